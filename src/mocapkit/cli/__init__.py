@@ -1,0 +1,1 @@
+"""The ``mocapkit`` command line: one entry point, one module per subcommand."""

@@ -1,0 +1,1 @@
+"""Image cues: edges and their distance transform, skin colour, blobs."""

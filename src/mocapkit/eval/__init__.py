@@ -1,0 +1,1 @@
+"""Accuracy metrics of a tracked motion against ground truth."""

@@ -1,0 +1,1 @@
+"""Inverse kinematics solvers on the shared skeleton model."""

@@ -1,0 +1,1 @@
+"""End-to-end jobs: run a tracker over a recording, calibrate, demo, benchmarks."""

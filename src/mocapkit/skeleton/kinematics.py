@@ -1,0 +1,422 @@
+"""Forward kinematics, point Jacobians and mass properties over any leading batch shape.
+
+All functions are pure: they take a `Skeleton` and joint parameters ``q`` of shape
+``(..., D)`` and return arrays with the same leading shape. One compiled (Numba)
+kernel serves a single pose, a sequence and a cloud of particles alike.
+
+Jacobian columns follow the geometric form (Buss 2004; Zhang et al. 2011 eq. 4,
+corrected per errata Z3): for a rotation about world axis ``v_j`` through pivot
+``p_j``, ``ds/dq_j = v_j x (s - p_j)``; for a prismatic DoF, ``ds/dq_j = v_j``; for a
+ball joint stored as a rotation vector ``r``, the world angular velocity of
+component ``k`` is ``R_parent @ J_l(r)[:, k]`` (SO(3) left Jacobian). Columns are zero
+unless the DoF's joint is the point's joint or one of its ancestors.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from functools import cache
+
+import numba
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mocapkit.errors import ShapeError
+from mocapkit.geometry.rotations import (
+    axis_angle_matrix_nb,
+    left_jacobian_so3_nb,
+    rotvec_matrix_nb,
+)
+from mocapkit.skeleton.model import BALL, PRISMATIC, REVOLUTE, Skeleton
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+
+class KinematicArrays:
+    """Flat arrays of a skeleton in the layout the compiled kernels take."""
+
+    __slots__ = (
+        "ancestors",
+        "dof_axis",
+        "dof_count",
+        "dof_kind",
+        "dof_start",
+        "offsets",
+        "parents",
+    )
+
+    def __init__(self, skeleton: Skeleton) -> None:
+        j = skeleton.n_joints
+        self.parents = np.ascontiguousarray(skeleton.parents, dtype=np.int64)
+        self.offsets = np.ascontiguousarray(skeleton.offsets_mm, dtype=np.float64)
+        counts = np.bincount(skeleton.dof_joint, minlength=j).astype(np.int64)
+        self.dof_count = counts
+        self.dof_start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        self.dof_kind = np.ascontiguousarray(skeleton.dof_kind, dtype=np.int64)
+        self.dof_axis = np.ascontiguousarray(skeleton.dof_axis, dtype=np.float64)
+        self.ancestors = np.ascontiguousarray(skeleton.ancestors_mask())
+
+
+@cache
+def kinematic_arrays(skeleton: Skeleton) -> KinematicArrays:
+    """The kernel layout of a skeleton (cached per skeleton object)."""
+    return KinematicArrays(skeleton)
+
+
+# ------------------------------------------------------------------ kernels
+
+
+@numba.njit(cache=True)
+def fk_pose_nb(
+    q: FloatArray,
+    parents: IntArray,
+    offsets: FloatArray,
+    dof_start: IntArray,
+    dof_count: IntArray,
+    dof_kind: IntArray,
+    dof_axis: FloatArray,
+    world: FloatArray,
+    axis_world: FloatArray,
+    pivot_world: FloatArray,
+) -> None:
+    """Forward kinematics of one pose ``q`` (D,).
+
+    Writes ``world`` (J, 4, 4) world_from_joint transforms, and for every DoF its
+    world axis ``axis_world`` (D, 3) and pivot ``pivot_world`` (D, 3).
+    """
+    n_joints = parents.shape[0]
+    rot_acc = np.empty((3, 3))
+    rot_step = np.empty((3, 3))
+    jl = np.empty((3, 3))
+    for j in range(n_joints):
+        p = parents[j]
+        # parent rotation and origin
+        if p < 0:
+            pr = np.eye(3)
+            pt = np.zeros(3)
+        else:
+            pr = world[p, :3, :3].copy()
+            pt = world[p, :3, 3].copy()
+        # local translation: offset plus prismatic DoFs (in the parent's orientation)
+        lt = offsets[j].copy()
+        start = dof_start[j]
+        stop = start + dof_count[j]
+        for d in range(start, stop):
+            if dof_kind[d] == 1:  # PRISMATIC
+                lt += dof_axis[d] * q[d]
+                axis_world[d] = pr @ dof_axis[d]
+                pivot_world[d] = pt
+        origin = pt + pr @ lt
+        rot_acc[:, :] = np.eye(3)
+        d = start
+        while d < stop:
+            kind = dof_kind[d]
+            if kind == 0:  # REVOLUTE
+                axis_world[d] = pr @ (rot_acc @ dof_axis[d])
+                pivot_world[d] = origin
+                axis_angle_matrix_nb(dof_axis[d], q[d], rot_step)
+                rot_acc[:, :] = rot_acc @ rot_step
+                d += 1
+            elif kind == 2:  # BALL: q[d:d+3] is a rotation vector in the joint frame
+                left_jacobian_so3_nb(np.ascontiguousarray(q[d : d + 3]), jl)
+                jl_t = np.ascontiguousarray(jl.T)
+                for k in range(3):
+                    axis_world[d + k] = pr @ jl_t[k]
+                    pivot_world[d + k] = origin
+                rotvec_matrix_nb(np.ascontiguousarray(q[d : d + 3]), rot_step)
+                rot_acc[:, :] = rot_step
+                d += 3
+            else:
+                d += 1
+        world[j, :3, :3] = pr @ rot_acc
+        world[j, :3, 3] = origin
+        world[j, 3, :3] = 0.0
+        world[j, 3, 3] = 1.0
+
+
+@numba.njit(cache=True)
+def fk_batch_nb(
+    q: FloatArray,
+    parents: IntArray,
+    offsets: FloatArray,
+    dof_start: IntArray,
+    dof_count: IntArray,
+    dof_kind: IntArray,
+    dof_axis: FloatArray,
+    world: FloatArray,
+) -> None:
+    """Forward kinematics of N poses ``q`` (N, D) into ``world`` (N, J, 4, 4)."""
+    n_dofs = q.shape[1]
+    axis_world = np.empty((n_dofs, 3))
+    pivot_world = np.empty((n_dofs, 3))
+    for n in range(q.shape[0]):
+        fk_pose_nb(
+            q[n], parents, offsets, dof_start, dof_count, dof_kind, dof_axis,
+            world[n], axis_world, pivot_world,
+        )
+
+
+@numba.njit(cache=True)
+def points_jacobian_pose_nb(
+    world: FloatArray,
+    axis_world: FloatArray,
+    pivot_world: FloatArray,
+    dof_joint_kind: IntArray,
+    dof_joint: IntArray,
+    ancestors: NDArray[np.bool_],
+    target_joint: IntArray,
+    target_point: FloatArray,
+    points_out: FloatArray,
+    jac_out: FloatArray,
+) -> None:
+    """Points (K, 3) and their Jacobian (3K, D) from one pose's FK results."""
+    n_dofs = axis_world.shape[0]
+    for k in range(target_joint.shape[0]):
+        jk = target_joint[k]
+        s = np.ascontiguousarray(world[jk, :3, :3]) @ target_point[k] + world[jk, :3, 3]
+        points_out[k] = s
+        for d in range(n_dofs):
+            if not ancestors[dof_joint[d], jk]:
+                jac_out[3 * k, d] = 0.0
+                jac_out[3 * k + 1, d] = 0.0
+                jac_out[3 * k + 2, d] = 0.0
+                continue
+            v = axis_world[d]
+            if dof_joint_kind[d] == 1:  # PRISMATIC
+                jac_out[3 * k, d] = v[0]
+                jac_out[3 * k + 1, d] = v[1]
+                jac_out[3 * k + 2, d] = v[2]
+            else:
+                r0 = s[0] - pivot_world[d, 0]
+                r1 = s[1] - pivot_world[d, 1]
+                r2 = s[2] - pivot_world[d, 2]
+                jac_out[3 * k, d] = v[1] * r2 - v[2] * r1
+                jac_out[3 * k + 1, d] = v[2] * r0 - v[0] * r2
+                jac_out[3 * k + 2, d] = v[0] * r1 - v[1] * r0
+
+
+@numba.njit(cache=True)
+def points_jacobian_batch_nb(
+    q: FloatArray,
+    parents: IntArray,
+    offsets: FloatArray,
+    dof_start: IntArray,
+    dof_count: IntArray,
+    dof_kind: IntArray,
+    dof_axis: FloatArray,
+    dof_joint: IntArray,
+    ancestors: NDArray[np.bool_],
+    target_joint: IntArray,
+    target_point: FloatArray,
+    points_out: FloatArray,
+    jac_out: FloatArray,
+) -> None:
+    """Points (N, K, 3) and Jacobians (N, 3K, D) of N poses ``q`` (N, D)."""
+    n_joints = parents.shape[0]
+    n_dofs = q.shape[1]
+    world = np.empty((n_joints, 4, 4))
+    axis_world = np.empty((n_dofs, 3))
+    pivot_world = np.empty((n_dofs, 3))
+    for n in range(q.shape[0]):
+        fk_pose_nb(
+            q[n], parents, offsets, dof_start, dof_count, dof_kind, dof_axis,
+            world, axis_world, pivot_world,
+        )
+        points_jacobian_pose_nb(
+            world, axis_world, pivot_world, dof_kind, dof_joint, ancestors,
+            target_joint, target_point, points_out[n], jac_out[n],
+        )
+
+
+# ------------------------------------------------------------------ public API
+
+
+def _flat_q(skeleton: Skeleton, q: ArrayLike) -> tuple[FloatArray, tuple[int, ...]]:
+    qa = np.asarray(q, dtype=np.float64)
+    skeleton.check_q(qa)
+    batch = qa.shape[:-1]
+    return np.ascontiguousarray(qa.reshape(-1, skeleton.n_dofs)), batch
+
+
+def forward_kinematics(skeleton: Skeleton, q: ArrayLike) -> FloatArray:
+    """World transforms of every joint.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    q : array_like, shape (..., D)
+        Joint parameters (rad, mm).
+
+    Returns
+    -------
+    ndarray, shape (..., J, 4, 4)
+        ``world_from_joint`` for each joint (mm).
+    """
+    flat, batch = _flat_q(skeleton, q)
+    ka = kinematic_arrays(skeleton)
+    world = np.empty((flat.shape[0], skeleton.n_joints, 4, 4))
+    fk_batch_nb(
+        flat, ka.parents, ka.offsets, ka.dof_start, ka.dof_count, ka.dof_kind, ka.dof_axis,
+        world,
+    )
+    return world.reshape(*batch, skeleton.n_joints, 4, 4)
+
+
+def joint_positions(skeleton: Skeleton, q: ArrayLike) -> FloatArray:
+    """World positions of every joint origin, shape (..., J, 3) in mm."""
+    return forward_kinematics(skeleton, q)[..., :3, 3]
+
+
+def _targets(
+    skeleton: Skeleton, joints: Sequence[int | str] | ArrayLike, points_in_joint: ArrayLike | None
+) -> tuple[IntArray, FloatArray]:
+    idx = np.array(
+        [skeleton.joint_index(j) if isinstance(j, str) else int(j) for j in np.ravel(joints)],  # type: ignore[arg-type]
+        dtype=np.int64,
+    )
+    if np.any(idx < 0) or np.any(idx >= skeleton.n_joints):
+        raise ShapeError(f"joint indices must lie in [0, {skeleton.n_joints}), found {idx}")
+    if points_in_joint is None:
+        pts = np.zeros((len(idx), 3))
+    else:
+        pts = np.ascontiguousarray(points_in_joint, dtype=np.float64)
+        if pts.shape != (len(idx), 3):
+            raise ShapeError(
+                f"points_in_joint: expected shape ({len(idx)}, 3) to match the joints, "
+                f"found {pts.shape}"
+            )
+    return idx, pts
+
+
+def points_and_jacobian(
+    skeleton: Skeleton,
+    q: ArrayLike,
+    joints: Sequence[int | str] | ArrayLike,
+    points_in_joint: ArrayLike | None = None,
+) -> tuple[FloatArray, FloatArray]:
+    """World positions of points fixed to joints and their position Jacobian.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    q : array_like, shape (..., D)
+    joints : sequence of int or str, length K
+        Joint carrying each point.
+    points_in_joint : array_like, shape (K, 3), optional
+        Point in its joint's frame (mm); the joint origin when omitted.
+
+    Returns
+    -------
+    points : ndarray, shape (..., K, 3)
+        World positions (mm).
+    jacobian : ndarray, shape (..., 3K, D)
+        ``d points / d q``; rows are ``x, y, z`` of point 0, then point 1, ...
+    """
+    flat, batch = _flat_q(skeleton, q)
+    idx, pts = _targets(skeleton, joints, points_in_joint)
+    ka = kinematic_arrays(skeleton)
+    n, k, d = flat.shape[0], len(idx), skeleton.n_dofs
+    points_out = np.empty((n, k, 3))
+    jac_out = np.empty((n, 3 * k, d))
+    points_jacobian_batch_nb(
+        flat, ka.parents, ka.offsets, ka.dof_start, ka.dof_count, ka.dof_kind, ka.dof_axis,
+        np.ascontiguousarray(skeleton.dof_joint), ka.ancestors, idx, pts, points_out, jac_out,
+    )
+    return points_out.reshape(*batch, k, 3), jac_out.reshape(*batch, 3 * k, d)
+
+
+def jacobian(
+    skeleton: Skeleton,
+    q: ArrayLike,
+    joints: Sequence[int | str] | ArrayLike,
+    points_in_joint: ArrayLike | None = None,
+) -> FloatArray:
+    """Position Jacobian ``(..., 3K, D)`` of points fixed to joints; see `points_and_jacobian`."""
+    return points_and_jacobian(skeleton, q, joints, points_in_joint)[1]
+
+
+def points_on_joints(
+    skeleton: Skeleton,
+    q: ArrayLike,
+    joints: Sequence[int | str] | ArrayLike,
+    points_in_joint: ArrayLike | None = None,
+) -> FloatArray:
+    """World positions (..., K, 3) of points fixed in the given joints' frames."""
+    world = forward_kinematics(skeleton, q)
+    idx, pts = _targets(skeleton, joints, points_in_joint)
+    sel = world[..., idx, :, :]
+    return np.einsum("...kij,kj->...ki", sel[..., :3, :3], pts) + sel[..., :3, 3]
+
+
+def canonical_positions(
+    skeleton: Skeleton, q: ArrayLike, names: Sequence[str] | None = None
+) -> FloatArray:
+    """Positions (..., K, 3) of canonical joints (default: all the skeleton provides)."""
+    idx, pts = skeleton.canonical_points(names)
+    return points_on_joints(skeleton, q, idx, pts)
+
+
+# ------------------------------------------------------------------ mass properties
+
+
+def segment_com(skeleton: Skeleton, q: ArrayLike) -> FloatArray:
+    """World centre of mass of every segment, shape (..., J, 3) in mm."""
+    world = forward_kinematics(skeleton, q)
+    local = skeleton.bone_end_mm * skeleton.com_fraction[:, None]
+    return np.einsum("...jik,jk->...ji", world[..., :3, :3], local) + world[..., :3, 3]
+
+
+def center_of_mass(skeleton: Skeleton, q: ArrayLike) -> FloatArray:
+    """Whole-body centre of mass, shape (..., 3) in mm."""
+    m = skeleton.mass_kg
+    if m.sum() <= 0:
+        raise ShapeError(f"skeleton {skeleton.name!r} has no mass; centre of mass undefined")
+    return np.einsum("j,...jk->...k", m, segment_com(skeleton, q)) / m.sum()
+
+
+def subtree_mass(skeleton: Skeleton) -> FloatArray:
+    """Mass (kg) of each joint's segment plus all segments below it, shape (J,)."""
+    out = skeleton.mass_kg.astype(float).copy()
+    for j in range(skeleton.n_joints - 1, 0, -1):
+        out[skeleton.parents[j]] += out[j]
+    return out
+
+
+def subtree_com(skeleton: Skeleton, q: ArrayLike) -> FloatArray:
+    """Centre of mass of each joint's subtree, shape (..., J, 3) in mm (NaN for massless)."""
+    seg = segment_com(skeleton, q)
+    weighted = seg * skeleton.mass_kg[:, None]
+    for j in range(skeleton.n_joints - 1, 0, -1):
+        weighted[..., skeleton.parents[j], :] += weighted[..., j, :]
+    mass = subtree_mass(skeleton)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return weighted / mass[:, None]
+
+
+def carried_mass(skeleton: Skeleton) -> FloatArray:
+    """Mass (kg) each DoF moves: the subtree of its joint (errata Z8b), shape (D,)."""
+    return subtree_mass(skeleton)[skeleton.dof_joint]
+
+
+__all__ = [
+    "BALL",
+    "PRISMATIC",
+    "REVOLUTE",
+    "KinematicArrays",
+    "canonical_positions",
+    "carried_mass",
+    "center_of_mass",
+    "fk_batch_nb",
+    "fk_pose_nb",
+    "forward_kinematics",
+    "jacobian",
+    "joint_positions",
+    "kinematic_arrays",
+    "points_and_jacobian",
+    "points_jacobian_pose_nb",
+    "points_on_joints",
+    "segment_com",
+    "subtree_com",
+    "subtree_mass",
+]

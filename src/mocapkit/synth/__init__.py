@@ -1,0 +1,1 @@
+"""Synthetic recording sessions rendered from real motion, with ground truth."""

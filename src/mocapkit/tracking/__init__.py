@@ -1,0 +1,1 @@
+"""Per-frame trackers with a streaming ``update(sample) -> pose`` interface."""

@@ -1,0 +1,1 @@
+"""Drawing skeletons and cues over images for inspection."""
