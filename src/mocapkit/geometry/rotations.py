@@ -178,9 +178,19 @@ def rotvec_matrix_nb(r: FloatArray, out: FloatArray) -> None:
         out[1, 0], out[1, 1], out[1, 2] = r[2], 1.0, -r[0]
         out[2, 0], out[2, 1], out[2, 2] = -r[1], r[0], 1.0
         return
-    axis = np.empty(3)
-    axis[0], axis[1], axis[2] = r[0] / p, r[1] / p, r[2] / p
-    axis_angle_matrix_nb(axis, p, out)
+    x, y, z = r[0] / p, r[1] / p, r[2] / p
+    c = np.cos(p)
+    s = np.sin(p)
+    t = 1.0 - c
+    out[0, 0] = c + x * x * t
+    out[0, 1] = x * y * t - z * s
+    out[0, 2] = x * z * t + y * s
+    out[1, 0] = y * x * t + z * s
+    out[1, 1] = c + y * y * t
+    out[1, 2] = y * z * t - x * s
+    out[2, 0] = z * x * t - y * s
+    out[2, 1] = z * y * t + x * s
+    out[2, 2] = c + z * z * t
 
 
 @numba.njit(cache=True, fastmath=False)
@@ -194,11 +204,15 @@ def left_jacobian_so3_nb(r: FloatArray, out: FloatArray) -> None:
     else:
         c1 = (1.0 - np.cos(p)) / p2
         c2 = (p - np.sin(p)) / (p2 * p)
-    k = np.zeros((3, 3))
-    k[0, 1], k[0, 2] = -r[2], r[1]
-    k[1, 0], k[1, 2] = r[2], -r[0]
-    k[2, 0], k[2, 1] = -r[1], r[0]
-    kk = k @ k
-    for i in range(3):
-        for j in range(3):
-            out[i, j] = (1.0 if i == j else 0.0) + c1 * k[i, j] + c2 * kk[i, j]
+    # [r]x and its square written out, so the kernel allocates nothing
+    x, y, z = r[0], r[1], r[2]
+    k01, k02, k12 = -z, y, -x
+    out[0, 0] = 1.0 + c2 * (-(y * y) - z * z)
+    out[1, 1] = 1.0 + c2 * (-(x * x) - z * z)
+    out[2, 2] = 1.0 + c2 * (-(x * x) - y * y)
+    out[0, 1] = c1 * k01 + c2 * x * y
+    out[1, 0] = -c1 * k01 + c2 * x * y
+    out[0, 2] = c1 * k02 + c2 * x * z
+    out[2, 0] = -c1 * k02 + c2 * x * z
+    out[1, 2] = c1 * k12 + c2 * y * z
+    out[2, 1] = -c1 * k12 + c2 * y * z

@@ -67,6 +67,15 @@ def kinematic_arrays(skeleton: Skeleton) -> KinematicArrays:
 # ------------------------------------------------------------------ kernels
 
 
+@numba.njit(cache=True, inline="always")
+def _matmul3_nb(a: FloatArray, b: FloatArray, out: FloatArray) -> None:
+    """``out = a @ b`` for 3x3 matrices without allocating (``out`` must not alias)."""
+    for i in range(3):
+        a0, a1, a2 = a[i, 0], a[i, 1], a[i, 2]
+        for j in range(3):
+            out[i, j] = a0 * b[0, j] + a1 * b[1, j] + a2 * b[2, j]
+
+
 @numba.njit(cache=True)
 def fk_pose_nb(
     q: FloatArray,
@@ -83,55 +92,82 @@ def fk_pose_nb(
     """Forward kinematics of one pose ``q`` (D,).
 
     Writes ``world`` (J, 4, 4) world_from_joint transforms, and for every DoF its
-    world axis ``axis_world`` (D, 3) and pivot ``pivot_world`` (D, 3).
+    world axis ``axis_world`` (D, 3) and pivot ``pivot_world`` (D, 3). Allocation
+    per call is a few 3x3 scratch matrices; nothing is allocated per joint.
     """
     n_joints = parents.shape[0]
     rot_acc = np.empty((3, 3))
     rot_step = np.empty((3, 3))
+    tmp = np.empty((3, 3))
+    pr = np.empty((3, 3))
     jl = np.empty((3, 3))
+    rv = np.empty(3)
     for j in range(n_joints):
         p = parents[j]
-        # parent rotation and origin
+        # parent rotation pr and origin (px, py, pz)
         if p < 0:
-            pr = np.eye(3)
-            pt = np.zeros(3)
+            for a in range(3):
+                for b in range(3):
+                    pr[a, b] = 1.0 if a == b else 0.0
+            px = py = pz = 0.0
         else:
-            pr = world[p, :3, :3].copy()
-            pt = world[p, :3, 3].copy()
-        # local translation: offset plus prismatic DoFs (in the parent's orientation)
-        lt = offsets[j].copy()
+            for a in range(3):
+                for b in range(3):
+                    pr[a, b] = world[p, a, b]
+            px, py, pz = world[p, 0, 3], world[p, 1, 3], world[p, 2, 3]
+        # local translation: offset plus prismatic DoFs, expressed in the parent's orientation
+        lx, ly, lz = offsets[j, 0], offsets[j, 1], offsets[j, 2]
         start = dof_start[j]
         stop = start + dof_count[j]
         for d in range(start, stop):
             if dof_kind[d] == 1:  # PRISMATIC
-                lt += dof_axis[d] * q[d]
-                axis_world[d] = pr @ dof_axis[d]
-                pivot_world[d] = pt
-        origin = pt + pr @ lt
-        rot_acc[:, :] = np.eye(3)
+                ax, ay, az = dof_axis[d, 0], dof_axis[d, 1], dof_axis[d, 2]
+                lx += ax * q[d]
+                ly += ay * q[d]
+                lz += az * q[d]
+                for a in range(3):
+                    axis_world[d, a] = pr[a, 0] * ax + pr[a, 1] * ay + pr[a, 2] * az
+                pivot_world[d, 0], pivot_world[d, 1], pivot_world[d, 2] = px, py, pz
+        ox = px + pr[0, 0] * lx + pr[0, 1] * ly + pr[0, 2] * lz
+        oy = py + pr[1, 0] * lx + pr[1, 1] * ly + pr[1, 2] * lz
+        oz = pz + pr[2, 0] * lx + pr[2, 1] * ly + pr[2, 2] * lz
+        # world rotation accumulates as pr @ R_1 @ R_2 ...; tmp holds the running product
+        for a in range(3):
+            for b in range(3):
+                rot_acc[a, b] = pr[a, b]
         d = start
         while d < stop:
             kind = dof_kind[d]
-            if kind == 0:  # REVOLUTE
-                axis_world[d] = pr @ (rot_acc @ dof_axis[d])
-                pivot_world[d] = origin
+            if kind == 0:  # REVOLUTE: world axis is the running product applied to the local axis
+                ax, ay, az = dof_axis[d, 0], dof_axis[d, 1], dof_axis[d, 2]
+                for a in range(3):
+                    axis_world[d, a] = rot_acc[a, 0] * ax + rot_acc[a, 1] * ay + rot_acc[a, 2] * az
+                pivot_world[d, 0], pivot_world[d, 1], pivot_world[d, 2] = ox, oy, oz
                 axis_angle_matrix_nb(dof_axis[d], q[d], rot_step)
-                rot_acc[:, :] = rot_acc @ rot_step
+                _matmul3_nb(rot_acc, rot_step, tmp)
+                rot_acc[:, :] = tmp
                 d += 1
             elif kind == 2:  # BALL: q[d:d+3] is a rotation vector in the joint frame
-                left_jacobian_so3_nb(np.ascontiguousarray(q[d : d + 3]), jl)
-                jl_t = np.ascontiguousarray(jl.T)
+                rv[0], rv[1], rv[2] = q[d], q[d + 1], q[d + 2]
+                left_jacobian_so3_nb(rv, jl)
                 for k in range(3):
-                    axis_world[d + k] = pr @ jl_t[k]
-                    pivot_world[d + k] = origin
-                rotvec_matrix_nb(np.ascontiguousarray(q[d : d + 3]), rot_step)
-                rot_acc[:, :] = rot_step
+                    for a in range(3):
+                        axis_world[d + k, a] = (
+                            pr[a, 0] * jl[0, k] + pr[a, 1] * jl[1, k] + pr[a, 2] * jl[2, k]
+                        )
+                    pivot_world[d + k, 0] = ox
+                    pivot_world[d + k, 1] = oy
+                    pivot_world[d + k, 2] = oz
+                rotvec_matrix_nb(rv, rot_step)
+                _matmul3_nb(pr, rot_step, rot_acc)
                 d += 3
             else:
                 d += 1
-        world[j, :3, :3] = pr @ rot_acc
-        world[j, :3, 3] = origin
-        world[j, 3, :3] = 0.0
+        for a in range(3):
+            for b in range(3):
+                world[j, a, b] = rot_acc[a, b]
+        world[j, 0, 3], world[j, 1, 3], world[j, 2, 3] = ox, oy, oz
+        world[j, 3, 0] = world[j, 3, 1] = world[j, 3, 2] = 0.0
         world[j, 3, 3] = 1.0
 
 
@@ -162,7 +198,7 @@ def points_jacobian_pose_nb(
     world: FloatArray,
     axis_world: FloatArray,
     pivot_world: FloatArray,
-    dof_joint_kind: IntArray,
+    dof_kind: IntArray,
     dof_joint: IntArray,
     ancestors: NDArray[np.bool_],
     target_joint: IntArray,
@@ -174,26 +210,29 @@ def points_jacobian_pose_nb(
     n_dofs = axis_world.shape[0]
     for k in range(target_joint.shape[0]):
         jk = target_joint[k]
-        s = np.ascontiguousarray(world[jk, :3, :3]) @ target_point[k] + world[jk, :3, 3]
-        points_out[k] = s
+        tx, ty, tz = target_point[k, 0], target_point[k, 1], target_point[k, 2]
+        s0 = world[jk, 0, 0] * tx + world[jk, 0, 1] * ty + world[jk, 0, 2] * tz + world[jk, 0, 3]
+        s1 = world[jk, 1, 0] * tx + world[jk, 1, 1] * ty + world[jk, 1, 2] * tz + world[jk, 1, 3]
+        s2 = world[jk, 2, 0] * tx + world[jk, 2, 1] * ty + world[jk, 2, 2] * tz + world[jk, 2, 3]
+        points_out[k, 0], points_out[k, 1], points_out[k, 2] = s0, s1, s2
         for d in range(n_dofs):
             if not ancestors[dof_joint[d], jk]:
                 jac_out[3 * k, d] = 0.0
                 jac_out[3 * k + 1, d] = 0.0
                 jac_out[3 * k + 2, d] = 0.0
                 continue
-            v = axis_world[d]
-            if dof_joint_kind[d] == 1:  # PRISMATIC
-                jac_out[3 * k, d] = v[0]
-                jac_out[3 * k + 1, d] = v[1]
-                jac_out[3 * k + 2, d] = v[2]
+            v0, v1, v2 = axis_world[d, 0], axis_world[d, 1], axis_world[d, 2]
+            if dof_kind[d] == 1:  # PRISMATIC
+                jac_out[3 * k, d] = v0
+                jac_out[3 * k + 1, d] = v1
+                jac_out[3 * k + 2, d] = v2
             else:
-                r0 = s[0] - pivot_world[d, 0]
-                r1 = s[1] - pivot_world[d, 1]
-                r2 = s[2] - pivot_world[d, 2]
-                jac_out[3 * k, d] = v[1] * r2 - v[2] * r1
-                jac_out[3 * k + 1, d] = v[2] * r0 - v[0] * r2
-                jac_out[3 * k + 2, d] = v[0] * r1 - v[1] * r0
+                r0 = s0 - pivot_world[d, 0]
+                r1 = s1 - pivot_world[d, 1]
+                r2 = s2 - pivot_world[d, 2]
+                jac_out[3 * k, d] = v1 * r2 - v2 * r1
+                jac_out[3 * k + 1, d] = v2 * r0 - v0 * r2
+                jac_out[3 * k + 2, d] = v0 * r1 - v1 * r0
 
 
 @numba.njit(cache=True)

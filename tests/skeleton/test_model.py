@@ -1,0 +1,146 @@
+"""The Skeleton model and its presets: Table 1 figures, validation, scaling."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocapkit.errors import ShapeError, UnknownNameError
+from mocapkit.skeleton import (
+    CANONICAL_JOINTS,
+    PRISMATIC,
+    REVOLUTE,
+    canonical_positions,
+    load_preset,
+    preset_names,
+    preset_options,
+    scale_skeleton,
+    standing_height_mm,
+)
+
+TABLE1 = {  # Zhang et al. 2011 Table 1: bone -> (length mm, mass g, DoFs)
+    "spine1": (156, 5790, 1),
+    "spine2": (171, 5790, 1),
+    "spine3": (142, 4130, 1),
+    "neck": (90, 3520, 2),
+    "head": (100, 4390, 0),
+    "clavicle": (190, 4130, 0),
+    "humerus": (300, 2180, 3),
+    "radius": (350, 1310, 1),
+    "hand": (80, 520, 0),
+    "hip": (85, 5715, 0),
+    "femur": (386, 10050, 3),
+    "tibia": (550, 3510, 1),
+    "foot": (128, 1110, 0),
+}
+
+
+def test_presets_listed() -> None:
+    assert set(preset_names()) == {"zhang21", "azad14", "upper_stick"}
+
+
+def test_zhang21_matches_table1() -> None:
+    sk = load_preset("zhang21")
+    rot = sk.dof_kind == REVOLUTE
+    assert int(rot.sum()) == 21
+    assert int((sk.dof_kind == PRISMATIC).sum()) == 3  # errata Z13 root translation
+    assert sk.total_mass_kg == pytest.approx(80.67, abs=1e-9)
+    lengths = sk.bone_length_mm
+    for bone, (length, mass_g, n_dof) in TABLE1.items():
+        names = [bone] if bone in sk.joint_names else [f"l_{bone}", f"r_{bone}"]
+        for name in names:
+            j = sk.joint_index(name)
+            assert lengths[j] == pytest.approx(length, abs=0.1), name
+            assert sk.mass_kg[j] * 1000 == pytest.approx(mass_g), name
+            assert len(sk.dofs_of_joint(j)) == n_dof, name
+
+
+def test_zhang21_limits_in_radians_and_aaos_elbow() -> None:
+    sk = load_preset("zhang21")
+    d = sk.dof_index("r_elbow_flexion")
+    assert sk.lower[d] == 0.0
+    assert sk.upper[d] == pytest.approx(np.radians(150))
+    d = sk.dof_index("l_shoulder_flexion")
+    assert sk.upper[d] == pytest.approx(np.pi)
+
+
+def test_presets_cover_canonical_vocabulary() -> None:
+    assert load_preset("zhang21").canonical_names == CANONICAL_JOINTS
+    upper = set(CANONICAL_JOINTS[:9])
+    assert set(load_preset("upper_stick").canonical_names) == upper
+    assert set(load_preset("azad14").canonical_names) == upper - {"pelvis"}
+
+
+def test_azad14_has_14_dofs_and_optional_shoulder_offsets() -> None:
+    assert load_preset("azad14").n_dofs == 14
+    assert preset_options("azad14") == ("adaptive_shoulder",)
+    sk = load_preset("azad14", ["adaptive_shoulder"])
+    assert sk.n_dofs == 20
+    d = sk.dof_index("l_shoulder_dx")
+    assert (sk.lower[d], sk.upper[d]) == (-50.0, 50.0)
+
+
+def test_rest_pose_is_upright_and_symmetric() -> None:
+    sk = load_preset("zhang21")
+    p = dict(zip(sk.canonical_names, canonical_positions(sk, sk.zero_pose()), strict=True))
+    assert p["head"][2] > p["neck"][2] > p["pelvis"][2] > p["left_knee"][2] > p["left_ankle"][2]
+    assert p["right_wrist"][0] > 0 > p["left_wrist"][0]  # right side towards +X
+    np.testing.assert_allclose(p["left_elbow"] * [-1, 1, 1], p["right_elbow"], atol=1e-9)
+
+
+def test_positive_flexion_moves_limbs_forward_on_both_sides() -> None:
+    sk = load_preset("zhang21")
+    for side in ("l", "r"):
+        q = sk.zero_pose()
+        q[sk.dof_index(f"{side}_shoulder_flexion")] = np.pi / 2
+        name = "left_wrist" if side == "l" else "right_wrist"
+        wrist = canonical_positions(sk, q, [name])[0]
+        shoulder = canonical_positions(sk, q, [name.replace("wrist", "shoulder")])[0]
+        assert wrist[1] - shoulder[1] == pytest.approx(650, abs=1e-6)  # arm points forward (+Y)
+        q = sk.zero_pose()
+        q[sk.dof_index(f"{side}_shoulder_abduction")] = np.pi / 2
+        wrist = canonical_positions(sk, q, [name])[0]
+        assert abs(wrist[0]) > abs(shoulder[0]) + 600  # abduction moves the arm outwards
+
+
+def test_scaling_by_height_and_bone_override() -> None:
+    sk = load_preset("zhang21")
+    assert standing_height_mm(sk) == pytest.approx(1690, abs=1)
+    tall = scale_skeleton(sk, height_mm=1850.0, mass_kg=90.0)
+    assert standing_height_mm(tall) == pytest.approx(1850.0, rel=1e-9)
+    assert tall.total_mass_kg == pytest.approx(90.0)
+    f = 1850.0 / standing_height_mm(sk)
+    j = sk.joint_index("l_radius")
+    assert tall.bone_length_mm[j] == pytest.approx(350 * f)
+    custom = scale_skeleton(sk, bone_lengths_mm={"l_radius": 300.0})
+    assert custom.bone_length_mm[j] == pytest.approx(300.0)
+    hand = custom.joint_index("l_hand")
+    np.testing.assert_allclose(custom.offsets_mm[hand], [0, 0, -300.0])
+
+
+def test_bad_input_is_rejected() -> None:
+    with pytest.raises(UnknownNameError, match="unknown skeleton preset 'nope'.*zhang21"):
+        load_preset("nope")
+    with pytest.raises(UnknownNameError, match="preset option"):
+        load_preset("zhang21", ["wings"])
+    sk = load_preset("zhang21")
+    with pytest.raises(UnknownNameError, match="unknown joint 'elbow'"):
+        sk.joint_index("elbow")
+    with pytest.raises(ShapeError, match="topologically ordered"):
+        sk.replace(parents=np.r_[-1, 2, np.asarray(sk.parents[2:])])
+    with pytest.raises(ShapeError, match="unit vectors"):
+        sk.replace(dof_axis=sk.dof_axis * 2)
+    with pytest.raises(ShapeError, match=r"expected shape \(27, 3\)"):
+        sk.replace(offsets_mm=np.zeros((3, 3)))
+    with pytest.raises(ShapeError, match="stature between 500 and 2800 mm"):
+        scale_skeleton(sk, height_mm=17.5)
+    with pytest.raises(ShapeError, match="owns no segment"):
+        scale_skeleton(sk, bone_lengths_mm={"head_end": 10.0})
+
+
+def test_skeleton_is_immutable() -> None:
+    sk = load_preset("zhang21")
+    with pytest.raises(ValueError, match="read-only"):
+        sk.offsets_mm[0, 0] = 1.0
+    with pytest.raises(AttributeError):
+        sk.name = "other"  # type: ignore[misc]
