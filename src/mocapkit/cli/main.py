@@ -49,6 +49,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MocapError as exc:
         print(f"mocapkit {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError) as exc:
+        # a missing or unreadable input: say which path, without a traceback
+        print(f"mocapkit {args.command}: error: {exc.strerror}: {exc.filename}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print(f"mocapkit {args.command}: interrupted", file=sys.stderr)
         return 130

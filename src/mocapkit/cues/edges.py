@@ -1,0 +1,401 @@
+"""Edge cue: Canny edges and their truncated distance transform inside regions of interest.
+
+Zhang et al. 2011 §5.1: grey -> low-pass -> histogram equalisation -> Canny ->
+distance transform of the inverted edge image. Per errata Z9 each value is the
+distance to the **nearest** edge pixel (``cv2.distanceTransform(255 - canny, DIST_L2,
+...)``), and per errata Z11 it is truncated at a cap (20-30 px) so that a missing
+edge cannot dominate the chamfer cost. Per §5.2 the work is done only inside
+regions of interest (RoIs) around each arm.
+
+RoI processing versus the whole image
+-------------------------------------
+Only the grey conversion and one histogram touch the whole frame (about 0.1 ms at
+640x480); the rest runs per RoI. Histogram equalisation is a pointwise monotone
+look-up table, so with ``equalize="image"`` (the default) the table is built once
+from the whole frame's histogram, exactly as `cv2.equalizeHist` builds it
+(`equalize_lut`; equality is tested), and applied inside each RoI. This puts the
+equalisation *before* the 5x5 low-pass, where the paper lists it after; both are
+order-1 smooth operations on the grey levels and the edges found differ only at
+threshold crossings, while equalising the blurred frame would need the whole frame
+blurred. Each RoI is processed on a crop grown by ``ceil(cap) + 4`` px (2 px for the
+blur, 2 px for Sobel and non-maximum suppression, ``cap`` so that edges just outside
+the RoI still give the right distance), then cut back to the RoI. The crop is
+clipped to the image, where OpenCV's border handling matches the full frame's.
+Hence the RoI result equals the full-frame result inside the RoI, except where
+Canny's hysteresis chains a weak edge through the margin to a strong edge outside
+it (hysteresis is not local). With ``equalize="roi"`` each padded crop is
+equalised on its own histogram (after its low-pass, the paper's order), the
+paper-literal reading of §5.2 that adapts to local lighting but makes the map
+depend on the RoI; ``"none"`` skips equalisation.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mocapkit.errors import ShapeError
+
+FloatArray = NDArray[np.float64]
+Float32Array = NDArray[np.float32]
+UInt8Array = NDArray[np.uint8]
+
+#: A region of interest ``(x0, y0, x1, y1)`` in pixels, end-exclusive.
+Roi = tuple[int, int, int, int]
+
+_MASKS = {"precise": cv2.DIST_MASK_PRECISE, "3": cv2.DIST_MASK_3, "5": cv2.DIST_MASK_5}
+
+
+@dataclass(frozen=True)
+class EdgeConfig:
+    """Parameters of the edge distance transform.
+
+    Parameters
+    ----------
+    blur_ksize : int
+        Odd size of the Gaussian low-pass kernel (the paper's low-pass filter; 5x5).
+    canny_low, canny_high : float
+        Canny hysteresis thresholds on the equalised image (recipe Z step 3: 50/150).
+    cap_px : float
+        Truncation of the distance (errata Z11: 20-30 px).
+    equalize : {"image", "roi", "none"}
+        Where `cv2.equalizeHist` takes its histogram (see the module notes).
+    mask : {"5", "3", "precise"}
+        `cv2.distanceTransform` mask. ``"5"`` (errata Z9) is the 5x5 chamfer
+        approximation of the Euclidean distance (within 2 % of it, tested against
+        brute force); ``"precise"`` is exact but about 5x slower (1.1 ms versus
+        0.2 ms on a 250x200 crop, one core).
+    """
+
+    blur_ksize: int = 5
+    canny_low: float = 50.0
+    canny_high: float = 150.0
+    cap_px: float = 25.0
+    equalize: Literal["image", "roi", "none"] = "image"
+    mask: Literal["5", "3", "precise"] = "5"
+
+    def __post_init__(self) -> None:
+        if self.blur_ksize < 1 or self.blur_ksize % 2 == 0:
+            raise ShapeError(
+                "EdgeConfig.blur_ksize: expected a positive odd kernel size, found "
+                f"{self.blur_ksize}"
+            )
+        if not (0 <= self.canny_low <= self.canny_high):
+            raise ShapeError(
+                f"EdgeConfig canny thresholds: expected 0 <= canny_low <= canny_high, found "
+                f"{self.canny_low} and {self.canny_high}"
+            )
+        if not (self.cap_px > 0 and math.isfinite(self.cap_px)):
+            raise ShapeError(f"EdgeConfig.cap_px: expected a positive number, found {self.cap_px}")
+        if self.equalize not in ("image", "roi", "none"):
+            raise ShapeError(
+                f"EdgeConfig.equalize: expected 'image', 'roi' or 'none', found {self.equalize!r}"
+            )
+        if self.mask not in _MASKS:
+            raise ShapeError(
+                f"EdgeConfig.mask: expected one of {sorted(_MASKS)}, found {self.mask!r}"
+            )
+
+    @property
+    def margin_px(self) -> int:
+        """Padding of each RoI crop that makes RoI results match full-image ones."""
+        return math.ceil(self.cap_px) + self.blur_ksize // 2 + 2
+
+
+@dataclass(frozen=True, eq=False)
+class DistanceMap:
+    """A truncated edge distance map covering one RoI of an image.
+
+    Parameters
+    ----------
+    distance_px : ndarray of float32, shape (h, w)
+        Distance (px) to the nearest edge pixel, at most ``cap_px``;
+        ``distance_px[r, c]`` belongs to image pixel ``(x0 + c, y0 + r)``.
+    origin_px : (int, int)
+        ``(x0, y0)`` of the RoI in the image.
+    cap_px : float
+        Truncation value; also the value of every pixel outside the RoI.
+    """
+
+    distance_px: Float32Array
+    origin_px: tuple[int, int]
+    cap_px: float
+
+    @property
+    def roi(self) -> Roi:
+        """The covered region ``(x0, y0, x1, y1)``, end-exclusive."""
+        x0, y0 = self.origin_px
+        h, w = self.distance_px.shape
+        return (x0, y0, x0 + w, y0 + h)
+
+    def lookup(self, points_px: ArrayLike) -> FloatArray:
+        """Bilinearly interpolated distance at image points (..., 2); ``cap_px`` outside.
+
+        A point counts as inside when all four neighbouring pixels are inside the RoI.
+        This is the same rule as the compiled chamfer cost of
+        :mod:`mocapkit.tracking.arm_refinement`.
+        """
+        p = np.asarray(points_px, dtype=float)
+        if p.shape[-1:] != (2,):
+            raise ShapeError(f"DistanceMap.lookup: expected points (..., 2), found {p.shape}")
+        x = p[..., 0] - self.origin_px[0]
+        y = p[..., 1] - self.origin_px[1]
+        h, w = self.distance_px.shape
+        with np.errstate(invalid="ignore"):
+            inside = (x >= 0) & (y >= 0) & (x < w - 1) & (y < h - 1)
+        out = np.full(x.shape, float(self.cap_px))
+        xi, yi = x[inside], y[inside]
+        c0 = np.floor(xi).astype(np.int64)
+        r0 = np.floor(yi).astype(np.int64)
+        fx, fy = xi - c0, yi - r0
+        d = self.distance_px
+        out[inside] = (
+            (1 - fy) * ((1 - fx) * d[r0, c0] + fx * d[r0, c0 + 1])
+            + fy * ((1 - fx) * d[r0 + 1, c0] + fx * d[r0 + 1, c0 + 1])
+        )
+        return out
+
+
+def to_grey(image: ArrayLike) -> UInt8Array:
+    """An 8-bit grey image from a grey (H, W), BGR (H, W, 3) or BGRA (H, W, 4) uint8 frame."""
+    img = np.asarray(image)
+    if img.dtype != np.uint8:
+        raise ShapeError(f"image: expected dtype uint8, found {img.dtype}")
+    if img.ndim == 2:
+        return img
+    if img.ndim == 3 and img.shape[2] == 3:
+        return np.asarray(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY), dtype=np.uint8)
+    if img.ndim == 3 and img.shape[2] == 4:
+        return np.asarray(cv2.cvtColor(img, cv2.COLOR_BGRA2GRAY), dtype=np.uint8)
+    if img.ndim == 3 and img.shape[2] == 1:
+        return np.ascontiguousarray(img[:, :, 0])
+    raise ShapeError(
+        f"image: expected a grey (H, W), BGR (H, W, 3) or BGRA (H, W, 4) frame, found shape "
+        f"{img.shape}"
+    )
+
+
+def distance_to_edges(
+    edges: ArrayLike, cap_px: float | None = None, mask: str = "5"
+) -> Float32Array:
+    """Distance from every pixel to the nearest edge pixel (errata Z9), optionally truncated.
+
+    Parameters
+    ----------
+    edges : array_like of uint8, shape (H, W)
+        Edge image, non-zero on edges (Canny output).
+    cap_px : float, optional
+        Truncation (errata Z11); without it, pixels of an image with no edge get a
+        large value (OpenCV's).
+    mask : {"5", "3", "precise"}
+        `cv2.distanceTransform` mask size; ``"precise"`` is exact Euclidean.
+
+    Returns
+    -------
+    ndarray of float32, shape (H, W)
+    """
+    e = np.asarray(edges)
+    if e.ndim != 2 or e.dtype != np.uint8:
+        raise ShapeError(f"edges: expected a 2-D uint8 image, found shape {e.shape} {e.dtype}")
+    if mask not in _MASKS:
+        raise ShapeError(f"mask: expected one of {sorted(_MASKS)}, found {mask!r}")
+    # distanceTransform measures the distance to the nearest ZERO pixel, hence the inversion
+    inverted = cv2.compare(e, 0, cv2.CMP_EQ)  # type: ignore[call-overload]
+    dist = cv2.distanceTransform(inverted, cv2.DIST_L2, _MASKS[mask])
+    if cap_px is not None:
+        np.minimum(dist, np.float32(cap_px), out=dist)
+    return dist
+
+
+def equalize_lut(grey: UInt8Array) -> UInt8Array:
+    """The 256-entry table `cv2.equalizeHist` applies to this image, shape (256,) uint8.
+
+    Same arithmetic as OpenCV (single-precision scale, round to nearest), so that
+    ``lut[grey] == cv2.equalizeHist(grey)``; applying it to a crop equalises the crop
+    with the whole image's histogram.
+    """
+    if grey.ndim != 2 or grey.dtype != np.uint8:
+        raise ShapeError(f"grey: expected a 2-D uint8 image, found shape {grey.shape} {grey.dtype}")
+    hist = cv2.calcHist([grey], [0], None, [256], [0, 256]).ravel().astype(np.int64)
+    lut = np.zeros(256, dtype=np.uint8)
+    total = int(grey.size)
+    if total == 0:
+        return np.arange(256, dtype=np.uint8)
+    first = int(np.flatnonzero(hist)[0])
+    if hist[first] == total:
+        lut[:] = first
+        return lut
+    scale = np.float32(255.0) / np.float32(total - hist[first])
+    running = np.cumsum(hist[first + 1 :]).astype(np.float32)
+    lut[first + 1 :] = np.clip(np.rint(running * scale), 0, 255).astype(np.uint8)
+    return lut
+
+
+@dataclass(frozen=True, eq=False)
+class PreparedFrame:
+    """Whole-frame results shared by every RoI of one frame (see `prepare_frame`).
+
+    Parameters
+    ----------
+    grey : ndarray of uint8, shape (H, W)
+    lut : ndarray of uint8, shape (256,), or None
+        Image-wide equalisation table (``equalize="image"``), else None.
+    """
+
+    grey: UInt8Array
+    lut: UInt8Array | None
+
+    @property
+    def image_size(self) -> tuple[int, int]:
+        """``(w, h)`` in pixels."""
+        return (int(self.grey.shape[1]), int(self.grey.shape[0]))
+
+
+def prepare_frame(image: ArrayLike, config: EdgeConfig) -> PreparedFrame:
+    """Whole-frame steps: grey conversion and, for ``equalize="image"``, the equalisation table."""
+    grey = to_grey(image)
+    lut = equalize_lut(grey) if config.equalize == "image" else None
+    return PreparedFrame(grey, lut)
+
+
+def canny_edges(crop: UInt8Array, config: EdgeConfig, lut: UInt8Array | None) -> UInt8Array:
+    """Equalise (table or own histogram), low-pass and Canny (Zhang §5.1, Fig. 4) on a grey crop."""
+    k = (config.blur_ksize, config.blur_ksize)
+    if lut is not None:
+        g = cv2.GaussianBlur(cv2.LUT(crop, lut), k, 0)
+    elif config.equalize == "roi":
+        g = cv2.equalizeHist(cv2.GaussianBlur(crop, k, 0))
+    else:
+        g = cv2.GaussianBlur(crop, k, 0)
+    return np.asarray(cv2.Canny(g, config.canny_low, config.canny_high), dtype=np.uint8)
+
+
+def clip_roi(roi: ArrayLike, image_size: tuple[int, int]) -> Roi:
+    """Clip ``(x0, y0, x1, y1)`` to an image of size ``(w, h)``; may return an empty RoI."""
+    r = np.asarray(roi, dtype=float).ravel()
+    if r.shape != (4,) or not np.all(np.isfinite(r)):
+        raise ShapeError(f"roi: expected 4 finite numbers (x0, y0, x1, y1), found {roi!r}")
+    w, h = image_size
+    x0 = int(min(max(math.floor(r[0]), 0), w))
+    y0 = int(min(max(math.floor(r[1]), 0), h))
+    x1 = int(min(max(math.ceil(r[2]), x0), w))
+    y1 = int(min(max(math.ceil(r[3]), y0), h))
+    return (x0, y0, x1, y1)
+
+
+def roi_around_points(
+    points_px: ArrayLike, image_size: tuple[int, int], pad_px: float
+) -> Roi:
+    """Padded bounding box of image points (N, 2), clipped to the image (Zhang §5.2, Fig. 5).
+
+    Non-finite points (behind the camera) are ignored; with none left the RoI is empty.
+    """
+    p = np.asarray(points_px, dtype=float).reshape(-1, 2)
+    p = p[np.all(np.isfinite(p), axis=1)]
+    if p.shape[0] == 0:
+        return (0, 0, 0, 0)
+    lo = p.min(axis=0) - pad_px
+    hi = p.max(axis=0) + pad_px + 1
+    return clip_roi((lo[0], lo[1], hi[0], hi[1]), image_size)
+
+
+def roi_distance_map(frame: PreparedFrame, roi: ArrayLike, config: EdgeConfig) -> DistanceMap:
+    """Truncated edge distance map of one RoI.
+
+    Parameters
+    ----------
+    frame : PreparedFrame
+        Output of `prepare_frame` for this frame and config.
+    roi : (x0, y0, x1, y1)
+        Region in pixels, end-exclusive; clipped to the image.
+    config : EdgeConfig
+
+    Returns
+    -------
+    DistanceMap
+    """
+    grey = frame.grey
+    h, w = grey.shape
+    x0, y0, x1, y1 = clip_roi(roi, (w, h))
+    if x1 <= x0 or y1 <= y0:
+        return DistanceMap(np.empty((0, 0), np.float32), (x0, y0), float(config.cap_px))
+    m = config.margin_px
+    cx0, cy0 = max(x0 - m, 0), max(y0 - m, 0)
+    cx1, cy1 = min(x1 + m, w), min(y1 + m, h)
+    crop = grey[cy0:cy1, cx0:cx1]
+    edges = canny_edges(crop, config, frame.lut)
+    dist = distance_to_edges(edges, config.cap_px, config.mask)
+    inner = np.ascontiguousarray(dist[y0 - cy0 : y1 - cy0, x0 - cx0 : x1 - cx0])
+    return DistanceMap(inner, (x0, y0), float(config.cap_px))
+
+
+def edge_distance_maps(
+    image: ArrayLike, rois: list[Roi] | tuple[Roi, ...], config: EdgeConfig | None = None
+) -> list[DistanceMap]:
+    """One truncated edge distance map per RoI of a frame (Zhang §5.1-5.2).
+
+    Parameters
+    ----------
+    image : array_like of uint8, shape (H, W) or (H, W, 3)
+        Grey or BGR frame.
+    rois : sequence of (x0, y0, x1, y1)
+    config : EdgeConfig, optional
+    """
+    cfg = config or EdgeConfig()
+    frame = prepare_frame(image, cfg)
+    return [roi_distance_map(frame, r, cfg) for r in rois]
+
+
+def edge_distance_transform(
+    image: ArrayLike,
+    rois: list[Roi] | tuple[Roi, ...] | None = None,
+    config: EdgeConfig | None = None,
+) -> Float32Array:
+    """Full-frame truncated edge distance map: computed inside the union of RoIs, cap elsewhere.
+
+    Parameters
+    ----------
+    image : array_like of uint8, shape (H, W) or (H, W, 3)
+    rois : sequence of (x0, y0, x1, y1), optional
+        Without RoIs the whole image is processed.
+    config : EdgeConfig, optional
+
+    Returns
+    -------
+    ndarray of float32, shape (H, W)
+    """
+    cfg = config or EdgeConfig()
+    frame = prepare_frame(image, cfg)
+    w, h = frame.image_size
+    if rois is None:
+        return roi_distance_map(frame, (0, 0, w, h), cfg).distance_px
+    out = np.full((h, w), np.float32(cfg.cap_px), dtype=np.float32)
+    for r in rois:
+        dm = roi_distance_map(frame, r, cfg)
+        rx0, ry0, rx1, ry1 = dm.roi
+        # overlapping RoIs agree up to hysteresis (module notes); keep the smaller value
+        np.minimum(out[ry0:ry1, rx0:rx1], dm.distance_px, out=out[ry0:ry1, rx0:rx1])
+    return out
+
+
+__all__ = [
+    "DistanceMap",
+    "EdgeConfig",
+    "PreparedFrame",
+    "Roi",
+    "canny_edges",
+    "clip_roi",
+    "distance_to_edges",
+    "edge_distance_maps",
+    "edge_distance_transform",
+    "equalize_lut",
+    "prepare_frame",
+    "roi_around_points",
+    "roi_distance_map",
+    "to_grey",
+]

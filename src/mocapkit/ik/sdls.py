@@ -1,0 +1,738 @@
+"""Selectively damped least-squares IK with a weighted Jacobian and a null-space secondary task.
+
+Zhang, Brunnett & Rusdorf 2011, §4 (Alg. 1), as corrected by errata Z1-Z8 and Z13,
+after Buss & Kim 2005 (SDLS) and Buss's released code (``CalcDeltaThetasSDLS``).
+One iteration, for the active end effectors only:
+
+1. forward kinematics; effector positions ``s`` and position Jacobian ``J`` (3K, D);
+2. per-effector clamped error ``e_l = t_l - s_l`` shortened to ``D_max`` (Z2);
+3. weighted Jacobian ``J_w = J diag(mu)^-1`` (Z3), ``psi_j = mu_j theta_j``;
+4. SVD ``J_w = U S V^T``; terms with ``sigma_i < 1e-10 sigma_1`` are skipped;
+5. SDLS: ``phi_i = ClampMaxAbs(sigma_i^-1 alpha_i v_i, gamma_i)`` with
+   ``gamma_i = Gamma min(1, N_i / M_i)``, ``N_i`` the sum of the norms of the 3-blocks of
+   ``u_i`` (Z4), ``M_i = sigma_i^-1 sum_l sum_j |v_ji| |J_w[l, j]|`` (Z5);
+6. secondary task ``dphi`` (see :mod:`mocapkit.ik.secondary`) mapped to psi space
+   (``mu_j dphi_j``, Z8e) and projected with the exact projector ``P = I - V_r V_r^T`` of
+   the undamped SVD (Z7);
+7. outer clamp of the sum (Buss & Kim's ``ClampMaxAbs(., Gamma)``, Z6), then
+   ``dtheta = dpsi / mu``, clamp into the joint limits;
+8. forward kinematics again (Z1: ``s`` is never updated as ``s + J dtheta``).
+
+Stop when every active effector is within ``tol_mm`` (after at least ``min_iterations``
+steps, so a warm-started frame still relaxes a little) or after ``max_iterations``.
+
+Weights ``mu`` (recipe Z): ``mu_j = sqrt(m_j / m_min)`` with ``m_j`` the carried mass
+(complement of the subtree on a planted leg, Z8b) and ``m_min`` the smallest carried
+mass of a revolute DoF, so ``min mu = 1`` over rotations and the bound ``Gamma`` on
+``dpsi`` also bounds every angle step. Prismatic root DoFs are in mm, not radians:
+they are made commensurate by a reference length ``L`` (default: the rest leg length,
+hip to ankle), ``psi_j = mu_j q_j / L``, i.e. moving the pelvis by ``L delta`` costs as
+much as tilting the whole body by ``delta`` radians about the planted feet, which is
+what moving the pelvis over planted feet amounts to. Their step is bounded by
+``Gamma L / mu_j`` mm.
+
+Joint limits: a DoF clipped at a limit is locked (its Jacobian column zeroed) until a
+later step moves it back inside, so the remaining DoFs take over the task instead
+of the solver pushing against the limit every iteration.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numba
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mocapkit.errors import ShapeError, unknown_name
+from mocapkit.ik.secondary import (
+    SecondaryTask,
+    carried_mass_planted,
+    clamp_max_abs_nb,
+    lever_weights_nb,
+    secondary_task_nb,
+)
+from mocapkit.skeleton.kinematics import (
+    fk_pose_nb,
+    kinematic_arrays,
+    points_and_jacobian,
+    points_jacobian_pose_nb,
+)
+from mocapkit.skeleton.model import PRISMATIC, REVOLUTE, Skeleton
+
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
+
+#: Buss's released code uses 45 deg for the global bound Gamma (errata Z6).
+DEFAULT_GAMMA_RAD = math.radians(45.0)
+#: Singular values below this fraction of the largest are ignored (errata Z6).
+SIGMA_CUTOFF = 1e-10
+
+
+@dataclass(frozen=True)
+class Effector:
+    """A point fixed to a joint that IK drives to a target.
+
+    Parameters
+    ----------
+    name : str
+        Effector name (marker-set name, e.g. ``"left_hand"``).
+    joint : str
+        Joint carrying the point.
+    point_mm : tuple of 3 float
+        The point in that joint's frame (mm). For a marker-driven effector this is
+        the marker-to-joint offset: the marker set sits at this point.
+    """
+
+    name: str
+    joint: str
+    point_mm: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class IKConfig:
+    """Settings of the SDLS solver (defaults follow the errata and recipe Z).
+
+    Parameters
+    ----------
+    gamma_rad : float
+        Global maximum angle change per iteration, Gamma (45 deg).
+    dmax_mm : float or None
+        Per-effector target clamp; ``None`` means 0.1 x arm length (73 mm for Table 1).
+    tol_mm : float
+        Stop when every active effector is this close to its target.
+    max_iterations, min_iterations : int
+        Iteration bounds per solve.
+    secondary_gain : float
+        ``k`` of the secondary task (0 disables it).
+    secondary_max_step_rad : float
+        ClampMaxAbs bound of the secondary task (errata Z8d uses Gamma). The exact
+        projector holds the effectors only to first order (Z7); a null-space step of
+        ``delta`` rad drifts an effector by about ``r delta^2 / 2`` (r ~ 700 mm), so with
+        Gamma = 45 deg the main task and the secondary task settle into a fixed point
+        several mm off the targets. 0.05 rad keeps the drift below 1 mm; relaxation
+        accumulates over the frames of a warm-started sequence.
+    clamp : {"hard", "soft"}
+        ``"hard"``: Buss & Kim's paper clamps (ClampMaxAbs per term and on the sum);
+        ``"soft"``: the factors of Buss's released code, ``g / (g + max|phi|)``.
+    prismatic_length_mm : float or None
+        Reference length ``L`` that converts root translation to an angle-like
+        cost (default: rest leg length, hip to ankle).
+    """
+
+    gamma_rad: float = DEFAULT_GAMMA_RAD
+    dmax_mm: float | None = None
+    tol_mm: float = 1.0
+    max_iterations: int = 100
+    min_iterations: int = 1
+    secondary_gain: float = 0.3
+    secondary_max_step_rad: float = 0.05
+    clamp: str = "hard"
+    prismatic_length_mm: float | None = None
+
+    def __post_init__(self) -> None:
+        if not (0.0 < self.gamma_rad <= math.pi):
+            raise ShapeError(f"IKConfig.gamma_rad: expected a value in (0, pi], found {self.gamma_rad}")
+        if self.dmax_mm is not None and not self.dmax_mm > 0:
+            raise ShapeError(f"IKConfig.dmax_mm: expected a positive length, found {self.dmax_mm}")
+        if not self.tol_mm > 0:
+            raise ShapeError(f"IKConfig.tol_mm: expected a positive tolerance, found {self.tol_mm}")
+        if self.max_iterations < 1 or not 0 <= self.min_iterations <= self.max_iterations:
+            raise ShapeError(
+                "IKConfig: expected 1 <= max_iterations and 0 <= min_iterations <= max_iterations, "
+                f"found max_iterations={self.max_iterations}, min_iterations={self.min_iterations}"
+            )
+        if not 0.0 <= self.secondary_gain <= 1.0:
+            raise ShapeError(
+                f"IKConfig.secondary_gain: expected k in [0, 1] (recipe: 0.1-0.5), "
+                f"found {self.secondary_gain}"
+            )
+        if not self.secondary_max_step_rad > 0:
+            raise ShapeError("IKConfig.secondary_max_step_rad: expected a positive angle, found "
+                             f"{self.secondary_max_step_rad}")
+        if self.clamp not in ("hard", "soft"):
+            raise ShapeError(f"IKConfig.clamp: expected 'hard' or 'soft', found {self.clamp!r}")
+
+
+@dataclass
+class IKResult:
+    """Outcome of one solve.
+
+    Attributes
+    ----------
+    q : ndarray, shape (D,)
+    iterations : int
+    residual_mm : ndarray, shape (E,)
+        Distance of each effector to its target (NaN for inactive effectors).
+    converged : bool
+        Every active effector within ``tol_mm``.
+    trace : ndarray, shape (iterations, 4) or None
+        Per iteration: max effector error before the step (mm), max |dtheta| over
+        revolute DoFs (rad), max |dpsi| (weighted units), max |dq| over prismatic DoFs (mm).
+    """
+
+    q: FloatArray
+    iterations: int
+    residual_mm: FloatArray
+    converged: bool
+    trace: FloatArray | None = field(default=None)
+
+
+# ------------------------------------------------------------------ compiled pieces
+
+
+@numba.njit(cache=True)
+def clamp_error_nb(s: FloatArray, t: FloatArray, dmax: float, out: FloatArray) -> None:
+    """Per-effector target clamp (errata Z2): ``out[l] = t_l - s_l`` shortened to ``dmax``.
+
+    ``s``, ``t`` (K, 3); ``out`` (3K,).
+    """
+    for k in range(s.shape[0]):
+        dx = t[k, 0] - s[k, 0]
+        dy = t[k, 1] - s[k, 1]
+        dz = t[k, 2] - s[k, 2]
+        n = math.sqrt(dx * dx + dy * dy + dz * dz)
+        f = 1.0
+        if n > dmax:
+            f = dmax / n
+        out[3 * k] = dx * f
+        out[3 * k + 1] = dy * f
+        out[3 * k + 2] = dz * f
+
+
+@numba.njit(cache=True)
+def sdls_nb(
+    jw: FloatArray,
+    e: FloatArray,
+    gamma: float,
+    soft: bool,
+    dpsi: FloatArray,
+    vr: FloatArray,
+    n_out: FloatArray,
+    m_out: FloatArray,
+) -> int:
+    """SDLS response ``dpsi`` (D,) of ``jw`` (3K, D) to the error ``e`` (3K,), per-term clamped.
+
+    Writes the rows of ``V^T`` kept (rank r) into ``vr[:r]`` (for the null-space
+    projector), and ``N_i``, ``M_i`` into ``n_out[:r]``, ``m_out[:r]``. Returns r.
+    The outer clamp is left to the caller (it also covers the secondary task).
+    """
+    n_rows, n_cols = jw.shape
+    n_eff = n_rows // 3
+    for j in range(n_cols):
+        dpsi[j] = 0.0
+    u, s, vt = np.linalg.svd(jw, full_matrices=False)
+    if s.shape[0] == 0 or s[0] <= 0.0:
+        return 0
+    # rho[l, j]: norm of the 3-block of effector l in column j
+    rho_sum = np.zeros(n_cols)
+    for j in range(n_cols):
+        acc = 0.0
+        for ll in range(n_eff):
+            a = jw[3 * ll, j]
+            b = jw[3 * ll + 1, j]
+            c = jw[3 * ll + 2, j]
+            acc += math.sqrt(a * a + b * b + c * c)
+        rho_sum[j] = acc
+    phi = np.empty(n_cols)
+    rank = 0
+    for i in range(s.shape[0]):
+        si = s[i]
+        if si < SIGMA_CUTOFF * s[0] or si <= 0.0:
+            continue
+        alpha = 0.0
+        n_i = 0.0
+        for ll in range(n_eff):
+            a = u[3 * ll, i]
+            b = u[3 * ll + 1, i]
+            c = u[3 * ll + 2, i]
+            alpha += a * e[3 * ll] + b * e[3 * ll + 1] + c * e[3 * ll + 2]
+            n_i += math.sqrt(a * a + b * b + c * c)
+        m_i = 0.0
+        for j in range(n_cols):
+            m_i += abs(vt[i, j]) * rho_sum[j]
+        m_i /= si
+        g = gamma
+        if n_i < m_i:
+            g = gamma * n_i / m_i
+        scale = alpha / si
+        mx = 0.0
+        for j in range(n_cols):
+            phi[j] = scale * vt[i, j]
+            if abs(phi[j]) > mx:
+                mx = abs(phi[j])
+        if soft:
+            f = g / (g + mx)
+        elif mx > g:
+            f = g / mx
+        else:
+            f = 1.0
+        for j in range(n_cols):
+            dpsi[j] += f * phi[j]
+        for j in range(n_cols):
+            vr[rank, j] = vt[i, j]
+        n_out[rank] = n_i
+        m_out[rank] = m_i
+        rank += 1
+    return rank
+
+
+@numba.njit(cache=True)
+def project_nullspace_nb(vr: FloatArray, rank: int, x: FloatArray, out: FloatArray) -> None:
+    """``out = (I - V_r V_r^T) x`` with the first ``rank`` rows of ``vr`` (errata Z7)."""
+    for j in range(x.shape[0]):
+        out[j] = x[j]
+    for i in range(rank):
+        c = 0.0
+        for j in range(x.shape[0]):
+            c += vr[i, j] * x[j]
+        for j in range(x.shape[0]):
+            out[j] -= c * vr[i, j]
+
+
+@numba.njit(cache=True)
+def solve_ik_nb(
+    q: FloatArray,
+    parents: NDArray[np.int64],
+    offsets: FloatArray,
+    dof_start: NDArray[np.int64],
+    dof_count: NDArray[np.int64],
+    dof_kind: NDArray[np.int64],
+    dof_axis: FloatArray,
+    dof_joint: NDArray[np.int64],
+    ancestors: BoolArray,
+    eff_joint: NDArray[np.int64],
+    eff_point: FloatArray,
+    targets: FloatArray,
+    frozen: BoolArray,
+    mu: FloatArray,
+    lower: FloatArray,
+    upper: FloatArray,
+    omega: FloatArray,
+    sec_mask: BoolArray,
+    planted: BoolArray,
+    mass: FloatArray,
+    com_local: FloatArray,
+    gain: float,
+    sec_max: float,
+    dmax: float,
+    gamma: float,
+    soft: bool,
+    tol: float,
+    max_iter: int,
+    min_iter: int,
+    residual: FloatArray,
+    trace: FloatArray,
+) -> int:
+    """Algorithm 1 (corrected) for one frame; updates ``q`` (D,) in place.
+
+    ``eff_joint`` (K,), ``eff_point`` (K, 3) and ``targets`` (K, 3) list the active
+    effectors only. ``frozen`` (D,) DoFs do not move. Writes the final distance of
+    each effector to ``residual`` (K,) and per-iteration diagnostics to ``trace``
+    (max_iter, 4). Returns the number of steps taken.
+    """
+    n_joints = parents.shape[0]
+    n_dofs = q.shape[0]
+    k_eff = eff_joint.shape[0]
+    world = np.empty((n_joints, 4, 4))
+    axis_world = np.empty((n_dofs, 3))
+    pivot_world = np.empty((n_dofs, 3))
+    pts = np.empty((k_eff, 3))
+    jac = np.empty((3 * k_eff, n_dofs))
+    jw = np.empty((3 * k_eff, n_dofs))
+    e = np.empty(3 * k_eff)
+    dpsi = np.empty(n_dofs)
+    dphi = np.empty(n_dofs)
+    dphi_p = np.empty(n_dofs)
+    mh = np.empty(n_dofs)
+    n_sv = min(3 * k_eff, n_dofs)
+    vr = np.empty((max(n_sv, 1), n_dofs))
+    n_buf = np.empty(max(n_sv, 1))
+    m_buf = np.empty(max(n_sv, 1))
+    locked = np.zeros(n_dofs, dtype=np.bool_)
+    inv_mu = 1.0 / mu
+    use_secondary = gain > 0.0
+
+    fk_pose_nb(q, parents, offsets, dof_start, dof_count, dof_kind, dof_axis,
+               world, axis_world, pivot_world)
+    points_jacobian_pose_nb(world, axis_world, pivot_world, dof_kind, dof_joint, ancestors,
+                            eff_joint, eff_point, pts, jac)
+    err = 0.0
+    for k in range(k_eff):
+        d = math.sqrt((targets[k, 0] - pts[k, 0]) ** 2 + (targets[k, 1] - pts[k, 1]) ** 2
+                      + (targets[k, 2] - pts[k, 2]) ** 2)
+        err = max(err, d)
+    it = 0
+    while it < max_iter and k_eff > 0:
+        if err < tol and it >= min_iter:
+            break
+        clamp_error_nb(pts, targets, dmax, e)
+        for r in range(3 * k_eff):
+            for d in range(n_dofs):
+                if frozen[d] or locked[d]:
+                    jw[r, d] = 0.0
+                else:
+                    jw[r, d] = jac[r, d] * inv_mu[d]
+        rank = sdls_nb(jw, e, gamma, soft, dpsi, vr, n_buf, m_buf)
+        if use_secondary:
+            lever_weights_nb(world, axis_world, pivot_world, parents, dof_joint, mass,
+                             com_local, planted, sec_mask, mh)
+            secondary_task_nb(q, omega, mh, gain, sec_max, dphi)
+            for d in range(n_dofs):
+                # psi space (Z8e); a DoF held at a limit has a zeroed column, so the
+                # projector would not compensate its motion: leave it out
+                dphi[d] = 0.0 if (frozen[d] or locked[d]) else dphi[d] * mu[d]
+            project_nullspace_nb(vr, rank, dphi, dphi_p)
+            for d in range(n_dofs):
+                dpsi[d] += dphi_p[d]
+        # outer clamp on the sum (Buss & Kim); uniform scaling keeps the null-space part
+        mx = 0.0
+        for d in range(n_dofs):
+            mx = max(mx, abs(dpsi[d]))
+        if mx > gamma:
+            f = gamma / (gamma + mx) if soft else gamma / mx
+            for d in range(n_dofs):
+                dpsi[d] *= f
+        max_rev = 0.0
+        max_pris = 0.0
+        max_psi = 0.0
+        for d in range(n_dofs):
+            if frozen[d]:
+                continue
+            step = dpsi[d] * inv_mu[d]
+            new = q[d] + step
+            if new < lower[d]:
+                new = lower[d]
+                locked[d] = True
+            elif new > upper[d]:
+                new = upper[d]
+                locked[d] = True
+            elif locked[d] and step != 0.0:
+                locked[d] = False  # moved back inside the limits
+            taken = new - q[d]
+            q[d] = new
+            max_psi = max(max_psi, abs(taken * mu[d]))
+            if dof_kind[d] == 1:
+                max_pris = max(max_pris, abs(taken))
+            else:
+                max_rev = max(max_rev, abs(taken))
+        if it < trace.shape[0]:
+            trace[it, 0] = err
+            trace[it, 1] = max_rev
+            trace[it, 2] = max_psi
+            trace[it, 3] = max_pris
+        fk_pose_nb(q, parents, offsets, dof_start, dof_count, dof_kind, dof_axis,
+                   world, axis_world, pivot_world)
+        points_jacobian_pose_nb(world, axis_world, pivot_world, dof_kind, dof_joint, ancestors,
+                                eff_joint, eff_point, pts, jac)
+        err = 0.0
+        for k in range(k_eff):
+            d2 = math.sqrt((targets[k, 0] - pts[k, 0]) ** 2 + (targets[k, 1] - pts[k, 1]) ** 2
+                           + (targets[k, 2] - pts[k, 2]) ** 2)
+            err = max(err, d2)
+        it += 1
+    for k in range(k_eff):
+        residual[k] = math.sqrt((targets[k, 0] - pts[k, 0]) ** 2 + (targets[k, 1] - pts[k, 1]) ** 2
+                                + (targets[k, 2] - pts[k, 2]) ** 2)
+    return it
+
+
+# ------------------------------------------------------------------ Python helpers
+
+
+def clamp_max_abs(w: ArrayLike, d: float) -> FloatArray:
+    """ClampMaxAbs (errata Z6): ``w`` if ``max|w| <= d``, else ``w d / max|w|``.
+
+    Parameters
+    ----------
+    w : array_like, shape (n,)
+    d : float
+        Bound, >= 0.
+    """
+    out = np.array(w, dtype=float).ravel()
+    clamp_max_abs_nb(out, float(d))
+    return out
+
+
+def clamp_target_error(s_mm: ArrayLike, t_mm: ArrayLike, dmax_mm: float) -> FloatArray:
+    """Per-effector clamped error (errata Z2), shape (3K,) from ``s``, ``t`` of shape (K, 3)."""
+    s = np.ascontiguousarray(s_mm, dtype=float)
+    t = np.ascontiguousarray(t_mm, dtype=float)
+    if s.ndim != 2 or s.shape[1] != 3 or t.shape != s.shape:
+        raise ShapeError(f"clamp_target_error: expected s and t of equal shape (K, 3), found "
+                         f"{s.shape} and {t.shape}")
+    out = np.empty(s.size)
+    clamp_error_nb(s, t, float(dmax_mm), out)
+    return out
+
+
+@dataclass
+class SDLSStep:
+    """One SDLS response (diagnostics for tests).
+
+    Attributes
+    ----------
+    dpsi : ndarray (D,)  per-term clamped sum, before the outer clamp
+    v_r : ndarray (r, D)  kept right singular vectors
+    n : ndarray (r,)  N_i (Z4)
+    m : ndarray (r,)  M_i (Z5)
+    """
+
+    dpsi: FloatArray
+    v_r: FloatArray
+    n: FloatArray
+    m: FloatArray
+
+
+def sdls_response(jw: ArrayLike, e: ArrayLike, gamma_rad: float = DEFAULT_GAMMA_RAD,
+                  soft: bool = False) -> SDLSStep:
+    """SDLS response of a weighted Jacobian ``jw`` (3K, D) to an error ``e`` (3K,)."""
+    a = np.ascontiguousarray(jw, dtype=float)
+    ev = np.ascontiguousarray(e, dtype=float)
+    if a.ndim != 2 or a.shape[0] % 3 or ev.shape != (a.shape[0],):
+        raise ShapeError(f"sdls_response: expected jw (3K, D) and e (3K,), found {a.shape}, {ev.shape}")
+    n_sv = max(min(a.shape), 1)
+    dpsi = np.empty(a.shape[1])
+    vr = np.empty((n_sv, a.shape[1]))
+    nb = np.empty(n_sv)
+    mb = np.empty(n_sv)
+    r = sdls_nb(a, ev, float(gamma_rad), bool(soft), dpsi, vr, nb, mb)
+    return SDLSStep(dpsi, vr[:r].copy(), nb[:r].copy(), mb[:r].copy())
+
+
+def nullspace_projector(jw: ArrayLike) -> FloatArray:
+    """Exact projector ``P = I - V_r V_r^T`` (D, D) onto the null space of ``jw`` (errata Z7)."""
+    step = sdls_response(jw, np.zeros(np.shape(jw)[0]))
+    d = step.v_r.shape[1]
+    return np.eye(d) - step.v_r.T @ step.v_r
+
+
+def arm_length_mm(skeleton: Skeleton) -> float:
+    """Length of the left arm (upper arm + forearm + hand segments) in mm (730 for Table 1)."""
+    lengths = skeleton.bone_length_mm
+    total = 0.0
+    for name in ("l_humerus", "l_radius", "l_hand"):
+        if name in skeleton.joint_names:
+            total += float(lengths[skeleton.joint_index(name)])
+    if total <= 0:
+        raise ShapeError(
+            f"skeleton {skeleton.name!r} has no l_humerus/l_radius/l_hand segments; "
+            "set IKConfig.dmax_mm explicitly"
+        )
+    return total
+
+
+def leg_length_mm(skeleton: Skeleton) -> float:
+    """Rest length of the left leg, hip joint to ankle (mm); arm length if there are no legs."""
+    if "l_femur" in skeleton.joint_names and "l_foot" in skeleton.joint_names:
+        lengths = skeleton.bone_length_mm
+        return float(lengths[skeleton.joint_index("l_femur")] + lengths[skeleton.joint_index("l_tibia")])
+    return arm_length_mm(skeleton)
+
+
+def dof_weights(
+    skeleton: Skeleton,
+    planted_joints: Sequence[str] = ("l_foot", "r_foot"),
+    prismatic_length_mm: float | None = None,
+) -> FloatArray:
+    """Cost weights ``mu`` (D,) of the weighted Jacobian (recipe Z, errata Z3; see module doc).
+
+    ``mu_j = sqrt(m_j / m_min)`` over revolute and ball DoFs (min 1); prismatic DoFs
+    get ``sqrt(m_j / m_min) / L`` (per mm) with ``L = prismatic_length_mm`` or the leg length.
+    """
+    m = carried_mass_planted(skeleton, planted_joints)
+    rot = skeleton.dof_kind != PRISMATIC
+    positive = m[rot & (m > 0)]
+    if positive.size == 0:
+        raise ShapeError(f"skeleton {skeleton.name!r}: no rotational DoF carries mass; "
+                         "cannot weight the Jacobian")
+    m_min = float(positive.min())
+    mu = np.sqrt(np.maximum(m, m_min) / m_min)
+    length = leg_length_mm(skeleton) if prismatic_length_mm is None else float(prismatic_length_mm)
+    if not length > 0:
+        raise ShapeError(f"prismatic_length_mm: expected a positive length, found {length}")
+    mu = np.where(rot, mu, mu / length)
+    return mu
+
+
+def default_effectors(skeleton: Skeleton) -> tuple[Effector, ...]:
+    """The five effectors of the paper on ``zhang21``: head centre, both wrists, both ankles."""
+    head_joint, head_point = skeleton.canonical.get("head", ("head", (0.0, 0.0, 0.0)))
+    return (
+        Effector("head", head_joint, tuple(float(x) for x in head_point)),  # type: ignore[arg-type]
+        Effector("left_hand", "l_hand"),
+        Effector("right_hand", "r_hand"),
+        Effector("left_foot", "l_foot"),
+        Effector("right_foot", "r_foot"),
+    )
+
+
+class SDLSSolver:
+    """Warm-startable SDLS IK on one skeleton and a fixed list of effectors.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    effectors : sequence of Effector, optional
+        Defaults to `default_effectors` (head, hands, feet).
+    config : IKConfig
+    planted_joints : sequence of str
+        Joints held on the ground (affects mass weights, Z8b).
+    omega : array_like, shape (D,), optional
+        Relaxed pose for the secondary task.
+    """
+
+    def __init__(
+        self,
+        skeleton: Skeleton,
+        effectors: Sequence[Effector] | None = None,
+        config: IKConfig | None = None,
+        planted_joints: Sequence[str] = ("l_foot", "r_foot"),
+        omega: ArrayLike | None = None,
+    ) -> None:
+        self.skeleton = skeleton
+        self.config = config or IKConfig()
+        self.effectors = tuple(effectors) if effectors is not None else default_effectors(skeleton)
+        if not self.effectors:
+            raise ShapeError("SDLSSolver: expected at least one effector, found none")
+        names = [e.name for e in self.effectors]
+        if len(set(names)) != len(names):
+            raise ShapeError(f"SDLSSolver: effector names must be unique, found {names}")
+        planted = tuple(p for p in planted_joints if p in skeleton.joint_names)
+        self.planted_joints = planted
+        self.secondary = SecondaryTask(skeleton, planted, omega)
+        self.mu = dof_weights(skeleton, planted, self.config.prismatic_length_mm)
+        self.dmax_mm = (self.config.dmax_mm if self.config.dmax_mm is not None
+                        else 0.1 * arm_length_mm(skeleton))
+        self._ka = kinematic_arrays(skeleton)
+        self._dof_joint = np.ascontiguousarray(skeleton.dof_joint)
+        self._eff_joint = np.array([skeleton.joint_index(e.joint) for e in self.effectors],
+                                   dtype=np.int64)
+        self._eff_point = np.array([e.point_mm for e in self.effectors], dtype=float).reshape(-1, 3)
+        self._lower = np.ascontiguousarray(skeleton.lower)
+        self._upper = np.ascontiguousarray(skeleton.upper)
+
+    @property
+    def effector_names(self) -> tuple[str, ...]:
+        """Names of the effectors, in the order targets are given."""
+        return tuple(e.name for e in self.effectors)
+
+    def effector_index(self, name: str) -> int:
+        """Index of an effector by name."""
+        try:
+            return self.effector_names.index(name)
+        except ValueError:
+            raise unknown_name("effector", name, self.effector_names, "SDLSSolver") from None
+
+    def with_points(self, points_mm: ArrayLike) -> SDLSSolver:
+        """A solver whose effector points (marker offsets in the joint frames) are replaced.
+
+        Parameters
+        ----------
+        points_mm : array_like, shape (E, 3)
+        """
+        pts = np.asarray(points_mm, dtype=float)
+        if pts.shape != (len(self.effectors), 3) or not np.all(np.isfinite(pts)):
+            raise ShapeError(f"effector points: expected finite shape ({len(self.effectors)}, 3), "
+                             f"found {pts.shape}")
+        effs = [Effector(e.name, e.joint, (float(p[0]), float(p[1]), float(p[2])))
+                for e, p in zip(self.effectors, pts, strict=True)]
+        return SDLSSolver(self.skeleton, effs, self.config, self.planted_joints,
+                          self.secondary.omega)
+
+    def effector_positions(self, q: ArrayLike) -> FloatArray:
+        """World positions (E, 3) of the effectors at pose ``q`` (D,)."""
+        pts, _ = points_and_jacobian(self.skeleton, q, self._eff_joint, self._eff_point)
+        return pts
+
+    def weighted_jacobian(self, q: ArrayLike) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Effector positions (E, 3), Jacobian ``J`` (3E, D) and ``J_w = J diag(mu)^-1``."""
+        pts, jac = points_and_jacobian(self.skeleton, q, self._eff_joint, self._eff_point)
+        return pts, jac, jac / self.mu[None, :]
+
+    def solve(
+        self,
+        q0: ArrayLike,
+        targets_mm: ArrayLike,
+        active: ArrayLike | None = None,
+        frozen: ArrayLike | None = None,
+        record_trace: bool = False,
+    ) -> IKResult:
+        """Run the IK loop from ``q0`` (warm start).
+
+        Parameters
+        ----------
+        q0 : array_like, shape (D,)
+            Start pose (rad, mm); clipped into the limits.
+        targets_mm : array_like, shape (E, 3)
+            Target of each effector (world, mm); rows of inactive effectors are ignored
+            and may be NaN.
+        active : array_like of bool, shape (E,), optional
+            Effectors in the task (default: those with finite targets).
+        frozen : array_like of bool, shape (D,), optional
+            DoFs held fixed.
+        record_trace : bool
+            Keep per-iteration diagnostics in the result.
+        """
+        sk = self.skeleton
+        q = np.ascontiguousarray(np.asarray(q0, dtype=float).copy())
+        sk.check_q(q, "q0")
+        if q.shape != (sk.n_dofs,):
+            raise ShapeError(f"q0: expected shape ({sk.n_dofs},), found {q.shape}")
+        q = np.clip(q, self._lower, self._upper)
+        t = np.asarray(targets_mm, dtype=float)
+        n_eff = len(self.effectors)
+        if t.shape != (n_eff, 3):
+            raise ShapeError(f"targets_mm: expected shape ({n_eff}, 3) for effectors "
+                             f"{list(self.effector_names)}, found {t.shape}")
+        finite = np.all(np.isfinite(t), axis=1)
+        act = finite if active is None else np.asarray(active, dtype=bool) & finite
+        if act.shape != (n_eff,):
+            raise ShapeError(f"active: expected shape ({n_eff},), found {act.shape}")
+        frz = (np.zeros(sk.n_dofs, dtype=bool) if frozen is None
+               else np.ascontiguousarray(frozen, dtype=bool))
+        if frz.shape != (sk.n_dofs,):
+            raise ShapeError(f"frozen: expected shape ({sk.n_dofs},), found {frz.shape}")
+        idx = np.flatnonzero(act)
+        cfg = self.config
+        residual = np.full(len(idx), np.nan)
+        trace = np.zeros((cfg.max_iterations if record_trace else 0, 4))
+        ka = self._ka
+        sec = self.secondary
+        n_it = solve_ik_nb(
+            q, ka.parents, ka.offsets, ka.dof_start, ka.dof_count, ka.dof_kind, ka.dof_axis,
+            self._dof_joint, ka.ancestors,
+            np.ascontiguousarray(self._eff_joint[idx]), np.ascontiguousarray(self._eff_point[idx]),
+            np.ascontiguousarray(t[idx]), frz, self.mu, self._lower, self._upper,
+            sec.omega, sec.mask, sec.planted, sec.mass, sec.com_local,
+            float(cfg.secondary_gain), float(min(cfg.secondary_max_step_rad, cfg.gamma_rad)),
+            float(self.dmax_mm), float(cfg.gamma_rad),
+            cfg.clamp == "soft", float(cfg.tol_mm), int(cfg.max_iterations),
+            int(cfg.min_iterations), residual, trace,
+        )
+        res_all = np.full(n_eff, np.nan)
+        res_all[idx] = residual
+        converged = bool(len(idx) == 0 or np.all(residual < cfg.tol_mm))
+        return IKResult(q=q, iterations=int(n_it), residual_mm=res_all, converged=converged,
+                        trace=trace[:n_it].copy() if record_trace else None)
+
+
+__all__ = [
+    "DEFAULT_GAMMA_RAD",
+    "REVOLUTE",
+    "Effector",
+    "IKConfig",
+    "IKResult",
+    "SDLSSolver",
+    "SDLSStep",
+    "arm_length_mm",
+    "clamp_max_abs",
+    "clamp_target_error",
+    "default_effectors",
+    "dof_weights",
+    "leg_length_mm",
+    "nullspace_projector",
+    "sdls_response",
+]

@@ -1,0 +1,583 @@
+"""Labelled 3-D marker trajectories (`MarkerData`), format dispatch, and the marker CSV format.
+
+Every reader returns positions in mm with NaN for occluded samples (never zero-filled);
+``read_markers`` picks the reader from the file extension.
+
+CSV layout (one row per frame, comma separated, UTF-8)::
+
+    time_s,LFHD_x,LFHD_y,LFHD_z,RFHD_x,RFHD_y,RFHD_z,...
+    0.0,12.5,803.1,1601.2,,,,...
+
+Coordinates are in mm; an empty cell (or ``nan``) is a missing sample.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mocapkit.errors import FormatError, ShapeError, UnknownNameError, unknown_name
+from mocapkit.io.atomic import atomic_write
+
+#: File extensions `read_markers` understands (lower case, with the dot).
+SUPPORTED_MARKER_EXTENSIONS: tuple[str, ...] = (".c3d", ".trc", ".csv")
+#: File extensions `write_markers` can write.
+WRITABLE_MARKER_EXTENSIONS: tuple[str, ...] = (".trc", ".csv")
+
+_AXES = ("x", "y", "z")
+
+
+def bare_marker_name(name: str) -> str:
+    """The marker name without a Vicon ``Subject:`` prefix (``"Derrick:LFHD"`` -> ``"LFHD"``)."""
+    return name.rsplit(":", 1)[-1]
+
+
+def _readonly(a: NDArray[np.float64]) -> NDArray[np.float64]:
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class MarkerOcclusion:
+    """Missing samples of one marker.
+
+    Attributes
+    ----------
+    name : str
+        Marker name as in the file.
+    n_frames : int
+        Number of frames in the recording.
+    n_missing : int
+        Frames where the marker is missing (any coordinate NaN).
+    longest_gap_frames : int
+        Longest run of consecutive missing frames.
+    longest_gap_s : float
+        Duration of that run: ``longest_gap_frames / rate_hz`` (samples times period).
+    """
+
+    name: str
+    n_frames: int
+    n_missing: int
+    longest_gap_frames: int
+    longest_gap_s: float
+
+    @property
+    def fraction_missing(self) -> float:
+        """Share of frames where the marker is missing, in [0, 1]."""
+        return self.n_missing / self.n_frames if self.n_frames else 0.0
+
+
+@dataclass(frozen=True)
+class OcclusionReport:
+    """Per-marker occlusion statistics of a `MarkerData` (see `MarkerData.occlusions`)."""
+
+    source: str
+    rate_hz: float
+    n_frames: int
+    markers: tuple[MarkerOcclusion, ...]
+
+    @property
+    def total_missing(self) -> int:
+        """Missing marker samples summed over all markers."""
+        return sum(m.n_missing for m in self.markers)
+
+    def get(self, name: str) -> MarkerOcclusion:
+        """The entry of the marker called exactly ``name``."""
+        for m in self.markers:
+            if m.name == name:
+                return m
+        raise unknown_name("marker", name, (m.name for m in self.markers), self.source)
+
+    def summary(self) -> str:
+        """A readable table: one line per marker with missing samples, worst first."""
+        n_m = len(self.markers)
+        complete = sum(1 for m in self.markers if m.n_missing == 0)
+        lines = [
+            f"{self.source}: {n_m} markers x {self.n_frames} frames at {self.rate_hz:g} Hz; "
+            f"{self.total_missing} missing samples; {complete}/{n_m} markers complete"
+        ]
+        gappy = sorted(
+            (m for m in self.markers if m.n_missing),
+            key=lambda m: (-m.n_missing, m.name),
+        )
+        if gappy:
+            width = max(len(m.name) for m in gappy)
+            lines.append(f"  {'marker':<{width}}  missing  (%)     longest gap")
+            for m in gappy:
+                lines.append(
+                    f"  {m.name:<{width}}  {m.n_missing:7d}  {100 * m.fraction_missing:5.1f}  "
+                    f"{m.longest_gap_frames:6d} frames = {m.longest_gap_s:.3f} s"
+                )
+        return "\n".join(lines)
+
+
+def longest_true_run(mask: NDArray[np.bool_]) -> NDArray[np.int64]:
+    """Length of the longest run of True along axis 0.
+
+    Parameters
+    ----------
+    mask : (T, ...) bool array
+
+    Returns
+    -------
+    (...) int array
+    """
+    m = np.asarray(mask, dtype=bool)
+    t = m.shape[0]
+    flat = m.reshape(t, -1)
+    out = np.zeros(flat.shape[1], dtype=np.int64)
+    for j in range(flat.shape[1]):
+        col = flat[:, j]
+        if not col.any():
+            continue
+        edges = np.diff(np.concatenate(([0], col.view(np.int8), [0])))
+        starts = np.flatnonzero(edges == 1)
+        ends = np.flatnonzero(edges == -1)
+        out[j] = int((ends - starts).max())
+    return out.reshape(m.shape[1:])
+
+
+@dataclass(frozen=True, eq=False)
+class MarkerData:
+    """Labelled marker trajectories of one recording.
+
+    Arrays are stored read-only copies; the object is immutable.
+
+    Attributes
+    ----------
+    time_s : (T,) float array
+        Time stamps in seconds, strictly increasing.
+    names : tuple of str
+        The M marker names as in the file (a Vicon ``Subject:`` prefix is kept).
+    positions_mm : (T, M, 3) float array
+        Marker positions in the file's lab frame, in mm; NaN where a marker is missing.
+    rate_hz : float
+        Sampling rate in Hz.
+    source : str
+        Where the data came from (file path), used in error messages.
+    """
+
+    time_s: NDArray[np.float64]
+    names: tuple[str, ...]
+    positions_mm: NDArray[np.float64]
+    rate_hz: float
+    source: str = "<memory>"
+    _lookup: dict[str, int] = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        src = self.source
+        time_s = np.array(self.time_s, dtype=np.float64)
+        pos = np.array(self.positions_mm, dtype=np.float64)
+        names = tuple(self.names)
+        if time_s.ndim != 1:
+            raise ShapeError(f"{src}: time_s: expected shape (T,), found {time_s.shape}")
+        t = time_s.shape[0]
+        if pos.ndim != 3 or pos.shape[0] != t or pos.shape[2] != 3:
+            raise ShapeError(
+                f"{src}: positions_mm: expected shape (T={t}, M, 3), found {pos.shape}"
+            )
+        if len(names) != pos.shape[1]:
+            raise ShapeError(
+                f"{src}: names: expected {pos.shape[1]} names (one per marker column), "
+                f"found {len(names)}"
+            )
+        for n in names:
+            if not isinstance(n, str) or not n.strip():
+                raise FormatError(f"{src}: marker names: expected non-empty strings, found {n!r}")
+        seen: dict[str, int] = {}
+        for i, n in enumerate(names):
+            if n in seen:
+                raise FormatError(
+                    f"{src}: marker names: expected unique names, found {n!r} at columns "
+                    f"{seen[n]} and {i}"
+                )
+            seen[n] = i
+        if not np.all(np.isfinite(time_s)):
+            bad = int(np.flatnonzero(~np.isfinite(time_s))[0])
+            raise FormatError(f"{src}: time stamps: expected finite values, found {time_s[bad]} "
+                              f"at frame {bad}")
+        if t > 1:
+            steps = np.diff(time_s)
+            if np.any(steps <= 0):
+                k = int(np.flatnonzero(steps <= 0)[0])
+                raise FormatError(
+                    f"{src}: time stamps: expected strictly increasing values, found "
+                    f"{time_s[k + 1]!r} s at frame {k + 1} after {time_s[k]!r} s at frame {k}"
+                )
+        if np.isinf(pos).any():
+            raise FormatError(f"{src}: positions_mm: expected finite values or NaN, found inf")
+        rate = float(self.rate_hz)
+        if not math.isfinite(rate) or rate <= 0:
+            raise FormatError(f"{src}: rate_hz: expected a positive sampling rate, found {rate}")
+        object.__setattr__(self, "time_s", _readonly(time_s))
+        object.__setattr__(self, "positions_mm", _readonly(pos))
+        object.__setattr__(self, "names", names)
+        object.__setattr__(self, "rate_hz", rate)
+        object.__setattr__(self, "source", str(src))
+        object.__setattr__(self, "_lookup", seen)
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def n_frames(self) -> int:
+        """Number of frames T."""
+        return int(self.positions_mm.shape[0])
+
+    @property
+    def n_markers(self) -> int:
+        """Number of markers M."""
+        return int(self.positions_mm.shape[1])
+
+    @property
+    def missing(self) -> NDArray[np.bool_]:
+        """(T, M) bool: True where a marker sample is missing (any coordinate NaN)."""
+        return np.asarray(np.isnan(self.positions_mm).any(axis=2), dtype=bool)
+
+    # ------------------------------------------------------------------ names
+    def index(self, name: str) -> int:
+        """Column of a marker, matched with or without a Vicon ``Subject:`` prefix.
+
+        An exact match wins. Otherwise a bare name (``"LFHD"``) matches a prefixed one
+        (``"Derrick:LFHD"``) when exactly one subject has it.
+
+        Raises
+        ------
+        UnknownNameError
+            Unknown name (the message lists the valid names), or a bare name that
+            several subjects share (the message lists the candidates).
+        """
+        if name in self._lookup:
+            return self._lookup[name]
+        bare = bare_marker_name(name)
+        hits = [i for i, n in enumerate(self.names) if bare_marker_name(n) == bare]
+        if ":" in name:
+            # A prefixed query matches only itself, or a bare file name when the file has
+            # no prefixes at all (e.g. a TRC exported without subject names).
+            hits = [i for i in hits if ":" not in self.names[i]]
+        if len(hits) == 1:
+            return hits[0]
+        if len(hits) > 1:
+            listed = ", ".join(self.names[i] for i in hits)
+            raise UnknownNameError(
+                f"ambiguous marker {name!r} in {self.source}: matches {listed}; "
+                f"give the full 'Subject:Marker' name"
+            )
+        raise unknown_name("marker", name, self.names, self.source)
+
+    def indices(self, names: Iterable[str]) -> list[int]:
+        """Columns of several markers (see `index`)."""
+        if isinstance(names, str):
+            names = [names]
+        return [self.index(n) for n in names]
+
+    def trajectory(self, name: str) -> NDArray[np.float64]:
+        """(T, 3) read-only positions of one marker in mm (NaN where missing)."""
+        return self.positions_mm[:, self.index(name), :]
+
+    def select(self, names: Iterable[str]) -> MarkerData:
+        """A new `MarkerData` with the given markers, in the given order.
+
+        Names are matched as in `index`; the result keeps the names as in the file.
+        """
+        idx = self.indices(names)
+        return MarkerData(
+            time_s=self.time_s,
+            names=tuple(self.names[i] for i in idx),
+            positions_mm=self.positions_mm[:, idx, :],
+            rate_hz=self.rate_hz,
+            source=self.source,
+        )
+
+    # ------------------------------------------------------------------ reports
+    def occlusions(self) -> OcclusionReport:
+        """Per-marker count of missing samples and longest gap (frames and seconds)."""
+        miss = self.missing
+        counts = miss.sum(axis=0)
+        longest = longest_true_run(miss)
+        return OcclusionReport(
+            source=self.source,
+            rate_hz=self.rate_hz,
+            n_frames=self.n_frames,
+            markers=tuple(
+                MarkerOcclusion(
+                    name=n,
+                    n_frames=self.n_frames,
+                    n_missing=int(counts[i]),
+                    longest_gap_frames=int(longest[i]),
+                    longest_gap_s=float(longest[i]) / self.rate_hz,
+                )
+                for i, n in enumerate(self.names)
+            ),
+        )
+
+    def summary(self) -> str:
+        """Readable description: size, rate, duration, and the occlusion table."""
+        dur = float(self.time_s[-1] - self.time_s[0]) if self.n_frames else 0.0
+        head = (
+            f"time {self.time_s[0]:.4f}..{self.time_s[-1]:.4f} s ({dur:.3f} s)"
+            if self.n_frames
+            else "no frames"
+        )
+        return f"{head}\n{self.occlusions().summary()}"
+
+
+# ---------------------------------------------------------------------- dispatch
+def read_markers(path: str | os.PathLike[str]) -> MarkerData:
+    """Read labelled marker trajectories from a C3D, TRC or CSV file.
+
+    Parameters
+    ----------
+    path : path-like
+        File whose extension (case-insensitive) is one of `SUPPORTED_MARKER_EXTENSIONS`.
+
+    Returns
+    -------
+    MarkerData
+        Positions in mm, NaN for missing samples.
+
+    Raises
+    ------
+    FormatError
+        Unsupported extension, or a file that does not follow its format.
+    FileNotFoundError
+        The file does not exist.
+    """
+    p = Path(path)
+    ext = p.suffix.lower()
+    if ext not in SUPPORTED_MARKER_EXTENSIONS:
+        raise FormatError(
+            f"{p}: unsupported marker file extension {p.suffix!r}; expected one of "
+            f"{', '.join(SUPPORTED_MARKER_EXTENSIONS)}"
+        )
+    if not p.is_file():
+        raise FileNotFoundError(f"{p}: marker file not found")
+    # Readers are imported here so that one format does not pull in the others' dependencies.
+    if ext == ".c3d":
+        from mocapkit.io.c3d import read_c3d
+
+        return read_c3d(p)
+    if ext == ".trc":
+        from mocapkit.io.trc import read_trc
+
+        return read_trc(p)
+    return read_markers_csv(p)
+
+
+def write_markers(path: str | os.PathLike[str], markers: MarkerData, **kwargs: Any) -> None:
+    """Write a `MarkerData` as TRC or CSV (chosen by extension), atomically.
+
+    Extra keyword arguments go to `mocapkit.io.trc.write_trc` (e.g. ``units="m"``).
+    """
+    p = Path(path)
+    ext = p.suffix.lower()
+    if ext not in WRITABLE_MARKER_EXTENSIONS:
+        raise FormatError(
+            f"{p}: cannot write markers with extension {p.suffix!r}; expected one of "
+            f"{', '.join(WRITABLE_MARKER_EXTENSIONS)}"
+        )
+    if ext == ".trc":
+        from mocapkit.io.trc import write_trc
+
+        write_trc(p, markers.time_s, markers.names, markers.positions_mm,
+                  rate_hz=markers.rate_hz, **kwargs)
+    else:
+        if kwargs:
+            raise TypeError(f"write_markers: CSV takes no options, found {sorted(kwargs)}")
+        write_markers_csv(p, markers.time_s, markers.names, markers.positions_mm)
+
+
+# ---------------------------------------------------------------------- helpers
+def infer_rate_hz(time_s: NDArray[np.float64], where: str) -> float:
+    """Sampling rate from time stamps: the inverse of the median step.
+
+    Raises `FormatError` naming ``where`` when fewer than two frames are given.
+    """
+    if time_s.shape[0] < 2:
+        raise FormatError(
+            f"{where}: time_s: expected at least 2 frames to infer the sampling rate, "
+            f"found {time_s.shape[0]}"
+        )
+    step = float(np.median(np.diff(time_s)))
+    if not step > 0:
+        raise FormatError(f"{where}: time_s: expected increasing time stamps, found median "
+                          f"step {step}")
+    return 1.0 / step
+
+
+def check_marker_arrays(
+    time_s: ArrayLike, marker_names: Sequence[str], positions_mm: ArrayLike, where: str
+) -> tuple[NDArray[np.float64], tuple[str, ...], NDArray[np.float64]]:
+    """Validate writer inputs; returns float arrays and the names as a tuple.
+
+    Raises `ShapeError` for wrong shapes and `FormatError` for names that cannot be
+    written (empty, duplicated, or holding separators or line breaks).
+    """
+    t = np.asarray(time_s, dtype=np.float64)
+    pos = np.asarray(positions_mm, dtype=np.float64)
+    if isinstance(marker_names, str):
+        raise ShapeError(f"{where}: marker_names: expected a sequence of names, found a string")
+    names = tuple(marker_names)
+    if t.ndim != 1:
+        raise ShapeError(f"{where}: time_s: expected shape (T,), found {t.shape}")
+    if pos.shape != (t.shape[0], len(names), 3):
+        raise ShapeError(
+            f"{where}: positions_mm: expected shape (T={t.shape[0]}, M={len(names)}, 3), "
+            f"found {pos.shape}"
+        )
+    # Reuse MarkerData's checks (unique non-empty names, increasing finite time, no inf).
+    MarkerData(time_s=t, names=names, positions_mm=pos, rate_hz=1.0, source=where)
+    for n in names:
+        if any(c in n for c in "\t\r\n,") or n != n.strip():
+            raise FormatError(
+                f"{where}: marker name {n!r}: expected no tab, comma, line break or "
+                f"surrounding spaces"
+            )
+    return t, names, pos
+
+
+def _format_float(v: float) -> str:
+    # repr gives the shortest string that reads back to the same double: exact round trip.
+    return "" if v != v else repr(v)
+
+
+# ---------------------------------------------------------------------- CSV
+def write_markers_csv(
+    path: str | os.PathLike[str],
+    time_s: ArrayLike,
+    marker_names: Sequence[str],
+    positions_mm: ArrayLike,
+) -> None:
+    """Write marker trajectories as CSV (``time_s, NAME_x, NAME_y, NAME_z, ...``), atomically.
+
+    Values are written with full double precision (exact round trip); NaN becomes an
+    empty cell.
+
+    Parameters
+    ----------
+    path : path-like
+    time_s : (T,) float array
+        Strictly increasing time stamps in seconds.
+    marker_names : sequence of str
+        M unique names (no commas, tabs or line breaks).
+    positions_mm : (T, M, 3) float array
+        Positions in mm; NaN for missing samples.
+    """
+    t, names, pos = check_marker_arrays(time_s, marker_names, positions_mm, str(path))
+    header = ["time_s"] + [f"{n}_{a}" for n in names for a in _AXES]
+    flat = pos.reshape(t.shape[0], -1).tolist()
+    with atomic_write(path, "w", newline="") as fh:
+        writer = csv.writer(fh, lineterminator="\n")
+        writer.writerow(header)
+        for ti, row in zip(t.tolist(), flat):
+            writer.writerow([repr(ti)] + [_format_float(v) for v in row])
+
+
+def _parse_cell(text: str, where: str, line: int, col: int, column_name: str) -> float:
+    s = text.strip()
+    if not s:
+        return math.nan
+    try:
+        return float(s)
+    except ValueError:
+        raise FormatError(
+            f"{where} line {line} column {col} ({column_name}): expected a number or an empty "
+            f"cell, found {text!r}"
+        ) from None
+
+
+def read_markers_csv(path: str | os.PathLike[str]) -> MarkerData:
+    """Read marker trajectories from a CSV file (see the module docstring for the layout).
+
+    The sampling rate is the inverse of the median time step.
+
+    Raises
+    ------
+    FormatError
+        Missing ``time_s`` first column, a column not ending in ``_x``/``_y``/``_z``,
+        an incomplete x/y/z triple, a row with the wrong number of cells, a non-numeric
+        cell (file, line and column named), or non-increasing time stamps.
+    """
+    p = Path(path)
+    where = str(p)
+    with open(p, encoding="utf-8-sig", newline="") as fh:
+        rows = list(csv.reader(fh))
+    # Drop blank lines (e.g. a trailing newline) but keep line numbers for messages.
+    numbered = [(i + 1, r) for i, r in enumerate(rows) if any(c.strip() for c in r)]
+    if not numbered:
+        raise FormatError(f"{where}: expected a header row starting with 'time_s', found an "
+                          f"empty file")
+    header_line, header = numbered[0]
+    header = [h.strip() for h in header]
+    if header[0] != "time_s":
+        raise FormatError(
+            f"{where} line {header_line} column 1: expected the time column 'time_s', "
+            f"found {header[0]!r}"
+        )
+    names: list[str] = []
+    slots: dict[str, list[int]] = {}
+    for col, h in enumerate(header[1:], start=1):
+        stem, sep, axis = h.rpartition("_")
+        if not sep or not stem or axis not in _AXES:
+            raise FormatError(
+                f"{where} line {header_line} column {col + 1}: expected a column named "
+                f"NAME_x, NAME_y or NAME_z, found {h!r}"
+            )
+        if stem not in slots:
+            slots[stem] = [-1, -1, -1]
+            names.append(stem)
+        k = _AXES.index(axis)
+        if slots[stem][k] != -1:
+            raise FormatError(
+                f"{where} line {header_line} column {col + 1}: duplicate column {h!r}"
+            )
+        slots[stem][k] = col
+    for n in names:
+        lacking = [f"{n}_{a}" for a, c in zip(_AXES, slots[n]) if c == -1]
+        if lacking:
+            raise FormatError(
+                f"{where} line {header_line}: marker {n!r} lacks column(s) {', '.join(lacking)}"
+            )
+    body = numbered[1:]
+    n_cols = len(header)
+    t = np.empty(len(body))
+    values = np.empty((len(body), n_cols - 1))
+    for r, (line, row) in enumerate(body):
+        if len(row) != n_cols:
+            raise FormatError(
+                f"{where} line {line}: expected {n_cols} cells as in the header, found {len(row)}"
+            )
+        ts = row[0].strip()
+        try:
+            t[r] = float(ts)
+        except ValueError:
+            raise FormatError(
+                f"{where} line {line} column 1 (time_s): expected a number, found {row[0]!r}"
+            ) from None
+        if not math.isfinite(t[r]):
+            raise FormatError(
+                f"{where} line {line} column 1 (time_s): expected a finite time, found {row[0]!r}"
+            )
+        for c in range(1, n_cols):
+            values[r, c - 1] = _parse_cell(row[c], where, line, c + 1, header[c])
+    if len(body) > 1 and np.any(np.diff(t) <= 0):
+        k = int(np.flatnonzero(np.diff(t) <= 0)[0])
+        raise FormatError(
+            f"{where} line {body[k + 1][0]} column 1 (time_s): expected time stamps strictly "
+            f"increasing, found {t[k + 1]!r} after {t[k]!r}"
+        )
+    cols = np.array([slots[n] for n in names], dtype=np.int64).reshape(len(names), 3) - 1
+    pos = values[:, cols] if names else np.empty((len(body), 0, 3))
+    return MarkerData(
+        time_s=t,
+        names=tuple(names),
+        positions_mm=pos,
+        rate_hz=infer_rate_hz(t, where),
+        source=where,
+    )

@@ -1,0 +1,497 @@
+"""Streaming hybrid tracker: head and hand marker sets plus one camera (Zhang et al. 2011).
+
+Per sample (Fig. 3): marker targets -> IK (:mod:`mocapkit.ik.sdls`) -> optional video
+refinement of each arm (``refiner`` hook) -> balance heuristic
+(:mod:`mocapkit.tracking.balance`) -> optional temporal smoothing -> pose.
+
+Streams (§3): markers and video run at different rates; the caller samples them as
+the paper does, giving each `HybridSample` the video frame and the newest marker
+sample with its own time stamp (``marker_time_s``).
+
+Occlusions: a marker set missing (NaN) for up to ``gap_limit_s`` is bridged by
+constant-velocity extrapolation from its last two observations; beyond that its
+effector is released (dropped from the IK task) and the gap is reported in
+``HybridPose.released`` and `HybridTracker.events`, never pinned to a stale position.
+
+Smoothing (the paper's own remedy for the oscillation it reports, §6-7): a causal
+one-euro filter on ``q`` (Casiez et al. 2012) followed by an IK polish that puts the
+effectors back on their markers; off when ``paper=True`` (which also selects the
+paper's proportional balance rule).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mocapkit.errors import ShapeError, unknown_name
+from mocapkit.ik.sdls import Effector, IKConfig, SDLSSolver
+from mocapkit.skeleton.kinematics import canonical_positions
+from mocapkit.skeleton.model import PRISMATIC, Skeleton
+from mocapkit.tracking.balance import (
+    BalanceConfig,
+    BalanceModel,
+    balance_pose,
+    calibrate_balance,
+    support_points,
+)
+
+FloatArray = NDArray[np.float64]
+
+#: Marker-set names the hybrid tracker drives, and their default effectors on ``zhang21``.
+MARKER_SETS: tuple[str, ...] = ("head", "left_hand", "right_hand")
+FEET: tuple[str, ...] = ("left_foot", "right_foot")
+
+Refiner = Callable[..., FloatArray]
+
+
+def default_marker_effectors(skeleton: Skeleton) -> dict[str, Effector]:
+    """Head centre (canonical ``head`` point) and both wrists, with zero marker offsets."""
+    head_joint, head_point = skeleton.canonical.get("head", ("head", (0.0, 0.0, 0.0)))
+    hp = tuple(float(x) for x in head_point)
+    return {
+        "head": Effector("head", head_joint, (hp[0], hp[1], hp[2])),
+        "left_hand": Effector("left_hand", "l_hand"),
+        "right_hand": Effector("right_hand", "r_hand"),
+    }
+
+
+@dataclass(frozen=True)
+class HybridConfig:
+    """Settings of the hybrid tracker.
+
+    Parameters
+    ----------
+    ik : IKConfig
+    paper : bool
+        Follow the paper literally: no temporal smoothing, proportional balance rule.
+    use_video : bool
+        Run the arm refinement when a camera, an image and a refiner are available.
+    gap_limit_s : float
+        Longest marker gap bridged by extrapolation (s).
+    balance : BalanceConfig or None
+        Default: ``"proportional"`` in paper mode, ``"solve"`` otherwise.
+    smoothing_min_cutoff_hz, smoothing_beta : float
+        One-euro filter parameters (cut-off at rest; speed coefficient, per rad/s,
+        per 1000 mm/s for the root translation).
+    marker_offsets_mm : mapping of str to (3,) array_like
+        Marker-set offsets in the effector's joint frame, added to the effector point.
+    refine_config : Any
+        Passed through to the refiner.
+    init_iterations : int
+        Cold-start solves (of ``ik.max_iterations`` each) on the first sample.
+    """
+
+    ik: IKConfig = field(default_factory=IKConfig)
+    paper: bool = False
+    use_video: bool = True
+    gap_limit_s: float = 0.25
+    balance: BalanceConfig | None = None
+    smoothing_min_cutoff_hz: float = 3.0
+    smoothing_beta: float = 0.5
+    marker_offsets_mm: Mapping[str, Sequence[float]] = field(default_factory=dict)
+    refine_config: Any = None
+    init_iterations: int = 3
+
+    def __post_init__(self) -> None:
+        if not self.gap_limit_s >= 0:
+            raise ShapeError(f"HybridConfig.gap_limit_s: expected >= 0 s, found {self.gap_limit_s}")
+        if not self.smoothing_min_cutoff_hz > 0 or not self.smoothing_beta >= 0:
+            raise ShapeError(
+                "HybridConfig: expected smoothing_min_cutoff_hz > 0 and smoothing_beta >= 0, found "
+                f"{self.smoothing_min_cutoff_hz}, {self.smoothing_beta}"
+            )
+
+    @property
+    def balance_config(self) -> BalanceConfig:
+        """The balance settings in effect."""
+        if self.balance is not None:
+            return self.balance
+        return BalanceConfig(mode="proportional" if self.paper else "solve")
+
+    @property
+    def smoothing(self) -> bool:
+        """Temporal smoothing is on unless in paper mode."""
+        return not self.paper
+
+
+@dataclass(frozen=True)
+class HybridSample:
+    """One input sample.
+
+    Parameters
+    ----------
+    time_s : float
+        Time of the sample (the video frame's time when video drives the loop).
+    markers_mm : mapping of str to array_like (3,)
+        Marker-set positions in the world frame (mm); NaN or absent when occluded.
+    marker_time_s : float, optional
+        Time stamp of the marker sample used (the newest one); ``time_s`` by default.
+    image : ndarray, optional
+        Video frame (H, W) or (H, W, 3) for the refinement.
+    """
+
+    time_s: float
+    markers_mm: Mapping[str, ArrayLike]
+    marker_time_s: float | None = None
+    image: NDArray[Any] | None = None
+
+
+@dataclass
+class HybridPose:
+    """Tracker output for one sample.
+
+    Attributes
+    ----------
+    time_s : float
+    q : ndarray (D,)
+    joints_mm : ndarray (K, 3)
+        Canonical joints of the skeleton (``skeleton.canonical_names`` order).
+    iterations : int
+        IK iterations of this sample.
+    residual_mm : dict of str to float
+        Distance of each effector to its target after the whole pipeline (NaN if released).
+    released : tuple of str
+        Marker sets dropped from the task (gap longer than the limit).
+    bridged : tuple of str
+        Marker sets extrapolated over a short gap.
+    spine_lean_rad : ndarray (3,)
+        Balance increments applied to the spine.
+    marker_time_s : float
+    refined : bool
+        Whether the video refinement ran.
+    """
+
+    time_s: float
+    q: FloatArray
+    joints_mm: FloatArray
+    iterations: int
+    residual_mm: dict[str, float]
+    released: tuple[str, ...]
+    bridged: tuple[str, ...]
+    spine_lean_rad: FloatArray
+    marker_time_s: float
+    refined: bool = False
+
+
+class OneEuroFilter:
+    """Causal one-euro filter on a vector (Casiez, Roussel, Vogel 2012).
+
+    Parameters
+    ----------
+    min_cutoff_hz : float
+        Cut-off when still; lower means smoother.
+    beta : array_like, shape (n,) or scalar
+        Speed coefficient; the cut-off grows as ``min_cutoff + beta |dx/dt|``, so fast
+        motion is followed with little lag.
+    d_cutoff_hz : float
+        Cut-off of the speed estimate.
+    """
+
+    def __init__(self, min_cutoff_hz: float, beta: ArrayLike, d_cutoff_hz: float = 1.0) -> None:
+        self.min_cutoff = float(min_cutoff_hz)
+        self.beta = np.asarray(beta, dtype=float)
+        self.d_cutoff = float(d_cutoff_hz)
+        self._x: FloatArray | None = None
+        self._dx: FloatArray | None = None
+        self._t: float | None = None
+
+    @staticmethod
+    def _alpha(cutoff: ArrayLike, dt: float) -> FloatArray:
+        tau = 1.0 / (2.0 * math.pi * np.asarray(cutoff, dtype=float))
+        return 1.0 / (1.0 + tau / dt)
+
+    def __call__(self, t_s: float, x: ArrayLike) -> FloatArray:
+        """Filter the value ``x`` observed at time ``t_s``; returns the smoothed value."""
+        xa = np.asarray(x, dtype=float)
+        if self._x is None or self._t is None or t_s <= self._t:
+            self._x, self._dx, self._t = xa.copy(), np.zeros_like(xa), float(t_s)
+            return xa.copy()
+        dt = float(t_s) - self._t
+        dx = (xa - self._x) / dt
+        a_d = self._alpha(self.d_cutoff, dt)
+        assert self._dx is not None
+        self._dx = a_d * dx + (1.0 - a_d) * self._dx
+        cutoff = self.min_cutoff + self.beta * np.abs(self._dx)
+        a = self._alpha(cutoff, dt)
+        self._x = a * xa + (1.0 - a) * self._x
+        self._t = float(t_s)
+        return self._x.copy()
+
+
+@dataclass
+class _Track:
+    """Last observations of one marker set (for gap bridging)."""
+
+    t: list[float] = field(default_factory=list)
+    p: list[FloatArray] = field(default_factory=list)
+    released: bool = False
+    gap_start_s: float | None = None
+
+
+class HybridTracker:
+    """Streaming tracker: ``update(sample) -> HybridPose``.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        Usually ``load_preset("zhang21")`` scaled to the subject (optionally with
+        ``root_rotation``).
+    camera : Camera, optional
+        Needed for the video refinement.
+    config : HybridConfig
+    refiner : callable, optional
+        ``refine(skeleton, camera, q, image, hand_targets_mm, config) -> q``; by default
+        ``mocapkit.tracking.arm_refinement.refine_arms`` when that module is installed.
+    initial_q : array_like, shape (D,), optional
+        Start pose; by default the relaxed pose placed under the head marker
+        (`initial_pose`).
+    marker_effectors : mapping of str to Effector, optional
+        Effector driven by each marker set (default `default_marker_effectors`).
+    """
+
+    def __init__(
+        self,
+        skeleton: Skeleton,
+        camera: Any = None,
+        config: HybridConfig | None = None,
+        refiner: Refiner | None = None,
+        initial_q: ArrayLike | None = None,
+        marker_effectors: Mapping[str, Effector] | None = None,
+    ) -> None:
+        self.skeleton = skeleton
+        self.camera = camera
+        self.config = config or HybridConfig()
+        effs = dict(marker_effectors or default_marker_effectors(skeleton))
+        for name, off in self.config.marker_offsets_mm.items():
+            if name not in effs:
+                raise unknown_name("marker set", name, effs, "HybridConfig.marker_offsets_mm")
+            o = np.asarray(off, dtype=float)
+            if o.shape != (3,) or not np.all(np.isfinite(o)):
+                raise ShapeError(f"HybridConfig.marker_offsets_mm[{name!r}]: expected 3 finite "
+                                 f"numbers (mm), found {off!r}")
+            e = effs[name]
+            p = np.add(e.point_mm, o)
+            effs[name] = Effector(e.name, e.joint, (float(p[0]), float(p[1]), float(p[2])))
+        self.marker_sets = tuple(effs)
+        effectors = [effs[n] for n in self.marker_sets] + [
+            Effector("left_foot", "l_foot"), Effector("right_foot", "r_foot")]
+        self.solver = SDLSSolver(skeleton, effectors, self.config.ik)
+        polish_cfg = replace(self.config.ik, secondary_gain=0.0, min_iterations=0)
+        self._polish = SDLSSolver(skeleton, effectors, polish_cfg)
+        self._refiner = refiner
+        self._refiner_looked_up = refiner is not None
+        self._initial_q = None if initial_q is None else np.asarray(initial_q, dtype=float)
+        self._q: FloatArray | None = None
+        self._feet: FloatArray | None = None
+        self._support: FloatArray | None = None
+        self._root_z0 = 0.0
+        self._balance_model: BalanceModel | None = None
+        self._tracks = {n: _Track() for n in self.marker_sets}
+        self._filter: OneEuroFilter | None = None
+        #: Log of gap events: (time_s, marker set, "bridging" | "released" | "recovered").
+        self.events: list[tuple[float, str, str]] = []
+
+    # ------------------------------------------------------------------ pieces
+
+    def refiner(self) -> Refiner | None:
+        """The video refinement in use (looked up once), or None."""
+        if not self._refiner_looked_up:
+            self._refiner_looked_up = True
+            try:
+                from mocapkit.tracking.arm_refinement import refine_arms
+            except ImportError:
+                self._refiner = None
+            else:
+                self._refiner = refine_arms
+        return self._refiner
+
+    def _targets(self, sample: HybridSample) -> tuple[FloatArray, list[str], list[str]]:
+        t_m = sample.time_s if sample.marker_time_s is None else float(sample.marker_time_s)
+        n = len(self.marker_sets)
+        targets = np.full((n + 2, 3), np.nan)
+        bridged: list[str] = []
+        released: list[str] = []
+        for i, name in enumerate(self.marker_sets):
+            tr = self._tracks[name]
+            raw = sample.markers_mm.get(name)
+            p = None if raw is None else np.asarray(raw, dtype=float).reshape(-1)
+            if p is not None and p.shape != (3,):
+                raise ShapeError(f"sample.markers_mm[{name!r}]: expected 3 coordinates (mm), "
+                                 f"found shape {p.shape}")
+            if p is not None and np.all(np.isfinite(p)):
+                if tr.released or tr.gap_start_s is not None:
+                    self.events.append((t_m, name, "recovered"))
+                tr.released, tr.gap_start_s = False, None
+                if not tr.t or t_m > tr.t[-1]:
+                    tr.t, tr.p = (tr.t + [t_m])[-2:], (tr.p + [p])[-2:]
+                targets[i] = p
+                continue
+            if tr.gap_start_s is None:
+                tr.gap_start_s = tr.t[-1] if tr.t else t_m
+            gap = t_m - tr.gap_start_s
+            if tr.t and not tr.released and gap <= self.config.gap_limit_s:
+                if not bridged or bridged[-1] != name:
+                    if not self.events or self.events[-1][1:] != (name, "bridging"):
+                        self.events.append((t_m, name, "bridging"))
+                v = ((tr.p[-1] - tr.p[0]) / (tr.t[-1] - tr.t[0])
+                     if len(tr.t) == 2 and tr.t[-1] > tr.t[0] else np.zeros(3))
+                targets[i] = tr.p[-1] + v * (t_m - tr.t[-1])
+                bridged.append(name)
+            else:
+                if not tr.released:
+                    self.events.append((t_m, name, "released"))
+                tr.released = True
+                released.append(name)
+        return targets, bridged, released
+
+    def initial_pose(self, targets: FloatArray) -> FloatArray:
+        """Relaxed pose with the pelvis below the head marker and facing from the hands.
+
+        Root x, y put the model's head over the head marker; the root height stays at
+        the model's standing height (feet on the floor z = 0 of a scaled model). With
+        the ``root_yaw`` DoF, the yaw makes the body's right (+X at rest) point from the
+        left-hand to the right-hand marker, projected horizontally (the hands are
+        roughly symmetric about the sagittal plane at the start of a take).
+        """
+        sk = self.skeleton
+        q = self.solver.secondary.omega.copy() if self._initial_q is None else self._initial_q.copy()
+        if self._initial_q is not None:
+            return np.clip(q, sk.lower, sk.upper)
+        names = list(self.marker_sets)
+        if "root_yaw" in sk.dof_names and "left_hand" in names and "right_hand" in names:
+            lh, rh = targets[names.index("left_hand")], targets[names.index("right_hand")]
+            if np.all(np.isfinite(lh)) and np.all(np.isfinite(rh)):
+                right = rh - lh
+                if np.hypot(right[0], right[1]) > 1e-6:
+                    q[sk.dof_index("root_yaw")] = math.atan2(right[1], right[0])
+        if "head" in names and np.all(np.isfinite(targets[names.index("head")])):
+            head_now = self.solver.effector_positions(q)[names.index("head")]
+            q[0] += targets[names.index("head"), 0] - head_now[0]
+            q[1] += targets[names.index("head"), 1] - head_now[1]
+        return np.clip(q, sk.lower, sk.upper)
+
+    # ------------------------------------------------------------------ update
+
+    def reset(self) -> None:
+        """Forget the state (pose, feet, gaps, filter); the next sample initialises again."""
+        self._q = None
+        self._feet = None
+        self._filter = None
+        self._tracks = {n: _Track() for n in self.marker_sets}
+        self.events = []
+
+    def update(self, sample: HybridSample) -> HybridPose:
+        """Track one sample; returns the pose (see `HybridPose`)."""
+        if not math.isfinite(sample.time_s):
+            raise ShapeError(f"sample.time_s: expected a finite time (s), found {sample.time_s}")
+        sk = self.skeleton
+        targets, bridged, released = self._targets(sample)
+        n = len(self.marker_sets)
+        iterations = 0
+        if self._q is None:
+            q = self.initial_pose(targets)
+            feet = self.solver.effector_positions(q)[n:]
+            self._feet = feet
+            self._support = support_points(sk, q)
+            self._root_z0 = float(q[sk.dof_index("root_tz")])
+            targets[n:] = feet
+            for _ in range(max(self.config.init_iterations, 1)):
+                res = self.solver.solve(q, targets)
+                q = res.q
+                iterations += res.iterations
+            if self.config.balance_config.mode == "proportional":
+                self._balance_model = calibrate_balance(self.solver, q)
+        else:
+            assert self._feet is not None
+            targets[n:] = self._feet
+            res = self.solver.solve(self._q, targets)
+            q = res.q
+            iterations += res.iterations
+        refined = False
+        ref = self.refiner() if (self.config.use_video and self.camera is not None
+                                  and sample.image is not None) else None
+        if ref is not None:
+            hands = {name: targets[i].copy() for i, name in enumerate(self.marker_sets)
+                     if name in ("left_hand", "right_hand") and np.all(np.isfinite(targets[i]))}
+            q = np.asarray(ref(sk, self.camera, q, sample.image, hands, self.config.refine_config),
+                           dtype=float)
+            sk.check_q(q, "refiner output")
+            refined = True
+        # warm start of the next frame: the pose before the balance post-process, so
+        # the spine bow is recomputed from dh each frame rather than accumulated
+        self._q = q.copy()
+        assert self._support is not None
+        bal = balance_pose(self.solver, q, targets, self._root_z0, self._support,
+                           self._balance_model, self.config.balance_config)
+        q = bal.q
+        if self.config.smoothing:
+            if self._filter is None:
+                beta = np.where(sk.dof_kind == PRISMATIC, self.config.smoothing_beta / 1000.0,
+                                self.config.smoothing_beta)
+                self._filter = OneEuroFilter(self.config.smoothing_min_cutoff_hz, beta)
+            q = self._filter(sample.time_s, q)
+            # the filter smooths the redundant DoFs; put the effectors back on the markers
+            res = self._polish.solve(q, targets)
+            q = res.q
+            iterations += res.iterations
+        resid_arr = np.linalg.norm(self.solver.effector_positions(q) - targets, axis=1)
+        names = self.marker_sets + FEET
+        residual = {nm: float(r) for nm, r in zip(names, resid_arr, strict=True)}
+        joints = canonical_positions(sk, q)
+        return HybridPose(
+            time_s=float(sample.time_s), q=q, joints_mm=joints, iterations=iterations,
+            residual_mm=residual, released=tuple(released), bridged=tuple(bridged),
+            spine_lean_rad=bal.taus,
+            marker_time_s=float(sample.time_s if sample.marker_time_s is None
+                                else sample.marker_time_s),
+            refined=refined,
+        )
+
+
+def calibrate_marker_offsets(
+    skeleton: Skeleton,
+    q: ArrayLike,
+    markers_mm: ArrayLike,
+    effectors: Sequence[Effector],
+) -> FloatArray:
+    """Marker-to-joint offsets from frames where the pose is known.
+
+    Averages ``R_j^T (m - o_j)`` (the marker in the effector joint's frame) over frames.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    q : array_like, shape (N, D)
+        Known poses.
+    markers_mm : array_like, shape (N, E, 3)
+        Marker-set positions (NaN for missing).
+    effectors : sequence of Effector, length E
+
+    Returns
+    -------
+    ndarray, shape (E, 3)
+        Offset of each marker set in its joint frame (mm); NaN when never seen.
+    """
+    from mocapkit.skeleton.kinematics import forward_kinematics
+
+    qa = np.asarray(q, dtype=float)
+    m = np.asarray(markers_mm, dtype=float)
+    if qa.ndim != 2 or m.shape != (qa.shape[0], len(effectors), 3):
+        raise ShapeError(f"calibrate_marker_offsets: expected q (N, D) and markers (N, "
+                         f"{len(effectors)}, 3), found {qa.shape} and {m.shape}")
+    world = forward_kinematics(skeleton, qa)
+    out = np.full((len(effectors), 3), np.nan)
+    for e, eff in enumerate(effectors):
+        j = skeleton.joint_index(eff.joint)
+        rot = world[:, j, :3, :3]
+        local = np.einsum("nji,nj->ni", rot, m[:, e] - world[:, j, :3, 3])
+        ok = np.all(np.isfinite(local), axis=1)
+        if ok.any():
+            out[e] = local[ok].mean(axis=0)
+    return out

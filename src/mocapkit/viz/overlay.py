@@ -1,0 +1,136 @@
+"""Drawing the body model's projected limb cones over an image, for inspection and synthetic tests.
+
+Each segment with a length and radii is drawn as its silhouette under the camera:
+the quadrilateral between its two contour generators
+(`mocapkit.tracking.arm_refinement.cone_contour_generators_nb`, exact under
+perspective) plus a disc of the projected radius at each end, so limbs look like
+tapered capsules. Segments are painted far to near. Corners are projected with the
+camera's distortion and joined by straight lines, which is exact for a distortion-free
+camera and close otherwise.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import cv2
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mocapkit.camera.pinhole import Camera
+from mocapkit.errors import ShapeError
+from mocapkit.skeleton.kinematics import forward_kinematics
+from mocapkit.skeleton.model import Skeleton
+from mocapkit.tracking.arm_refinement import cone_contour_generators_nb
+
+FloatArray = NDArray[np.float64]
+Colour = tuple[int, int, int]
+
+
+def segment_silhouettes(
+    skeleton: Skeleton,
+    camera: Camera,
+    q: ArrayLike,
+    joints: Sequence[str] | None = None,
+) -> list[tuple[str, FloatArray, FloatArray, float]]:
+    """Projected silhouettes of body segments, sorted far to near.
+
+    Parameters
+    ----------
+    skeleton, camera : Skeleton, Camera
+    q : array_like, shape (D,)
+    joints : sequence of str, optional
+        Joints whose segments to include (default: every segment with length and radius).
+
+    Returns
+    -------
+    list of (joint name, quad (4, 2) px, end discs (2, 3) as ``u, v, radius px``, depth mm)
+        Segments with an end behind the camera are left out.
+    """
+    qa = np.asarray(q, dtype=float)
+    skeleton.check_q(qa)
+    world = forward_kinematics(skeleton, qa)
+    if joints is None:
+        idx = [
+            j for j in range(skeleton.n_joints)
+            if skeleton.bone_length_mm[j] > 0 and skeleton.radii_mm[j].max() > 0
+        ]
+    else:
+        idx = [skeleton.joint_index(n) for n in joints]
+    cam_r = camera.camera_from_world[:3, :3]
+    cam_t = camera.camera_from_world[:3, 3]
+    fx = float(camera.K[0, 0])
+    out = []
+    lines = np.empty((2, 2, 3))
+    for j in idx:
+        a_w = world[j, :3, 3]
+        b_w = world[j, :3, :3] @ skeleton.bone_end_mm[j] + a_w
+        a = cam_r @ a_w + cam_t
+        b = cam_r @ b_w + cam_t
+        if a[2] <= 1.0 or b[2] <= 1.0:
+            continue
+        ra, rb = (float(r) for r in skeleton.radii_mm[j])
+        cone_contour_generators_nb(a, b, ra, rb, lines)
+        corners = np.stack([lines[0, 0], lines[0, 1], lines[1, 1], lines[1, 0]])
+        quad = camera.project_camera_points(corners)
+        ends_px = camera.project_camera_points(np.stack([a, b]))
+        discs = np.column_stack([ends_px, [fx * ra / a[2], fx * rb / b[2]]])
+        out.append((skeleton.joint_names[j], quad, discs, float(0.5 * (a[2] + b[2]))))
+    out.sort(key=lambda item: -item[3])
+    return out
+
+
+def draw_body(
+    image: NDArray[np.uint8],
+    skeleton: Skeleton,
+    camera: Camera,
+    q: ArrayLike,
+    colours: Mapping[str, Colour] | None = None,
+    default_colour: Colour = (150, 150, 150),
+    joints: Sequence[str] | None = None,
+) -> NDArray[np.uint8]:
+    """Paint filled segment silhouettes into ``image`` (in place) and return it.
+
+    Parameters
+    ----------
+    image : ndarray of uint8, shape (H, W, 3)
+        BGR canvas of the camera's size.
+    skeleton, camera : Skeleton, Camera
+    q : array_like, shape (D,)
+    colours : mapping joint name -> BGR, optional
+        Colour per segment; others get ``default_colour``.
+    joints : sequence of str, optional
+        Segments to draw (default all).
+    """
+    w, h = camera.image_size
+    if image.shape[:2] != (h, w) or image.dtype != np.uint8:
+        raise ShapeError(
+            f"image: expected uint8 of size {h}x{w} for camera {camera.name!r}, found "
+            f"{image.shape} {image.dtype}"
+        )
+    colours = colours or {}
+    shift = 4  # sub-pixel precision of OpenCV's drawing
+    scale = 1 << shift
+    for name, quad, discs, _depth in segment_silhouettes(skeleton, camera, q, joints):
+        if not (np.all(np.isfinite(quad)) and np.all(np.isfinite(discs))):
+            continue
+        colour = tuple(int(c) for c in colours.get(name, default_colour))
+        pts = np.round(quad * scale).astype(np.int32)
+        cv2.fillConvexPoly(image, pts, colour, cv2.LINE_AA, shift)
+        for u, v, r in discs:
+            centre = (round(u * scale), round(v * scale))
+            cv2.circle(image, centre, max(round(r * scale), 1), colour, -1, cv2.LINE_AA, shift)
+    return image
+
+
+def draw_points(
+    image: NDArray[np.uint8], points_px: ArrayLike, colour: Colour = (0, 255, 255), radius: int = 1
+) -> NDArray[np.uint8]:
+    """Draw image points (N, 2) (e.g. `ArmProblem.outline_px`) into ``image`` in place."""
+    p = np.asarray(points_px, dtype=float).reshape(-1, 2)
+    for u, v in p[np.all(np.isfinite(p), axis=1)]:
+        cv2.circle(image, (round(u), round(v)), radius, colour, -1)
+    return image
+
+
+__all__ = ["draw_body", "draw_points", "segment_silhouettes"]
