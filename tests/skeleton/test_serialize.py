@@ -17,8 +17,17 @@ from mocapkit.skeleton.serialize import (
 )
 
 _FIELDS = (
-    "parents", "offsets_mm", "dof_joint", "dof_kind", "dof_axis", "lower", "upper",
-    "bone_end_mm", "mass_kg", "com_fraction", "radii_mm",
+    "parents",
+    "offsets_mm",
+    "dof_joint",
+    "dof_kind",
+    "dof_axis",
+    "lower",
+    "upper",
+    "bone_end_mm",
+    "mass_kg",
+    "com_fraction",
+    "radii_mm",
 )
 
 

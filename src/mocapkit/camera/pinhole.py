@@ -57,7 +57,10 @@ class Camera:
         set_ = object.__setattr__
         w, h = (int(v) for v in self.image_size)
         if w <= 0 or h <= 0:
-            raise ShapeError(f"camera {self.name!r} image_size: expected positive [w, h], found {self.image_size}")
+            raise ShapeError(
+                f"camera {self.name!r} image_size: expected positive [w, h], "
+                f"found {self.image_size}"
+            )
         set_(self, "image_size", (w, h))
         set_(self, "K", _frozen(self.K, (3, 3), "K", self.name))
         dist = _frozen(np.ravel(self.dist), None, "dist", self.name)
@@ -120,7 +123,7 @@ class Camera:
         px = np.asarray(pixels, dtype=float)
         flat = px.reshape(-1, 1, 2)
         out = cv2.undistortPoints(flat, np.asarray(self.K), np.asarray(self.dist))
-        return out.reshape(px.shape)
+        return np.asarray(out, dtype=float).reshape(px.shape)
 
     def in_image(self, pixels: ArrayLike, margin_px: float = 0.0) -> NDArray[np.bool_]:
         """Whether pixels (..., 2) lie inside the image (minus a margin)."""
@@ -158,7 +161,9 @@ def distort_normalized(
     dd = np.ravel(np.asarray(dist, dtype=float))
     d[: dd.shape[0]] = dd
     if np.any(d[8:] != 0):
-        raise ShapeError("distortion: thin-prism/tilt coefficients (s1..s4, tx, ty) are not supported")
+        raise ShapeError(
+            "distortion: thin-prism/tilt coefficients (s1..s4, tx, ty) are not supported"
+        )
     k1, k2, p1, p2, k3, k4, k5, k6 = d[:8]
     r2 = x * x + y * y
     radial = (1 + k1 * r2 + k2 * r2**2 + k3 * r2**3) / (1 + k4 * r2 + k5 * r2**2 + k6 * r2**3)
@@ -167,9 +172,7 @@ def distort_normalized(
     return xd, yd
 
 
-def look_at(
-    eye_mm: ArrayLike, target_mm: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)
-) -> FloatArray:
+def look_at(eye_mm: ArrayLike, target_mm: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> FloatArray:
     """``camera_from_world`` (4, 4) of a camera at ``eye_mm`` looking at ``target_mm``.
 
     OpenCV camera axes: x right, y down, z forward. ``up`` is the world direction

@@ -188,8 +188,16 @@ def fk_batch_nb(
     pivot_world = np.empty((n_dofs, 3))
     for n in range(q.shape[0]):
         fk_pose_nb(
-            q[n], parents, offsets, dof_start, dof_count, dof_kind, dof_axis,
-            world[n], axis_world, pivot_world,
+            q[n],
+            parents,
+            offsets,
+            dof_start,
+            dof_count,
+            dof_kind,
+            dof_axis,
+            world[n],
+            axis_world,
+            pivot_world,
         )
 
 
@@ -259,12 +267,28 @@ def points_jacobian_batch_nb(
     pivot_world = np.empty((n_dofs, 3))
     for n in range(q.shape[0]):
         fk_pose_nb(
-            q[n], parents, offsets, dof_start, dof_count, dof_kind, dof_axis,
-            world, axis_world, pivot_world,
+            q[n],
+            parents,
+            offsets,
+            dof_start,
+            dof_count,
+            dof_kind,
+            dof_axis,
+            world,
+            axis_world,
+            pivot_world,
         )
         points_jacobian_pose_nb(
-            world, axis_world, pivot_world, dof_kind, dof_joint, ancestors,
-            target_joint, target_point, points_out[n], jac_out[n],
+            world,
+            axis_world,
+            pivot_world,
+            dof_kind,
+            dof_joint,
+            ancestors,
+            target_joint,
+            target_point,
+            points_out[n],
+            jac_out[n],
         )
 
 
@@ -296,7 +320,13 @@ def forward_kinematics(skeleton: Skeleton, q: ArrayLike) -> FloatArray:
     ka = kinematic_arrays(skeleton)
     world = np.empty((flat.shape[0], skeleton.n_joints, 4, 4))
     fk_batch_nb(
-        flat, ka.parents, ka.offsets, ka.dof_start, ka.dof_count, ka.dof_kind, ka.dof_axis,
+        flat,
+        ka.parents,
+        ka.offsets,
+        ka.dof_start,
+        ka.dof_count,
+        ka.dof_kind,
+        ka.dof_axis,
         world,
     )
     return world.reshape(*batch, skeleton.n_joints, 4, 4)
@@ -311,7 +341,7 @@ def _targets(
     skeleton: Skeleton, joints: Sequence[int | str] | ArrayLike, points_in_joint: ArrayLike | None
 ) -> tuple[IntArray, FloatArray]:
     idx = np.array(
-        [skeleton.joint_index(j) if isinstance(j, str) else int(j) for j in np.ravel(joints)],  # type: ignore[arg-type]
+        [skeleton.joint_index(j) if isinstance(j, str) else int(j) for j in np.ravel(joints)],
         dtype=np.int64,
     )
     if np.any(idx < 0) or np.any(idx >= skeleton.n_joints):
@@ -359,8 +389,19 @@ def points_and_jacobian(
     points_out = np.empty((n, k, 3))
     jac_out = np.empty((n, 3 * k, d))
     points_jacobian_batch_nb(
-        flat, ka.parents, ka.offsets, ka.dof_start, ka.dof_count, ka.dof_kind, ka.dof_axis,
-        np.ascontiguousarray(skeleton.dof_joint), ka.ancestors, idx, pts, points_out, jac_out,
+        flat,
+        ka.parents,
+        ka.offsets,
+        ka.dof_start,
+        ka.dof_count,
+        ka.dof_kind,
+        ka.dof_axis,
+        np.ascontiguousarray(skeleton.dof_joint),
+        ka.ancestors,
+        idx,
+        pts,
+        points_out,
+        jac_out,
     )
     return points_out.reshape(*batch, k, 3), jac_out.reshape(*batch, 3 * k, d)
 

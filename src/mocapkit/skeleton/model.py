@@ -138,7 +138,9 @@ class Skeleton:
         set_(self, "dof_names", tuple(self.dof_names))
         set_(self, "dof_joint", _frozen(self.dof_joint, np.int64, (d,), "dof_joint"))
         set_(self, "dof_kind", _frozen(self.dof_kind, np.int64, (d,), "dof_kind"))
-        set_(self, "dof_axis", _frozen(np.reshape(self.dof_axis, (d, 3)), float, (d, 3), "dof_axis"))
+        set_(
+            self, "dof_axis", _frozen(np.reshape(self.dof_axis, (d, 3)), float, (d, 3), "dof_axis")
+        )
         set_(self, "lower", _frozen(self.lower, float, (d,), "lower"))
         set_(self, "upper", _frozen(self.upper, float, (d,), "upper"))
         set_(self, "bone_end_mm", _frozen(self.bone_end_mm, float, (n, 3), "bone_end_mm"))
@@ -257,9 +259,7 @@ class Skeleton:
         """Canonical joints this skeleton provides, in canonical order."""
         return tuple(c for c in CANONICAL_JOINTS if c in self.canonical)
 
-    def canonical_points(
-        self, names: Sequence[str] | None = None
-    ) -> tuple[IntArray, FloatArray]:
+    def canonical_points(self, names: Sequence[str] | None = None) -> tuple[IntArray, FloatArray]:
         """Joint indices (K,) and points in those joints' frames (K, 3) for canonical names.
 
         Parameters

@@ -30,12 +30,7 @@ def preset_names() -> tuple[str, ...]:
 def preset_options(name: str) -> tuple[str, ...]:
     """Option groups a preset's table declares (e.g. ``adaptive_shoulder``)."""
     table = _read_table(name)
-    opts = {
-        d["option"]
-        for j in table.get("joint", [])
-        for d in j.get("dofs", [])
-        if "option" in d
-    }
+    opts = {d["option"] for j in table.get("joint", []) for d in j.get("dofs", []) if "option" in d}
     return tuple(sorted(opts))
 
 

@@ -81,7 +81,9 @@ def scale_skeleton(
         if old == 0.0:
             raise ShapeError(f"bone_lengths_mm[{jname!r}]: joint {jname!r} owns no segment")
         if not np.isfinite(length) or length <= 0:
-            raise ShapeError(f"bone_lengths_mm[{jname!r}]: expected a positive length, found {length}")
+            raise ShapeError(
+                f"bone_lengths_mm[{jname!r}]: expected a positive length, found {length}"
+            )
         f = float(length) / old
         offsets = sk.offsets_mm.copy()
         ends = sk.bone_end_mm.copy()

@@ -332,13 +332,13 @@ class HybridTracker:
                     tr.t, tr.p = (tr.t + [t_m])[-2:], (tr.p + [p])[-2:]
                 targets[i] = p
                 continue
+            new_gap = tr.gap_start_s is None
             if tr.gap_start_s is None:
                 tr.gap_start_s = tr.t[-1] if tr.t else t_m
             gap = t_m - tr.gap_start_s
             if tr.t and not tr.released and gap <= self.config.gap_limit_s:
-                if not bridged or bridged[-1] != name:
-                    if not self.events or self.events[-1][1:] != (name, "bridging"):
-                        self.events.append((t_m, name, "bridging"))
+                if new_gap:
+                    self.events.append((t_m, name, "bridging"))
                 v = ((tr.p[-1] - tr.p[0]) / (tr.t[-1] - tr.t[0])
                      if len(tr.t) == 2 and tr.t[-1] > tr.t[0] else np.zeros(3))
                 targets[i] = tr.p[-1] + v * (t_m - tr.t[-1])
