@@ -12,7 +12,9 @@ this is a chain of revolute DoFs about the columns of ``C``, listed last dof
 first (our product order). ``C`` itself is built the same way from the
 ``axis`` angles and their order letters (``XYZ`` -> ``Rz @ Ry @ Rx``). The
 root: prismatic DoFs for ``TX TY TZ`` and revolute DoFs for its rotations
-(``order``), conjugated by its ``orientation``; its rest offset is ``position``.
+(``order``), conjugated by its ``orientation``; its rest offset is ``position``
+and the AMC root translation is taken as absolute (``q = value - position``; the
+CMU files have ``position 0 0 0``).
 This convention was checked against the cgspeed BVH conversion of the same trial
 (CMU 01_01; see tests/io/test_asf_amc.py).
 

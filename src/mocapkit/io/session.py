@@ -240,10 +240,16 @@ def load_truth(path: str | os.PathLike[str]) -> Truth:
         t = np.asarray(data["time_s"], dtype=float)
         names = tuple(str(n) for n in np.atleast_1d(data["joint_names"]))
         joints = np.asarray(data["joints_mm"], dtype=float)
-        mnames = tuple(str(n) for n in np.atleast_1d(data["marker_names"])) if (
-            "marker_names" in data.files) else ()
-        markers = np.asarray(data["markers_mm"], dtype=float) if "markers_mm" in data.files else (
-            np.zeros((t.shape[0], 0, 3)))
+        mnames = (
+            tuple(str(n) for n in np.atleast_1d(data["marker_names"]))
+            if ("marker_names" in data.files)
+            else ()
+        )
+        markers = (
+            np.asarray(data["markers_mm"], dtype=float)
+            if "markers_mm" in data.files
+            else (np.zeros((t.shape[0], 0, 3)))
+        )
     if t.ndim != 1:
         raise ShapeError(f"{p}: time_s: expected shape (T,), found {t.shape}")
     _check_times(t, p, "time_s")
@@ -256,7 +262,8 @@ def load_truth(path: str | os.PathLike[str]) -> Truth:
         raise FormatError(f"{p}: joint_names: expected canonical names, found {bad}")
     if markers.shape != (t.shape[0], len(mnames), 3):
         raise ShapeError(
-            f"{p}: markers_mm: expected shape ({t.shape[0]}, {len(mnames)}, 3), found {markers.shape}"
+            f"{p}: markers_mm: expected shape ({t.shape[0]}, {len(mnames)}, 3), "
+            f"found {markers.shape}"
         )
     return Truth(t, names, joints, mnames, markers)
 
@@ -446,23 +453,30 @@ class Session:
             raise SessionError(f"{self.path}: session folder not found")
         info_path = self.path / "session.json"
         if not info_path.is_file():
-            raise SessionError(f"{self.path}: missing session.json (every session folder needs one)")
+            raise SessionError(
+                f"{self.path}: missing session.json (every session folder needs one)"
+            )
         try:
             info = json.loads(info_path.read_text(encoding="utf-8"))
         except json.JSONDecodeError as exc:
-            raise FormatError(f"{info_path}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+            raise FormatError(
+                f"{info_path}: not valid JSON (line {exc.lineno}: {exc.msg})"
+            ) from None
         if not isinstance(info, dict):
             raise FormatError(f"{info_path}: expected a JSON object, found {type(info).__name__}")
         if info.get("format") != FORMAT_VERSION:
             raise FormatError(
-                f"{info_path}: field 'format': expected {FORMAT_VERSION}, found {info.get('format')!r}"
+                f"{info_path}: field 'format': expected {FORMAT_VERSION}, "
+                f"found {info.get('format')!r}"
             )
         if info.get("units", "mm") != "mm":
             raise FormatError(f"{info_path}: field 'units': expected 'mm', found {info['units']!r}")
         self.info: dict[str, Any] = info
         subject = info.get("subject", {})
         if not isinstance(subject, dict):
-            raise FormatError(f"{info_path}: field 'subject': expected an object, found {subject!r}")
+            raise FormatError(
+                f"{info_path}: field 'subject': expected an object, found {subject!r}"
+            )
         h = subject.get("height_mm")
         if h is not None and not (isinstance(h, int | float) and 500 <= h <= 2800):
             raise FormatError(
@@ -484,7 +498,9 @@ class Session:
         self.rates: dict[str, float] = {}
         for key, v in rates.items():
             if not (isinstance(v, int | float) and v > 0):
-                raise FormatError(f"{info_path}: rates.{key}: expected a positive rate in Hz, found {v!r}")
+                raise FormatError(
+                    f"{info_path}: rates.{key}: expected a positive rate in Hz, found {v!r}"
+                )
             self.rates[str(key)] = float(v)
 
         # ---------------------------------------------------------------- cameras
@@ -492,12 +508,15 @@ class Session:
 
         cam_file = info.get("cameras", "cameras.json")
         if not isinstance(cam_file, str):
-            raise FormatError(f"{info_path}: field 'cameras': expected a file name, found {cam_file!r}")
+            raise FormatError(
+                f"{info_path}: field 'cameras': expected a file name, found {cam_file!r}"
+            )
         cam_path = self.path / cam_file
         self.cameras: list[Camera] = read_cameras(cam_path) if cam_path.is_file() else []
         if not cam_path.is_file() and "cameras" in info:
-            raise SessionError(f"{self.path}: session.json names cameras file {cam_file!r}, "
-                               f"which is missing")
+            raise SessionError(
+                f"{self.path}: session.json names cameras file {cam_file!r}, which is missing"
+            )
         names = [c.name for c in self.cameras]
 
         # ---------------------------------------------------------------- video
@@ -514,7 +533,9 @@ class Session:
                         f"(cameras: {names or 'none'})"
                     )
                 if cam in self._videos:
-                    raise SessionError(f"{vdir}: camera {cam!r} has both a video file and an image folder")
+                    raise SessionError(
+                        f"{vdir}: camera {cam!r} has both a video file and an image folder"
+                    )
                 self._videos[cam] = self._open_video(cam, entry)
         self._videos = {c: self._videos[c] for c in names if c in self._videos}
 
@@ -523,11 +544,15 @@ class Session:
 
         present = [f for f in MARKER_FILES if (self.path / f).is_file()]
         if len(present) > 1:
-            raise SessionError(f"{self.path}: both {present[0]} and {present[1]}; keep one marker file")
+            raise SessionError(
+                f"{self.path}: both {present[0]} and {present[1]}; keep one marker file"
+            )
         self.markers: MarkerData | None = read_markers(self.path / present[0]) if present else None
         sets = info.get("marker_sets", {})
         if not isinstance(sets, dict):
-            raise FormatError(f"{info_path}: field 'marker_sets': expected an object, found {sets!r}")
+            raise FormatError(
+                f"{info_path}: field 'marker_sets': expected an object, found {sets!r}"
+            )
         self.marker_sets: dict[str, list[str]] = {
             str(k): _as_str_list(v, f"{info_path}: marker_sets.{k}") for k, v in sets.items()
         }
@@ -565,8 +590,10 @@ class Session:
         if entry.is_dir():
             n = len(_image_files(entry))
             if n == 0:
-                raise SessionError(f"{entry}: image folder of camera {cam!r} holds no images "
-                                   f"({', '.join(IMAGE_EXTENSIONS)})")
+                raise SessionError(
+                    f"{entry}: image folder of camera {cam!r} holds no images "
+                    f"({', '.join(IMAGE_EXTENSIONS)})"
+                )
         else:
             cap = cv2.VideoCapture(str(entry))
             try:
@@ -619,7 +646,8 @@ class Session:
         """The video of one camera."""
         if camera not in self._videos:
             raise SessionError(
-                f"{self.path}: no video of camera {camera!r}; videos: {list(self._videos) or 'none'}"
+                f"{self.path}: no video of camera {camera!r}; "
+                f"videos: {list(self._videos) or 'none'}"
             )
         return self._videos[camera]
 
@@ -669,25 +697,34 @@ class Session:
         missing: list[str] = []
         wanted = list(cameras) if not isinstance(cameras, int) else []
         if isinstance(cameras, int) and len(self.cameras) < cameras:
-            missing.append(f"{cameras} calibrated camera(s) in cameras.json (found {len(self.cameras)})")
+            missing.append(
+                f"{cameras} calibrated camera(s) in cameras.json (found {len(self.cameras)})"
+            )
         for c in wanted:
             if c not in self.camera_names:
                 missing.append(f"camera {c!r} in cameras.json (found {list(self.camera_names)})")
         if video:
             for c in wanted or ([] if self._videos else ["any camera"]):
                 if c not in self._videos:
-                    missing.append(f"video/{c}.mp4 (or an image folder video/{c}/)"
-                                   if c != "any camera" else "a video under video/")
+                    missing.append(
+                        f"video/{c}.mp4 (or an image folder video/{c}/)"
+                        if c != "any camera"
+                        else "a video under video/"
+                    )
         if markers and self.markers is None:
             missing.append("markers.c3d or markers.csv")
         for s in marker_sets:
             if s not in self.marker_sets:
-                missing.append(f"marker set {s!r} in session.json marker_sets "
-                               f"(defined: {sorted(self.marker_sets) or 'none'})")
+                missing.append(
+                    f"marker set {s!r} in session.json marker_sets "
+                    f"(defined: {sorted(self.marker_sets) or 'none'})"
+                )
         if keypoints:
             for c in wanted or ([] if self.keypoints else ["any camera"]):
                 if c not in self.keypoints:
-                    missing.append(f"keypoints/{c}.csv" if c != "any camera" else "keypoints/<camera>.csv")
+                    missing.append(
+                        f"keypoints/{c}.csv" if c != "any camera" else "keypoints/<camera>.csv"
+                    )
         if truth and self.truth is None:
             missing.append("truth.npz")
         if height and self.height_mm is None:
@@ -711,8 +748,11 @@ class Session:
         SessionSample
             Frames are lazy: call ``sample.image(camera)`` before advancing the iterator.
         """
-        cams = list(self._videos) if camera is None else (
-            [camera] if isinstance(camera, str) else list(camera))
+        cams = (
+            list(self._videos)
+            if camera is None
+            else ([camera] if isinstance(camera, str) else list(camera))
+        )
         self.require(video=True, cameras=cams)
         if not cams:
             raise SessionError(f"{self.path}: no camera selected")
@@ -738,11 +778,22 @@ class Session:
                         kp[c] = k.pixels[r]
                 mi = int(np.searchsorted(mt, t, side="right")) - 1
                 if m is not None and mi >= 0:
-                    sets = {} if set_pos is None else {
-                        n: set_pos[mi, s] for s, n in enumerate(self.marker_sets)}
+                    sets = (
+                        {}
+                        if set_pos is None
+                        else {n: set_pos[mi, s] for s, n in enumerate(self.marker_sets)}
+                    )
                     yield SessionSample(
-                        i, t, frames, mi, float(mt[mi]), t - float(mt[mi]),
-                        m.positions_mm[mi], m.names, sets, kp,
+                        i,
+                        t,
+                        frames,
+                        mi,
+                        float(mt[mi]),
+                        t - float(mt[mi]),
+                        m.positions_mm[mi],
+                        m.names,
+                        sets,
+                        kp,
                     )
                 else:
                     yield SessionSample(i, t, frames, keypoints_px=kp)
@@ -752,7 +803,7 @@ class Session:
 
 
 def load_session(path: str | os.PathLike[str]) -> Session:
-    """Load and validate a session folder; raises `SessionError`/`FormatError` naming the problem."""
+    """Load and validate a session folder; errors name the file, what was expected and found."""
     return Session(path)
 
 

@@ -78,38 +78,105 @@ def _plant_feet(skel: Skeleton, q: FloatArray) -> FloatArray:
 
 def _stance(knee: float, hip: float, spine: float, spread: float = 6.0) -> dict[str, float]:
     return {
-        "l_hip_flexion": hip, "r_hip_flexion": hip,
-        "l_knee_flexion": knee, "r_knee_flexion": knee,
-        "l_hip_abduction": spread, "r_hip_abduction": spread,
-        "spine1_flexion": spine / 3, "spine2_flexion": spine / 3, "spine3_flexion": spine / 3,
+        "l_hip_flexion": hip,
+        "r_hip_flexion": hip,
+        "l_knee_flexion": knee,
+        "r_knee_flexion": knee,
+        "l_hip_abduction": spread,
+        "r_hip_abduction": spread,
+        "spine1_flexion": spine / 3,
+        "spine2_flexion": spine / 3,
+        "spine3_flexion": spine / 3,
     }
 
 
 def _table_tennis(duration_s: float) -> list[Key]:
-    ready = {"r_shoulder_flexion": 35.0, "r_shoulder_abduction": 15.0,
-             "r_shoulder_rotation": 20.0, "r_elbow_flexion": 95.0}
-    free = {"l_shoulder_flexion": 30.0, "l_shoulder_abduction": 15.0,
-            "l_shoulder_rotation": 25.0, "l_elbow_flexion": 85.0, "neck_flexion": -12.0}
+    ready = {
+        "r_shoulder_flexion": 35.0,
+        "r_shoulder_abduction": 15.0,
+        "r_shoulder_rotation": 20.0,
+        "r_elbow_flexion": 95.0,
+    }
+    free = {
+        "l_shoulder_flexion": 30.0,
+        "l_shoulder_abduction": 15.0,
+        "l_shoulder_rotation": 25.0,
+        "l_elbow_flexion": 85.0,
+        "neck_flexion": -12.0,
+    }
 
-    def pose(arm: Mapping[str, float], knee: float, hip: float, spine: float,
-             neck_lat: float = 0.0) -> dict[str, float]:
+    def pose(
+        arm: Mapping[str, float], knee: float, hip: float, spine: float, neck_lat: float = 0.0
+    ) -> dict[str, float]:
         return {**free, **_stance(knee, hip, spine), **arm, "neck_lateral": neck_lat}
 
     rdy = pose(ready, 25, 22, 18)
     forehand = [
         (0.0, rdy),
-        (0.35, pose({"r_shoulder_flexion": -15.0, "r_shoulder_abduction": 45.0,
-                     "r_shoulder_rotation": -20.0, "r_elbow_flexion": 80.0}, 35, 28, 12, 5)),
-        (0.62, pose({"r_shoulder_flexion": 95.0, "r_shoulder_abduction": -25.0,
-                     "r_shoulder_rotation": 35.0, "r_elbow_flexion": 65.0}, 22, 20, 26, -5)),
+        (
+            0.35,
+            pose(
+                {
+                    "r_shoulder_flexion": -15.0,
+                    "r_shoulder_abduction": 45.0,
+                    "r_shoulder_rotation": -20.0,
+                    "r_elbow_flexion": 80.0,
+                },
+                35,
+                28,
+                12,
+                5,
+            ),
+        ),
+        (
+            0.62,
+            pose(
+                {
+                    "r_shoulder_flexion": 95.0,
+                    "r_shoulder_abduction": -25.0,
+                    "r_shoulder_rotation": 35.0,
+                    "r_elbow_flexion": 65.0,
+                },
+                22,
+                20,
+                26,
+                -5,
+            ),
+        ),
         (1.0, rdy),
     ]
     backhand = [
         (0.0, rdy),
-        (0.33, pose({"r_shoulder_flexion": 40.0, "r_shoulder_abduction": -25.0,
-                     "r_shoulder_rotation": 55.0, "r_elbow_flexion": 120.0}, 32, 26, 22, -4)),
-        (0.6, pose({"r_shoulder_flexion": 75.0, "r_shoulder_abduction": 30.0,
-                    "r_shoulder_rotation": -10.0, "r_elbow_flexion": 45.0}, 24, 21, 20, 4)),
+        (
+            0.33,
+            pose(
+                {
+                    "r_shoulder_flexion": 40.0,
+                    "r_shoulder_abduction": -25.0,
+                    "r_shoulder_rotation": 55.0,
+                    "r_elbow_flexion": 120.0,
+                },
+                32,
+                26,
+                22,
+                -4,
+            ),
+        ),
+        (
+            0.6,
+            pose(
+                {
+                    "r_shoulder_flexion": 75.0,
+                    "r_shoulder_abduction": 30.0,
+                    "r_shoulder_rotation": -10.0,
+                    "r_elbow_flexion": 45.0,
+                },
+                24,
+                21,
+                20,
+                4,
+            ),
+        ),
         (1.0, rdy),
     ]
     rally = [(t, p) for t, p in forehand] + [(1.0 + t, p) for t, p in backhand[1:]]
@@ -118,22 +185,43 @@ def _table_tennis(duration_s: float) -> list[Key]:
 
 
 def _squat(duration_s: float) -> list[Key]:
-    stand = {**_stance(3, 2, 0, 5), "l_shoulder_flexion": 5.0, "r_shoulder_flexion": 5.0,
-             "l_elbow_flexion": 15.0, "r_elbow_flexion": 15.0}
-    down = {**_stance(100, 85, 36, 8), "l_shoulder_flexion": 80.0, "r_shoulder_flexion": 80.0,
-            "l_elbow_flexion": 10.0, "r_elbow_flexion": 10.0, "neck_flexion": -20.0}
+    stand = {
+        **_stance(3, 2, 0, 5),
+        "l_shoulder_flexion": 5.0,
+        "r_shoulder_flexion": 5.0,
+        "l_elbow_flexion": 15.0,
+        "r_elbow_flexion": 15.0,
+    }
+    down = {
+        **_stance(100, 85, 36, 8),
+        "l_shoulder_flexion": 80.0,
+        "r_shoulder_flexion": 80.0,
+        "l_elbow_flexion": 10.0,
+        "r_elbow_flexion": 10.0,
+        "neck_flexion": -20.0,
+    }
     keys = [(0.0, stand), (0.6, stand), (1.9, down), (2.4, down), (3.6, stand), (4.0, stand)]
     n = int(np.ceil(duration_s / 4.0)) + 1
     return _cycle(keys, 4.0, n)
 
 
 def _wave(duration_s: float) -> list[Key]:
-    hang = {"l_shoulder_abduction": 8.0, "l_elbow_flexion": 15.0,
-            "r_shoulder_abduction": 8.0, "r_elbow_flexion": 15.0}
+    hang = {
+        "l_shoulder_abduction": 8.0,
+        "l_elbow_flexion": 15.0,
+        "r_shoulder_abduction": 8.0,
+        "r_elbow_flexion": 15.0,
+    }
     keys: list[Key] = [(0.0, hang), (0.5, hang)]
     t = 1.4
-    up = {"l_shoulder_abduction": 8.0, "l_elbow_flexion": 15.0, "r_shoulder_abduction": 105.0,
-          "r_shoulder_flexion": 15.0, "r_shoulder_rotation": -80.0, "neck_lateral": 5.0}
+    up = {
+        "l_shoulder_abduction": 8.0,
+        "l_elbow_flexion": 15.0,
+        "r_shoulder_abduction": 105.0,
+        "r_shoulder_flexion": 15.0,
+        "r_shoulder_rotation": -80.0,
+        "neck_lateral": 5.0,
+    }
     keys.append((t, {**up, "r_elbow_flexion": 80.0}))
     while t < duration_s + 0.5:
         keys.append((t + 0.25, {**up, "r_elbow_flexion": 55.0}))
@@ -163,7 +251,7 @@ def builtin_motion(name: str, duration_s: float = 20.0) -> Motion:
     if not (np.isfinite(duration_s) and 0.1 <= duration_s <= 3600.0):
         raise ShapeError(f"duration_s: expected 0.1-3600 s, found {duration_s}")
     skel = load_preset("zhang21")
-    n = int(round(duration_s * RATE_HZ)) + 1
+    n = round(duration_s * RATE_HZ) + 1
     t = np.arange(n) / RATE_HZ
     q = skel.clip_to_limits(_interpolate(skel, makers[name](duration_s), t))
     q = _plant_feet(skel, q)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import ShapeError
 from mocapkit.synth.render import CameraRenderer
@@ -67,8 +67,9 @@ class RealismOptions:
         }
         for name, (v, lo, hi) in checks.items():
             if not (np.isfinite(v) and lo <= v <= hi):
-                raise ShapeError(f"--{name.replace('_', '-')}: expected a value in [{lo}, {hi}], "
-                                 f"found {v}")
+                raise ShapeError(
+                    f"--{name.replace('_', '-')}: expected a value in [{lo}, {hi}], found {v}"
+                )
         if self.background not in BACKGROUNDS:
             raise ShapeError(
                 f"--background: expected one of {', '.join(BACKGROUNDS)}, found {self.background!r}"
@@ -86,7 +87,7 @@ def jittered_times(
     The jitter is Gaussian, clipped to a quarter of the interval so order is kept.
     """
     dt = 1.0 / rate_hz
-    t = start_s + np.arange(n) * dt
+    t: FloatArray = start_s + np.arange(n, dtype=np.float64) * dt
     if jitter_s > 0:
         t = t + np.clip(rng.normal(0.0, jitter_s, n), -0.25 * dt, 0.25 * dt)
     return t
@@ -124,34 +125,42 @@ def corrupt_markers(
 # ====================================================================== background
 
 
-def _room_polygons(rng: np.random.Generator, centre: FloatArray, fwd: FloatArray) -> list[
-    tuple[FloatArray, tuple[int, int, int]]
-]:
-    """3-D polygons (N, 3) with colours: back wall, posters, shelves and boxes behind the subject."""
+def _room_polygons(
+    rng: np.random.Generator, centre: FloatArray, fwd: FloatArray
+) -> list[tuple[FloatArray, tuple[int, int, int]]]:
+    """3-D polygons (N, 3) with colours: back wall, posters and boxes behind the subject."""
     right = np.cross(fwd, np.array([0.0, 0.0, 1.0]))
     up = np.array([0.0, 0.0, 1.0])
     wall_d = 2200.0 + rng.uniform(0, 800)
     wall_c = centre - wall_d * fwd
     polys: list[tuple[FloatArray, tuple[int, int, int]]] = []
 
+    def rgb(values: ArrayLike) -> tuple[int, int, int]:
+        a, b, c = (int(v) for v in np.ravel(values)[:3])
+        return (a, b, c)
+
     def quad(c: FloatArray, u: FloatArray, v: FloatArray) -> FloatArray:
         return np.array([c - u - v, c + u - v, c + u + v, c - u + v])
 
-    wall_col = tuple(int(x) for x in rng.integers(150, 215, 3))
-    polys.append((quad(wall_c + 2500 * up, 6000 * right, 2500 * up), wall_col))  # type: ignore[arg-type]
+    wall_col = rgb(rng.integers(150, 215, 3))
+    polys.append((quad(wall_c + 2500 * up, 6000 * right, 2500 * up), wall_col))
     # side walls so that wide views do not see the void
     for s in (-1.0, 1.0):
         c = centre + s * 4500 * right + 3000 * fwd - wall_d * 0.5 * fwd
-        polys.append((quad(c + 2500 * up, (3000 + wall_d) * fwd, 2500 * up),
-                      tuple(int(0.85 * x) for x in wall_col)))  # type: ignore[arg-type]
+        polys.append(
+            (
+                quad(c + 2500 * up, (3000 + wall_d) * fwd, 2500 * up),
+                rgb(0.85 * np.array(wall_col)),
+            )
+        )
     # posters and shelves on the back wall
     for _ in range(int(rng.integers(6, 11))):
         x = rng.uniform(-3500, 3500)
         z = rng.uniform(900, 2300)
         w, h = rng.uniform(150, 600), rng.uniform(150, 600)
-        col = tuple(int(v) for v in rng.integers(20, 240, 3))
+        poster = rgb(rng.integers(20, 240, 3))
         c = wall_c - 5 * fwd + x * right + z * up
-        polys.append((quad(c, 0.5 * w * right, 0.5 * h * up), col))  # type: ignore[arg-type]
+        polys.append((quad(c, 0.5 * w * right, 0.5 * h * up), poster))
     # boxes and cabinets on the floor, in front of the wall
     for _ in range(int(rng.integers(3, 7))):
         x = rng.uniform(-3500, 3500)
@@ -162,10 +171,13 @@ def _room_polygons(rng: np.random.Generator, centre: FloatArray, fwd: FloatArray
         base = wall_c + (0.5 * d + 10) * fwd + x * right
         front = base + 0.5 * d * fwd
         top = base + h * up
-        polys.append((quad(front + 0.5 * h * up, 0.5 * w * right, 0.5 * h * up),
-                      tuple(int(v) for v in col)))  # type: ignore[arg-type]
-        polys.append((quad(top, 0.5 * w * right, 0.5 * d * fwd),
-                      tuple(int(v) for v in np.minimum(255, col * 1.25))))  # type: ignore[arg-type]
+        polys.append((quad(front + 0.5 * h * up, 0.5 * w * right, 0.5 * h * up), rgb(col)))
+        polys.append(
+            (
+                quad(top, 0.5 * w * right, 0.5 * d * fwd),
+                rgb(np.minimum(255, col * 1.25)),
+            )
+        )
     return polys
 
 
@@ -203,11 +215,21 @@ def render_background(
     tile = 500.0
     for i in range(-12, 13):
         for j in range(-10, 14):
-            c = np.asarray(centre_mm, dtype=float) * np.array([1, 1, 0]) + i * tile * right + j * tile * fwd
+            c = (
+                np.asarray(centre_mm, dtype=float) * np.array([1, 1, 0])
+                + i * tile * right
+                + j * tile * fwd
+            )
             corners = np.array([c, c + tile * right, c + tile * right + tile * fwd, c + tile * fwd])
-            _fill_world_polygon(renderer, canvas, corners,
-                                tuple(int(v) for v in (floor_a if (i + j) % 2 else floor_b)))
-    for poly, col in _room_polygons(rng, np.asarray(centre_mm, dtype=float) * np.array([1, 1, 0]), fwd):
+            _fill_world_polygon(
+                renderer,
+                canvas,
+                corners,
+                tuple(int(v) for v in (floor_a if (i + j) % 2 else floor_b)),
+            )
+    for poly, col in _room_polygons(
+        rng, np.asarray(centre_mm, dtype=float) * np.array([1, 1, 0]), fwd
+    ):
         _fill_world_polygon(renderer, canvas, poly, col)
     # low-frequency texture (stains, shading) and fine grain
     small = rng.normal(0.0, 1.0, (h // 24 + 2, w // 24 + 2, 1)).astype(np.float32)
@@ -245,8 +267,13 @@ def _fill_world_polygon(
     v = k[1, 1] * p[:, 1] / p[:, 2] + k[1, 2]
     pix = np.stack([u, v], axis=-1)
     pix = np.clip(pix, -1e5, 1e5)
-    cv2.fillConvexPoly(canvas, np.round(pix * 4).astype(np.int32),
-                       tuple(int(c) for c in colour[:3]), cv2.LINE_AA, 2)
+    cv2.fillConvexPoly(
+        canvas,
+        np.round(pix * 4).astype(np.int32),
+        tuple(int(c) for c in colour[:3]),
+        cv2.LINE_AA,
+        2,
+    )
 
 
 # ====================================================================== per-frame optics

@@ -237,8 +237,17 @@ def _unit(v: FloatArray) -> FloatArray:
 
 def _require_canonical(skeleton: Skeleton) -> None:
     needed = [
-        "pelvis", "neck", "head", "left_shoulder", "right_shoulder", "left_elbow",
-        "right_elbow", "left_wrist", "right_wrist", "left_hip", "right_hip",
+        "pelvis",
+        "neck",
+        "head",
+        "left_shoulder",
+        "right_shoulder",
+        "left_elbow",
+        "right_elbow",
+        "left_wrist",
+        "right_wrist",
+        "left_hip",
+        "right_hip",
     ]
     missing = [c for c in needed if c not in skeleton.canonical]
     if missing:
@@ -302,7 +311,6 @@ def build_body(
     prims: list[Primitive] = []
     roles, sides = joint_roles(skeleton)
     owner = {c: skeleton.joint_index(skeleton.canonical[c][0]) for c in skeleton.canonical}
-    sub = {c: set(skeleton.subtree(j).tolist()) for c, j in owner.items()}
 
     # ------------------------------------------------------------ limbs from the file's bones
     for j in range(1, n_j):
@@ -324,7 +332,9 @@ def build_body(
             # the first bone of a hand or foot is palm or foot, deeper ones fingers or toes
             base = owner[f"{sides[p]}_{'wrist' if role == 'hand' else 'ankle'}"]
             deep = p != base
-            key = ("fingers" if deep else "hand") if role == "hand" else ("toes" if deep else "foot")
+            key = (
+                ("fingers" if deep else "hand") if role == "hand" else ("toes" if deep else "foot")
+            )
             colour = a.skin if role == "hand" else a.shoes
             prims.append(Primitive(CAPSULE, (p, j), ROLE_RADII_MM[key], colour))
             continue
@@ -342,9 +352,7 @@ def build_body(
                 mid = add(0.5 * (joints[:, p] + joints[:, j]))
                 r_mid = 0.5 * (radii[0] + radii[1])
                 prims.append(Primitive(CAPSULE, (mid, j), (r_mid, radii[1]), a.skin))
-                prims.append(
-                    Primitive(CAPSULE, (p, mid), (radii[0] + 6, r_mid + 7), a.shirt, -3.0)
-                )
+                prims.append(Primitive(CAPSULE, (p, mid), (radii[0] + 6, r_mid + 7), a.shirt, -3.0))
         elif role == "forearm":
             colour = a.shirt if a.sleeve == "long" else a.skin
             extra = 4.0 if a.sleeve == "long" else 0.0
@@ -374,8 +382,9 @@ def build_body(
             upper.append(add(sh_mid + s * (0.5 * sh_w - 20.0) * right_sh + d * 85.0 * fwd_sh))
             upper.append(add(waist + s * waist_w * waist_right + d * 100.0 * waist_fwd))
             lower.append(add(waist + 30.0 * up + s * waist_w * waist_right + d * 100.0 * waist_fwd))
-            lower.append(add(hip_mid - 60.0 * up + s * (0.5 * hip_w + 60.0) * right_hip
-                             + d * 95.0 * fwd_hip))
+            lower.append(
+                add(hip_mid - 60.0 * up + s * (0.5 * hip_w + 60.0) * right_hip + d * 95.0 * fwd_hip)
+            )
     prims.append(Primitive(HULL, tuple(upper), (), a.shirt, 40.0))
     prims.append(Primitive(HULL, tuple(lower), (), a.trousers, 45.0))
 
@@ -396,7 +405,9 @@ def build_body(
     for s in (-1.0, 1.0):
         eye = head + 82.0 * fwd_head + 12.0 * head_up + s * 32.0 * side_head
         prims.append(Primitive(SPHERE, (add(eye),), (17.0,), (25, 25, 25), -8.0))
-        prims.append(Primitive(SPHERE, (add(eye + 4.0 * fwd_head),), (12.0,), (180, 200, 205), -9.0))
+        prims.append(
+            Primitive(SPHERE, (add(eye + 4.0 * fwd_head),), (12.0,), (180, 200, 205), -9.0)
+        )
 
     # ------------------------------------------------------------ markers
     markers = np.empty((n_t, len(MARKER_NAMES), 3))
@@ -492,8 +503,9 @@ class CameraRenderer:
 
     def warp(self, canvas: NDArray[np.uint8]) -> NDArray[np.uint8]:
         """Apply the lens distortion: canvas (ideal camera) to the camera's image."""
-        out = cv2.remap(canvas, self._map1, self._map2, cv2.INTER_LINEAR,
-                        borderMode=cv2.BORDER_REPLICATE)
+        out = cv2.remap(
+            canvas, self._map1, self._map2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+        )
         return np.asarray(out, dtype=np.uint8)
 
     def draw_body(
@@ -518,9 +530,14 @@ class CameraRenderer:
             if np.any(z[pts] <= 50.0) or not np.all(np.isfinite(px[pts])):
                 continue  # behind or at the camera
             if prim.kind == CAPSULE:
-                self._capsule(canvas, px[pts[0]], px[pts[1]],
-                              f * prim.radii_mm[0] / z[pts[0]], f * prim.radii_mm[1] / z[pts[1]],
-                              prim.colour)
+                self._capsule(
+                    canvas,
+                    px[pts[0]],
+                    px[pts[1]],
+                    f * prim.radii_mm[0] / z[pts[0]],
+                    f * prim.radii_mm[1] / z[pts[1]],
+                    prim.colour,
+                )
             elif prim.kind == HULL:
                 self._hull(canvas, px[pts], prim.colour)
             elif prim.kind == ELLIPSOID:
@@ -530,9 +547,11 @@ class CameraRenderer:
                 self._disc(canvas, px[pts[0]], r, prim.colour)
 
     @staticmethod
-    def _disc(canvas: NDArray[np.uint8], c: FloatArray, r: float, colour: tuple[int, int, int]) -> None:
-        ci = (int(round(c[0] * _SCALE)), int(round(c[1] * _SCALE)))
-        cv2.circle(canvas, ci, max(1, int(round(r * _SCALE))), colour, -1, cv2.LINE_AA, _SHIFT)
+    def _disc(
+        canvas: NDArray[np.uint8], c: FloatArray, r: float, colour: tuple[int, int, int]
+    ) -> None:
+        ci = (round(c[0] * _SCALE), round(c[1] * _SCALE))
+        cv2.circle(canvas, ci, max(1, round(r * _SCALE)), colour, -1, cv2.LINE_AA, _SHIFT)
 
     def _capsule(
         self,
@@ -555,8 +574,9 @@ class CameraRenderer:
             if n > 1e-6:
                 nrm = np.array([-d[1], d[0]]) / n
                 poly = np.array([aa + sa * nrm, bb + sb * nrm, bb - sb * nrm, aa - sa * nrm])
-                cv2.fillConvexPoly(canvas, np.round(poly * _SCALE).astype(np.int32), col,
-                                   cv2.LINE_AA, _SHIFT)
+                cv2.fillConvexPoly(
+                    canvas, np.round(poly * _SCALE).astype(np.int32), col, cv2.LINE_AA, _SHIFT
+                )
             self._disc(canvas, aa, sa, col)
             self._disc(canvas, bb, sb, col)
 
@@ -584,14 +604,23 @@ class CameraRenderer:
         pc = self._r @ centre + self._t
         k = self.canvas_K
         x, y, z = pc
-        jac = np.array([[k[0, 0] / z, 0.0, -k[0, 0] * x / z**2],
-                        [0.0, k[1, 1] / z, -k[1, 1] * y / z**2]]) @ self._r
+        jac = (
+            np.array(
+                [[k[0, 0] / z, 0.0, -k[0, 0] * x / z**2], [0.0, k[1, 1] / z, -k[1, 1] * y / z**2]]
+            )
+            @ self._r
+        )
         m = jac @ axes.T  # (2, 3)
         u, s, _ = np.linalg.svd(m)
         c2 = np.array([k[0, 0] * x / z + k[0, 2], k[1, 1] * y / z + k[1, 2]])
         angle = float(np.degrees(np.arctan2(u[1, 0], u[0, 0])))
         for scale, shade, offset in ((1.0, 0.75, 0.0), (0.7, 1.0, 0.18)):
             cc = c2 - offset * s[1] * np.array([1.0, 1.0])
-            ci = (int(round(cc[0] * _SCALE)), int(round(cc[1] * _SCALE)))
-            ax = (max(1, int(round(s[0] * scale * _SCALE))), max(1, int(round(s[1] * scale * _SCALE))))
-            cv2.ellipse(canvas, ci, ax, angle, 0, 360, _shade(colour, shade), -1, cv2.LINE_AA, _SHIFT)
+            ci = (round(cc[0] * _SCALE), round(cc[1] * _SCALE))
+            ax = (
+                max(1, round(s[0] * scale * _SCALE)),
+                max(1, round(s[1] * scale * _SCALE)),
+            )
+            cv2.ellipse(
+                canvas, ci, ax, angle, 0, 360, _shade(colour, shade), -1, cv2.LINE_AA, _SHIFT
+            )

@@ -95,7 +95,8 @@ class SynthOptions:
             raise ShapeError(f"--size: expected WxH between 32 and 8192 px, found {w}x{h}")
         if self.video_format not in VIDEO_FORMATS:
             raise ShapeError(
-                f"video format: expected one of {', '.join(VIDEO_FORMATS)}, found {self.video_format!r}"
+                f"video format: expected one of {', '.join(VIDEO_FORMATS)}, "
+                f"found {self.video_format!r}"
             )
 
 
@@ -150,7 +151,9 @@ def _prepare_out(out: Path, overwrite: bool) -> None:
         raise SessionError(f"{out}: output exists and is not a folder")
     if out.is_dir() and any(out.iterdir()):
         if not overwrite:
-            raise SessionError(f"{out}: output folder is not empty (pass --overwrite to replace a session)")
+            raise SessionError(
+                f"{out}: output folder is not empty (pass --overwrite to replace a session)"
+            )
         if not (out / "session.json").is_file():
             raise SessionError(f"{out}: refusing to overwrite a folder that holds no session.json")
         for sub in ("video", "keypoints"):
@@ -164,7 +167,9 @@ def _prepare_out(out: Path, overwrite: bool) -> None:
 class _VideoOut:
     """Writes one camera's frames as mp4v video or a PNG folder, and checks the result."""
 
-    def __init__(self, folder: Path, camera: str, fmt: str, fps: float, size: tuple[int, int]) -> None:
+    def __init__(
+        self, folder: Path, camera: str, fmt: str, fps: float, size: tuple[int, int]
+    ) -> None:
         self.fmt = fmt
         self.count = 0
         if fmt == "mp4":
@@ -216,7 +221,9 @@ def _facing(joints: FloatArray, names: tuple[str, ...]) -> FloatArray:
     return fwd / n if n > 1e-6 else np.array([0.0, 1.0, 0.0])
 
 
-def synthesize_session(motion_spec: str, out_dir: str | Path, options: SynthOptions) -> SynthSummary:
+def synthesize_session(
+    motion_spec: str, out_dir: str | Path, options: SynthOptions
+) -> SynthSummary:
     """Render a synthetic session folder from a motion file or a built-in motion.
 
     Parameters
@@ -244,7 +251,9 @@ def synthesize_session(motion_spec: str, out_dir: str | Path, options: SynthOpti
     if opts.height_mm is not None:
         motion = scale_motion(motion, opts.height_mm)
     if np.any(~np.isfinite(motion.q)):
-        raise ShapeError(f"{motion.source}: the motion has frames without a pose (NaN); cannot render")
+        raise ShapeError(
+            f"{motion.source}: the motion has frames without a pose (NaN); cannot render"
+        )
     t_m = np.asarray(motion.time_s, dtype=float)
     if t_m.shape[0] < 2:
         raise ShapeError(f"{motion.source}: expected at least 2 frames, found {t_m.shape[0]}")
@@ -272,8 +281,9 @@ def synthesize_session(motion_spec: str, out_dir: str | Path, options: SynthOpti
     pelvis0 = start_joints[names.index("pelvis")]
     shift = np.array([-pelvis0[0], -pelvis0[1], FLOOR_CLEARANCE_MM - lowest])
     fwd = _facing(start_joints, names)
-    shoulders = [start_joints[names.index(n)][2] for n in ("left_shoulder", "right_shoulder")
-                 if n in names]
+    shoulders = [
+        start_joints[names.index(n)][2] for n in ("left_shoulder", "right_shoulder") if n in names
+    ]
     chest = (float(np.mean(shoulders)) + shift[2] - 120.0) if shoulders else 1300.0
 
     appearance = Appearance.random(rng_look, opts.shirt_colour, opts.sleeve)
@@ -282,15 +292,21 @@ def synthesize_session(motion_spec: str, out_dir: str | Path, options: SynthOpti
 
     # -------------------------------------------------------- times
     n_video = int(np.floor(duration * opts.fps + 1e-9)) + 1
-    t_video = np.clip(jittered_times(n_video, opts.fps, opts.realism.video_jitter_s, rng_time),
-                      0.0, duration)
+    t_video = np.clip(
+        jittered_times(n_video, opts.fps, opts.realism.video_jitter_s, rng_time), 0.0, duration
+    )
     t_video = np.maximum.accumulate(t_video)
     if np.any(np.diff(t_video) <= 0):
         raise ShapeError("video time stamps collapsed; increase --seconds or lower the jitter")
     dt_m = 1.0 / opts.marker_rate_hz
     n_mark = int(np.floor((duration - 0.5 * dt_m) * opts.marker_rate_hz + 1e-9)) + 1
-    t_mark = jittered_times(n_mark, opts.marker_rate_hz, opts.realism.marker_jitter_s, rng_time,
-                            start_s=float(rng_time.uniform(0.0, 0.5 * dt_m)))
+    t_mark = jittered_times(
+        n_mark,
+        opts.marker_rate_hz,
+        opts.realism.marker_jitter_s,
+        rng_time,
+        start_s=float(rng_time.uniform(0.0, 0.5 * dt_m)),
+    )
 
     # -------------------------------------------------------- static data
     _prepare_out(out, opts.overwrite)
@@ -307,7 +323,9 @@ def synthesize_session(motion_spec: str, out_dir: str | Path, options: SynthOpti
         body.markers_at(t_video),
     )
     truth.save(out / "truth.npz")
-    markers = corrupt_markers(body.markers_at(t_mark), opts.marker_rate_hz, opts.realism, rng_markers)
+    markers = corrupt_markers(
+        body.markers_at(t_mark), opts.marker_rate_hz, opts.realism, rng_markers
+    )
     write_markers_csv(out / "markers.csv", t_mark, MARKER_NAMES, markers)
     for cam in cameras:
         px = cam.project(truth.joints_mm)
@@ -321,7 +339,10 @@ def synthesize_session(motion_spec: str, out_dir: str | Path, options: SynthOpti
             write_timestamps_csv(vdir / f"{cam.name}.timestamps.csv", t_video)
     height = standing_height_mm(motion.skeleton)
     info = {
-        "subject": {"height_mm": round(float(np.clip(height, 500, 2800)), 1), "bone_lengths_mm": {}},
+        "subject": {
+            "height_mm": round(float(np.clip(height, 500, 2800)), 1),
+            "bone_lengths_mm": {},
+        },
         "cameras": "cameras.json",
         "marker_sets": {s: [s] for s in TRACKER_SETS},
         "reference_markers": list(REFERENCE_MARKERS),
@@ -348,13 +369,17 @@ def synthesize_session(motion_spec: str, out_dir: str | Path, options: SynthOpti
     room_state = rng_room.bit_generator.state
     for r in renderers:
         rng_room.bit_generator.state = room_state  # the same room in every view
-        backgrounds.append(render_background(r, np.zeros(3), fwd, opts.realism.background, rng_room))
+        backgrounds.append(
+            render_background(r, np.zeros(3), fwd, opts.realism.background, rng_room)
+        )
         lights.append(lighting_field(opts.image_size, rng_light))
     exposure = opts.realism.blur / opts.fps
     offsets = [0.0] if exposure <= 0 else [-0.25 * exposure, 0.25 * exposure]
     sub_times = (t_video[:, None] + np.array(offsets)[None, :]).ravel()
     points = body.points_at(sub_times).reshape(n_video, len(offsets), -1, 3)
-    writers = [_VideoOut(vdir, c.name, opts.video_format, opts.fps, opts.image_size) for c in cameras]
+    writers = [
+        _VideoOut(vdir, c.name, opts.video_format, opts.fps, opts.image_size) for c in cameras
+    ]
     try:
         with Progress(n_video, f"synth {out.name}") as progress:
             for k in range(n_video):
@@ -364,7 +389,9 @@ def synthesize_session(motion_spec: str, out_dir: str | Path, options: SynthOpti
                     if len(offsets) > 1:
                         second = bg.copy()
                         r.draw_body(second, body.primitives, points[k, 1])
-                        canvas = cv2.addWeighted(canvas, 0.5, second, 0.5, 0.0)
+                        canvas = np.asarray(
+                            cv2.addWeighted(canvas, 0.5, second, 0.5, 0.0), dtype=np.uint8
+                        )
                     image = finish_frame(r.warp(canvas), light, opts.realism.noise, rng_noise)
                     w.write(image)
                 progress.update()

@@ -93,7 +93,8 @@ _G_LAMBDA = 92
 _G_LITERAL = 93
 _G_NSEG = 94
 _G_USE_TARGET = 95
-_G_SIZE = 96
+_G_EULER = 96  # shoulder axes as signed basis vectors: 3 axis indices, 3 signs (-1 if not)
+_G_SIZE = 102
 
 _MAX_SEG = 3
 _MIN_Z_MM = 1.0  # points closer than this to the camera plane count as off-image
@@ -129,6 +130,11 @@ class RefineConfig:
         hand target, `mocapkit.ik.sdls.Effector.point_mm`; the origin is the wrist).
     solver : {"numba", "scipy"}
         `nelder_mead_nb` or `scipy.optimize.minimize(method="Nelder-Mead")`.
+    swivel_scan_rad : float
+        Half-range of the 1-D swivel scan that seeds the simplex (0 disables it and
+        runs the paper's plain search from the IK pose).
+    swivel_scan_steps : int
+        Number of swivel angles scanned (including 0 when odd).
     """
 
     edges: EdgeConfig = field(default_factory=EdgeConfig)
@@ -146,6 +152,8 @@ class RefineConfig:
         (0.0, 0.0, 0.0),
     )
     solver: Literal["numba", "scipy"] = "numba"
+    swivel_scan_rad: float = math.radians(40.0)
+    swivel_scan_steps: int = 17
 
     def __post_init__(self) -> None:
         checks = {
@@ -156,6 +164,8 @@ class RefineConfig:
             "fatol": self.fatol >= 0,
             "maxfev": self.maxfev >= 5,
             "roi_pad_px": self.roi_pad_px >= 0,
+            "swivel_scan_rad": 0 <= self.swivel_scan_rad <= math.pi,
+            "swivel_scan_steps": self.swivel_scan_steps >= 1,
         }
         for name, ok in checks.items():
             if not ok:
@@ -578,6 +588,84 @@ def arm_outline_px_nb(x: FloatArray, geo: FloatArray, out: FloatArray) -> int:
 
 
 @numba.njit(cache=True)
+def swivel_x_nb(x: FloatArray, alpha: float, geo: FloatArray, out: FloatArray) -> bool:
+    """Arm parameters after a swivel of ``alpha`` rad about the shoulder->effector axis.
+
+    The upper arm's rotation is pre-multiplied by the swivel (elbow unchanged, so the
+    effector stays put; Azad's 1-D swivel angle, recipe Z) and decomposed back onto
+    the shoulder's axes (intrinsic Tait-Bryan angles about distinct signed basis
+    axes). Writes ``out`` (4,); returns False when the axes do not allow it.
+    """
+    if geo[_G_EULER] < 0:
+        return False
+    rots = np.empty((3, 3, 3))
+    orig = np.empty((3, 3))
+    eff = np.empty(3)
+    _arm_frames_nb(x, geo, rots, orig, eff)
+    pr = geo[_G_PARENT_R : _G_PARENT_R + 9].reshape(3, 3)
+    n = eff - orig[0]
+    nn = math.sqrt(n[0] ** 2 + n[1] ** 2 + n[2] ** 2)
+    if nn < 1e-9:
+        return False
+    # swivel axis in the parent frame: R_local(alpha) = Rot(P^T n, alpha) @ R_local(0)
+    npar = np.empty(3)
+    for i in range(3):
+        npar[i] = (pr[0, i] * n[0] + pr[1, i] * n[1] + pr[2, i] * n[2]) / nn
+    sw = np.empty((3, 3))
+    axis_angle_matrix_nb(npar, alpha, sw)
+    local = np.empty((3, 3))
+    tmp = np.empty((3, 3))
+    prt = np.ascontiguousarray(pr.T)
+    _mat3(prt, rots[0], tmp)  # R_local(0) = P^T R_upper
+    _mat3(sw, tmp, local)
+    i = int(geo[_G_EULER])
+    j = int(geo[_G_EULER + 1])
+    k = int(geo[_G_EULER + 2])
+    eps = 1.0 if (j - i) % 3 == 1 else -1.0  # parity of the axis permutation
+    phi2 = math.asin(min(max(eps * local[i, k], -1.0), 1.0))
+    phi1 = math.atan2(-eps * local[j, k], local[k, k])
+    phi3 = math.atan2(-eps * local[i, j], local[i, i])
+    out[0] = phi1 * geo[_G_EULER + 3]
+    out[1] = phi2 * geo[_G_EULER + 4]
+    out[2] = phi3 * geo[_G_EULER + 5]
+    out[3] = x[3]
+    return True
+
+
+@numba.njit(cache=True)
+def swivel_scan_nb(
+    x0: FloatArray,
+    geo: FloatArray,
+    dmap: NDArray[np.float32],
+    half_range: float,
+    steps: int,
+    lb: FloatArray,
+    ub: FloatArray,
+) -> tuple[FloatArray, float, int]:
+    """Best of ``x0`` and ``steps`` swivels evenly spread over ``[-half_range, half_range]``.
+
+    Candidates are clipped to the joint limits. Returns ``(x, cost, evaluations)``.
+    """
+    best = x0.copy()
+    fbest = arm_cost_nb(x0, geo, dmap)
+    nfev = 1
+    cand = np.empty(4)
+    for m in range(steps):
+        alpha = -half_range + 2.0 * half_range * m / (steps - 1) if steps > 1 else 0.0
+        if alpha == 0.0:
+            continue
+        if not swivel_x_nb(x0, alpha, geo, cand):
+            break
+        _clip(cand, lb, ub)
+        f = arm_cost_nb(cand, geo, dmap)
+        nfev += 1
+        if f < fbest:
+            fbest = f
+            best[:] = cand
+    return best, fbest, nfev
+
+
+@numba.njit(cache=True)
 def arm_cost_many_nb(xs: FloatArray, geo: FloatArray, dmap: NDArray[np.float32]) -> FloatArray:
     """`arm_cost_nb` at each row of ``xs`` (N, 4); used for timing and grids."""
     out = np.empty(xs.shape[0])
@@ -767,7 +855,7 @@ class ArmProblem:
     side : str
     dofs : ndarray of int, shape (4,)
         Indices of the arm's DoFs in the skeleton's ``q``.
-    geo : ndarray, shape (96,)
+    geo : ndarray, shape (102,)
         Packed geometry for the compiled kernels.
     distance : DistanceMap
     lower, upper : ndarray, shape (4,)
@@ -846,7 +934,7 @@ def pack_arm_geometry(
     distance_origin_px: tuple[int, int] = (0, 0),
     world: FloatArray | None = None,
 ) -> FloatArray:
-    """The flat geometry vector (96,) of one arm for the compiled kernels.
+    """The flat geometry vector (102,) of one arm for the compiled kernels.
 
     Parameters
     ----------
@@ -915,6 +1003,13 @@ def pack_arm_geometry(
     geo[_G_LAMBDA] = config.hand_weight_px_per_mm
     geo[_G_LITERAL] = 1.0 if config.literal_sum else 0.0
     geo[_G_NSEG] = 3.0 if config.include_hand else 2.0
+    axes = skeleton.dof_axis[dofs[:3]]
+    basis = np.argmax(np.abs(axes), axis=1)
+    if np.allclose(np.abs(axes[np.arange(3), basis]), 1.0) and len(set(basis.tolist())) == 3:
+        geo[_G_EULER : _G_EULER + 3] = basis
+        geo[_G_EULER + 3 : _G_EULER + 6] = np.sign(axes[np.arange(3), basis])
+    else:
+        geo[_G_EULER : _G_EULER + 6] = -1.0
     return geo
 
 
@@ -990,14 +1085,20 @@ def solve_arm(problem: ArmProblem, config: RefineConfig) -> tuple[FloatArray, Ar
     x0 = problem.x0
     diag.cost_before = problem.cost(x0)
     diag.chamfer_before, diag.hand_offset_before_mm = problem.cost_terms(x0)
-    sim = initial_simplex(x0, config.simplex_step_rad)
+    start, n_scan = x0, 0
+    if config.swivel_scan_rad > 0 and config.swivel_scan_steps > 1:
+        start, _f, n_scan = swivel_scan_nb(
+            x0, problem.geo, dmap, config.swivel_scan_rad, config.swivel_scan_steps,
+            problem.lower, problem.upper,
+        )
+    sim = initial_simplex(start, config.simplex_step_rad)
     if config.solver == "scipy":
         from scipy.optimize import Bounds, minimize
 
         geo = problem.geo
         res = minimize(
             lambda x: arm_cost_nb(x, geo, dmap),
-            x0,
+            start,
             method="Nelder-Mead",
             bounds=Bounds(problem.lower, problem.upper),
             options={
@@ -1017,7 +1118,7 @@ def solve_arm(problem: ArmProblem, config: RefineConfig) -> tuple[FloatArray, Ar
     diag.refined = True
     diag.cost_after = problem.cost(x)
     diag.chamfer_after, diag.hand_offset_after_mm = problem.cost_terms(x)
-    diag.n_evaluations, diag.n_iterations, diag.converged = nfev, nit, conv
+    diag.n_evaluations, diag.n_iterations, diag.converged = nfev + n_scan, nit, conv
     return x, diag
 
 
@@ -1163,4 +1264,6 @@ __all__ = [
     "refine_arms",
     "solve_arm",
     "swivel_arm",
+    "swivel_scan_nb",
+    "swivel_x_nb",
 ]

@@ -1,0 +1,131 @@
+"""``mocapkit synth``: render a synthetic session (video, markers, keypoints, truth)."""
+
+from __future__ import annotations
+
+import argparse
+
+from mocapkit.errors import ShapeError
+from mocapkit.synth.realism import BACKGROUNDS, RealismOptions
+from mocapkit.synth.render import SLEEVES
+from mocapkit.synth.rigs import RIG_NAMES
+from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+
+_EPILOG = """\
+MOTION is a BVH or AMC file (an AMC takes its skeleton from --asf, else from an .asf
+beside it: same stem, the subject prefix before '_', or the only .asf in the folder),
+or a built-in procedural motion: builtin:table-tennis, builtin:squat, builtin:wave.
+The subject is recentred so that the pelvis is at the world origin at the start of the
+excerpt and the floor is z = 0; cameras face the subject's initial facing direction.
+"""
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise ShapeError(f"--size: expected WIDTHxHEIGHT such as 640x480, found {text!r}") from None
+    return (w, h)
+
+
+def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """Add the ``synth`` subcommand."""
+    p = subparsers.add_parser(
+        "synth",
+        help="render a synthetic session from a motion file or a built-in motion",
+        description="Render a session folder (cameras.json, video, markers.csv, keypoints, "
+        "truth.npz) from real or procedural motion.",
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    d = RealismOptions()
+    p.add_argument("motion", metavar="MOTION", help="BVH/AMC file or builtin:NAME")
+    p.add_argument("--out", required=True, help="session folder to create")
+    p.add_argument("--rig", choices=RIG_NAMES, default="mono", help="cameras (default mono)")
+    p.add_argument("--start-s", type=float, default=0.0, help="excerpt start in the clip (s)")
+    p.add_argument("--seconds", type=float, default=5.0, help="excerpt length (s, default 5)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument(
+        "--height-mm", type=float, default=None, help="scale the skeleton to this stature"
+    )
+    p.add_argument("--asf", default=None, help="ASF skeleton of an AMC motion")
+    p.add_argument("--fps", type=float, default=30.0, help="video rate (default 30)")
+    p.add_argument("--marker-rate", type=float, default=120.0, help="marker rate Hz (default 120)")
+    p.add_argument("--size", type=str, default="640x480", help="image size WxH (default 640x480)")
+    p.add_argument(
+        "--noise",
+        type=float,
+        default=d.noise,
+        help=f"sensor noise sigma, grey levels (default {d.noise})",
+    )
+    p.add_argument(
+        "--blur",
+        type=float,
+        default=d.blur,
+        help=f"motion blur: shutter / frame interval (default {d.blur}; 0 = off)",
+    )
+    p.add_argument("--background", choices=BACKGROUNDS, default=d.background, help="scene")
+    p.add_argument(
+        "--marker-noise-mm",
+        type=float,
+        default=d.marker_noise_mm,
+        help=f"marker noise sigma per axis, mm (default {d.marker_noise_mm})",
+    )
+    p.add_argument(
+        "--dropout",
+        type=float,
+        default=d.dropout,
+        help=f"probability per marker sample that a drop-out starts (default {d.dropout})",
+    )
+    p.add_argument(
+        "--dropout-s",
+        type=float,
+        default=d.dropout_s,
+        help=f"mean drop-out length, s (default {d.dropout_s})",
+    )
+    p.add_argument(
+        "--video-jitter-s",
+        type=float,
+        default=d.video_jitter_s,
+        help=f"video time stamp jitter sigma, s (default {d.video_jitter_s}; 0 = even)",
+    )
+    p.add_argument(
+        "--sleeve", choices=SLEEVES, default="short", help="shirt sleeves (default short)"
+    )
+    p.add_argument(
+        "--shirt-colour", default=None, help="shirt colour name or #RRGGBB (default: seeded)"
+    )
+    p.add_argument("--png", action="store_true", help="write PNG image folders instead of mp4")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing session folder")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Render the session and print a summary."""
+    realism = RealismOptions(
+        noise=args.noise,
+        blur=args.blur,
+        background=args.background,
+        marker_noise_mm=args.marker_noise_mm,
+        dropout=args.dropout,
+        dropout_s=args.dropout_s,
+        video_jitter_s=args.video_jitter_s,
+    )
+    options = SynthOptions(
+        rig=args.rig,
+        start_s=args.start_s,
+        seconds=args.seconds,
+        seed=args.seed,
+        height_mm=args.height_mm,
+        asf=args.asf,
+        fps=args.fps,
+        marker_rate_hz=args.marker_rate,
+        image_size=_size(args.size),
+        sleeve=args.sleeve,
+        shirt_colour=args.shirt_colour,
+        video_format="png" if args.png else "mp4",
+        overwrite=args.overwrite,
+        realism=realism,
+    )
+    summary = synthesize_session(args.motion, args.out, options)
+    print(summary.text())
+    return 0

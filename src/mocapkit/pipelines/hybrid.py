@@ -1,0 +1,279 @@
+"""File runners of the hybrid tracker (sessions, raw marker files) and its IK benchmark.
+
+Both runners feed `mocapkit.tracking.hybrid.HybridTracker.update` sample by sample,
+the same code a live feed would call.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mocapkit.errors import SessionError, ShapeError
+from mocapkit.ik.sdls import IKConfig, SDLSSolver
+from mocapkit.io.motion import Motion
+from mocapkit.progress import Progress
+from mocapkit.skeleton.model import Skeleton
+from mocapkit.skeleton.presets import load_preset
+from mocapkit.skeleton.scaling import scale_skeleton
+from mocapkit.tracking.hybrid import (
+    MARKER_SETS,
+    HybridConfig,
+    HybridPose,
+    HybridSample,
+    HybridTracker,
+)
+
+FloatArray = NDArray[np.float64]
+
+
+def hybrid_skeleton(
+    height_mm: float | None = None,
+    bone_lengths_mm: Mapping[str, float] | None = None,
+    root_rotation: bool = True,
+) -> Skeleton:
+    """``zhang21`` scaled to a subject, for the hybrid tracker.
+
+    With ``root_rotation`` the root gets a free yaw (limits removed, so a subject may
+    turn round) while root pitch and roll are held at 0: with feet planted and only
+    head and hands observed, whole-body tilt is not determined by the markers.
+    Bone-length overrides whose joint is not in ``zhang21`` are ignored.
+    """
+    sk = load_preset("zhang21", ("root_rotation",) if root_rotation else ())
+    bones = {k: v for k, v in (bone_lengths_mm or {}).items() if k in sk.joint_names}
+    sk = scale_skeleton(sk, height_mm=height_mm, bone_lengths_mm=bones or None)
+    if root_rotation:
+        lower, upper = sk.lower.copy(), sk.upper.copy()
+        lower[sk.dof_index("root_yaw")], upper[sk.dof_index("root_yaw")] = -np.inf, np.inf
+        for name in ("root_pitch", "root_roll"):
+            lower[sk.dof_index(name)] = upper[sk.dof_index(name)] = 0.0
+        sk = sk.replace(lower=lower, upper=upper)
+    return sk
+
+
+def _run(
+    tracker: HybridTracker, samples: Sequence[HybridSample] | object, n: int, label: str
+) -> tuple[FloatArray, FloatArray, list[HybridPose]]:
+    poses: list[HybridPose] = []
+    with Progress(n, label) as prog:
+        for s in samples:  # type: ignore[attr-defined]
+            poses.append(tracker.update(s))
+            prog.update()
+    if not poses:
+        raise ShapeError(f"{label}: no samples to track")
+    return (np.array([p.time_s for p in poses]), np.stack([p.q for p in poses]), poses)
+
+
+def track_hybrid_session(
+    session_dir: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str] | None,
+    use_video: bool = True,
+    paper: bool = False,
+    config: HybridConfig | None = None,
+) -> Motion:
+    """Track a recording session with head and hand marker sets plus one camera.
+
+    Uses the marker sets ``head``, ``left_hand``, ``right_hand`` of the session (any other
+    set, such as elbow reference markers, is ignored), the first camera with a video
+    for the refinement, the subject's height and bone lengths from ``session.json``.
+
+    Parameters
+    ----------
+    session_dir : path
+    out_dir : path or None
+        Result folder (``motion.npz``, ``joints.csv``, ``motion.bvh``); nothing written if None.
+    use_video : bool
+        Run the video refinement of the arms.
+    paper : bool
+        Follow the paper literally (no smoothing, proportional balance).
+    config : HybridConfig, optional
+        Overrides ``paper`` and ``use_video`` when given.
+    """
+    from mocapkit.io.session import load_session
+
+    session = load_session(session_dir)
+    missing = [n for n in MARKER_SETS if n not in session.marker_sets]
+    if missing or session.markers is None:
+        raise SessionError(
+            f"{session.path}: the hybrid tracker needs marker sets {list(MARKER_SETS)} in "
+            f"session.json; missing {missing or 'the marker file'}"
+        )
+    cfg = config or HybridConfig(paper=paper, use_video=use_video)
+    sk = hybrid_skeleton(session.height_mm, session.bone_lengths_mm)
+    cams = session.video_cameras
+    if not cams:
+        raise SessionError(f"{session.path}: no camera with a video; the hybrid tracker's "
+                           "time line is the video's")
+    camera = session.camera(cams[0])
+    tracker = HybridTracker(sk, camera if cfg.use_video else None, cfg)
+    n = session.video(cams[0]).n_frames
+
+    def stream():  # type: ignore[no-untyped-def]
+        for s in session.samples(cams[0]):
+            markers = {k: v for k, v in s.marker_sets_mm.items() if k in MARKER_SETS}
+            image = s.image(cams[0]) if (cfg.use_video and tracker.refiner() is not None) else None
+            yield HybridSample(s.time_s, markers,
+                               None if np.isnan(s.marker_time_s) else s.marker_time_s, image)
+
+    t, q, _ = _run(tracker, stream(), n, "track hybrid")
+    mode = "paper" if cfg.paper else "default"
+    motion = Motion.from_q(sk, t, q, source=f"hybrid tracker ({mode}, video="
+                           f"{'on' if cfg.use_video else 'off'}) on {session.path}")
+    if out_dir is not None:
+        motion.write_result_folder(out_dir)
+    return motion
+
+
+def track_hybrid_marker_arrays(
+    time_s: ArrayLike,
+    sets_mm: Mapping[str, ArrayLike],
+    height_mm: float,
+    config: HybridConfig | None = None,
+    label: str = "track hybrid",
+) -> tuple[Skeleton, FloatArray, list[HybridPose]]:
+    """Run the hybrid tracker (IK only) on marker-set trajectories.
+
+    Parameters
+    ----------
+    time_s : array_like, shape (T,)
+    sets_mm : mapping of str to array_like (T, 3)
+        ``head``, ``left_hand``, ``right_hand`` positions (NaN when occluded).
+    height_mm : float
+        Subject stature (scales ``zhang21``).
+    config : HybridConfig, optional
+        Default: ``HybridConfig(use_video=False)``.
+
+    Returns
+    -------
+    skeleton, q (T, D), poses
+    """
+    t = np.asarray(time_s, dtype=float)
+    if t.ndim != 1 or t.size == 0:
+        raise ShapeError(f"time_s: expected a non-empty 1-D array of times (s), found {t.shape}")
+    arrays = {}
+    for name in MARKER_SETS:
+        if name not in sets_mm:
+            raise ShapeError(f"sets_mm: missing marker set {name!r}; found {sorted(sets_mm)}")
+        a = np.asarray(sets_mm[name], dtype=float)
+        if a.shape != (t.size, 3):
+            raise ShapeError(f"sets_mm[{name!r}]: expected shape ({t.size}, 3), found {a.shape}")
+        arrays[name] = a
+    cfg = config or HybridConfig(use_video=False)
+    sk = hybrid_skeleton(height_mm)
+    tracker = HybridTracker(sk, None, cfg)
+    samples = (HybridSample(float(t[i]), {k: v[i] for k, v in arrays.items()})
+               for i in range(t.size))
+    _, q, poses = _run(tracker, samples, t.size, label)
+    return sk, q, poses
+
+
+def track_hybrid_markers(
+    markers_path: str | os.PathLike[str],
+    marker_sets: Sequence[str],
+    height_mm: float | None = None,
+    out_dir: str | os.PathLike[str] | None = None,
+    config: HybridConfig | None = None,
+) -> Motion:
+    """Run the hybrid tracker's IK on a raw marker file (C3D, TRC, CSV) without a session.
+
+    Parameters
+    ----------
+    markers_path : path
+    marker_sets : sequence of str
+        Specs ``"name=M1+M2+..."`` for ``head``, ``left_hand`` and ``right_hand``
+        (e.g. ``head=LFHD+RFHD+LBHD+RBHD``); a set's position is the mean of its members.
+    height_mm : float, optional
+        Subject stature; estimated from the head markers when omitted
+        (`mocapkit.io.marker_sets.estimate_height_mm`: head-set height over standing
+        frames plus a head-top offset).
+    out_dir : path, optional
+        Result folder.
+    config : HybridConfig, optional
+        Default: IK only (``use_video=False``).
+
+    Notes
+    -----
+    The root starts under the head marker, facing so the body's right points from the
+    left-hand to the right-hand set (`HybridTracker.initial_pose`); feet are planted
+    where that first pose puts them, on the floor z = 0.
+    """
+    from mocapkit.io.marker_sets import estimate_height_mm, evaluate_marker_sets, parse_marker_sets
+    from mocapkit.io.markers import read_markers
+
+    markers = read_markers(markers_path)
+    sets = parse_marker_sets(list(marker_sets))
+    names = [s.name for s in sets]
+    missing = [n for n in MARKER_SETS if n not in names]
+    if missing:
+        raise ShapeError(f"marker_sets: the hybrid tracker needs sets {list(MARKER_SETS)}; "
+                         f"missing {missing} (given {names})")
+    pos = evaluate_marker_sets(markers, sets)
+    if height_mm is None:
+        height_mm = float(estimate_height_mm(markers, head=sets[names.index("head")]))
+    sk, q, _ = track_hybrid_marker_arrays(
+        markers.time_s, {n: pos[:, i] for i, n in enumerate(names)}, height_mm, config)
+    motion = Motion.from_q(sk, markers.time_s, q,
+                           source=f"hybrid tracker IK on {Path(markers_path).name}")
+    if out_dir is not None:
+        motion.write_result_folder(out_dir)
+    return motion
+
+
+def bench_ik(n_frames: int = 2000, repeats: int = 5, rate_hz: float = 50.0) -> dict[str, float]:
+    """Warm-started IK solves per second on a synthetic arm-waving sequence (one core).
+
+    Targets come from forward kinematics of a smooth upper-body motion sampled at
+    ``rate_hz``; each frame starts from the previous solution (Alg. 1 with the default
+    `IKConfig`). The first pass compiles and is not timed.
+
+    Returns
+    -------
+    dict
+        ``solves_per_s`` (median over repeats), ``solves_per_s_min``, ``mean_iterations``,
+        ``max_residual_mm``, ``converged_fraction``, ``n_frames``.
+    """
+    if n_frames < 1 or repeats < 1:
+        raise ShapeError(f"bench_ik: expected n_frames >= 1 and repeats >= 1, found "
+                         f"{n_frames}, {repeats}")
+    sk = load_preset("zhang21")
+    solver = SDLSSolver(sk, config=IKConfig())
+    t = np.arange(n_frames) / rate_hz
+    q = np.tile(solver.secondary.omega, (n_frames, 1))
+    for d, name in enumerate(sk.dof_names):
+        if "shoulder" in name or "elbow" in name:
+            q[:, d] += 0.5 * np.sin(2 * np.pi * 0.5 * t + d) + 0.4
+        elif "spine" in name:
+            q[:, d] += 0.1 * np.sin(2 * np.pi * 0.3 * t + d)
+        elif "neck" in name:
+            q[:, d] += 0.2 * np.sin(2 * np.pi * 0.4 * t + d)
+    q = np.clip(q, sk.lower, sk.upper)
+    targets = np.stack([solver.effector_positions(qq) for qq in q])
+    solver.solve(q[0], targets[0])  # compile
+    rates, iters, resid, conv = [], 0.0, 0.0, 0.0
+    for _ in range(repeats):
+        qc = q[0].copy()
+        n_it = 0
+        worst = 0.0
+        ok = 0
+        start = time.perf_counter()
+        for i in range(n_frames):
+            res = solver.solve(qc, targets[i])
+            qc = res.q
+            n_it += res.iterations
+            worst = max(worst, float(np.nanmax(res.residual_mm)))
+            ok += res.converged
+        rates.append(n_frames / (time.perf_counter() - start))
+        iters, resid, conv = n_it / n_frames, worst, ok / n_frames
+    return {
+        "solves_per_s": float(np.median(rates)),
+        "solves_per_s_min": float(np.min(rates)),
+        "mean_iterations": float(iters),
+        "max_residual_mm": float(resid),
+        "converged_fraction": float(conv),
+        "n_frames": float(n_frames),
+    }
