@@ -1,4 +1,4 @@
-"""Errata tests for Zhang et al. 2011 §4 (Z1-Z8, Z13): Jacobian, clamps, SDLS damping, null space."""
+"""Errata tests for Zhang et al. 2011 §4 (Z1-Z8, Z13): Jacobian, clamps, SDLS, null space."""
 
 from __future__ import annotations
 
@@ -165,6 +165,7 @@ def test_unreachable_target_settles(skel, clamp):
     targets[hand] += [2500.0, 0.0, 0.0]
     res = solver.solve(q0, targets, record_trace=True)
     assert not res.converged and res.iterations == 300
+    assert res.trace is not None
     tail = res.trace[-50:]
     # settled, no oscillation: over the last 50 iterations the worst error varies by
     # under 1 % and every step is at least 20 times below Gamma (a flip-flopping

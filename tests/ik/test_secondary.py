@@ -67,8 +67,12 @@ def test_secondary_lowers_cost_once_targets_met(skel, rng):
     solver = SDLSSolver(skel, config=IKConfig(secondary_gain=0.3))
     plain = SDLSSolver(skel, config=IKConfig(secondary_gain=0.0))
     q_true = relaxed_pose(skel)
-    for name, val in [("r_shoulder_flexion", 0.9), ("r_elbow_flexion", 1.0),
-                      ("l_shoulder_abduction", 0.6), ("spine2_flexion", 0.2)]:
+    for name, val in [
+        ("r_shoulder_flexion", 0.9),
+        ("r_elbow_flexion", 1.0),
+        ("l_shoulder_abduction", 0.6),
+        ("spine2_flexion", 0.2),
+    ]:
         q_true[skel.dof_index(name)] = val
     targets = solver.effector_positions(q_true)
     # a valid but tense solution: reach the targets without the secondary task from a bent start

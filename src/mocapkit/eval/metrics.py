@@ -290,6 +290,7 @@ def evaluate_result(
     """
     from mocapkit.io.session import load_session, load_truth
 
+    rt, rn, rj = load_result_joints(result)
     tp = Path(truth_session)
     if tp.is_file():
         truth = load_truth(tp)
@@ -299,5 +300,4 @@ def evaluate_result(
         if session.truth is None:  # unreachable after require
             raise SessionError(f"{tp}: no truth.npz")
         truth = session.truth
-    rt, rn, rj = load_result_joints(result)
     return evaluate_joints(rt, rn, rj, truth.time_s, truth.joint_names, truth.joints_mm)

@@ -134,7 +134,9 @@ class IKConfig:
 
     def __post_init__(self) -> None:
         if not (0.0 < self.gamma_rad <= math.pi):
-            raise ShapeError(f"IKConfig.gamma_rad: expected a value in (0, pi], found {self.gamma_rad}")
+            raise ShapeError(
+                f"IKConfig.gamma_rad: expected a value in (0, pi], found {self.gamma_rad}"
+            )
         if self.dmax_mm is not None and not self.dmax_mm > 0:
             raise ShapeError(f"IKConfig.dmax_mm: expected a positive length, found {self.dmax_mm}")
         if not self.tol_mm > 0:
@@ -150,8 +152,10 @@ class IKConfig:
                 f"found {self.secondary_gain}"
             )
         if not self.secondary_max_step_rad > 0:
-            raise ShapeError("IKConfig.secondary_max_step_rad: expected a positive angle, found "
-                             f"{self.secondary_max_step_rad}")
+            raise ShapeError(
+                "IKConfig.secondary_max_step_rad: expected a positive angle, found "
+                f"{self.secondary_max_step_rad}"
+            )
         if self.clamp not in ("hard", "soft"):
             raise ShapeError(f"IKConfig.clamp: expected 'hard' or 'soft', found {self.clamp!r}")
 
@@ -355,14 +359,37 @@ def solve_ik_nb(
     inv_mu = 1.0 / mu
     use_secondary = gain > 0.0
 
-    fk_pose_nb(q, parents, offsets, dof_start, dof_count, dof_kind, dof_axis,
-               world, axis_world, pivot_world)
-    points_jacobian_pose_nb(world, axis_world, pivot_world, dof_kind, dof_joint, ancestors,
-                            eff_joint, eff_point, pts, jac)
+    fk_pose_nb(
+        q,
+        parents,
+        offsets,
+        dof_start,
+        dof_count,
+        dof_kind,
+        dof_axis,
+        world,
+        axis_world,
+        pivot_world,
+    )
+    points_jacobian_pose_nb(
+        world,
+        axis_world,
+        pivot_world,
+        dof_kind,
+        dof_joint,
+        ancestors,
+        eff_joint,
+        eff_point,
+        pts,
+        jac,
+    )
     err = 0.0
     for k in range(k_eff):
-        d = math.sqrt((targets[k, 0] - pts[k, 0]) ** 2 + (targets[k, 1] - pts[k, 1]) ** 2
-                      + (targets[k, 2] - pts[k, 2]) ** 2)
+        d = math.sqrt(
+            (targets[k, 0] - pts[k, 0]) ** 2
+            + (targets[k, 1] - pts[k, 1]) ** 2
+            + (targets[k, 2] - pts[k, 2]) ** 2
+        )
         err = max(err, d)
     it = 0
     while it < max_iter and k_eff > 0:
@@ -377,8 +404,18 @@ def solve_ik_nb(
                     jw[r, d] = jac[r, d] * inv_mu[d]
         rank = sdls_nb(jw, e, gamma, soft, dpsi, vr, n_buf, m_buf)
         if use_secondary:
-            lever_weights_nb(world, axis_world, pivot_world, parents, dof_joint, mass,
-                             com_local, planted, sec_mask, mh)
+            lever_weights_nb(
+                world,
+                axis_world,
+                pivot_world,
+                parents,
+                dof_joint,
+                mass,
+                com_local,
+                planted,
+                sec_mask,
+                mh,
+            )
             secondary_task_nb(q, omega, mh, gain, sec_max, dphi)
             for d in range(n_dofs):
                 # psi space (Z8e); a DoF held at a limit has a zeroed column, so the
@@ -423,19 +460,45 @@ def solve_ik_nb(
             trace[it, 1] = max_rev
             trace[it, 2] = max_psi
             trace[it, 3] = max_pris
-        fk_pose_nb(q, parents, offsets, dof_start, dof_count, dof_kind, dof_axis,
-                   world, axis_world, pivot_world)
-        points_jacobian_pose_nb(world, axis_world, pivot_world, dof_kind, dof_joint, ancestors,
-                                eff_joint, eff_point, pts, jac)
+        fk_pose_nb(
+            q,
+            parents,
+            offsets,
+            dof_start,
+            dof_count,
+            dof_kind,
+            dof_axis,
+            world,
+            axis_world,
+            pivot_world,
+        )
+        points_jacobian_pose_nb(
+            world,
+            axis_world,
+            pivot_world,
+            dof_kind,
+            dof_joint,
+            ancestors,
+            eff_joint,
+            eff_point,
+            pts,
+            jac,
+        )
         err = 0.0
         for k in range(k_eff):
-            d2 = math.sqrt((targets[k, 0] - pts[k, 0]) ** 2 + (targets[k, 1] - pts[k, 1]) ** 2
-                           + (targets[k, 2] - pts[k, 2]) ** 2)
+            d2 = math.sqrt(
+                (targets[k, 0] - pts[k, 0]) ** 2
+                + (targets[k, 1] - pts[k, 1]) ** 2
+                + (targets[k, 2] - pts[k, 2]) ** 2
+            )
             err = max(err, d2)
         it += 1
     for k in range(k_eff):
-        residual[k] = math.sqrt((targets[k, 0] - pts[k, 0]) ** 2 + (targets[k, 1] - pts[k, 1]) ** 2
-                                + (targets[k, 2] - pts[k, 2]) ** 2)
+        residual[k] = math.sqrt(
+            (targets[k, 0] - pts[k, 0]) ** 2
+            + (targets[k, 1] - pts[k, 1]) ** 2
+            + (targets[k, 2] - pts[k, 2]) ** 2
+        )
     return it
 
 
@@ -461,8 +524,10 @@ def clamp_target_error(s_mm: ArrayLike, t_mm: ArrayLike, dmax_mm: float) -> Floa
     s = np.ascontiguousarray(s_mm, dtype=float)
     t = np.ascontiguousarray(t_mm, dtype=float)
     if s.ndim != 2 or s.shape[1] != 3 or t.shape != s.shape:
-        raise ShapeError(f"clamp_target_error: expected s and t of equal shape (K, 3), found "
-                         f"{s.shape} and {t.shape}")
+        raise ShapeError(
+            f"clamp_target_error: expected s and t of equal shape (K, 3), found "
+            f"{s.shape} and {t.shape}"
+        )
     out = np.empty(s.size)
     clamp_error_nb(s, t, float(dmax_mm), out)
     return out
@@ -486,13 +551,16 @@ class SDLSStep:
     m: FloatArray
 
 
-def sdls_response(jw: ArrayLike, e: ArrayLike, gamma_rad: float = DEFAULT_GAMMA_RAD,
-                  soft: bool = False) -> SDLSStep:
+def sdls_response(
+    jw: ArrayLike, e: ArrayLike, gamma_rad: float = DEFAULT_GAMMA_RAD, soft: bool = False
+) -> SDLSStep:
     """SDLS response of a weighted Jacobian ``jw`` (3K, D) to an error ``e`` (3K,)."""
     a = np.ascontiguousarray(jw, dtype=float)
     ev = np.ascontiguousarray(e, dtype=float)
     if a.ndim != 2 or a.shape[0] % 3 or ev.shape != (a.shape[0],):
-        raise ShapeError(f"sdls_response: expected jw (3K, D) and e (3K,), found {a.shape}, {ev.shape}")
+        raise ShapeError(
+            f"sdls_response: expected jw (3K, D) and e (3K,), found {a.shape}, {ev.shape}"
+        )
     n_sv = max(min(a.shape), 1)
     dpsi = np.empty(a.shape[1])
     vr = np.empty((n_sv, a.shape[1]))
@@ -528,7 +596,9 @@ def leg_length_mm(skeleton: Skeleton) -> float:
     """Rest length of the left leg, hip joint to ankle (mm); arm length if there are no legs."""
     if "l_femur" in skeleton.joint_names and "l_foot" in skeleton.joint_names:
         lengths = skeleton.bone_length_mm
-        return float(lengths[skeleton.joint_index("l_femur")] + lengths[skeleton.joint_index("l_tibia")])
+        return float(
+            lengths[skeleton.joint_index("l_femur")] + lengths[skeleton.joint_index("l_tibia")]
+        )
     return arm_length_mm(skeleton)
 
 
@@ -546,8 +616,10 @@ def dof_weights(
     rot = skeleton.dof_kind != PRISMATIC
     positive = m[rot & (m > 0)]
     if positive.size == 0:
-        raise ShapeError(f"skeleton {skeleton.name!r}: no rotational DoF carries mass; "
-                         "cannot weight the Jacobian")
+        raise ShapeError(
+            f"skeleton {skeleton.name!r}: no rotational DoF carries mass; "
+            "cannot weight the Jacobian"
+        )
     m_min = float(positive.min())
     mu = np.sqrt(np.maximum(m, m_min) / m_min)
     length = leg_length_mm(skeleton) if prismatic_length_mm is None else float(prismatic_length_mm)
@@ -604,12 +676,16 @@ class SDLSSolver:
         self.planted_joints = planted
         self.secondary = SecondaryTask(skeleton, planted, omega)
         self.mu = dof_weights(skeleton, planted, self.config.prismatic_length_mm)
-        self.dmax_mm = (self.config.dmax_mm if self.config.dmax_mm is not None
-                        else 0.1 * arm_length_mm(skeleton))
+        self.dmax_mm = (
+            self.config.dmax_mm
+            if self.config.dmax_mm is not None
+            else 0.1 * arm_length_mm(skeleton)
+        )
         self._ka = kinematic_arrays(skeleton)
         self._dof_joint = np.ascontiguousarray(skeleton.dof_joint)
-        self._eff_joint = np.array([skeleton.joint_index(e.joint) for e in self.effectors],
-                                   dtype=np.int64)
+        self._eff_joint = np.array(
+            [skeleton.joint_index(e.joint) for e in self.effectors], dtype=np.int64
+        )
         self._eff_point = np.array([e.point_mm for e in self.effectors], dtype=float).reshape(-1, 3)
         self._lower = np.ascontiguousarray(skeleton.lower)
         self._upper = np.ascontiguousarray(skeleton.upper)
@@ -635,12 +711,17 @@ class SDLSSolver:
         """
         pts = np.asarray(points_mm, dtype=float)
         if pts.shape != (len(self.effectors), 3) or not np.all(np.isfinite(pts)):
-            raise ShapeError(f"effector points: expected finite shape ({len(self.effectors)}, 3), "
-                             f"found {pts.shape}")
-        effs = [Effector(e.name, e.joint, (float(p[0]), float(p[1]), float(p[2])))
-                for e, p in zip(self.effectors, pts, strict=True)]
-        return SDLSSolver(self.skeleton, effs, self.config, self.planted_joints,
-                          self.secondary.omega)
+            raise ShapeError(
+                f"effector points: expected finite shape ({len(self.effectors)}, 3), "
+                f"found {pts.shape}"
+            )
+        effs = [
+            Effector(e.name, e.joint, (float(p[0]), float(p[1]), float(p[2])))
+            for e, p in zip(self.effectors, pts, strict=True)
+        ]
+        return SDLSSolver(
+            self.skeleton, effs, self.config, self.planted_joints, self.secondary.omega
+        )
 
     def effector_positions(self, q: ArrayLike) -> FloatArray:
         """World positions (E, 3) of the effectors at pose ``q`` (D,)."""
@@ -685,14 +766,19 @@ class SDLSSolver:
         t = np.asarray(targets_mm, dtype=float)
         n_eff = len(self.effectors)
         if t.shape != (n_eff, 3):
-            raise ShapeError(f"targets_mm: expected shape ({n_eff}, 3) for effectors "
-                             f"{list(self.effector_names)}, found {t.shape}")
+            raise ShapeError(
+                f"targets_mm: expected shape ({n_eff}, 3) for effectors "
+                f"{list(self.effector_names)}, found {t.shape}"
+            )
         finite = np.all(np.isfinite(t), axis=1)
         act = finite if active is None else np.asarray(active, dtype=bool) & finite
         if act.shape != (n_eff,):
             raise ShapeError(f"active: expected shape ({n_eff},), found {act.shape}")
-        frz = (np.zeros(sk.n_dofs, dtype=bool) if frozen is None
-               else np.ascontiguousarray(frozen, dtype=bool))
+        frz = (
+            np.zeros(sk.n_dofs, dtype=bool)
+            if frozen is None
+            else np.ascontiguousarray(frozen, dtype=bool)
+        )
         if frz.shape != (sk.n_dofs,):
             raise ShapeError(f"frozen: expected shape ({sk.n_dofs},), found {frz.shape}")
         idx = np.flatnonzero(act)
@@ -702,21 +788,48 @@ class SDLSSolver:
         ka = self._ka
         sec = self.secondary
         n_it = solve_ik_nb(
-            q, ka.parents, ka.offsets, ka.dof_start, ka.dof_count, ka.dof_kind, ka.dof_axis,
-            self._dof_joint, ka.ancestors,
-            np.ascontiguousarray(self._eff_joint[idx]), np.ascontiguousarray(self._eff_point[idx]),
-            np.ascontiguousarray(t[idx]), frz, self.mu, self._lower, self._upper,
-            sec.omega, sec.mask, sec.planted, sec.mass, sec.com_local,
-            float(cfg.secondary_gain), float(min(cfg.secondary_max_step_rad, cfg.gamma_rad)),
-            float(self.dmax_mm), float(cfg.gamma_rad),
-            cfg.clamp == "soft", float(cfg.tol_mm), int(cfg.max_iterations),
-            int(cfg.min_iterations), residual, trace,
+            q,
+            ka.parents,
+            ka.offsets,
+            ka.dof_start,
+            ka.dof_count,
+            ka.dof_kind,
+            ka.dof_axis,
+            self._dof_joint,
+            ka.ancestors,
+            np.ascontiguousarray(self._eff_joint[idx]),
+            np.ascontiguousarray(self._eff_point[idx]),
+            np.ascontiguousarray(t[idx]),
+            frz,
+            self.mu,
+            self._lower,
+            self._upper,
+            sec.omega,
+            sec.mask,
+            sec.planted,
+            sec.mass,
+            sec.com_local,
+            float(cfg.secondary_gain),
+            float(min(cfg.secondary_max_step_rad, cfg.gamma_rad)),
+            float(self.dmax_mm),
+            float(cfg.gamma_rad),
+            cfg.clamp == "soft",
+            float(cfg.tol_mm),
+            int(cfg.max_iterations),
+            int(cfg.min_iterations),
+            residual,
+            trace,
         )
         res_all = np.full(n_eff, np.nan)
         res_all[idx] = residual
         converged = bool(len(idx) == 0 or np.all(residual < cfg.tol_mm))
-        return IKResult(q=q, iterations=int(n_it), residual_mm=res_all, converged=converged,
-                        trace=trace[:n_it].copy() if record_trace else None)
+        return IKResult(
+            q=q,
+            iterations=int(n_it),
+            residual_mm=res_all,
+            converged=converged,
+            trace=trace[:n_it].copy() if record_trace else None,
+        )
 
 
 __all__ = [

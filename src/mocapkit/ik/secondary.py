@@ -116,8 +116,12 @@ def lever_weights_nb(
     msum = np.zeros(n_joints)
     for j in range(n_joints):
         for a in range(3):
-            c = (world[j, a, 0] * com_local[j, 0] + world[j, a, 1] * com_local[j, 1]
-                 + world[j, a, 2] * com_local[j, 2] + world[j, a, 3])
+            c = (
+                world[j, a, 0] * com_local[j, 0]
+                + world[j, a, 1] * com_local[j, 1]
+                + world[j, a, 2] * com_local[j, 2]
+                + world[j, a, 3]
+            )
             wsum[j, a] = c * mass[j]
         msum[j] = mass[j]
     for j in range(n_joints - 1, 0, -1):
@@ -212,12 +216,31 @@ class SecondaryTask:
         world = np.empty((j, 4, 4))
         axis_world = np.empty((d, 3))
         pivot_world = np.empty((d, 3))
-        fk_pose_nb(qa, ka.parents, ka.offsets, ka.dof_start, ka.dof_count, ka.dof_kind,
-                   ka.dof_axis, world, axis_world, pivot_world)
+        fk_pose_nb(
+            qa,
+            ka.parents,
+            ka.offsets,
+            ka.dof_start,
+            ka.dof_count,
+            ka.dof_kind,
+            ka.dof_axis,
+            world,
+            axis_world,
+            pivot_world,
+        )
         out = np.empty(d)
-        lever_weights_nb(world, axis_world, pivot_world, ka.parents,
-                         np.ascontiguousarray(self.skeleton.dof_joint), self.mass,
-                         self.com_local, self.planted, self.mask, out)
+        lever_weights_nb(
+            world,
+            axis_world,
+            pivot_world,
+            ka.parents,
+            np.ascontiguousarray(self.skeleton.dof_joint),
+            self.mass,
+            self.com_local,
+            self.planted,
+            self.mask,
+            out,
+        )
         return out
 
     def cost(self, q: ArrayLike) -> float:

@@ -212,6 +212,11 @@ class Truth:
     marker_names: tuple[str, ...] = ()
     markers_mm: FloatArray = field(default_factory=lambda: np.zeros((0, 0, 3)))
 
+    def __post_init__(self) -> None:
+        if not self.marker_names and np.size(self.markers_mm) == 0:
+            n = int(np.shape(self.time_s)[0])
+            object.__setattr__(self, "markers_mm", np.zeros((n, 0, 3)))
+
     def save(self, path: str | os.PathLike[str]) -> None:
         """Write ``truth.npz`` atomically (no pickles)."""
         from mocapkit.io.atomic import atomic_save_npz

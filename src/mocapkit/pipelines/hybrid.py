@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -57,11 +57,11 @@ def hybrid_skeleton(
 
 
 def _run(
-    tracker: HybridTracker, samples: Sequence[HybridSample] | object, n: int, label: str
+    tracker: HybridTracker, samples: Iterable[HybridSample], n: int, label: str
 ) -> tuple[FloatArray, FloatArray, list[HybridPose]]:
     poses: list[HybridPose] = []
     with Progress(n, label) as prog:
-        for s in samples:  # type: ignore[attr-defined]
+        for s in samples:
             poses.append(tracker.update(s))
             prog.update()
     if not poses:
@@ -107,23 +107,30 @@ def track_hybrid_session(
     sk = hybrid_skeleton(session.height_mm, session.bone_lengths_mm)
     cams = session.video_cameras
     if not cams:
-        raise SessionError(f"{session.path}: no camera with a video; the hybrid tracker's "
-                           "time line is the video's")
+        raise SessionError(
+            f"{session.path}: no camera with a video; the hybrid tracker's time line is the video's"
+        )
     camera = session.camera(cams[0])
     tracker = HybridTracker(sk, camera if cfg.use_video else None, cfg)
     n = session.video(cams[0]).n_frames
 
-    def stream():  # type: ignore[no-untyped-def]
+    def stream() -> Iterator[HybridSample]:
         for s in session.samples(cams[0]):
             markers = {k: v for k, v in s.marker_sets_mm.items() if k in MARKER_SETS}
             image = s.image(cams[0]) if (cfg.use_video and tracker.refiner() is not None) else None
-            yield HybridSample(s.time_s, markers,
-                               None if np.isnan(s.marker_time_s) else s.marker_time_s, image)
+            yield HybridSample(
+                s.time_s, markers, None if np.isnan(s.marker_time_s) else s.marker_time_s, image
+            )
 
     t, q, _ = _run(tracker, stream(), n, "track hybrid")
     mode = "paper" if cfg.paper else "default"
-    motion = Motion.from_q(sk, t, q, source=f"hybrid tracker ({mode}, video="
-                           f"{'on' if cfg.use_video else 'off'}) on {session.path}")
+    motion = Motion.from_q(
+        sk,
+        t,
+        q,
+        source=f"hybrid tracker ({mode}, video="
+        f"{'on' if cfg.use_video else 'off'}) on {session.path}",
+    )
     if out_dir is not None:
         motion.write_result_folder(out_dir)
     return motion
@@ -166,8 +173,9 @@ def track_hybrid_marker_arrays(
     cfg = config or HybridConfig(use_video=False)
     sk = hybrid_skeleton(height_mm)
     tracker = HybridTracker(sk, None, cfg)
-    samples = (HybridSample(float(t[i]), {k: v[i] for k, v in arrays.items()})
-               for i in range(t.size))
+    samples = (
+        HybridSample(float(t[i]), {k: v[i] for k, v in arrays.items()}) for i in range(t.size)
+    )
     _, q, poses = _run(tracker, samples, t.size, label)
     return sk, q, poses
 
@@ -178,6 +186,7 @@ def track_hybrid_markers(
     height_mm: float | None = None,
     out_dir: str | os.PathLike[str] | None = None,
     config: HybridConfig | None = None,
+    plant_feet: bool = True,
 ) -> Motion:
     """Run the hybrid tracker's IK on a raw marker file (C3D, TRC, CSV) without a session.
 
@@ -195,6 +204,9 @@ def track_hybrid_markers(
         Result folder.
     config : HybridConfig, optional
         Default: IK only (``use_video=False``).
+    plant_feet : bool
+        Hold the feet where the first frame puts them (the paper); False for takes
+        where the subject walks (ignored when ``config`` is given).
 
     Notes
     -----
@@ -210,15 +222,20 @@ def track_hybrid_markers(
     names = [s.name for s in sets]
     missing = [n for n in MARKER_SETS if n not in names]
     if missing:
-        raise ShapeError(f"marker_sets: the hybrid tracker needs sets {list(MARKER_SETS)}; "
-                         f"missing {missing} (given {names})")
+        raise ShapeError(
+            f"marker_sets: the hybrid tracker needs sets {list(MARKER_SETS)}; "
+            f"missing {missing} (given {names})"
+        )
     pos = evaluate_marker_sets(markers, sets)
     if height_mm is None:
         height_mm = float(estimate_height_mm(markers, head=sets[names.index("head")]))
+    cfg = config or HybridConfig(use_video=False, plant_feet=plant_feet)
     sk, q, _ = track_hybrid_marker_arrays(
-        markers.time_s, {n: pos[:, i] for i, n in enumerate(names)}, height_mm, config)
-    motion = Motion.from_q(sk, markers.time_s, q,
-                           source=f"hybrid tracker IK on {Path(markers_path).name}")
+        markers.time_s, {n: pos[:, i] for i, n in enumerate(names)}, height_mm, cfg
+    )
+    motion = Motion.from_q(
+        sk, markers.time_s, q, source=f"hybrid tracker IK on {Path(markers_path).name}"
+    )
     if out_dir is not None:
         motion.write_result_folder(out_dir)
     return motion
@@ -238,8 +255,9 @@ def bench_ik(n_frames: int = 2000, repeats: int = 5, rate_hz: float = 50.0) -> d
         ``max_residual_mm``, ``converged_fraction``, ``n_frames``.
     """
     if n_frames < 1 or repeats < 1:
-        raise ShapeError(f"bench_ik: expected n_frames >= 1 and repeats >= 1, found "
-                         f"{n_frames}, {repeats}")
+        raise ShapeError(
+            f"bench_ik: expected n_frames >= 1 and repeats >= 1, found {n_frames}, {repeats}"
+        )
     sk = load_preset("zhang21")
     solver = SDLSSolver(sk, config=IKConfig())
     t = np.arange(n_frames) / rate_hz

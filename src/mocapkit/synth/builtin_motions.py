@@ -186,14 +186,14 @@ def _table_tennis(duration_s: float) -> list[Key]:
 
 def _squat(duration_s: float) -> list[Key]:
     stand = {
-        **_stance(3, 2, 0, 5),
+        **_stance(3, 2, 0, 0),
         "l_shoulder_flexion": 5.0,
         "r_shoulder_flexion": 5.0,
         "l_elbow_flexion": 15.0,
         "r_elbow_flexion": 15.0,
     }
     down = {
-        **_stance(100, 85, 36, 8),
+        **_stance(100, 85, 36, 0),
         "l_shoulder_flexion": 80.0,
         "r_shoulder_flexion": 80.0,
         "l_elbow_flexion": 10.0,

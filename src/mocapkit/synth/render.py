@@ -257,11 +257,6 @@ def _require_canonical(skeleton: Skeleton) -> None:
         )
 
 
-def _first_child(skeleton: Skeleton, j: int) -> int | None:
-    kids = skeleton.children(j)
-    return int(kids[0]) if len(kids) else None
-
-
 def build_body(
     skeleton: Skeleton,
     time_s: FloatArray,
@@ -300,7 +295,21 @@ def build_body(
         j = skeleton.joint_index(jname)
         return joints[:, j] + rot[:, j] @ np.asarray(point, dtype=float)
 
-    rest = forward_kinematics(skeleton, skeleton.zero_pose())[..., :3, 3]
+    rest_world = forward_kinematics(skeleton, skeleton.zero_pose())
+    rest = rest_world[..., :3, 3]
+
+    def forearm_rest(side: str) -> FloatArray:
+        # Direction elbow -> wrist at q = 0, where every joint frame is parallel to the
+        # world, so it is also the direction in the elbow's and the wrist's own frames.
+        ends = []
+        for c in (f"{side}_elbow", f"{side}_wrist"):
+            jname, point = skeleton.canonical[c]
+            j = skeleton.joint_index(jname)
+            ends.append(rest_world[j, :3, 3] + rest_world[j, :3, :3] @ np.asarray(point, float))
+        d = ends[1] - ends[0]
+        n = float(np.linalg.norm(d))
+        return d / n if n > 1e-6 else np.array([0.0, 0.0, -1.0])
+
     tracks: list[FloatArray] = [joints[:, j] for j in range(n_j)]
 
     def add(p: FloatArray) -> int:
@@ -399,7 +408,7 @@ def build_body(
     hy = add(head + fwd_head)
     hz = add(head + head_up)
     prims.append(Primitive(ELLIPSOID, (hc, hx, hy, hz), HEAD_RADII_MM, a.skin))
-    hair_c = head - 14.0 * fwd_head + 14.0 * head_up
+    hair_c = head - 28.0 * fwd_head + 22.0 * head_up
     h2 = (add(hair_c), add(hair_c + side_head), add(hair_c + fwd_head), add(hair_c + head_up))
     prims.append(Primitive(ELLIPSOID, h2, (HEAD_RADII_MM[0] + 6, 94.0, 110.0), a.hair))
     for s in (-1.0, 1.0):
@@ -414,8 +423,7 @@ def build_body(
     markers[:, 0] = head + HEAD_MARKER_FORWARD_MM * fwd_head
     for k, side in ((1, "left"), (2, "right")):
         wj = owner[f"{side}_wrist"]
-        child = _first_child(skeleton, wj)
-        along = _unit(rest[child] - rest[wj]) if child is not None else np.array([0.0, 0.0, -1.0])
+        along = forearm_rest(side)  # the hand continues the forearm
         out = np.array([0.0, 1.0, 0.0]) - along[1] * along  # rest forward, orthogonal to the hand
         out = out / max(float(np.linalg.norm(out)), 1e-9)
         point = np.asarray(skeleton.canonical[f"{side}_wrist"][1], dtype=float)
@@ -426,8 +434,7 @@ def build_body(
         prims.append(Primitive(CAPSULE, (g, m), (11.0, 11.0), (40, 40, 45), -6.0))
     for k, side in ((3, "left"), (4, "right")):
         ej = owner[f"{side}_elbow"]
-        child = _first_child(skeleton, ej)
-        along = _unit(rest[child] - rest[ej]) if child is not None else np.array([0.0, 0.0, -1.0])
+        along = forearm_rest(side)
         back = np.array([0.0, -1.0, 0.0]) - (-along[1]) * along
         back = back / max(float(np.linalg.norm(back)), 1e-9)
         point = np.asarray(skeleton.canonical[f"{side}_elbow"][1], dtype=float)

@@ -37,6 +37,15 @@ arms). ``solver="scipy"`` runs SciPy itself on the same compiled cost.
 Recipe Z step 4: explicit initial simplex of +-``simplex_step_rad`` (0.1 rad) per
 DoF (SciPy's default 5 % steps are far too small for angles), ``xatol=1e-3``,
 ``maxfev`` about 300, joint-limit bounds.
+
+Swivel seeding (a deviation, on by default). The outline chamfer's basin along the
+IK ambiguity, the swivel of the arm about the shoulder-wrist axis, is only about
+half a limb width wide (about +-15 deg in the tests' scene): beyond it the other
+side line of the cone locks onto the wrong image edge, and no local search from the
+IK pose recovers. Before the simplex, the cost is therefore evaluated at
+``swivel_scan_steps`` swivel angles over +-``swivel_scan_rad`` with the hand held
+exactly on its marker (Azad's 1-D swivel, recipe Z "better, hold the hand exactly");
+the simplex starts from the best. ``swivel_scan_rad=0`` runs the paper's plain search.
 """
 
 from __future__ import annotations
@@ -70,6 +79,8 @@ FloatArray = NDArray[np.float64]
 
 SIDES: tuple[str, ...] = ("left", "right")
 _PREFIX = {"left": "l_", "right": "r_"}
+#: Keys accepted in ``hand_targets_mm``: the side, or the hybrid tracker's marker-set name.
+_SIDE_OF_KEY = {"left": "left", "right": "right", "left_hand": "left", "right_hand": "right"}
 
 # ------------------------------------------------------------------ packed problem layout
 # One flat float64 vector ``geo`` holds everything the compiled cost needs about one arm.
@@ -1150,6 +1161,7 @@ def refine_arms(
         Grey or BGR video frame nearest the marker sample.
     hand_targets_mm : mapping {"left"|"right": array (3,) or None}
         Hand effector targets (world mm). A side that is absent or None is not refined.
+        The marker-set names ``"left_hand"``/``"right_hand"`` are accepted as well.
     config : RefineConfig, optional
     diagnostics : dict, optional
         When given, receives one `ArmDiagnostics` per side.
@@ -1164,15 +1176,17 @@ def refine_arms(
     skeleton.check_q(qa)
     if qa.ndim != 1:
         raise ShapeError(f"q: expected one pose of shape ({skeleton.n_dofs},), found {qa.shape}")
-    for key in hand_targets_mm:
-        if key not in _PREFIX:
-            raise unknown_name("arm side", key, SIDES, "hand_targets_mm")
+    by_side: dict[str, ArrayLike | None] = {}
+    for key, value in hand_targets_mm.items():
+        if key not in _SIDE_OF_KEY:
+            raise unknown_name("arm side", key, _SIDE_OF_KEY, "hand_targets_mm")
+        by_side[_SIDE_OF_KEY[key]] = value
     frame = image if isinstance(image, PreparedFrame) else prepare_frame(image, cfg.edges)
     world = forward_kinematics(skeleton, qa)
     out = qa.copy()
     for side in SIDES:
         t0 = time.perf_counter()
-        target = hand_targets_mm.get(side)
+        target = by_side.get(side)
         if target is None:
             if diagnostics is not None:
                 diagnostics[side] = ArmDiagnostics(side=side, reason="no hand target")

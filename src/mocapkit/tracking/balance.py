@@ -1,4 +1,4 @@
-"""Balance heuristic: bow the spine so the centre of gravity stays over the feet (Zhang et al. §5.3).
+"""Balance heuristic: bow the spine so the centre of gravity stays over the feet (Zhang §5.3).
 
 The paper rotates the three spine bones about the mediolateral axis by
 ``tau_i = p_i dh``, with ``dh`` the change of the root height from the first frame
@@ -65,11 +65,17 @@ class BalanceConfig:
 
     def __post_init__(self) -> None:
         if self.mode not in _BALANCE_MODES:
-            raise ShapeError(f"BalanceConfig.mode: expected one of {_BALANCE_MODES}, found {self.mode!r}")
+            raise ShapeError(
+                f"BalanceConfig.mode: expected one of {_BALANCE_MODES}, found {self.mode!r}"
+            )
         if not 0.0 <= self.margin_fraction < 0.5:
-            raise ShapeError(f"BalanceConfig.margin_fraction: expected [0, 0.5), found {self.margin_fraction}")
+            raise ShapeError(
+                f"BalanceConfig.margin_fraction: expected [0, 0.5), found {self.margin_fraction}"
+            )
         if self.bisection_steps < 1:
-            raise ShapeError(f"BalanceConfig.bisection_steps: expected >= 1, found {self.bisection_steps}")
+            raise ShapeError(
+                f"BalanceConfig.bisection_steps: expected >= 1, found {self.bisection_steps}"
+            )
 
 
 def forward_direction(skeleton: Skeleton, q: ArrayLike) -> FloatArray:
@@ -90,8 +96,9 @@ def support_points(skeleton: Skeleton, q: ArrayLike) -> FloatArray:
     """
     idx = [skeleton.joint_index(n) for n in FOOT_JOINTS if n in skeleton.joint_names]
     if not idx:
-        raise ShapeError(f"skeleton {skeleton.name!r} has no foot joints {FOOT_JOINTS}; "
-                         "no base of support")
+        raise ShapeError(
+            f"skeleton {skeleton.name!r} has no foot joints {FOOT_JOINTS}; no base of support"
+        )
     return forward_kinematics(skeleton, q)[idx, :3, 3]
 
 
@@ -193,7 +200,7 @@ def _bisect_lean(
     steps: int,
     support: FloatArray,
 ) -> float:
-    """Total lean (rad) whose restored pose puts the CoG at ``goal_mm`` along the facing direction."""
+    """Total lean (rad) whose restored pose puts the CoG at ``goal_mm`` along the facing axis."""
     sk = solver.skeleton
     spine = spine_dof_indices(sk)
     split = _spine_split(sk, spine)
@@ -243,8 +250,11 @@ def calibrate_balance(
     sk = solver.skeleton
     q0 = solver.secondary.omega.copy() if q_rest is None else np.asarray(q_rest, float).copy()
     s0 = solver.effector_positions(q0)
-    lowered = [solver.effector_index(n) for n in ("head", "left_hand", "right_hand")
-               if n in solver.effector_names]
+    lowered = [
+        solver.effector_index(n)
+        for n in ("head", "left_hand", "right_hand")
+        if n in solver.effector_names
+    ]
     spine = spine_dof_indices(sk)
     split = _spine_split(sk, spine)
     dh = np.asarray(dh_grid_mm, dtype=float)
@@ -305,7 +315,9 @@ def balance_pose(
     qa = np.asarray(q, dtype=float)
     spine = spine_dof_indices(sk)
     if cfg.mode == "off":
-        return BalanceResult(qa.copy(), np.zeros(len(spine)), np.full(len(solver.effectors), np.nan))
+        return BalanceResult(
+            qa.copy(), np.zeros(len(spine)), np.full(len(solver.effectors), np.nan)
+        )
     dh = float(qa[sk.dof_index("root_tz")] - root_height0_mm)
     t = np.asarray(targets_mm, dtype=float)
     act = None if active is None else np.asarray(active, dtype=bool)

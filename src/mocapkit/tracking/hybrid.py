@@ -85,6 +85,14 @@ class HybridConfig:
         Passed through to the refiner.
     init_iterations : int
         Cold-start solves (of ``ik.max_iterations`` each) on the first sample.
+    smoothing_polish_tol_mm : float
+        After smoothing, effectors further than this from their markers are put back
+        by IK. A tolerance near the marker noise keeps the smoothing (a tight one would
+        re-inject the noise into the redundant DoFs, e.g. the elbow swivel).
+    plant_feet : bool
+        Hold the feet at their initial positions (the paper's assumption). Set False
+        for takes where the subject walks; the feet are then free (no foot effector)
+        and the balance step is skipped (no base of support).
     """
 
     ik: IKConfig = field(default_factory=IKConfig)
@@ -97,6 +105,8 @@ class HybridConfig:
     marker_offsets_mm: Mapping[str, Sequence[float]] = field(default_factory=dict)
     refine_config: Any = None
     init_iterations: int = 3
+    plant_feet: bool = True
+    smoothing_polish_tol_mm: float = 5.0
 
     def __post_init__(self) -> None:
         if not self.gap_limit_s >= 0:
@@ -110,6 +120,8 @@ class HybridConfig:
     @property
     def balance_config(self) -> BalanceConfig:
         """The balance settings in effect."""
+        if not self.plant_feet:
+            return BalanceConfig(mode="off")
         if self.balance is not None:
             return self.balance
         return BalanceConfig(mode="proportional" if self.paper else "solve")
@@ -273,16 +285,21 @@ class HybridTracker:
                 raise unknown_name("marker set", name, effs, "HybridConfig.marker_offsets_mm")
             o = np.asarray(off, dtype=float)
             if o.shape != (3,) or not np.all(np.isfinite(o)):
-                raise ShapeError(f"HybridConfig.marker_offsets_mm[{name!r}]: expected 3 finite "
-                                 f"numbers (mm), found {off!r}")
+                raise ShapeError(
+                    f"HybridConfig.marker_offsets_mm[{name!r}]: expected 3 finite "
+                    f"numbers (mm), found {off!r}"
+                )
             e = effs[name]
             p = np.add(e.point_mm, o)
             effs[name] = Effector(e.name, e.joint, (float(p[0]), float(p[1]), float(p[2])))
         self.marker_sets = tuple(effs)
         effectors = [effs[n] for n in self.marker_sets] + [
-            Effector("left_foot", "l_foot"), Effector("right_foot", "r_foot")]
+            Effector("left_foot", "l_foot"),
+            Effector("right_foot", "r_foot"),
+        ]
         self.solver = SDLSSolver(skeleton, effectors, self.config.ik)
-        polish_cfg = replace(self.config.ik, secondary_gain=0.0, min_iterations=0)
+        polish_cfg = replace(self.config.ik, secondary_gain=0.0, min_iterations=0,
+                             tol_mm=self.config.smoothing_polish_tol_mm)
         self._polish = SDLSSolver(skeleton, effectors, polish_cfg)
         self._refiner = refiner
         self._refiner_looked_up = refiner is not None
@@ -322,14 +339,16 @@ class HybridTracker:
             raw = sample.markers_mm.get(name)
             p = None if raw is None else np.asarray(raw, dtype=float).reshape(-1)
             if p is not None and p.shape != (3,):
-                raise ShapeError(f"sample.markers_mm[{name!r}]: expected 3 coordinates (mm), "
-                                 f"found shape {p.shape}")
+                raise ShapeError(
+                    f"sample.markers_mm[{name!r}]: expected 3 coordinates (mm), "
+                    f"found shape {p.shape}"
+                )
             if p is not None and np.all(np.isfinite(p)):
                 if tr.released or tr.gap_start_s is not None:
                     self.events.append((t_m, name, "recovered"))
                 tr.released, tr.gap_start_s = False, None
                 if not tr.t or t_m > tr.t[-1]:
-                    tr.t, tr.p = (tr.t + [t_m])[-2:], (tr.p + [p])[-2:]
+                    tr.t, tr.p = [*tr.t, t_m][-2:], [*tr.p, p][-2:]
                 targets[i] = p
                 continue
             new_gap = tr.gap_start_s is None
@@ -339,8 +358,11 @@ class HybridTracker:
             if tr.t and not tr.released and gap <= self.config.gap_limit_s:
                 if new_gap:
                     self.events.append((t_m, name, "bridging"))
-                v = ((tr.p[-1] - tr.p[0]) / (tr.t[-1] - tr.t[0])
-                     if len(tr.t) == 2 and tr.t[-1] > tr.t[0] else np.zeros(3))
+                v = (
+                    (tr.p[-1] - tr.p[0]) / (tr.t[-1] - tr.t[0])
+                    if len(tr.t) == 2 and tr.t[-1] > tr.t[0]
+                    else np.zeros(3)
+                )
                 targets[i] = tr.p[-1] + v * (t_m - tr.t[-1])
                 bridged.append(name)
             else:
@@ -360,7 +382,11 @@ class HybridTracker:
         roughly symmetric about the sagittal plane at the start of a take).
         """
         sk = self.skeleton
-        q = self.solver.secondary.omega.copy() if self._initial_q is None else self._initial_q.copy()
+        q = (
+            self.solver.secondary.omega.copy()
+            if self._initial_q is None
+            else self._initial_q.copy()
+        )
         if self._initial_q is not None:
             return np.clip(q, sk.lower, sk.upper)
         names = list(self.marker_sets)
@@ -400,7 +426,7 @@ class HybridTracker:
             self._feet = feet
             self._support = support_points(sk, q)
             self._root_z0 = float(q[sk.dof_index("root_tz")])
-            targets[n:] = feet
+            targets[n:] = feet if self.config.plant_feet else np.nan
             for _ in range(max(self.config.init_iterations, 1)):
                 res = self.solver.solve(q, targets)
                 q = res.q
@@ -409,31 +435,48 @@ class HybridTracker:
                 self._balance_model = calibrate_balance(self.solver, q)
         else:
             assert self._feet is not None
-            targets[n:] = self._feet
+            targets[n:] = self._feet if self.config.plant_feet else np.nan
             res = self.solver.solve(self._q, targets)
             q = res.q
             iterations += res.iterations
         refined = False
-        ref = self.refiner() if (self.config.use_video and self.camera is not None
-                                  and sample.image is not None) else None
+        ref = (
+            self.refiner()
+            if (self.config.use_video and self.camera is not None and sample.image is not None)
+            else None
+        )
         if ref is not None:
-            hands = {name: targets[i].copy() for i, name in enumerate(self.marker_sets)
-                     if name in ("left_hand", "right_hand") and np.all(np.isfinite(targets[i]))}
-            q = np.asarray(ref(sk, self.camera, q, sample.image, hands, self.config.refine_config),
-                           dtype=float)
+            hands = {
+                name: targets[i].copy()
+                for i, name in enumerate(self.marker_sets)
+                if name in ("left_hand", "right_hand") and np.all(np.isfinite(targets[i]))
+            }
+            q = np.asarray(
+                ref(sk, self.camera, q, sample.image, hands, self.config.refine_config), dtype=float
+            )
             sk.check_q(q, "refiner output")
             refined = True
         # warm start of the next frame: the pose before the balance post-process, so
         # the spine bow is recomputed from dh each frame rather than accumulated
         self._q = q.copy()
         assert self._support is not None
-        bal = balance_pose(self.solver, q, targets, self._root_z0, self._support,
-                           self._balance_model, self.config.balance_config)
+        bal = balance_pose(
+            self.solver,
+            q,
+            targets,
+            self._root_z0,
+            self._support,
+            self._balance_model,
+            self.config.balance_config,
+        )
         q = bal.q
         if self.config.smoothing:
             if self._filter is None:
-                beta = np.where(sk.dof_kind == PRISMATIC, self.config.smoothing_beta / 1000.0,
-                                self.config.smoothing_beta)
+                beta = np.where(
+                    sk.dof_kind == PRISMATIC,
+                    self.config.smoothing_beta / 1000.0,
+                    self.config.smoothing_beta,
+                )
                 self._filter = OneEuroFilter(self.config.smoothing_min_cutoff_hz, beta)
             q = self._filter(sample.time_s, q)
             # the filter smooths the redundant DoFs; put the effectors back on the markers
@@ -445,11 +488,17 @@ class HybridTracker:
         residual = {nm: float(r) for nm, r in zip(names, resid_arr, strict=True)}
         joints = canonical_positions(sk, q)
         return HybridPose(
-            time_s=float(sample.time_s), q=q, joints_mm=joints, iterations=iterations,
-            residual_mm=residual, released=tuple(released), bridged=tuple(bridged),
+            time_s=float(sample.time_s),
+            q=q,
+            joints_mm=joints,
+            iterations=iterations,
+            residual_mm=residual,
+            released=tuple(released),
+            bridged=tuple(bridged),
             spine_lean_rad=bal.taus,
-            marker_time_s=float(sample.time_s if sample.marker_time_s is None
-                                else sample.marker_time_s),
+            marker_time_s=float(
+                sample.time_s if sample.marker_time_s is None else sample.marker_time_s
+            ),
             refined=refined,
         )
 
@@ -476,15 +525,19 @@ def calibrate_marker_offsets(
     Returns
     -------
     ndarray, shape (E, 3)
-        Offset of each marker set in its joint frame (mm); NaN when never seen.
+        Each marker set's position in its effector joint's frame (mm), i.e. the
+        effector point to use; minus the default point it is the offset for
+        ``HybridConfig.marker_offsets_mm``. NaN when never seen.
     """
     from mocapkit.skeleton.kinematics import forward_kinematics
 
     qa = np.asarray(q, dtype=float)
     m = np.asarray(markers_mm, dtype=float)
     if qa.ndim != 2 or m.shape != (qa.shape[0], len(effectors), 3):
-        raise ShapeError(f"calibrate_marker_offsets: expected q (N, D) and markers (N, "
-                         f"{len(effectors)}, 3), found {qa.shape} and {m.shape}")
+        raise ShapeError(
+            f"calibrate_marker_offsets: expected q (N, D) and markers (N, "
+            f"{len(effectors)}, 3), found {qa.shape} and {m.shape}"
+        )
     world = forward_kinematics(skeleton, qa)
     out = np.full((len(effectors), 3), np.nan)
     for e, eff in enumerate(effectors):

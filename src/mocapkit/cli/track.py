@@ -1,0 +1,71 @@
+"""``mocapkit track``: run a tracker over a recording (``hybrid``; ``mono``/``stereo`` later)."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+
+def register(subparsers: Any) -> None:
+    """Add ``track`` with its ``hybrid`` sub-subcommand."""
+    parser = subparsers.add_parser("track", help="track a recording with one of the methods")
+    methods = parser.add_subparsers(dest="method", metavar="METHOD")
+    methods.required = True
+    hyb = methods.add_parser(
+        "hybrid",
+        help="head and hand marker sets plus one camera (Zhang et al. 2011)",
+        description="Track a session folder (markers + video), or with --markers a raw "
+        "marker file (IK only). Writes motion.npz, joints.csv and motion.bvh to --out.",
+    )
+    hyb.add_argument("session", nargs="?", help="session folder (omit with --markers)")
+    hyb.add_argument("--out", required=True, help="result folder")
+    hyb.add_argument("--no-video", action="store_true", help="skip the video refinement")
+    hyb.add_argument(
+        "--paper",
+        action="store_true",
+        help="follow the paper literally (no smoothing, proportional balance)",
+    )
+    hyb.add_argument("--markers", help="raw marker file (.c3d, .trc, .csv) instead of a session")
+    hyb.add_argument(
+        "--marker-set",
+        action="append",
+        default=[],
+        metavar="NAME=M1+M2",
+        help="marker set for --markers (head, left_hand, right_hand); repeat",
+    )
+    hyb.add_argument(
+        "--height-mm",
+        type=float,
+        default=None,
+        help="subject stature for --markers (default: estimated from the head markers)",
+    )
+    hyb.add_argument(
+        "--free-feet",
+        action="store_true",
+        help="with --markers: do not hold the feet at their first positions",
+    )
+    hyb.set_defaults(func=_run_hybrid)
+
+
+def _run_hybrid(args: argparse.Namespace) -> int:
+    from mocapkit.errors import SessionError
+    from mocapkit.pipelines.hybrid import track_hybrid_markers, track_hybrid_session
+
+    if args.markers:
+        if args.session:
+            raise SessionError(
+                "track hybrid: give either a SESSION folder or --markers FILE, not both"
+            )
+        motion = track_hybrid_markers(
+            args.markers, args.marker_set, args.height_mm, args.out, plant_feet=not args.free_feet
+        )
+    else:
+        if not args.session:
+            raise SessionError(
+                "track hybrid: expected a SESSION folder or --markers FILE, found neither"
+            )
+        motion = track_hybrid_session(
+            args.session, args.out, use_video=not args.no_video, paper=args.paper
+        )
+    print(f"tracked {motion.n_frames} frames -> {args.out}")
+    return 0

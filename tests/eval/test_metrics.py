@@ -1,0 +1,162 @@
+"""Evaluation metrics: zero on the truth, known figures on known perturbations, time matching."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from mocapkit.cli.main import main
+from mocapkit.errors import SessionError, ShapeError
+from mocapkit.eval.metrics import (
+    evaluate_joints,
+    evaluate_result,
+    match_by_time,
+    similarity_align,
+)
+from mocapkit.geometry.rotations import matrix_from_rotvec
+from mocapkit.io.motion import Motion
+from mocapkit.io.session import Truth, write_session_json
+from mocapkit.skeleton import CANONICAL_JOINTS
+from mocapkit.synth.builtin_motions import builtin_motion
+
+
+@pytest.fixture(scope="module")
+def truth() -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
+    m = builtin_motion("table-tennis", duration_s=2.0)
+    # truth at 30 Hz like a session's video frames
+    keep = np.arange(0, m.n_frames, 4)
+    return np.asarray(m.time_s)[keep], m.joint_names, np.asarray(m.joints_mm)[keep]
+
+
+def test_truth_against_itself_is_zero(truth):
+    t, names, j = truth
+    r = evaluate_joints(t, names, j, t, names, j)
+    assert r.mpjpe_mm == 0.0
+    assert r.pa_mpjpe_mm == pytest.approx(0.0, abs=1e-9)
+    assert r.elbow_mm == 0.0
+    assert r.coverage == 1.0
+    assert all(v == 0.0 for v in r.per_joint_mm.values())
+    assert r.jitter_mm_s2 == pytest.approx(r.truth_jitter_mm_s2)
+    assert r.truth_jitter_mm_s2 > 0
+    assert r.joints == tuple(c for c in CANONICAL_JOINTS if c in names)
+
+
+def test_left_elbow_perturbation_gives_known_figures(truth):
+    t, names, j = truth
+    est = j.copy()
+    k = names.index("left_elbow")
+    est[:, k, 1] += 10.0
+    r = evaluate_joints(t, names, est, t, names, j)
+    assert r.per_joint_mm["left_elbow"] == pytest.approx(10.0)
+    assert r.per_joint_mm["right_elbow"] == 0.0
+    assert r.elbow_mm == pytest.approx(5.0)
+    assert r.mpjpe_mm == pytest.approx(10.0 / len(names))
+    # a constant offset adds no acceleration
+    assert r.jitter_mm_s2 == pytest.approx(r.truth_jitter_mm_s2)
+
+
+def test_constant_offset_and_similarity_transform(truth):
+    t, names, j = truth
+    r = evaluate_joints(t, names, j + np.array([12.0, -16.0, 0.0]), t, names, j)
+    assert r.mpjpe_mm == pytest.approx(20.0)
+    assert r.pa_mpjpe_mm == pytest.approx(0.0, abs=1e-6)
+    rot = matrix_from_rotvec(np.array([0.2, -0.4, 0.9]))
+    moved = 1.15 * j @ rot.T + np.array([300.0, -50.0, 20.0])
+    r2 = evaluate_joints(t, names, moved, t, names, j)
+    assert r2.mpjpe_mm > 100.0
+    assert r2.pa_mpjpe_mm == pytest.approx(0.0, abs=1e-6)
+
+
+def test_similarity_align_recovers_points(rng):
+    pts = rng.normal(size=(10, 3)) * 300
+    rot = matrix_from_rotvec(rng.normal(size=3))
+    src = 0.8 * pts @ rot.T + 40.0
+    np.testing.assert_allclose(similarity_align(src, pts), pts, atol=1e-8)
+
+
+def test_matching_is_by_time_stamp_not_index(truth):
+    t, names, j = truth
+    dt = float(np.median(np.diff(t)))
+    # every other truth frame, stamped 0.3 frame late: still matched, zero error
+    sub = np.arange(0, len(t), 2)
+    r = evaluate_joints(t[sub] + 0.3 * dt, names, j[sub], t, names, j)
+    assert r.coverage == pytest.approx(len(sub) / len(t))
+    assert r.mpjpe_mm == 0.0
+    # the same samples shifted by a whole frame are compared with the next truth frame
+    shifted = evaluate_joints(t[:-1] + dt, names, j[:-1], t, names, j)
+    assert shifted.coverage == pytest.approx((len(t) - 1) / len(t))
+    assert shifted.mpjpe_mm > 1.0
+
+
+def test_match_by_time_tolerance():
+    tt = np.array([0.0, 0.1, 0.2, 0.3])
+    rt = np.array([0.31, 0.049, 0.24])
+    np.testing.assert_array_equal(match_by_time(tt, rt), [1, -1, 2, 0])
+
+
+def test_nan_result_frames_count_against_coverage(truth):
+    t, names, j = truth
+    est = j.copy()
+    est[:5] = np.nan
+    r = evaluate_joints(t, names, est, t, names, j)
+    assert r.coverage == pytest.approx((len(t) - 5) / len(t))
+    assert r.mpjpe_mm == 0.0
+
+
+def test_noise_raises_jitter(truth, rng):
+    t, names, j = truth
+    noisy = j + rng.normal(0, 5.0, j.shape)
+    r = evaluate_joints(t, names, noisy, t, names, j)
+    assert r.jitter_mm_s2 > 3 * r.truth_jitter_mm_s2
+
+
+def test_shape_and_vocabulary_errors(truth):
+    t, names, j = truth
+    with pytest.raises(ShapeError, match="expected joints of shape"):
+        evaluate_joints(t, names, j[:, :3], t, names, j)
+    with pytest.raises(ShapeError, match="share no joint"):
+        evaluate_joints(t, ("head",), j[:, :1], t, names[1:], j[:, 1:])
+
+
+def test_result_folder_and_cli(tmp_path, truth, capsys):
+    m = builtin_motion("squat", duration_s=1.0)
+    result = tmp_path / "result"
+    m.write_result_folder(result)
+    session = tmp_path / "session"
+    session.mkdir()
+    write_session_json(session / "session.json", {})
+    Truth(m.time_s, m.joint_names, m.joints_mm).save(session / "truth.npz")
+    r = evaluate_result(result, session)
+    assert r.mpjpe_mm == pytest.approx(0.0, abs=1e-9)
+    assert r.coverage == 1.0
+    # joints.csv alone (no motion.npz) works too; its values are rounded to 1e-6 mm
+    (result / "motion.npz").unlink()
+    r2 = evaluate_result(result, session / "truth.npz")
+    assert r2.mpjpe_mm < 1e-5
+    assert main(["eval", str(result), "--truth", str(session), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["coverage"] == 1.0
+    assert set(doc["per_joint_mm"]) == set(m.joint_names)
+    assert main(["eval", str(result), "--truth", str(session)]) == 0
+    assert "mpjpe_mm" in capsys.readouterr().out
+
+
+def test_missing_result_and_truth(tmp_path):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    with pytest.raises(SessionError, match="neither motion.npz nor joints.csv"):
+        evaluate_result(empty, tmp_path)
+    m = builtin_motion("wave", duration_s=0.5)
+    m.write_result_folder(tmp_path / "r")
+    session = tmp_path / "s"
+    session.mkdir()
+    write_session_json(session / "session.json", {})
+    with pytest.raises(SessionError, match=r"lacks truth\.npz"):
+        evaluate_result(tmp_path / "r", session)
+
+
+def test_motion_result_roundtrip_type():
+    m = builtin_motion("wave", duration_s=0.2)
+    assert isinstance(m, Motion)

@@ -1,0 +1,190 @@
+"""Session folders: loading, streaming samples in time order, and clear refusals."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mocapkit.errors import FormatError, SessionError
+from mocapkit.io.session import (
+    load_session,
+    read_keypoints_csv,
+    read_timestamps_csv,
+    write_keypoints_csv,
+    write_timestamps_csv,
+)
+from mocapkit.synth.realism import RealismOptions
+from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+
+
+@pytest.fixture(scope="module")
+def session_dir(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("sess") / "wave"
+    synthesize_session(
+        "builtin:wave",
+        out,
+        SynthOptions(rig="all", seconds=0.4, start_s=1.0, image_size=(160, 120), seed=3),
+    )
+    return out
+
+
+@pytest.fixture
+def copy(session_dir, tmp_path) -> Path:
+    dst = tmp_path / "s"
+    shutil.copytree(session_dir, dst)
+    return dst
+
+
+def test_load_and_stream(session_dir):
+    s = load_session(session_dir)
+    assert s.video_cameras == ("mono", "stereo_left", "stereo_right")
+    assert s.height_mm is not None and 1500 < s.height_mm < 2000
+    s.require(
+        video=True,
+        markers=True,
+        keypoints=True,
+        truth=True,
+        cameras=3,
+        marker_sets=("head", "left_hand", "right_hand"),
+        height=True,
+    )
+    assert s.truth is not None and s.markers is not None
+    samples = []
+    for smp in s.samples():
+        assert smp.image("stereo_right").shape == (120, 160, 3)
+        samples.append(smp)
+    assert len(samples) == len(s.truth.time_s) == s.video("mono").n_frames
+    times = np.array([x.time_s for x in samples])
+    assert np.all(np.diff(times) > 0)
+    np.testing.assert_allclose(times, s.truth.time_s)
+    with_markers = [x for x in samples if x.marker_index >= 0]
+    assert len(with_markers) >= len(samples) - 1
+    for x in with_markers:
+        # the newest marker sample at or before the frame (markers at 120 Hz, with jitter)
+        assert 0.0 <= x.marker_dt_s <= 1 / 120 + 0.002
+        assert x.marker_time_s == s.markers.time_s[x.marker_index]
+        if x.marker_index + 1 < s.markers.n_frames:
+            assert s.markers.time_s[x.marker_index + 1] > x.time_s
+        assert set(x.marker_sets_mm) == {"head", "left_hand", "right_hand"}
+        assert x.keypoints_px["mono"].shape == (15, 2)
+
+
+def test_lazy_frames_expire_after_advancing(session_dir):
+    s = load_session(session_dir)
+    it = s.samples("mono")
+    first = next(it)
+    image = first.image()
+    second = next(it)
+    assert second.image().shape == image.shape
+    with pytest.raises(SessionError, match="no longer available"):
+        first.image()
+    with pytest.raises(SessionError, match="no frame of camera 'stereo_left'"):
+        second.image("stereo_left")
+
+
+def test_random_access_matches_stream(session_dir):
+    s = load_session(session_dir)
+    v = s.video("stereo_left")
+    frames = [smp.image() for smp in s.samples("stereo_left")]
+    np.testing.assert_array_equal(v.read(3), frames[3])
+
+
+def test_require_lists_what_is_missing(copy):
+    (copy / "truth.npz").unlink()
+    (copy / "markers.csv").unlink()
+    s = load_session(copy)
+    with pytest.raises(SessionError, match=r"lacks markers\.c3d or markers\.csv; truth\.npz"):
+        s.require(markers=True, truth=True)
+    with pytest.raises(SessionError, match="camera 'kinect'"):
+        s.require(cameras=["kinect"])
+    with pytest.raises(SessionError, match="marker set 'pelvis'"):
+        s.require(marker_sets=["pelvis"])
+
+
+def test_refuses_missing_session_json(tmp_path):
+    with pytest.raises(SessionError, match="missing session.json"):
+        load_session(tmp_path)
+    with pytest.raises(SessionError, match="session folder not found"):
+        load_session(tmp_path / "nope")
+
+
+def test_refuses_wrong_format_and_units(copy):
+    doc = json.loads((copy / "session.json").read_text())
+    (copy / "session.json").write_text(json.dumps({**doc, "format": 2}))
+    with pytest.raises(FormatError, match=r"session.json: field 'format': expected 1, found 2"):
+        load_session(copy)
+    (copy / "session.json").write_text(json.dumps({**doc, "units": "m"}))
+    with pytest.raises(FormatError, match="field 'units': expected 'mm'"):
+        load_session(copy)
+    (copy / "session.json").write_text("{not json")
+    with pytest.raises(FormatError, match="not valid JSON"):
+        load_session(copy)
+
+
+def test_refuses_video_of_unknown_camera(copy):
+    shutil.copy(copy / "video" / "mono.mp4", copy / "video" / "side.mp4")
+    with pytest.raises(SessionError, match="video of camera 'side', which cameras.json does not"):
+        load_session(copy)
+
+
+def test_refuses_timestamp_count_mismatch(copy):
+    path = copy / "video" / "mono.timestamps.csv"
+    t = read_timestamps_csv(path)
+    write_timestamps_csv(path, t[:-2])
+    with pytest.raises(
+        SessionError,
+        match=rf"one time stamp per frame of mono.mp4 \({len(t)} frames\), found {len(t) - 2}",
+    ):
+        load_session(copy)
+
+
+def test_refuses_missing_cameras_file_and_marker_members(copy):
+    doc = json.loads((copy / "session.json").read_text())
+    (copy / "session.json").write_text(json.dumps({**doc, "marker_sets": {"head": ["LFHD"]}}))
+    with pytest.raises(SessionError, match=r"marker set 'head' uses markers \['LFHD'\]"):
+        load_session(copy)
+    (copy / "session.json").write_text(json.dumps(doc))
+    (copy / "cameras.json").unlink()
+    with pytest.raises(SessionError, match="names cameras file 'cameras.json', which is missing"):
+        load_session(copy)
+
+
+def test_image_folder_video(tmp_path):
+    out = tmp_path / "png"
+    synthesize_session(
+        "builtin:squat",
+        out,
+        SynthOptions(
+            rig="mono",
+            seconds=0.2,
+            image_size=(96, 72),
+            video_format="png",
+            realism=RealismOptions(video_jitter_s=0.0),
+        ),
+    )
+    assert not (out / "video" / "mono.timestamps.csv").exists()
+    s = load_session(out)
+    frames = list(s.samples())
+    assert len(frames) == len(list((out / "video" / "mono").glob("*.png")))
+    np.testing.assert_allclose([f.time_s for f in frames], np.arange(len(frames)) / 30.0)
+    assert frames[-1].image().shape == (72, 96, 3)
+
+
+def test_keypoints_csv_roundtrip_and_errors(tmp_path):
+    t = np.array([0.0, 0.033, 0.067])
+    px = np.arange(12, dtype=float).reshape(3, 2, 2)
+    px[1, 0] = np.nan
+    write_keypoints_csv(tmp_path / "k.csv", t, ["head", "neck"], px)
+    k = read_keypoints_csv(tmp_path / "k.csv")
+    assert k.joint_names == ("head", "neck")
+    np.testing.assert_allclose(k.pixels, px, atol=1e-3)
+    (tmp_path / "bad.csv").write_text("time_s,nose_x_px,nose_y_px\n0,1,2\n")
+    with pytest.raises(FormatError, match="expected a canonical joint"):
+        read_keypoints_csv(tmp_path / "bad.csv")
+    (tmp_path / "bad2.csv").write_text("time_s,head_x_px,head_y_px\n0,1\n")
+    with pytest.raises(FormatError, match="line 2: expected 3 columns, found 2"):
+        read_keypoints_csv(tmp_path / "bad2.csv")

@@ -1,0 +1,173 @@
+"""Streaming hybrid tracker: warm-started IK, gap bridging/release, smoothing, refiner hook."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocapkit.errors import ShapeError, UnknownNameError
+from mocapkit.ik.sdls import IKConfig
+from mocapkit.skeleton import canonical_positions, load_preset
+from mocapkit.tracking.balance import BalanceConfig
+from mocapkit.tracking.hybrid import (
+    HybridConfig,
+    HybridSample,
+    HybridTracker,
+    OneEuroFilter,
+    calibrate_marker_offsets,
+    default_marker_effectors,
+)
+
+RATE = 50.0
+
+
+@pytest.fixture(scope="module")
+def truth():
+    """A waving sequence of zhang21 poses and its marker-set trajectories."""
+    sk = load_preset("zhang21")
+    n = 60
+    t = np.arange(n) / RATE
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False))
+    q = np.tile(tracker.solver.secondary.omega, (n, 1))
+    for d, name in enumerate(sk.dof_names):
+        if "shoulder" in name or "elbow" in name:
+            q[:, d] += 0.4 * np.sin(2 * np.pi * 0.7 * t + d) + 0.4
+    q = np.clip(q, sk.lower, sk.upper)
+    pos = np.stack([tracker.solver.effector_positions(qq)[:3] for qq in q])
+    return sk, t, q, pos
+
+
+def samples(t, pos, names=("head", "left_hand", "right_hand")):
+    return [
+        HybridSample(float(t[i]), {n: pos[i, k] for k, n in enumerate(names)})
+        for i in range(len(t))
+    ]
+
+
+@pytest.mark.parametrize("paper", [False, True])
+def test_tracks_markers(truth, paper):
+    sk, t, _q, pos = truth
+    cfg = HybridConfig(use_video=False, paper=paper)
+    tracker = HybridTracker(sk, config=cfg)
+    # contract: the paper pipeline ends on the balance restore (2 x IK tolerance); the
+    # default one on the smoothing polish (effectors within its tolerance)
+    bound = 2.0 * cfg.ik.tol_mm if paper else cfg.smoothing_polish_tol_mm
+    for s in samples(t, pos):
+        pose = tracker.update(s)
+        assert pose.q.shape == (sk.n_dofs,)
+        assert pose.joints_mm.shape == (len(sk.canonical_names), 3)
+        assert max(pose.residual_mm[n] for n in ("head", "left_hand", "right_hand")) <= bound
+        assert pose.released == () and not pose.refined
+
+
+def test_gap_bridged_then_released(truth):
+    sk, t, _q, pos = truth
+    cfg = HybridConfig(use_video=False, gap_limit_s=0.1)
+    tracker = HybridTracker(sk, config=cfg)
+    seq = samples(t, pos)
+    gap = range(20, 40)  # 0.4 s gap of the left hand
+    for i, s in enumerate(seq):
+        if i in gap:
+            s = HybridSample(s.time_s, {k: v for k, v in s.markers_mm.items() if k != "left_hand"})
+        pose = tracker.update(s)
+        if i in gap:
+            gap_s = s.time_s - t[19]
+            if gap_s <= 0.1:
+                assert pose.bridged == ("left_hand",) and pose.released == ()
+                # constant-velocity extrapolation stays near the true path over a short gap
+                assert pose.residual_mm["left_hand"] < 1e-6 + 40.0
+            else:
+                assert pose.released == ("left_hand",)
+                assert np.isnan(pose.residual_mm["left_hand"])
+        elif i > 40:
+            assert pose.released == ()
+            assert pose.residual_mm["left_hand"] <= cfg.smoothing_polish_tol_mm
+    kinds = [e[2] for e in tracker.events if e[1] == "left_hand"]
+    assert kinds == ["bridging", "released", "recovered"]
+
+
+def test_bridge_extrapolates_constant_velocity():
+    sk = load_preset("zhang21")
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False, init_iterations=1))
+    head = tracker.solver.effector_positions(tracker.solver.secondary.omega)[0]
+    lh = np.array([-250.0, 100.0, 900.0])
+    rh = np.array([250.0, 100.0, 900.0])
+    tracker.update(HybridSample(0.0, {"head": head, "left_hand": lh, "right_hand": rh}))
+    tracker.update(
+        HybridSample(0.02, {"head": head, "left_hand": [*lh, 0, 10, 0], "right_hand": rh})
+    )
+    targets, bridged, released = tracker._targets(
+        HybridSample(0.06, {"head": head, "right_hand": rh})
+    )
+    assert bridged == ["left_hand"] and released == []
+    np.testing.assert_allclose(targets[1], [*lh, 0, 30, 0])
+
+
+def test_smoothing_reduces_jitter_without_lag(truth, rng):
+    sk, t, q, pos = truth
+    noisy = pos + rng.normal(0.0, 4.0, pos.shape)
+    elbows = {}
+    for smooth in (False, True):
+        cfg = HybridConfig(use_video=False, paper=not smooth, balance=BalanceConfig(mode="off"))
+        tracker = HybridTracker(sk, config=cfg, initial_q=q[0])
+        qs = np.stack([tracker.update(s).q for s in samples(t, noisy)])
+        elbows[smooth] = canonical_positions(sk, qs, ["left_elbow", "right_elbow"])
+    clean = canonical_positions(sk, q, ["left_elbow", "right_elbow"])
+
+    def jitter(x):  # second difference: high-frequency energy
+        return float(np.sqrt(np.mean(np.diff(x, 2, axis=0) ** 2)))
+
+    assert jitter(elbows[True]) < 0.8 * jitter(elbows[False])
+    # lag: best alignment with the clean trajectory within 2 frames
+    errs = [
+        np.mean(np.linalg.norm(elbows[True][10 + k : 50 + k] - clean[10:50], axis=2))
+        for k in range(0, 5)
+    ]
+    assert int(np.argmin(errs)) <= 2
+
+
+def test_one_euro_passes_constant():
+    f = OneEuroFilter(2.0, 0.1)
+    for i in range(20):
+        out = f(i / 50.0, np.array([3.0, -1.0]))
+    np.testing.assert_allclose(out, [3.0, -1.0])
+
+
+def test_refiner_hook_called_with_hands(truth):
+    sk, t, _q, pos = truth
+    calls = []
+
+    def refiner(skeleton, camera, q_in, image, hands, config):
+        calls.append(sorted(hands))
+        return q_in
+
+    tracker = HybridTracker(sk, camera=object(), config=HybridConfig(), refiner=refiner)
+    s = samples(t[:2], pos[:2])
+    pose = tracker.update(HybridSample(s[0].time_s, s[0].markers_mm, image=np.zeros((4, 4))))
+    assert pose.refined and calls == [["left_hand", "right_hand"]]
+    pose = tracker.update(s[1])  # no image: no refinement
+    assert not pose.refined and len(calls) == 1
+
+
+def test_marker_offsets(truth):
+    sk, _t, q, _pos = truth
+    effs = list(default_marker_effectors(sk).values())
+    offset = np.array([0.0, 20.0, -30.0])
+    shifted = HybridTracker(
+        sk, config=HybridConfig(use_video=False, marker_offsets_mm={"right_hand": offset})
+    )
+    markers = np.stack([shifted.solver.effector_positions(qq)[:3] for qq in q[:5]])
+    est = calibrate_marker_offsets(sk, q[:5], markers, effs)
+    np.testing.assert_allclose(est[2], offset, atol=1e-9)
+    np.testing.assert_allclose(est[0], effs[0].point_mm, atol=1e-9)
+
+
+def test_bad_inputs(truth):
+    sk = truth[0]
+    with pytest.raises(UnknownNameError, match="marker set"):
+        HybridTracker(sk, config=HybridConfig(marker_offsets_mm={"tail": (0, 0, 0)}))
+    with pytest.raises(ShapeError, match="gap_limit_s"):
+        HybridConfig(gap_limit_s=-1.0)
+    tracker = HybridTracker(sk, config=HybridConfig(ik=IKConfig(), use_video=False))
+    with pytest.raises(ShapeError, match="markers_mm\\['head'\\]"):
+        tracker.update(HybridSample(0.0, {"head": np.zeros(2)}))
