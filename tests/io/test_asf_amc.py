@@ -191,6 +191,8 @@ def test_other_real_clips_read(shared_data: Path) -> None:
         assert np.median(z[:, head] - z[:, ankle]) > 1000.0  # mostly upright, in mm
     charleston = read_amc(mocap / "charleston1.amc", mocap / "charleston.asf")
     assert charleston.n_frames == 506
+    # the take number is stripped when looking the skeleton up
+    assert find_asf(mocap / "charleston1.amc") == mocap / "charleston.asf"
 
 
 def test_asf_lookup_rules(tmp_path: Path) -> None:

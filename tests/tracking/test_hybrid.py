@@ -94,13 +94,15 @@ def test_bridge_extrapolates_constant_velocity():
     rh = np.array([250.0, 100.0, 900.0])
     tracker.update(HybridSample(0.0, {"head": head, "left_hand": lh, "right_hand": rh}))
     tracker.update(
-        HybridSample(0.02, {"head": head, "left_hand": [*lh, 0, 10, 0], "right_hand": rh})
+        HybridSample(
+            0.02, {"head": head, "left_hand": lh + np.array([0.0, 10.0, 0.0]), "right_hand": rh}
+        )
     )
     targets, bridged, released = tracker._targets(
         HybridSample(0.06, {"head": head, "right_hand": rh})
     )
     assert bridged == ["left_hand"] and released == []
-    np.testing.assert_allclose(targets[1], [*lh, 0, 30, 0])
+    np.testing.assert_allclose(targets[1], lh + np.array([0.0, 30.0, 0.0]))
 
 
 def test_smoothing_reduces_jitter_without_lag(truth, rng):

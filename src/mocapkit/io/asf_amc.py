@@ -31,7 +31,8 @@ AMC files carry no frame rate: CMU's standard rate, 120 Hz, is the default
 seconds. Every bone with DoFs must appear in every frame.
 
 ASF lookup (when ``asf_path`` is not given): ``<stem>.asf`` beside the AMC, then the
-subject prefix before ``_`` (``01_09.amc`` -> ``01.asf``), then the only ``.asf`` in
+subject prefix before ``_`` (``01_09.amc`` -> ``01.asf``), then the stem without its
+trailing take number (``charleston1.amc`` -> ``charleston.asf``), then the only ``.asf`` in
 the folder; otherwise `FormatError` listing what was tried.
 """
 
@@ -407,6 +408,10 @@ def find_asf(amc_path: str | os.PathLike[str]) -> Path:
     candidates = [folder / f"{amc.stem}.asf"]
     if "_" in amc.stem:
         candidates.append(folder / f"{amc.stem.split('_', 1)[0]}.asf")
+    # a numbered take of a named subject: charleston1.amc -> charleston.asf
+    stripped = amc.stem.rstrip("0123456789")
+    if stripped and stripped != amc.stem:
+        candidates.append(folder / f"{stripped}.asf")
     for c in candidates:
         tried.append(str(c))
         if c.is_file():
