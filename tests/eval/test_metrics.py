@@ -160,3 +160,23 @@ def test_missing_result_and_truth(tmp_path):
 def test_motion_result_roundtrip_type():
     m = builtin_motion("wave", duration_s=0.2)
     assert isinstance(m, Motion)
+
+
+def test_joint_subset_restricts_comparison() -> None:
+    from mocapkit.eval.metrics import evaluate_joints, joint_subset
+    from mocapkit.skeleton import CANONICAL_JOINTS, UPPER_BODY_JOINTS
+
+    t = np.arange(10) / 30.0
+    truth = np.zeros((10, len(CANONICAL_JOINTS), 3))
+    result = truth.copy()
+    result[:, CANONICAL_JOINTS.index("left_knee"), 0] = 40.0  # a leg error only
+    upper = evaluate_joints(
+        t, CANONICAL_JOINTS, result, t, CANONICAL_JOINTS, truth, joints=joint_subset("upper")
+    )
+    assert upper.joints == UPPER_BODY_JOINTS
+    assert upper.mpjpe_mm == 0.0
+    every = evaluate_joints(t, CANONICAL_JOINTS, result, t, CANONICAL_JOINTS, truth)
+    assert every.mpjpe_mm == pytest.approx(40.0 / len(CANONICAL_JOINTS))
+    assert joint_subset("left_elbow, right_elbow") == ("left_elbow", "right_elbow")
+    with pytest.raises(KeyError, match="unknown canonical joint 'elbows'"):
+        joint_subset("elbows")

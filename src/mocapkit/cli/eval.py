@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from mocapkit.eval.metrics import evaluate_result
+from mocapkit.eval.metrics import evaluate_result, joint_subset
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -20,11 +20,17 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "--truth", required=True, metavar="SESSION", help="session folder with truth.npz"
     )
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    p.add_argument(
+        "--joints",
+        default="all",
+        help="joints to compare: 'all', 'upper' (head, neck, pelvis, shoulders, elbows, "
+        "wrists) or a comma-separated list of canonical names",
+    )
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Evaluate and print."""
-    report = evaluate_result(args.result, args.truth)
+    report = evaluate_result(args.result, args.truth, joints=joint_subset(args.joints))
     print(report.to_json() if args.json else report.table())
     return 0

@@ -15,13 +15,15 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mocapkit.errors import FormatError, SessionError, ShapeError
+from mocapkit.errors import FormatError, SessionError, ShapeError, unknown_name
+from mocapkit.skeleton.model import CANONICAL_JOINTS, UPPER_BODY_JOINTS
 
 FloatArray = NDArray[np.float64]
 
@@ -165,6 +167,7 @@ def evaluate_joints(
     truth_time_s: ArrayLike,
     truth_names: tuple[str, ...] | list[str],
     truth_joints_mm: ArrayLike,
+    joints: Sequence[str] | None = None,
 ) -> EvalReport:
     """Compare result joints with truth joints, matched by time stamp.
 
@@ -178,6 +181,9 @@ def evaluate_joints(
     truth_time_s : (T,) float array
     truth_names : sequence of str
     truth_joints_mm : (T, K_t, 3) float array
+    joints : sequence of str, optional
+        Restrict the comparison to these canonical joints (e.g. `UPPER_BODY_JOINTS`);
+        default: every joint both sides have.
 
     Returns
     -------
@@ -197,7 +203,13 @@ def evaluate_joints(
             f"truth: expected joints of shape ({tt.shape[0]}, {len(truth_names)}, 3), "
             f"found {tj.shape}"
         )
-    common = tuple(n for n in truth_names if n in result_names)
+    if joints is not None:
+        unknown = [n for n in joints if n not in CANONICAL_JOINTS]
+        if unknown:
+            raise unknown_name("canonical joint", unknown[0], CANONICAL_JOINTS, "joints")
+    common = tuple(
+        n for n in truth_names if n in result_names and (joints is None or n in joints)
+    )
     if not common:
         raise ShapeError(
             f"result and truth share no joint: result has {list(result_names)}, truth has "
@@ -248,6 +260,23 @@ def evaluate_joints(
     )
 
 
+def joint_subset(spec: str) -> tuple[str, ...] | None:
+    """Canonical joints named by ``all`` (None: every shared joint), ``upper`` or a list.
+
+    ``upper`` is the upper body the marker-and-camera trackers estimate from arms and
+    head: head, neck, pelvis, shoulders, elbows and wrists.
+    """
+    if spec == "all":
+        return None
+    if spec == "upper":
+        return UPPER_BODY_JOINTS
+    names = tuple(n.strip() for n in spec.split(",") if n.strip())
+    for n in names:
+        if n not in CANONICAL_JOINTS:
+            raise unknown_name("canonical joint", n, (*CANONICAL_JOINTS, "all", "upper"), "--joints")
+    return names
+
+
 def load_result_joints(
     result: str | os.PathLike[str],
 ) -> tuple[FloatArray, tuple[str, ...], FloatArray]:
@@ -277,7 +306,9 @@ def load_result_joints(
 
 
 def evaluate_result(
-    result: str | os.PathLike[str], truth_session: str | os.PathLike[str]
+    result: str | os.PathLike[str],
+    truth_session: str | os.PathLike[str],
+    joints: Sequence[str] | None = None,
 ) -> EvalReport:
     """Evaluate a tracker's result folder against a synthetic session's ``truth.npz``.
 
@@ -287,6 +318,8 @@ def evaluate_result(
         Result folder (or its ``motion.npz`` / ``joints.csv``).
     truth_session : path-like
         Session folder with ``truth.npz`` (or the ``truth.npz`` file itself).
+    joints : sequence of str, optional
+        Canonical joints to compare (default: all both sides have).
     """
     from mocapkit.io.session import load_session, load_truth
 
@@ -300,4 +333,6 @@ def evaluate_result(
         if session.truth is None:  # unreachable after require
             raise SessionError(f"{tp}: no truth.npz")
         truth = session.truth
-    return evaluate_joints(rt, rn, rj, truth.time_s, truth.joint_names, truth.joints_mm)
+    return evaluate_joints(
+        rt, rn, rj, truth.time_s, truth.joint_names, truth.joints_mm, joints=joints
+    )
