@@ -35,8 +35,13 @@ def _shapes_image(rng: np.random.Generator) -> np.ndarray:
         x, y = (int(v) for v in rng.integers(20, 300, 2) % (300, 220))
         w, h = (int(v) for v in rng.integers(15, 60, 2))
         cv2.rectangle(img, (x, y), (x + w, y + h), c, -1)
-        cv2.circle(img, (int(rng.integers(0, 320)), int(rng.integers(0, 240))),
-                   int(rng.integers(8, 40)), c, -1)
+        cv2.circle(
+            img,
+            (int(rng.integers(0, 320)), int(rng.integers(0, 240))),
+            int(rng.integers(8, 40)),
+            c,
+            -1,
+        )
     return img
 
 

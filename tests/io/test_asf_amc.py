@@ -162,8 +162,11 @@ def test_bvh_and_amc_of_cmu_01_01_agree(shared_data: Path) -> None:
     assert amc.n_frames == bvh.n_frames == 2751
     assert amc.joint_names == bvh.joint_names == CANONICAL_JOINTS
     err = np.linalg.norm(amc.joints_mm - bvh.joints_mm, axis=-1)  # (T, K)
-    lower = [amc.joint_names.index(n) for n in CANONICAL_JOINTS
-             if n == "pelvis" or n.endswith(("hip", "knee", "ankle"))]
+    lower = [
+        amc.joint_names.index(n)
+        for n in CANONICAL_JOINTS
+        if n == "pelvis" or n.endswith(("hip", "knee", "ankle"))
+    ]
     upper = [k for k in range(len(CANONICAL_JOINTS)) if k not in lower]
     assert err[:, lower].max() < 0.01  # mm (BVH values carry 4 decimals)
     thorax_mm = 2.06488 * CMU_UNIT_MM
@@ -182,7 +185,8 @@ def test_bvh_and_amc_of_cmu_01_01_agree(shared_data: Path) -> None:
 
 def test_other_real_clips_read(shared_data: Path) -> None:
     mocap = shared_data / "mocap"
-    for amc, frames in (("01_09.amc", 4242), ("lambada.amc", 2180), ("zombie.amc", 1558)):
+    clips = (("01_09.amc", 4242), ("01_12.amc", 4109), ("lambada.amc", 2180), ("zombie.amc", 1558))
+    for amc, frames in clips:
         motion = read_amc(mocap / amc)
         assert motion.n_frames == frames
         assert motion.joint_names == CANONICAL_JOINTS
@@ -211,8 +215,11 @@ def test_asf_lookup_rules(tmp_path: Path) -> None:
     assert find_asf(only / "walk.amc") == only / "skeleton.asf"
     assert read_amc(only / "walk.amc").n_frames == 2
     (pre / "dance.amc").write_text(TINY_AMC)
-    with pytest.raises(FormatError, match=r"dance\.amc: no ASF skeleton found; tried: .*dance\.asf"
-                       r"; the only \.asf in .*found 2.*Pass asf_path explicitly"):
+    with pytest.raises(
+        FormatError,
+        match=r"dance\.amc: no ASF skeleton found; tried: .*dance\.asf"
+        r"; the only \.asf in .*found 2.*Pass asf_path explicitly",
+    ):
         read_amc(pre / "dance.amc")
     with pytest.raises(FormatError, match=r"ASF skeleton file .*missing\.asf does not exist"):
         read_amc(only / "walk.amc", tmp_path / "missing.asf")
@@ -220,15 +227,21 @@ def test_asf_lookup_rules(tmp_path: Path) -> None:
 
 def test_bad_amc_input(tmp_path: Path) -> None:
     unknown = TINY_AMC.replace("b 40", "zz 40")
-    with pytest.raises(UnknownNameError, match=r"unknown bone 'zz' in .*bad1\.amc line 8 "
-                       r"\(skeleton bad1\.asf\); expected one of: a, b, root"):
+    with pytest.raises(
+        UnknownNameError,
+        match=r"unknown bone 'zz' in .*bad1\.amc line 8 "
+        r"\(skeleton bad1\.asf\); expected one of: a, b, root",
+    ):
         read_amc(_tiny(tmp_path, amc=unknown, stem="bad1"))
     text = TINY_AMC.replace("a 5 -15 25", "a 5 abc 25")
     with pytest.raises(FormatError, match=r"bad2\.amc: line 7: expected a number, found 'abc'"):
         read_amc(_tiny(tmp_path, amc=text, stem="bad2"))
     missing = TINY_AMC.replace("b -10\n", "")
-    with pytest.raises(FormatError, match=r"bad3\.amc: frame 2 \(line 9\): missing values for "
-                       r"bone 'b'"):
+    with pytest.raises(
+        FormatError,
+        match=r"bad3\.amc: frame 2 \(line 9\): missing values for "
+        r"bone 'b'",
+    ):
         read_amc(_tiny(tmp_path, amc=missing, stem="bad3"))
     count = TINY_AMC.replace("b 40", "b 40 50")
     with pytest.raises(FormatError, match=r"line 8: bone 'b' expects 1 values .*found 2"):
@@ -249,8 +262,11 @@ def test_bad_asf_input(tmp_path: Path) -> None:
     with pytest.raises(UnknownNameError, match=r"unknown bone 'q' in .*e2\.asf :hierarchy"):
         read_amc(_tiny(tmp_path, asf=bad_hier, stem="e2"))
     bad_limits = TINY_ASF.replace("(-170 170)", "(-170 170)\n           (0 1)")
-    with pytest.raises(FormatError, match=r"bone 'b': expected 1 limit pairs \(one per dof\), "
-                       r"found 2"):
+    with pytest.raises(
+        FormatError,
+        match=r"bone 'b': expected 1 limit pairs \(one per dof\), "
+        r"found 2",
+    ):
         read_amc(_tiny(tmp_path, asf=bad_limits, stem="e3"))
     bad_dof = TINY_ASF.replace("dof rz", "dof qz")
     with pytest.raises(FormatError, match=r"bone 'b': unknown dof 'qz'"):

@@ -104,8 +104,11 @@ def test_truncated_motion_block(tmp_path: Path) -> None:
     text = SMALL_BVH.rstrip("\n")
     text = text[: text.rfind(" ")] + "\n"  # drop the last value
     path = _write(tmp_path, text, "short.bvh")
-    with pytest.raises(FormatError, match=r"short\.bvh: MOTION block: expected 2 frames x 12 "
-                       r"channels = 24 values, found 23 .*line 25 has 11 values"):
+    with pytest.raises(
+        FormatError,
+        match=r"short\.bvh: MOTION block: expected 2 frames x 12 "
+        r"channels = 24 values, found 23 .*line 25 has 11 values",
+    ):
         read_bvh(path, unit_mm=1.0)
 
 
@@ -119,12 +122,18 @@ def test_unbalanced_braces(tmp_path: Path) -> None:
     lines = SMALL_BVH.splitlines()
     lines.remove("}")  # the root's closing brace
     path = _write(tmp_path, "\n".join(lines), "braces.bvh")
-    with pytest.raises(FormatError, match=r"braces\.bvh: line \d+: hierarchy ends early "
-                       r"\(unbalanced braces\?\).*closing joint 'Root'"):
+    with pytest.raises(
+        FormatError,
+        match=r"braces\.bvh: line \d+: hierarchy ends early "
+        r"\(unbalanced braces\?\).*closing joint 'Root'",
+    ):
         read_bvh(path, unit_mm=1.0)
     extra = SMALL_BVH.replace("MOTION", "}\nMOTION")
-    with pytest.raises(FormatError, match=r"line 21: expected 'MOTION' after the root joint's "
-                       r"closing brace.*found '}'"):
+    with pytest.raises(
+        FormatError,
+        match=r"line 21: expected 'MOTION' after the root joint's "
+        r"closing brace.*found '}'",
+    ):
         read_bvh(_write(tmp_path, extra, "extra.bvh"), unit_mm=1.0)
 
 
@@ -133,8 +142,11 @@ def test_non_numeric_value_and_bad_headers(tmp_path: Path) -> None:
     with pytest.raises(FormatError, match=r"bad\.bvh: line 25: expected a number, found 'x'"):
         read_bvh(_write(tmp_path, bad, "bad.bvh"), unit_mm=1.0)
     bad_offset = SMALL_BVH.replace("OFFSET 5 0 0", "OFFSET 5 zero 0")
-    with pytest.raises(FormatError, match=r"line 12: expected a number for OFFSET of joint 'Tip', "
-                       r"found 'zero'"):
+    with pytest.raises(
+        FormatError,
+        match=r"line 12: expected a number for OFFSET of joint 'Tip', "
+        r"found 'zero'",
+    ):
         read_bvh(_write(tmp_path, bad_offset, "off.bvh"), unit_mm=1.0)
     bad_channel = SMALL_BVH.replace("Zrotation Xrotation\n", "Zrotation Wrotation\n")
     with pytest.raises(FormatError, match=r"line 13: joint 'Tip': unknown channel 'Wrotation'"):
@@ -158,8 +170,13 @@ def _mocap(shared_data: Path) -> Path:
 def _rest_checks(motion: Motion) -> None:
     """At q = 0 the subject stands up along +Z with its right side towards +X."""
     skel = motion.skeleton
-    rest = dict(zip(skel.canonical_names, np.asarray(
-        points_on_joints(skel, skel.zero_pose(), *skel.canonical_points())), strict=True))
+    rest = dict(
+        zip(
+            skel.canonical_names,
+            np.asarray(points_on_joints(skel, skel.zero_pose(), *skel.canonical_points())),
+            strict=True,
+        )
+    )
     assert rest["right_hip"][0] > rest["left_hip"][0]
     assert rest["right_shoulder"][0] > rest["left_shoulder"][0]
     assert rest["head"][2] > rest["neck"][2] > rest["pelvis"][2] > rest["left_knee"][2]

@@ -166,12 +166,7 @@ def test_write_markers_dispatch(tmp_path: Path) -> None:
 
 def test_csv_reads_empty_and_nan_cells_as_missing(tmp_path: Path) -> None:
     path = tmp_path / "m.csv"
-    path.write_text(
-        "time_s,A_x,A_y,A_z,B_x,B_y,B_z\n"
-        "0.0,1,2,3,,,\n"
-        "0.01,4,5,6,NaN,nan,7\n"
-        "\n"
-    )
+    path.write_text("time_s,A_x,A_y,A_z,B_x,B_y,B_z\n0.0,1,2,3,,,\n0.01,4,5,6,NaN,nan,7\n\n")
     m = read_markers_csv(path)
     assert m.names == ("A", "B")
     assert np.isnan(m.positions_mm[:, 1, :2]).all()

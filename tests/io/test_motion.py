@@ -161,8 +161,11 @@ def test_read_motion_dispatch(shared_data: Path, tmp_path: Path) -> None:
     assert "01.asf" in amc.source
     amc2 = read_motion(mocap / "charleston1.amc", asf=mocap / "charleston.asf")
     assert amc2.n_frames == 506
-    with pytest.raises(FormatError, match=r"unsupported motion file extension '\.asf'.*"
-                       r"read the \.amc"):
+    with pytest.raises(
+        FormatError,
+        match=r"unsupported motion file extension '\.asf'.*"
+        r"read the \.amc",
+    ):
         read_motion(mocap / "01.asf")
     with pytest.raises(FormatError, match=r"an ASF skeleton is only used with \.amc files"):
         read_motion(mocap / "131_01.bvh", asf=mocap / "01.asf")

@@ -99,24 +99,42 @@ def test_reads_opensim_file_in_metres_with_gaps(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("text", "pattern"),
     [
-        (_header() + "1\t0.00\t1\t2\t3\t4\t5\t6\n2\t0.01\t1\t2\t3\t4\t5\n",
-         r"bad.trc line 7: expected 8 tab-separated columns .* found 7"),
-        (_header() + "1\t0.00\t1\t2\t3\t4\t5\t6\t7\t8\n2\t0.01\t1\t2\t3\t4\t5\t6\n",
-         r"bad.trc line 6: expected 8 tab-separated columns"),
-        (_header() + "1\t0.00\t1\t2\t3\t4\t5\t6\n2\t0.01\t1\t2\t3\tfoo\t5\t6\n",
-         r"bad.trc line 7 column 6 \(B X\): expected a number or an empty field, found 'foo'"),
-        (_header() + "1\t\t1\t2\t3\t4\t5\t6\n2\t0.01\t1\t2\t3\t4\t5\t6\n",
-         r"line 6 column 2 \(Time\): expected a time stamp"),
-        (_header() + "1\t0.02\t1\t2\t3\t4\t5\t6\n2\t0.01\t1\t2\t3\t4\t5\t6\n",
-         r"line 7 column 2 \(Time\): expected strictly increasing"),
-        (_header(units="inch") + "1\t0\t1\t2\t3\t4\t5\t6\n",
-         r"line 3 \(Units\): expected one of mm, cm, m, found 'inch'"),
-        (_header(n_markers=3) + "1\t0\t1\t2\t3\t4\t5\t6\n",
-         r"line 4: expected NumMarkers = 3 marker names, found 2"),
-        (_header(n_frames=3) + "1\t0\t1\t2\t3\t4\t5\t6\n2\t0.01\t1\t2\t3\t4\t5\t6\n",
-         r"header NumFrames = 3, found 2 data rows"),
-        ("Hello\n" + _header()[_header().index("\n") + 1 :],
-         r"line 1: expected a TRC header starting with 'PathFileType'"),
+        (
+            _header() + "1\t0.00\t1\t2\t3\t4\t5\t6\n2\t0.01\t1\t2\t3\t4\t5\n",
+            r"bad.trc line 7: expected 8 tab-separated columns .* found 7",
+        ),
+        (
+            _header() + "1\t0.00\t1\t2\t3\t4\t5\t6\t7\t8\n2\t0.01\t1\t2\t3\t4\t5\t6\n",
+            r"bad.trc line 6: expected 8 tab-separated columns",
+        ),
+        (
+            _header() + "1\t0.00\t1\t2\t3\t4\t5\t6\n2\t0.01\t1\t2\t3\tfoo\t5\t6\n",
+            r"bad.trc line 7 column 6 \(B X\): expected a number or an empty field, found 'foo'",
+        ),
+        (
+            _header() + "1\t\t1\t2\t3\t4\t5\t6\n2\t0.01\t1\t2\t3\t4\t5\t6\n",
+            r"line 6 column 2 \(Time\): expected a time stamp",
+        ),
+        (
+            _header() + "1\t0.02\t1\t2\t3\t4\t5\t6\n2\t0.01\t1\t2\t3\t4\t5\t6\n",
+            r"line 7 column 2 \(Time\): expected strictly increasing",
+        ),
+        (
+            _header(units="inch") + "1\t0\t1\t2\t3\t4\t5\t6\n",
+            r"line 3 \(Units\): expected one of mm, cm, m, found 'inch'",
+        ),
+        (
+            _header(n_markers=3) + "1\t0\t1\t2\t3\t4\t5\t6\n",
+            r"line 4: expected NumMarkers = 3 marker names, found 2",
+        ),
+        (
+            _header(n_frames=3) + "1\t0\t1\t2\t3\t4\t5\t6\n2\t0.01\t1\t2\t3\t4\t5\t6\n",
+            r"header NumFrames = 3, found 2 data rows",
+        ),
+        (
+            "Hello\n" + _header()[_header().index("\n") + 1 :],
+            r"line 1: expected a TRC header starting with 'PathFileType'",
+        ),
         ("PathFileType\t4\n", r"expected at least 5 header lines"),
         (_header().replace("DataRate", "Rate"), r"expected header field 'DataRate'"),
         (_header().replace("Frame#", "Frame"), r"line 4: expected the columns 'Frame#' and 'Time'"),

@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 
 from mocapkit.cli.main import main
-from mocapkit.errors import ShapeError
+from mocapkit.errors import SessionError, ShapeError
 from mocapkit.pipelines.hybrid import (
     bench_ik,
     hybrid_skeleton,
     track_hybrid_marker_arrays,
     track_hybrid_markers,
+    track_hybrid_session,
 )
 from mocapkit.skeleton import canonical_positions
 from mocapkit.tracking.hybrid import HybridConfig
@@ -106,3 +107,100 @@ def test_bench_ik_reports():
     out = bench_ik(n_frames=50, repeats=1)
     assert out["converged_fraction"] == 1.0
     assert out["solves_per_s"] > 0 and out["mean_iterations"] >= 1.0
+
+
+# ---------------------------------------------------------------- sessions
+
+
+@pytest.fixture(scope="module")
+def wave_session(tmp_path_factory):
+    """A tiny rendered session (16 frames, 320x240), rendered once for this module."""
+    from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+
+    folder = tmp_path_factory.mktemp("wave") / "session"
+    # 0.5-1.0 s of the clip: the right arm rises (the first 0.5 s is a still rest pose)
+    options = SynthOptions(
+        rig="mono", start_s=0.5, seconds=0.5, image_size=(320, 240), overwrite=True
+    )
+    synthesize_session("builtin:wave", folder, options)
+    return folder
+
+
+@pytest.fixture(scope="module")
+def wave_result(wave_session, tmp_path_factory):
+    """`track_hybrid_session` (with video) on the session, and its result folder."""
+    out = tmp_path_factory.mktemp("wave_result") / "result"
+    return track_hybrid_session(wave_session, out), out
+
+
+def _copy_session(src, dst):
+    import shutil
+
+    shutil.copytree(src, dst)
+    return dst
+
+
+def test_session_writes_result_folder_on_video_time_line(wave_session, wave_result):
+    from mocapkit.io.motion import load_motion_npz, read_joints_csv
+    from mocapkit.io.session import load_session
+
+    motion, out = wave_result
+    assert sorted(p.name for p in out.iterdir()) == ["joints.csv", "motion.bvh", "motion.npz"]
+    video_t = load_session(wave_session).video("mono").time_s
+    assert video_t.shape == (16,)
+    # one pose per video frame, stamped with the frame's (jittered) time, not the markers'
+    np.testing.assert_array_equal(motion.time_s, video_t)
+    assert np.any(np.abs(np.diff(video_t) - 1 / 30) > 1e-4)  # the time stamps are uneven
+    saved = load_motion_npz(out / "motion.npz")
+    np.testing.assert_array_equal(saved.time_s, video_t)
+    np.testing.assert_allclose(saved.joints_mm, motion.joints_mm)
+    t_csv, names, joints = read_joints_csv(out / "joints.csv")
+    np.testing.assert_allclose(t_csv, video_t, rtol=0, atol=1e-9)
+    assert names == motion.joint_names
+    np.testing.assert_allclose(joints, motion.joints_mm, atol=1e-3)
+    assert np.all(np.isfinite(motion.joints_mm))
+    assert "video=on" in motion.source
+    # the tracker follows the rising arm: the truth's right wrist rises about 600 mm
+    truth = load_session(wave_session).truth
+    rise_true = np.ptp(truth.joints_mm[:, truth.joint_names.index("right_wrist"), 2])
+    assert rise_true > 400.0
+    assert 0.7 * rise_true < np.ptp(motion.joint("right_wrist")[:, 2]) < 1.3 * rise_true
+
+
+def test_session_ignores_elbow_reference_markers(wave_session, wave_result, tmp_path):
+    """The elbow reference markers are for evaluation only: removing them changes nothing."""
+    import csv
+
+    from mocapkit.io.session import load_session
+
+    copy = _copy_session(wave_session, tmp_path / "no_elbows")
+    path = copy / "markers.csv"
+    with open(path, newline="") as fh:
+        rows = list(csv.reader(fh))
+    keep = [i for i, name in enumerate(rows[0]) if "elbow_ref" not in name]
+    assert len(keep) == len(rows[0]) - 6  # two markers, three columns each
+    with open(path, "w", newline="") as fh:
+        csv.writer(fh, lineterminator="\n").writerows([[r[i] for i in keep] for r in rows])
+    assert not any("elbow" in n for n in load_session(copy).markers.names)
+
+    motion = track_hybrid_session(copy, None)
+    reference, _ = wave_result
+    np.testing.assert_array_equal(motion.q, reference.q)
+    np.testing.assert_array_equal(motion.joints_mm, reference.joints_mm)
+
+
+def test_session_without_hand_set_is_refused(wave_session, tmp_path):
+    import json
+
+    copy = _copy_session(wave_session, tmp_path / "no_hand")
+    info_path = copy / "session.json"
+    info = json.loads(info_path.read_text())
+    del info["marker_sets"]["left_hand"]
+    info_path.write_text(json.dumps(info))
+    with pytest.raises(
+        SessionError,
+        match=r"no_hand: the hybrid tracker needs marker sets .*"
+        r"missing \['left_hand'\]",
+    ):
+        track_hybrid_session(copy, tmp_path / "out")
+    assert not (tmp_path / "out").exists()

@@ -16,9 +16,11 @@ from mocapkit.skeleton import joint_positions, load_preset
 from mocapkit.tracking.arm_refinement import (
     SIDES,
     RefineConfig,
+    arm_cost_nb,
     arm_joint_names,
     arm_problem,
     initial_simplex,
+    nelder_mead_arm_nb,
     nelder_mead_nb,
     project_points_nb,
     refine_arms,
@@ -29,9 +31,14 @@ from mocapkit.viz.overlay import draw_body
 
 SKEL = load_preset("zhang21")
 POSE_DEG = {
-    "l_shoulder_abduction": 35, "l_shoulder_flexion": 20, "l_elbow_flexion": 70,
-    "l_shoulder_rotation": 30, "r_shoulder_abduction": 45, "r_shoulder_flexion": 10,
-    "r_elbow_flexion": 60, "r_shoulder_rotation": -20,
+    "l_shoulder_abduction": 35,
+    "l_shoulder_flexion": 20,
+    "l_elbow_flexion": 70,
+    "l_shoulder_rotation": 30,
+    "r_shoulder_abduction": 45,
+    "r_shoulder_flexion": 10,
+    "r_elbow_flexion": 60,
+    "r_shoulder_rotation": -20,
 }
 
 
@@ -43,7 +50,10 @@ def _pose() -> np.ndarray:
 
 
 CAMERA = Camera(
-    "front", (640, 480), intrinsics_from_fov((640, 480), 60), np.zeros(5),
+    "front",
+    (640, 480),
+    intrinsics_from_fov((640, 480), 60),
+    np.zeros(5),
     look_at((300, 3200, 1300), (0, 0, 1250)),
 )
 
@@ -116,11 +126,38 @@ def test_nelder_mead_nb_reproduces_scipy(which, rng):
         maxfev = 300 if which == "bowl_bounded" else 23
     sim = initial_simplex(np.clip(x0, lb, ub), 0.1)
     res = minimize(
-        lambda x: fun(x, a, b), np.clip(x0, lb, ub), method="Nelder-Mead",
+        lambda x: fun(x, a, b),
+        np.clip(x0, lb, ub),
+        method="Nelder-Mead",
         bounds=None if which == "rosenbrock" else Bounds(lb, ub),
         options={"initial_simplex": sim, "xatol": 1e-6, "fatol": 1e-8, "maxfev": maxfev},
     )
     x, fx, nfev, _nit, converged = nelder_mead_nb(fun, a, b, sim, lb, ub, 1e-6, 1e-8, maxfev)
+    np.testing.assert_array_equal(x, res.x)
+    assert fx == res.fun
+    assert nfev == res.nfev
+    assert converged == (res.status == 0)
+
+
+@pytest.mark.parametrize("side", SIDES)
+def test_nelder_mead_arm_nb_reproduces_scipy_on_the_arm_cost(scene, side):
+    """The cached production search (cost bound as a global) = SciPy on the same cost,
+    iterate for iterate: same result, value and evaluation count."""
+    q, img, targets = scene
+    start = swivel_arm(SKEL, q, side, math.radians(12.0))
+    p = arm_problem(SKEL, CAMERA, start, side, img, targets[side])
+    dmap = p.distance.distance_px
+    sim = initial_simplex(p.x0, 0.1)
+    res = minimize(
+        lambda x: arm_cost_nb(x, p.geo, dmap),
+        p.x0,
+        method="Nelder-Mead",
+        bounds=Bounds(p.lower, p.upper),
+        options={"initial_simplex": sim, "xatol": 1e-3, "fatol": 1e-4, "maxfev": 300},
+    )
+    x, fx, nfev, _nit, converged = nelder_mead_arm_nb(
+        p.geo, dmap, sim, p.lower, p.upper, 1e-3, 1e-4, 300
+    )
     np.testing.assert_array_equal(x, res.x)
     assert fx == res.fun
     assert nfev == res.nfev
@@ -180,18 +217,27 @@ def test_plain_paper_search_and_scipy_solver(scene):
     plain = RefineConfig(swivel_scan_rad=0.0)
     for cfg in (plain, RefineConfig(swivel_scan_rad=0.0, solver="scipy")):
         diag = {}
-        refined = refine_arms(SKEL, CAMERA, start, img, {"right": targets["right"]}, cfg,
-                              diagnostics=diag)
+        refined = refine_arms(
+            SKEL, CAMERA, start, img, {"right": targets["right"]}, cfg, diagnostics=diag
+        )
         assert abs(_swivel_deg(q, refined, "right")) < 2.0
         assert diag["left"].reason == "no hand target" and not diag["left"].refined
-        np.testing.assert_array_equal(refined[SKEL.dofs_of_joint("l_humerus")],
-                                      start[SKEL.dofs_of_joint("l_humerus")])
+        np.testing.assert_array_equal(
+            refined[SKEL.dofs_of_joint("l_humerus")], start[SKEL.dofs_of_joint("l_humerus")]
+        )
 
 
 def test_literal_sum_counts_silhouette_pixels(scene):
     q, img, targets = scene
-    p = arm_problem(SKEL, CAMERA, q, "left", img, targets["left"],
-                    RefineConfig(literal_sum=True, include_hand=False))
+    p = arm_problem(
+        SKEL,
+        CAMERA,
+        q,
+        "left",
+        img,
+        targets["left"],
+        RefineConfig(literal_sum=True, include_hand=False),
+    )
     ones = type(p.distance)(np.ones_like(p.distance.distance_px), p.distance.origin_px, 25.0)
     p1 = type(p)(p.side, p.dofs, p.geo, ones, p.lower, p.upper, p.x0)
     mask = np.zeros((480, 640), np.uint8)

@@ -25,7 +25,8 @@ def build_parser() -> argparse.ArgumentParser:
     """The full argument parser with every subcommand module registered."""
     parser = argparse.ArgumentParser(
         prog="mocapkit",
-        description="Human motion capture from markers plus one camera, one video, or a stereo pair.",
+        description="Human motion capture from markers plus one camera, one video, "
+        "or a stereo pair.",
     )
     parser.add_argument("--version", action="version", version=f"mocapkit {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")

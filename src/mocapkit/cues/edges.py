@@ -154,9 +154,8 @@ class DistanceMap:
         r0 = np.floor(yi).astype(np.int64)
         fx, fy = xi - c0, yi - r0
         d = self.distance_px
-        out[inside] = (
-            (1 - fy) * ((1 - fx) * d[r0, c0] + fx * d[r0, c0 + 1])
-            + fy * ((1 - fx) * d[r0 + 1, c0] + fx * d[r0 + 1, c0 + 1])
+        out[inside] = (1 - fy) * ((1 - fx) * d[r0, c0] + fx * d[r0, c0 + 1]) + fy * (
+            (1 - fx) * d[r0 + 1, c0] + fx * d[r0 + 1, c0 + 1]
         )
         return out
 
@@ -288,9 +287,7 @@ def clip_roi(roi: ArrayLike, image_size: tuple[int, int]) -> Roi:
     return (x0, y0, x1, y1)
 
 
-def roi_around_points(
-    points_px: ArrayLike, image_size: tuple[int, int], pad_px: float
-) -> Roi:
+def roi_around_points(points_px: ArrayLike, image_size: tuple[int, int], pad_px: float) -> Roi:
     """Padded bounding box of image points (N, 2), clipped to the image (Zhang §5.2, Fig. 5).
 
     Non-finite points (behind the camera) are ignored; with none left the RoI is empty.

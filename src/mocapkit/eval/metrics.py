@@ -207,9 +207,7 @@ def evaluate_joints(
         unknown = [n for n in joints if n not in CANONICAL_JOINTS]
         if unknown:
             raise unknown_name("canonical joint", unknown[0], CANONICAL_JOINTS, "joints")
-    common = tuple(
-        n for n in truth_names if n in result_names and (joints is None or n in joints)
-    )
+    common = tuple(n for n in truth_names if n in result_names and (joints is None or n in joints))
     if not common:
         raise ShapeError(
             f"result and truth share no joint: result has {list(result_names)}, truth has "
@@ -273,7 +271,9 @@ def joint_subset(spec: str) -> tuple[str, ...] | None:
     names = tuple(n.strip() for n in spec.split(",") if n.strip())
     for n in names:
         if n not in CANONICAL_JOINTS:
-            raise unknown_name("canonical joint", n, (*CANONICAL_JOINTS, "all", "upper"), "--joints")
+            raise unknown_name(
+                "canonical joint", n, (*CANONICAL_JOINTS, "all", "upper"), "--joints"
+            )
     return names
 
 

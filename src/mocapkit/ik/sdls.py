@@ -105,6 +105,11 @@ class IKConfig:
         Stop when every active effector is this close to its target.
     max_iterations, min_iterations : int
         Iteration bounds per solve.
+    stall_iterations, stall_fraction : int, float
+        Stop when the largest effector error has not dropped by the share
+        ``stall_fraction`` within ``stall_iterations`` steps. Off (0) by default: slow
+        but steady progress (a restore solve with the spine frozen) also looks like a
+        stall; 35 steps and 0.5 % suit a caller that only wants a settled answer fast.
     secondary_gain : float
         ``k`` of the secondary task (0 disables it).
     secondary_max_step_rad : float
@@ -127,6 +132,8 @@ class IKConfig:
     tol_mm: float = 1.0
     max_iterations: int = 100
     min_iterations: int = 1
+    stall_iterations: int = 0
+    stall_fraction: float = 0.005
     secondary_gain: float = 0.3
     secondary_max_step_rad: float = 0.05
     clamp: str = "hard"
@@ -141,6 +148,11 @@ class IKConfig:
             raise ShapeError(f"IKConfig.dmax_mm: expected a positive length, found {self.dmax_mm}")
         if not self.tol_mm > 0:
             raise ShapeError(f"IKConfig.tol_mm: expected a positive tolerance, found {self.tol_mm}")
+        if self.stall_iterations < 0 or not 0 <= self.stall_fraction < 1:
+            raise ShapeError(
+                "IKConfig: expected stall_iterations >= 0 and 0 <= stall_fraction < 1, found "
+                f"{self.stall_iterations}, {self.stall_fraction}"
+            )
         if self.max_iterations < 1 or not 0 <= self.min_iterations <= self.max_iterations:
             raise ShapeError(
                 "IKConfig: expected 1 <= max_iterations and 0 <= min_iterations <= max_iterations, "
@@ -327,6 +339,8 @@ def solve_ik_nb(
     tol: float,
     max_iter: int,
     min_iter: int,
+    stall_iter: int,
+    stall_fraction: float,
     residual: FloatArray,
     trace: FloatArray,
 ) -> int:
@@ -335,7 +349,9 @@ def solve_ik_nb(
     ``eff_joint`` (K,), ``eff_point`` (K, 3) and ``targets`` (K, 3) list the active
     effectors only. ``frozen`` (D,) DoFs do not move. Writes the final distance of
     each effector to ``residual`` (K,) and per-iteration diagnostics to ``trace``
-    (max_iter, 4). Returns the number of steps taken.
+    (max_iter, 4). Stops early when the largest error has not dropped by the share
+    ``stall_fraction`` in ``stall_iter`` steps (an unreachable target has settled;
+    more steps only cost time). Returns the number of steps taken.
     """
     n_joints = parents.shape[0]
     n_dofs = q.shape[0]
@@ -392,8 +408,12 @@ def solve_ik_nb(
         )
         err = max(err, d)
     it = 0
+    best_err = err
+    since_best = 0
     while it < max_iter and k_eff > 0:
         if err < tol and it >= min_iter:
+            break
+        if stall_iter > 0 and since_best >= stall_iter and it >= min_iter:
             break
         clamp_error_nb(pts, targets, dmax, e)
         for r in range(3 * k_eff):
@@ -492,6 +512,11 @@ def solve_ik_nb(
                 + (targets[k, 2] - pts[k, 2]) ** 2
             )
             err = max(err, d2)
+        if err < best_err * (1.0 - stall_fraction):
+            best_err = err
+            since_best = 0
+        else:
+            since_best += 1
         it += 1
     for k in range(k_eff):
         residual[k] = math.sqrt(
@@ -817,6 +842,8 @@ class SDLSSolver:
             float(cfg.tol_mm),
             int(cfg.max_iterations),
             int(cfg.min_iterations),
+            int(cfg.stall_iterations),
+            float(cfg.stall_fraction),
             residual,
             trace,
         )

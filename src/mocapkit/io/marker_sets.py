@@ -163,9 +163,9 @@ def _resolve(markers: MarkerData, s: MarkerSet) -> list[int]:
     return idx
 
 
-def set_centre_mm(points_mm: NDArray[np.float64], compensate_dropout: bool = True) -> NDArray[
-    np.float64
-]:
+def set_centre_mm(
+    points_mm: NDArray[np.float64], compensate_dropout: bool = True
+) -> NDArray[np.float64]:
     """Centre of one marker cluster per frame, with optional dropout compensation.
 
     Parameters

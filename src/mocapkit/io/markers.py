@@ -202,8 +202,9 @@ class MarkerData:
             seen[n] = i
         if not np.all(np.isfinite(time_s)):
             bad = int(np.flatnonzero(~np.isfinite(time_s))[0])
-            raise FormatError(f"{src}: time stamps: expected finite values, found {time_s[bad]} "
-                              f"at frame {bad}")
+            raise FormatError(
+                f"{src}: time stamps: expected finite values, found {time_s[bad]} at frame {bad}"
+            )
         if t > 1:
             steps = np.diff(time_s)
             if np.any(steps <= 0):
@@ -385,8 +386,14 @@ def write_markers(path: str | os.PathLike[str], markers: MarkerData, **kwargs: A
     if ext == ".trc":
         from mocapkit.io.trc import write_trc
 
-        write_trc(p, markers.time_s, markers.names, markers.positions_mm,
-                  rate_hz=markers.rate_hz, **kwargs)
+        write_trc(
+            p,
+            markers.time_s,
+            markers.names,
+            markers.positions_mm,
+            rate_hz=markers.rate_hz,
+            **kwargs,
+        )
     else:
         if kwargs:
             raise TypeError(f"write_markers: CSV takes no options, found {sorted(kwargs)}")
@@ -406,8 +413,9 @@ def infer_rate_hz(time_s: NDArray[np.float64], where: str) -> float:
         )
     step = float(np.median(np.diff(time_s)))
     if not step > 0:
-        raise FormatError(f"{where}: time_s: expected increasing time stamps, found median "
-                          f"step {step}")
+        raise FormatError(
+            f"{where}: time_s: expected increasing time stamps, found median step {step}"
+        )
     return 1.0 / step
 
 
@@ -511,8 +519,9 @@ def read_markers_csv(path: str | os.PathLike[str]) -> MarkerData:
     # Drop blank lines (e.g. a trailing newline) but keep line numbers for messages.
     numbered = [(i + 1, r) for i, r in enumerate(rows) if any(c.strip() for c in r)]
     if not numbered:
-        raise FormatError(f"{where}: expected a header row starting with 'time_s', found an "
-                          f"empty file")
+        raise FormatError(
+            f"{where}: expected a header row starting with 'time_s', found an empty file"
+        )
     header_line, header = numbered[0]
     header = [h.strip() for h in header]
     if header[0] != "time_s":

@@ -3,8 +3,10 @@
 Layout (all lengths in mm, times in s)::
 
     session.json                 {"format": 1, "units": "mm", "subject": {"height_mm": ...,
-                                  "bone_lengths_mm": {...}}, "cameras": "cameras.json",
+                                  "bone_lengths_mm": {segment: mm}}, "cameras": "cameras.json",
                                   "marker_sets": {"head": ["LFHD", ...], ...},
+                                  "marker_offsets_mm": {"head": {"segment": "head",
+                                  "offset_mm": [0, 100, 0]}, ...},
                                   "reference_markers": [...], "rates": {"video_hz": 30,
                                   "markers_hz": 120}}
     cameras.json                 see `mocapkit.io.cameras`
@@ -19,6 +21,12 @@ Layout (all lengths in mm, times in s)::
 the newest marker sample at or before the frame time and keeps the time difference, as the
 hybrid tracker of Zhang et al. (2011, §3) samples its two independent streams (video at
 30 Hz, markers at 120 Hz) "so that both estimations work on the newest tracking data".
+
+Subject bone lengths are keyed by `mocapkit.skeleton.CANONICAL_SEGMENTS` names (what a lab
+measures: upper arm, forearm, clavicle, trunk, ...). Marker offsets say where a marker set
+sits on the body (glasses in front of the head, an object held in the hand): the canonical
+joint it rides on and its offset in that body part's anatomical frame (x right, y forward,
+z up in the anatomical position).
 """
 
 from __future__ import annotations
@@ -39,7 +47,7 @@ from numpy.typing import ArrayLike, NDArray
 from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import FormatError, SessionError, ShapeError
 from mocapkit.io.atomic import atomic_write
-from mocapkit.skeleton.model import CANONICAL_JOINTS
+from mocapkit.skeleton.model import CANONICAL_JOINTS, CANONICAL_SEGMENTS
 
 FloatArray = NDArray[np.float64]
 FORMAT_VERSION = 1
@@ -493,10 +501,19 @@ class Session:
             isinstance(v, int | float) and v > 0 for v in bones.values()
         ):
             raise FormatError(
-                f"{info_path}: subject.bone_lengths_mm: expected joint name -> positive length, "
-                f"found {bones!r}"
+                f"{info_path}: subject.bone_lengths_mm: expected segment name -> positive "
+                f"length (mm), found {bones!r}"
             )
+        for k in bones:
+            if k not in CANONICAL_SEGMENTS:
+                raise FormatError(
+                    f"{info_path}: subject.bone_lengths_mm: unknown segment {k!r}; expected "
+                    f"one of {sorted(CANONICAL_SEGMENTS)}"
+                )
         self.bone_lengths_mm: dict[str, float] = {str(k): float(v) for k, v in bones.items()}
+        self.marker_offsets: dict[str, tuple[str, FloatArray]] = _parse_marker_offsets(
+            info.get("marker_offsets_mm", {}), info_path
+        )
         rates = info.get("rates", {})
         if not isinstance(rates, dict):
             raise FormatError(f"{info_path}: field 'rates': expected an object, found {rates!r}")
@@ -810,6 +827,35 @@ class Session:
 def load_session(path: str | os.PathLike[str]) -> Session:
     """Load and validate a session folder; errors name the file, what was expected and found."""
     return Session(path)
+
+
+def _parse_marker_offsets(doc: Any, where: Path) -> dict[str, tuple[str, FloatArray]]:
+    """``marker_offsets_mm``: marker set -> (canonical joint it rides on, offset (3,) mm).
+
+    The offset is in that body part's anatomical frame: x to the subject's right, y
+    forward, z up, with the body standing, arms hanging and palms forward.
+    """
+    if not isinstance(doc, dict):
+        raise FormatError(f"{where}: field 'marker_offsets_mm': expected an object, found {doc!r}")
+    out: dict[str, tuple[str, FloatArray]] = {}
+    for name, entry in doc.items():
+        field = f"{where}: marker_offsets_mm.{name}"
+        if not isinstance(entry, dict) or set(entry) != {"segment", "offset_mm"}:
+            raise FormatError(
+                f"{field}: expected {{'segment': canonical joint, 'offset_mm': [x, y, z]}}, "
+                f"found {entry!r}"
+            )
+        seg = entry["segment"]
+        if seg not in CANONICAL_JOINTS:
+            raise FormatError(
+                f"{field}.segment: expected a canonical joint ({', '.join(CANONICAL_JOINTS)}), "
+                f"found {seg!r}"
+            )
+        off = np.asarray(entry["offset_mm"], dtype=float)
+        if off.shape != (3,) or not np.all(np.isfinite(off)):
+            raise FormatError(f"{field}.offset_mm: expected 3 finite numbers, found {off!r}")
+        out[str(name)] = (str(seg), off)
+    return out
 
 
 def write_session_json(path: str | os.PathLike[str], info: Mapping[str, Any]) -> None:

@@ -138,8 +138,10 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerData:
             s = f[c].strip()
             if not s:
                 if c == 1:
-                    raise FormatError(f"{where} line {line_no} column 2 (Time): expected a "
-                                      f"time stamp, found an empty field")
+                    raise FormatError(
+                        f"{where} line {line_no} column 2 (Time): expected a "
+                        f"time stamp, found an empty field"
+                    )
                 v = math.nan
             else:
                 try:
@@ -196,8 +198,9 @@ def write_trc(
     """
     where = str(path)
     if units not in TRC_UNITS_MM:
-        raise FormatError(f"{where}: units: expected one of {', '.join(TRC_UNITS_MM)}, "
-                          f"found {units!r}")
+        raise FormatError(
+            f"{where}: units: expected one of {', '.join(TRC_UNITS_MM)}, found {units!r}"
+        )
     t, names, pos = check_marker_arrays(time_s, marker_names, positions_mm, where)
     if rate_hz is None:
         if t.shape[0] < 2:

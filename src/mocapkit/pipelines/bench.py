@@ -106,7 +106,10 @@ def _hybrid_sequence(n_frames: int, rate_hz: float) -> tuple[Any, Camera, np.nda
     q = np.clip(q, sk.lower, sk.upper)
     size = HYBRID_IMAGE_SIZE
     cam = Camera(
-        "bench", size, intrinsics_from_fov(size, 60), np.zeros(5),
+        "bench",
+        size,
+        intrinsics_from_fov(size, 60),
+        np.zeros(5),
         look_at((300, 3200, 1300), (0, 0, 1250)),
     )
     return sk, cam, q
@@ -173,8 +176,9 @@ def bench_hybrid(
     ]
     diags: list[ArmDiagnostics] = []
 
-    def recording_refiner(skel: Any, camera: Any, q: Any, image: Any, hands: Any,
-                          config: Any) -> Any:
+    def recording_refiner(
+        skel: Any, camera: Any, q: Any, image: Any, hands: Any, config: Any
+    ) -> Any:
         d: dict[str, ArmDiagnostics] = {}
         out = refine_arms(skel, camera, q, image, hands, config, diagnostics=d)
         diags.extend(x for x in d.values() if x.refined)
@@ -196,9 +200,14 @@ def bench_hybrid(
             fps_list.append(n_frames / (time.perf_counter() - t0))
             est = np.stack([p.q for p in poses])
         names = ["left_elbow", "right_elbow"]
-        elbow_err = float(np.mean(np.linalg.norm(
-            canonical_positions(sk, est, names) - canonical_positions(sk, q_true, names), axis=-1
-        )))
+        elbow_err = float(
+            np.mean(
+                np.linalg.norm(
+                    canonical_positions(sk, est, names) - canonical_positions(sk, q_true, names),
+                    axis=-1,
+                )
+            )
+        )
         refine_ms = float(np.median([d.elapsed_ms for d in diags]))
         evals = float(np.median([d.n_evaluations for d in diags]))
         # the compiled cost and the edge map alone, on the middle frame
@@ -229,7 +238,7 @@ def bench_hybrid(
         "mean_elbow_error_mm": elbow_err,
         "image_size": f"{HYBRID_IMAGE_SIZE[0]}x{HYBRID_IMAGE_SIZE[1]}",
         "pipeline": "HybridTracker.update: IK + edge DT in arm RoIs + both arm refinements "
-                    "+ balance + smoothing",
+        "+ balance + smoothing",
         "n_frames": float(n_frames),
         "repeats": float(repeats),
     }

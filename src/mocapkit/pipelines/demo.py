@@ -66,7 +66,8 @@ def _describe_real_clip(say: Callable[[str], None]) -> None:
     frame = motion.n_frames // 2
     for name in ("head", "left_wrist", "right_wrist"):
         p = motion.joints_mm[frame, motion.joint_names.index(name)]
-        say(f"  t={motion.time_s[frame]:6.2f} s  {name:<12} ({p[0]:7.0f}, {p[1]:7.0f}, {p[2]:7.0f}) mm")
+        xyz = f"({p[0]:7.0f}, {p[1]:7.0f}, {p[2]:7.0f}) mm"
+        say(f"  t={motion.time_s[frame]:6.2f} s  {name:<12} {xyz}")
 
 
 def run_demo(

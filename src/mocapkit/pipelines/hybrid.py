@@ -20,7 +20,7 @@ from mocapkit.io.motion import Motion
 from mocapkit.progress import Progress
 from mocapkit.skeleton.model import Skeleton
 from mocapkit.skeleton.presets import load_preset
-from mocapkit.skeleton.scaling import scale_skeleton
+from mocapkit.skeleton.scaling import fit_segment_lengths, scale_skeleton
 from mocapkit.tracking.hybrid import (
     MARKER_SETS,
     HybridConfig,
@@ -42,11 +42,13 @@ def hybrid_skeleton(
     With ``root_rotation`` the root gets a free yaw (limits removed, so a subject may
     turn round) while root pitch and roll are held at 0: with feet planted and only
     head and hands observed, whole-body tilt is not determined by the markers.
-    Bone-length overrides whose joint is not in ``zhang21`` are ignored.
+    The model is scaled to the stature, then its canonical segments are stretched to
+    the measured ``bone_lengths_mm`` (names of `CANONICAL_SEGMENTS`).
     """
     sk = load_preset("zhang21", ("root_rotation",) if root_rotation else ())
-    bones = {k: v for k, v in (bone_lengths_mm or {}).items() if k in sk.joint_names}
-    sk = scale_skeleton(sk, height_mm=height_mm, bone_lengths_mm=bones or None)
+    sk = scale_skeleton(sk, height_mm=height_mm)
+    if bone_lengths_mm:
+        sk = fit_segment_lengths(sk, bone_lengths_mm)
     if root_rotation:
         lower, upper = sk.lower.copy(), sk.upper.copy()
         lower[sk.dof_index("root_yaw")], upper[sk.dof_index("root_yaw")] = -np.inf, np.inf
@@ -67,6 +69,33 @@ def _run(
     if not poses:
         raise ShapeError(f"{label}: no samples to track")
     return (np.array([p.time_s for p in poses]), np.stack([p.q for p in poses]), poses)
+
+
+#: The canonical joint each hybrid effector sits on (its default point, see
+#: `mocapkit.tracking.hybrid.default_marker_effectors`).
+EFFECTOR_SEGMENTS = {"head": "head", "left_hand": "left_wrist", "right_hand": "right_wrist"}
+
+
+def effector_offsets(
+    declared: Mapping[str, tuple[str, FloatArray]], where: str | os.PathLike[str] = "session"
+) -> dict[str, tuple[float, float, float]]:
+    """Marker offsets declared in a session, as offsets from the hybrid effector points.
+
+    ``zhang21`` joint frames are parallel to the anatomical frames at q = 0 (arms hang,
+    palms forward), so a declared anatomical offset is the offset in the effector's joint
+    frame. An offset declared on another body part than the effector's is refused.
+    """
+    out: dict[str, tuple[float, float, float]] = {}
+    for name, (segment, offset) in declared.items():
+        if name not in EFFECTOR_SEGMENTS:
+            continue
+        if segment != EFFECTOR_SEGMENTS[name]:
+            raise SessionError(
+                f"{where}: marker_offsets_mm.{name}.segment: the hybrid tracker expects "
+                f"{EFFECTOR_SEGMENTS[name]!r}, found {segment!r}"
+            )
+        out[name] = (float(offset[0]), float(offset[1]), float(offset[2]))
+    return out
 
 
 def track_hybrid_session(
@@ -103,7 +132,11 @@ def track_hybrid_session(
             f"{session.path}: the hybrid tracker needs marker sets {list(MARKER_SETS)} in "
             f"session.json; missing {missing or 'the marker file'}"
         )
-    cfg = config or HybridConfig(paper=paper, use_video=use_video)
+    cfg = config or HybridConfig(
+        paper=paper,
+        use_video=use_video,
+        marker_offsets_mm=effector_offsets(session.marker_offsets, session.path),
+    )
     sk = hybrid_skeleton(session.height_mm, session.bone_lengths_mm)
     cams = session.video_cameras
     if not cams:
@@ -111,13 +144,14 @@ def track_hybrid_session(
             f"{session.path}: no camera with a video; the hybrid tracker's time line is the video's"
         )
     camera = session.camera(cams[0])
-    tracker = HybridTracker(sk, camera if cfg.use_video else None, cfg)
+    # the camera also sets the initial facing, so it is passed even without video
+    tracker = HybridTracker(sk, camera, cfg)
     n = session.video(cams[0]).n_frames
 
     def stream() -> Iterator[HybridSample]:
         for s in session.samples(cams[0]):
             markers = {k: v for k, v in s.marker_sets_mm.items() if k in MARKER_SETS}
-            image = s.image(cams[0]) if (cfg.use_video and tracker.refiner() is not None) else None
+            image = s.image(cams[0]) if cfg.use_video else None
             yield HybridSample(
                 s.time_s, markers, None if np.isnan(s.marker_time_s) else s.marker_time_s, image
             )

@@ -16,17 +16,24 @@ from mocapkit.skeleton.kinematics import (
 from mocapkit.skeleton.model import (
     BALL,
     CANONICAL_JOINTS,
+    CANONICAL_SEGMENTS,
     PRISMATIC,
     REVOLUTE,
     UPPER_BODY_JOINTS,
     Skeleton,
 )
 from mocapkit.skeleton.presets import load_preset, preset_names, preset_options
-from mocapkit.skeleton.scaling import scale_skeleton, standing_height_mm
+from mocapkit.skeleton.scaling import (
+    fit_segment_lengths,
+    scale_skeleton,
+    segment_lengths_mm,
+    standing_height_mm,
+)
 
 __all__ = [
     "BALL",
     "CANONICAL_JOINTS",
+    "CANONICAL_SEGMENTS",
     "PRISMATIC",
     "REVOLUTE",
     "UPPER_BODY_JOINTS",
@@ -34,6 +41,7 @@ __all__ = [
     "canonical_positions",
     "carried_mass",
     "center_of_mass",
+    "fit_segment_lengths",
     "forward_kinematics",
     "jacobian",
     "joint_positions",
@@ -44,6 +52,7 @@ __all__ = [
     "preset_options",
     "scale_skeleton",
     "segment_com",
+    "segment_lengths_mm",
     "standing_height_mm",
     "subtree_com",
     "subtree_mass",

@@ -63,6 +63,25 @@ CANONICAL_JOINTS: tuple[str, ...] = (
 #: The upper-body subset (what the hybrid and stereo trackers estimate from arms and head).
 UPPER_BODY_JOINTS: tuple[str, ...] = CANONICAL_JOINTS[:9]
 
+#: Body segments a lab measures on a subject, as (proximal, distal) canonical joints.
+#: ``session.json`` gives subject bone lengths under these names.
+CANONICAL_SEGMENTS: dict[str, tuple[str, str]] = {
+    "trunk": ("pelvis", "neck"),
+    "head": ("neck", "head"),
+    "left_clavicle": ("neck", "left_shoulder"),
+    "right_clavicle": ("neck", "right_shoulder"),
+    "left_upper_arm": ("left_shoulder", "left_elbow"),
+    "right_upper_arm": ("right_shoulder", "right_elbow"),
+    "left_forearm": ("left_elbow", "left_wrist"),
+    "right_forearm": ("right_elbow", "right_wrist"),
+    "left_pelvis": ("pelvis", "left_hip"),
+    "right_pelvis": ("pelvis", "right_hip"),
+    "left_thigh": ("left_hip", "left_knee"),
+    "right_thigh": ("right_hip", "right_knee"),
+    "left_shank": ("left_knee", "left_ankle"),
+    "right_shank": ("right_knee", "right_ankle"),
+}
+
 
 def _frozen(a: Any, dtype: Any, shape: tuple[int, ...] | None, what: str) -> NDArray[Any]:
     arr = np.array(a, dtype=dtype, copy=True)

@@ -6,9 +6,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from mocapkit.errors import ShapeError
-from mocapkit.skeleton.kinematics import joint_positions
-from mocapkit.skeleton.model import PRISMATIC, Skeleton
+from mocapkit.errors import ShapeError, unknown_name
+from mocapkit.skeleton.kinematics import canonical_positions, joint_positions
+from mocapkit.skeleton.model import CANONICAL_SEGMENTS, PRISMATIC, FloatArray, Skeleton
 
 #: Height of the lateral malleolus (ankle joint) above the floor as a fraction of stature
 #: (Winter, Biomechanics and Motor Control of Human Movement, 4th ed., Fig. 4.1: 0.039 H).
@@ -94,4 +94,95 @@ def scale_skeleton(
             if np.allclose(offsets[c], end_before, atol=1e-6):
                 offsets[c] = ends[j]
         sk = sk.replace(offsets_mm=offsets, bone_end_mm=ends)
+    return sk
+
+
+def segment_lengths_mm(skeleton: Skeleton) -> dict[str, float]:
+    """Lengths of the canonical segments (`CANONICAL_SEGMENTS`) in the rest pose, mm.
+
+    Only segments whose two canonical joints the skeleton provides are listed. The
+    trunk of a skeleton with a flexible spine is measured straight (rest pose), as a
+    lab measures it on a standing subject.
+    """
+    names = skeleton.canonical_names
+    pos = dict(zip(names, canonical_positions(skeleton, skeleton.zero_pose()), strict=True))
+    return {
+        seg: float(np.linalg.norm(pos[b] - pos[a]))
+        for seg, (a, b) in CANONICAL_SEGMENTS.items()
+        if a in pos and b in pos
+    }
+
+
+def _segment_path(skeleton: Skeleton, ja: int, jb: int, a_mm: FloatArray) -> list[int]:
+    """Joints whose rest offsets make up the segment from joint ``ja`` to joint ``jb``.
+
+    The path runs from ``jb`` up to the lowest common ancestor of the two joints; joints
+    sitting exactly at A's rest position ``a_mm`` (a clavicle starting where the neck
+    does) lie before the segment and are left out.
+    """
+    up_a = {int(j) for j in np.flatnonzero(skeleton.ancestors_mask()[:, ja])}
+    rest = joint_positions(skeleton, skeleton.zero_pose())
+    path = []
+    j = jb
+    while j not in up_a:
+        if not np.allclose(rest[j], a_mm, atol=1e-6):
+            path.append(j)
+        j = int(skeleton.parents[j])
+    return path
+
+
+def fit_segment_lengths(skeleton: Skeleton, lengths_mm: Mapping[str, float]) -> Skeleton:
+    """Stretch a model so its canonical segments have a subject's measured lengths.
+
+    For a segment from canonical joint A to canonical joint B, every rest offset on the
+    kinematic path from A's joint down to B's joint is scaled by ``length / current``,
+    together with B's canonical point and any sibling attached at the same place (the
+    clavicles move with the top of the spine), so directions are kept and only lengths
+    change. Segments are fitted proximal first (the order of `CANONICAL_SEGMENTS`).
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    lengths_mm : mapping of str to float
+        Segment name (a key of `CANONICAL_SEGMENTS`) -> length in mm.
+    """
+    for seg, length in lengths_mm.items():
+        if seg not in CANONICAL_SEGMENTS:
+            raise unknown_name("body segment", seg, CANONICAL_SEGMENTS, "bone lengths")
+        if not (np.isfinite(length) and length > 0):
+            raise ShapeError(f"bone length of {seg!r}: expected a positive length, found {length}")
+    sk = skeleton
+    for seg, (a, b) in CANONICAL_SEGMENTS.items():
+        if seg not in lengths_mm or a not in sk.canonical or b not in sk.canonical:
+            continue
+        current = segment_lengths_mm(sk).get(seg, 0.0)
+        if current <= 1e-9:
+            continue
+        f = float(lengths_mm[seg]) / current
+        ja = sk.joint_index(sk.canonical[a][0])
+        jb_name, b_point = sk.canonical[b]
+        jb = sk.joint_index(jb_name)
+        a_mm = canonical_positions(sk, sk.zero_pose(), [a])[0]
+        path = _segment_path(sk, ja, jb, a_mm)
+        offsets = sk.offsets_mm.copy()
+        ends = sk.bone_end_mm.copy()
+        for k in path:
+            parent = int(sk.parents[k])
+            old = offsets[k].copy()
+            for c in sk.children(parent):
+                if np.allclose(offsets[c], old, atol=1e-6):
+                    offsets[c] = old * f
+            if np.allclose(ends[parent], old, atol=1e-6):
+                ends[parent] = old * f
+        canonical = dict(sk.canonical)
+        if np.any(np.asarray(b_point) != 0):
+            # B is a point inside its joint's segment (the head centre): scale it and the
+            # segment it lies on, so the point keeps its relative place
+            bp = np.asarray(b_point, dtype=float) * f
+            canonical[b] = (jb_name, (float(bp[0]), float(bp[1]), float(bp[2])))
+            ends[jb] = ends[jb] * f
+            for c in sk.children(jb):
+                if np.allclose(offsets[c], sk.bone_end_mm[jb], atol=1e-6):
+                    offsets[c] = ends[jb]
+        sk = sk.replace(offsets_mm=offsets, bone_end_mm=ends, canonical=canonical)
     return sk

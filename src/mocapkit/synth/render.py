@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import ShapeError
+from mocapkit.geometry.rotations import matrix_from_axis_angle
 from mocapkit.skeleton.kinematics import forward_kinematics
 from mocapkit.skeleton.model import Skeleton
 
@@ -299,16 +300,7 @@ def build_body(
     rest = rest_world[..., :3, 3]
 
     def forearm_rest(side: str) -> FloatArray:
-        # Direction elbow -> wrist at q = 0, where every joint frame is parallel to the
-        # world, so it is also the direction in the elbow's and the wrist's own frames.
-        ends = []
-        for c in (f"{side}_elbow", f"{side}_wrist"):
-            jname, point = skeleton.canonical[c]
-            j = skeleton.joint_index(jname)
-            ends.append(rest_world[j, :3, 3] + rest_world[j, :3, :3] @ np.asarray(point, float))
-        d = ends[1] - ends[0]
-        n = float(np.linalg.norm(d))
-        return d / n if n > 1e-6 else np.array([0.0, 0.0, -1.0])
+        return _forearm_rest(skeleton, rest_world, side)
 
     tracks: list[FloatArray] = [joints[:, j] for j in range(n_j)]
 
@@ -424,10 +416,8 @@ def build_body(
     for k, side in ((1, "left"), (2, "right")):
         wj = owner[f"{side}_wrist"]
         along = forearm_rest(side)  # the hand continues the forearm
-        out = np.array([0.0, 1.0, 0.0]) - along[1] * along  # rest forward, orthogonal to the hand
-        out = out / max(float(np.linalg.norm(out)), 1e-9)
         point = np.asarray(skeleton.canonical[f"{side}_wrist"][1], dtype=float)
-        local = point + HAND_MARKER_ALONG_MM * along + HAND_MARKER_OUT_MM * out
+        local = point + _hand_marker_local(along)
         markers[:, k] = joints[:, wj] + rot[:, wj] @ local
         grip = joints[:, wj] + rot[:, wj] @ (point + 45.0 * along)
         g, m = add(grip), add(markers[:, k])
@@ -449,6 +439,56 @@ def build_body(
         primitives=tuple(prims),
         markers_mm=markers,
     )
+
+
+def _forearm_rest(skeleton: Skeleton, rest_world: FloatArray, side: str) -> FloatArray:
+    """Unit direction elbow -> wrist at q = 0 (every joint frame is then parallel to the
+    world, so it is also the direction in the elbow's and the wrist's own frames)."""
+    ends = []
+    for c in (f"{side}_elbow", f"{side}_wrist"):
+        jname, point = skeleton.canonical[c]
+        j = skeleton.joint_index(jname)
+        ends.append(rest_world[j, :3, 3] + rest_world[j, :3, :3] @ np.asarray(point, float))
+    d = ends[1] - ends[0]
+    n = float(np.linalg.norm(d))
+    return d / n if n > 1e-6 else np.array([0.0, 0.0, -1.0])
+
+
+def _hand_marker_local(along: FloatArray) -> FloatArray:
+    """Hand marker offset from the wrist in the wrist frame (mm), for a rest forearm
+    direction ``along``: on the hand-held object, beyond the wrist along the forearm line
+    and out towards the rest pose's front."""
+    out = np.array([0.0, 1.0, 0.0]) - along[1] * along
+    out = out / max(float(np.linalg.norm(out)), 1e-9)
+    return HAND_MARKER_ALONG_MM * along + HAND_MARKER_OUT_MM * out
+
+
+def declared_marker_offsets(skeleton: Skeleton) -> dict[str, dict[str, object]]:
+    """The tracker markers' placement as a lab declares it in ``session.json``.
+
+    Each entry names the canonical joint the marker rides on and its offset (mm) in that
+    body part's anatomical frame: x to the subject's right, y forward, z up, with the body
+    in the anatomical position (standing, arms hanging, palms forward). The hand offsets
+    are turned from the skeleton's own rest pose (a T-pose for CMU skeletons) into that
+    position by the smallest rotation taking the rest forearm onto -z.
+    """
+    rest_world = forward_kinematics(skeleton, skeleton.zero_pose())
+    out: dict[str, dict[str, object]] = {
+        "head": {"segment": "head", "offset_mm": [0.0, HEAD_MARKER_FORWARD_MM, 0.0]}
+    }
+    down = np.array([0.0, 0.0, -1.0])
+    for side in ("left", "right"):
+        along = _forearm_rest(skeleton, rest_world, side)
+        axis = np.cross(along, down)
+        angle = float(np.arctan2(np.linalg.norm(axis), float(along @ down)))
+        n = float(np.linalg.norm(axis))
+        anat_from_rest = matrix_from_axis_angle(axis / n, angle) if n > 1e-9 else np.eye(3)
+        offset = anat_from_rest @ _hand_marker_local(along)
+        out[f"{side}_hand"] = {
+            "segment": f"{side}_wrist",
+            "offset_mm": [round(float(v), 3) for v in offset],
+        }
+    return out
 
 
 # ====================================================================== rasterisation

@@ -34,7 +34,7 @@ from mocapkit.io.motion import Motion
 from mocapkit.io.session import Truth, write_keypoints_csv, write_session_json, write_timestamps_csv
 from mocapkit.progress import Progress
 from mocapkit.skeleton.model import PRISMATIC
-from mocapkit.skeleton.scaling import scale_skeleton, standing_height_mm
+from mocapkit.skeleton.scaling import scale_skeleton, segment_lengths_mm, standing_height_mm
 from mocapkit.synth.realism import (
     RealismOptions,
     corrupt_markers,
@@ -48,6 +48,7 @@ from mocapkit.synth.render import (
     Appearance,
     CameraRenderer,
     build_body,
+    declared_marker_offsets,
     interpolate_tracks,
 )
 from mocapkit.synth.rigs import make_rig
@@ -341,8 +342,12 @@ def synthesize_session(
     info = {
         "subject": {
             "height_mm": round(float(np.clip(height, 500, 2800)), 1),
-            "bone_lengths_mm": {},
+            # measured on the motion's own skeleton, as a lab measures its subject
+            "bone_lengths_mm": {
+                k: round(v, 1) for k, v in segment_lengths_mm(motion.skeleton).items()
+            },
         },
+        "marker_offsets_mm": declared_marker_offsets(motion.skeleton),
         "cameras": "cameras.json",
         "marker_sets": {s: [s] for s in TRACKER_SETS},
         "reference_markers": list(REFERENCE_MARKERS),

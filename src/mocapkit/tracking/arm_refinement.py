@@ -27,7 +27,7 @@ projected axis by ``r f / z``. End caps are not part of the outline.
 
 Optimiser. The cost is compiled with Numba (one-arm FK from the fixed parent
 transform, projection with the camera's K and OpenCV distortion, bilinear look-up).
-The simplex search is `nelder_mead_nb`, a Numba transcription of SciPy's
+The simplex search is `nelder_mead_arm_nb`, a Numba transcription of SciPy's
 ``minimize(method="Nelder-Mead")`` (non-adaptive coefficients, bounds by clipping,
 the same stopping tests on ``xatol``/``fatol``/``maxfev``), tested to give SciPy's
 iterates on smooth functions. It exists because SciPy's pure-Python loop costs
@@ -140,7 +140,7 @@ class RefineConfig:
         Left and right hand effector in the hand joint's frame (the point IK puts on the
         hand target, `mocapkit.ik.sdls.Effector.point_mm`; the origin is the wrist).
     solver : {"numba", "scipy"}
-        `nelder_mead_nb` or `scipy.optimize.minimize(method="Nelder-Mead")`.
+        `nelder_mead_arm_nb` or `scipy.optimize.minimize(method="Nelder-Mead")`.
     swivel_scan_rad : float
         Half-range of the 1-D swivel scan that seeds the simplex (0 disables it and
         runs the paper's plain search from the IK pose).
@@ -423,9 +423,7 @@ def cone_contour_generators_nb(
 
 
 @numba.njit(cache=True)
-def _segment_outlines_nb(
-    x: FloatArray, geo: FloatArray, lines: FloatArray, eff: FloatArray
-) -> int:
+def _segment_outlines_nb(x: FloatArray, geo: FloatArray, lines: FloatArray, eff: FloatArray) -> int:
     """Contour generators of the arm cones in CAMERA coordinates.
 
     Writes ``lines`` (n_seg, 2, 2, 3): per segment, per side, the ruling's start and
@@ -696,23 +694,199 @@ def _sort_simplex(sim: FloatArray, fsim: FloatArray) -> None:
     row = np.empty(sim.shape[1])
     for i in range(1, n):
         f = fsim[i]
-        row[:] = sim[i]
+        _row_to(sim, i, row)
         j = i - 1
         while j >= 0 and fsim[j] > f:
             fsim[j + 1] = fsim[j]
-            sim[j + 1] = sim[j]
+            _row_to(sim, j, sim[j + 1])
             j -= 1
         fsim[j + 1] = f
-        sim[j + 1] = row
+        _to_row(row, sim, j + 1)
 
 
-@numba.njit(cache=True, inline="always")
+# Element loops for the row copies of the simplex: slice assignment (``a[:] = b``)
+# compiles to a broadcasting check with a formatted error path, several times the
+# code of the loop, in every one of the dozen places the search copies a vertex.
+@numba.njit(cache=True)
+def _row_to(m: FloatArray, i: int, out: FloatArray) -> None:
+    """``out[:] = m[i]``."""
+    for j in range(out.shape[0]):
+        out[j] = m[i, j]
+
+
+@numba.njit(cache=True)
+def _to_row(v: FloatArray, m: FloatArray, i: int) -> None:
+    """``m[i] = v``."""
+    for j in range(v.shape[0]):
+        m[i, j] = v[j]
+
+
+@numba.njit(cache=True)
+def _vec_to(v: FloatArray, out: FloatArray) -> None:
+    """``out[:] = v``."""
+    for j in range(v.shape[0]):
+        out[j] = v[j]
+
+
+@numba.njit(cache=True)
 def _clip(x: FloatArray, lb: FloatArray, ub: FloatArray) -> None:
     for i in range(x.shape[0]):
         x[i] = min(max(x[i], lb[i]), ub[i])
 
 
-@numba.njit(cache=True)
+# Caching. A jitted function that receives another dispatcher as an argument cannot
+# be cached: the dispatcher's type differs in every process, so Numba saves a new
+# entry each run and never finds it again (numba issue #9237), and a cached caller
+# that passes one is refused as "uses dynamic globals". The simplex logic therefore
+# lives once, in `_nelder_mead_core`, inlined at the IR level (``inline="always"``)
+# into each caller before typing: there the cost argument is just the caller's
+# module-level global. `nelder_mead_arm_nb` (production, the arm cost) has a plain
+# signature and is cached; `nelder_mead_nb` (any cost, for tests against SciPy)
+# cannot be and is compiled per process.
+
+
+@numba.njit(inline="always")
+def _nelder_mead_core(
+    fun: Any,
+    a: Any,
+    b: Any,
+    initial_simplex: FloatArray,
+    lb: FloatArray,
+    ub: FloatArray,
+    xatol: float,
+    fatol: float,
+    maxfev: int,
+) -> tuple[FloatArray, float, int, int, bool]:
+    """Downhill simplex with SciPy's semantics; see `nelder_mead_nb` (never called from Python).
+
+    Scalar loops throughout: NumPy array expressions here multiply the generated code
+    (and compile time) several-fold. Each loop computes, element by element, the same
+    expression in the same order as the SciPy line it transcribes (quoted), so the
+    iterates are bit-identical.
+    """
+    rho = 1.0
+    chi = 2.0
+    psi = 0.5
+    sigma = 0.5
+    n = initial_simplex.shape[1]
+    sim = initial_simplex.copy()
+    # SciPy: reflect vertices above the upper bound into the interior, then clip
+    for i in range(n + 1):
+        for j in range(n):
+            if sim[i, j] > ub[j]:
+                sim[i, j] = 2.0 * ub[j] - sim[i, j]
+            sim[i, j] = min(max(sim[i, j], lb[j]), ub[j])
+    fsim = np.full(n + 1, np.inf)
+    xt = np.empty(n)  # SciPy hands the cost a copy of the point
+    nfev = 0
+    for k in range(n + 1):
+        if nfev >= maxfev:
+            break
+        _row_to(sim, k, xt)
+        fsim[k] = fun(xt, a, b)
+        nfev += 1
+    _sort_simplex(sim, fsim)
+    iterations = 1
+    converged = False
+    xbar = np.empty(n)
+    xr = np.empty(n)
+    xe = np.empty(n)
+    xc = np.empty(n)
+    while nfev < maxfev:
+        # convergence test, as SciPy's: max |sim[1:] - sim[0]| <= xatol and
+        # max |fsim[0] - fsim[1:]| <= fatol
+        dx = 0.0
+        df = 0.0
+        for i in range(1, n + 1):
+            for j in range(n):
+                dx = max(dx, abs(sim[i, j] - sim[0, j]))
+            df = max(df, abs(fsim[0] - fsim[i]))
+        if dx <= xatol and df <= fatol:
+            converged = True
+            break
+        # "xbar = np.add.reduce(sim[:-1], 0) / N": row after row, as NumPy's axis-0 reduce
+        for j in range(n):
+            acc = sim[0, j]
+            for i in range(1, n):
+                acc += sim[i, j]
+            xbar[j] = acc / n
+        # "xr = (1 + rho) * xbar - rho * sim[-1]"
+        for j in range(n):
+            xr[j] = (1 + rho) * xbar[j] - rho * sim[n, j]
+        _clip(xr, lb, ub)
+        _vec_to(xr, xt)
+        fxr = fun(xt, a, b)
+        nfev += 1
+        doshrink = False
+        if fxr < fsim[0]:
+            if nfev >= maxfev:
+                break
+            # "xe = (1 + rho * chi) * xbar - rho * chi * sim[-1]"
+            for j in range(n):
+                xe[j] = (1 + rho * chi) * xbar[j] - rho * chi * sim[n, j]
+            _clip(xe, lb, ub)
+            _vec_to(xe, xt)
+            fxe = fun(xt, a, b)
+            nfev += 1
+            if fxe < fxr:
+                _to_row(xe, sim, n)
+                fsim[n] = fxe
+            else:
+                _to_row(xr, sim, n)
+                fsim[n] = fxr
+        elif fxr < fsim[n - 1]:
+            _to_row(xr, sim, n)
+            fsim[n] = fxr
+        else:
+            if nfev >= maxfev:
+                break
+            if fxr < fsim[n]:
+                # outside contraction: "xc = (1 + psi * rho) * xbar - psi * rho * sim[-1]"
+                for j in range(n):
+                    xc[j] = (1 + psi * rho) * xbar[j] - psi * rho * sim[n, j]
+                _clip(xc, lb, ub)
+                _vec_to(xc, xt)
+                fxc = fun(xt, a, b)
+                nfev += 1
+                if fxc <= fxr:
+                    _to_row(xc, sim, n)
+                    fsim[n] = fxc
+                else:
+                    doshrink = True
+            else:
+                # inside contraction: "xcc = (1 - psi) * xbar + psi * sim[-1]"
+                for j in range(n):
+                    xc[j] = (1 - psi) * xbar[j] + psi * sim[n, j]
+                _clip(xc, lb, ub)
+                _vec_to(xc, xt)
+                fxcc = fun(xt, a, b)
+                nfev += 1
+                if fxcc < fsim[n]:
+                    _to_row(xc, sim, n)
+                    fsim[n] = fxcc
+                else:
+                    doshrink = True
+            if doshrink:
+                for i in range(1, n + 1):
+                    # "sim[j] = sim[0] + sigma * (sim[j] - sim[0])", then clipped
+                    for j in range(n):
+                        sim[i, j] = sim[0, j] + sigma * (sim[i, j] - sim[0, j])
+                    _clip(sim[i], lb, ub)
+                    if nfev >= maxfev:
+                        # SciPy: the vertex has moved but its value is stale
+                        break
+                    _row_to(sim, i, xt)
+                    fsim[i] = fun(xt, a, b)
+                    nfev += 1
+        iterations += 1
+        _sort_simplex(sim, fsim)
+    _sort_simplex(sim, fsim)
+    return sim[0].copy(), fsim[0], nfev, iterations, converged
+
+
+# not cache=True: a dispatcher argument defeats the on-disk cache (notes above) and
+# would only add a new cache entry per process
+@numba.njit
 def nelder_mead_nb(
     fun: Any,
     a: Any,
@@ -725,6 +899,10 @@ def nelder_mead_nb(
     maxfev: int,
 ) -> tuple[FloatArray, float, int, int, bool]:
     """Downhill simplex with SciPy's semantics (``adaptive=False``, bounds by clipping).
+
+    Generic in the cost; compiled anew in every process (a function argument defeats
+    Numba's cache). The arm refinement uses `nelder_mead_arm_nb`, the same search on
+    `arm_cost_nb`, which is cached.
 
     Parameters
     ----------
@@ -749,106 +927,37 @@ def nelder_mead_nb(
     converged : bool
         Stopped on the tolerances.
     """
-    rho = 1.0
-    chi = 2.0
-    psi = 0.5
-    sigma = 0.5
-    n = initial_simplex.shape[1]
-    sim = initial_simplex.copy()
-    # SciPy: reflect vertices above the upper bound into the interior, then clip
-    for i in range(n + 1):
-        for j in range(n):
-            if sim[i, j] > ub[j]:
-                sim[i, j] = 2.0 * ub[j] - sim[i, j]
-            sim[i, j] = min(max(sim[i, j], lb[j]), ub[j])
-    fsim = np.full(n + 1, np.inf)
-    nfev = 0
-    for k in range(n + 1):
-        if nfev >= maxfev:
-            break
-        fsim[k] = fun(sim[k].copy(), a, b)
-        nfev += 1
-    _sort_simplex(sim, fsim)
-    iterations = 1
-    converged = False
-    xbar = np.empty(n)
-    xr = np.empty(n)
-    xe = np.empty(n)
-    xc = np.empty(n)
-    while nfev < maxfev:
-        # convergence test, as SciPy's: max |sim[1:] - sim[0]| <= xatol and
-        # max |fsim[0] - fsim[1:]| <= fatol
-        dx = 0.0
-        df = 0.0
-        for i in range(1, n + 1):
-            for j in range(n):
-                dx = max(dx, abs(sim[i, j] - sim[0, j]))
-            df = max(df, abs(fsim[0] - fsim[i]))
-        if dx <= xatol and df <= fatol:
-            converged = True
-            break
-        # centroid of all but the worst (same summation order as np.add.reduce)
-        xbar[:] = sim[0]
-        for i in range(1, n):
-            xbar += sim[i]
-        xbar /= n
-        xr[:] = (1 + rho) * xbar - rho * sim[-1]
-        _clip(xr, lb, ub)
-        fxr = fun(xr.copy(), a, b)
-        nfev += 1
-        doshrink = False
-        if fxr < fsim[0]:
-            if nfev >= maxfev:
-                break
-            xe[:] = (1 + rho * chi) * xbar - rho * chi * sim[-1]
-            _clip(xe, lb, ub)
-            fxe = fun(xe.copy(), a, b)
-            nfev += 1
-            if fxe < fxr:
-                sim[-1] = xe
-                fsim[-1] = fxe
-            else:
-                sim[-1] = xr
-                fsim[-1] = fxr
-        elif fxr < fsim[-2]:
-            sim[-1] = xr
-            fsim[-1] = fxr
-        else:
-            if nfev >= maxfev:
-                break
-            if fxr < fsim[-1]:  # outside contraction
-                xc[:] = (1 + psi * rho) * xbar - psi * rho * sim[-1]
-                _clip(xc, lb, ub)
-                fxc = fun(xc.copy(), a, b)
-                nfev += 1
-                if fxc <= fxr:
-                    sim[-1] = xc
-                    fsim[-1] = fxc
-                else:
-                    doshrink = True
-            else:  # inside contraction
-                xc[:] = (1 - psi) * xbar + psi * sim[-1]
-                _clip(xc, lb, ub)
-                fxcc = fun(xc.copy(), a, b)
-                nfev += 1
-                if fxcc < fsim[-1]:
-                    sim[-1] = xc
-                    fsim[-1] = fxcc
-                else:
-                    doshrink = True
-            if doshrink:
-                for j in range(1, n + 1):
-                    sim[j] = sim[0] + sigma * (sim[j] - sim[0])
-                    _clip(sim[j], lb, ub)
-                    if nfev >= maxfev:
-                        # SciPy: the vertex has moved but its value is stale
-                        break
-                    fsim[j] = fun(sim[j].copy(), a, b)
-                    nfev += 1
-        iterations += 1
-        _sort_simplex(sim, fsim)
-    _sort_simplex(sim, fsim)
-    return sim[0].copy(), fsim[0], nfev, iterations, converged
+    return _nelder_mead_core(fun, a, b, initial_simplex, lb, ub, xatol, fatol, maxfev)
+
+
+@numba.njit(cache=True)
+def nelder_mead_arm_nb(
+    geo: FloatArray,
+    dmap: NDArray[np.float32],
+    initial_simplex: FloatArray,
+    lb: FloatArray,
+    ub: FloatArray,
+    xatol: float,
+    fatol: float,
+    maxfev: int,
+) -> tuple[FloatArray, float, int, int, bool]:
+    """`nelder_mead_nb` on `arm_cost_nb` (eq. 14) of one arm, cached on disk.
+
+    Parameters
+    ----------
+    geo : ndarray, shape (102,)
+        Packed arm geometry (`ArmProblem.geo`).
+    dmap : ndarray of float32, shape (H, W)
+        Truncated edge distance map of the arm's RoI, px.
+    initial_simplex, lb, ub, xatol, fatol, maxfev
+        As `nelder_mead_nb`, with ``N = 4`` (rad).
+
+    Returns
+    -------
+    x, fx, nfev, nit, converged
+        As `nelder_mead_nb`.
+    """
+    return _nelder_mead_core(arm_cost_nb, geo, dmap, initial_simplex, lb, ub, xatol, fatol, maxfev)
 
 
 # ------------------------------------------------------------------ Python side
@@ -1024,9 +1133,7 @@ def pack_arm_geometry(
     return geo
 
 
-def arm_roi(
-    skeleton: Skeleton, camera: Camera, world: FloatArray, side: str, pad_px: float
-) -> Roi:
+def arm_roi(skeleton: Skeleton, camera: Camera, world: FloatArray, side: str, pad_px: float) -> Roi:
     """Bounding box of the projected shoulder, elbow, wrist and hand end, padded (§5.2, Fig. 5)."""
     idx = [skeleton.joint_index(n) for n in arm_joint_names(side)]
     return roi_around_points(camera.project(world[idx, :3, 3]), camera.image_size, pad_px)
@@ -1099,8 +1206,13 @@ def solve_arm(problem: ArmProblem, config: RefineConfig) -> tuple[FloatArray, Ar
     start, n_scan = x0, 0
     if config.swivel_scan_rad > 0 and config.swivel_scan_steps > 1:
         start, _f, n_scan = swivel_scan_nb(
-            x0, problem.geo, dmap, config.swivel_scan_rad, config.swivel_scan_steps,
-            problem.lower, problem.upper,
+            x0,
+            problem.geo,
+            dmap,
+            config.swivel_scan_rad,
+            config.swivel_scan_steps,
+            problem.lower,
+            problem.upper,
         )
     sim = initial_simplex(start, config.simplex_step_rad)
     if config.solver == "scipy":
@@ -1122,9 +1234,15 @@ def solve_arm(problem: ArmProblem, config: RefineConfig) -> tuple[FloatArray, Ar
         x = np.asarray(res.x, dtype=float)
         nfev, nit, conv = int(res.nfev), int(res.nit), bool(res.status == 0)
     else:
-        x, _fx, nfev, nit, conv = nelder_mead_nb(
-            arm_cost_nb, problem.geo, dmap, sim, problem.lower, problem.upper,
-            config.xatol, config.fatol, config.maxfev,
+        x, _fx, nfev, nit, conv = nelder_mead_arm_nb(
+            problem.geo,
+            dmap,
+            sim,
+            problem.lower,
+            problem.upper,
+            config.xatol,
+            config.fatol,
+            config.maxfev,
         )
     diag.refined = True
     diag.cost_after = problem.cost(x)
@@ -1272,6 +1390,7 @@ __all__ = [
     "arm_roi",
     "cone_contour_generators_nb",
     "initial_simplex",
+    "nelder_mead_arm_nb",
     "nelder_mead_nb",
     "pack_arm_geometry",
     "project_points_nb",

@@ -33,6 +33,7 @@ from mocapkit.errors import ShapeError, unknown_name
 from mocapkit.ik.sdls import Effector, IKConfig, SDLSSolver
 from mocapkit.skeleton.kinematics import canonical_positions
 from mocapkit.skeleton.model import PRISMATIC, Skeleton
+from mocapkit.tracking.arm_refinement import RefineConfig, refine_arms
 from mocapkit.tracking.balance import (
     BalanceConfig,
     BalanceModel,
@@ -89,6 +90,10 @@ class HybridConfig:
         After smoothing, effectors further than this from their markers are put back
         by IK. A tolerance near the marker noise keeps the smoothing (a tight one would
         re-inject the noise into the redundant DoFs, e.g. the elbow swivel).
+    replant_mm : float
+        With planted feet: when a marker effector stays further than this off its
+        marker, the subject has stepped; the feet are put down again under the new
+        pose (0 keeps them where they started, as the paper does).
     plant_feet : bool
         Hold the feet at their initial positions (the paper's assumption). Set False
         for takes where the subject walks; the feet are then free (no foot effector)
@@ -107,6 +112,7 @@ class HybridConfig:
     init_iterations: int = 3
     plant_feet: bool = True
     smoothing_polish_tol_mm: float = 5.0
+    replant_mm: float = 15.0
 
     def __post_init__(self) -> None:
         if not self.gap_limit_s >= 0:
@@ -298,11 +304,27 @@ class HybridTracker:
             Effector("right_foot", "r_foot"),
         ]
         self.solver = SDLSSolver(skeleton, effectors, self.config.ik)
-        polish_cfg = replace(self.config.ik, secondary_gain=0.0, min_iterations=0,
-                             tol_mm=self.config.smoothing_polish_tol_mm)
+        polish_cfg = replace(
+            self.config.ik,
+            secondary_gain=0.0,
+            min_iterations=0,
+            tol_mm=self.config.smoothing_polish_tol_mm,
+        )
         self._polish = SDLSSolver(skeleton, effectors, polish_cfg)
-        self._refiner = refiner
-        self._refiner_looked_up = refiner is not None
+        self._refiner: Refiner = refine_arms if refiner is None else refiner
+        # the refiner's hand penalty must pull towards the same points the IK places on
+        # the markers, offsets included
+        base = self.config.refine_config or RefineConfig()
+        self._refine_config = base
+        if isinstance(base, RefineConfig) and "left_hand" in effs and "right_hand" in effs:
+            lp, rp = effs["left_hand"].point_mm, effs["right_hand"].point_mm
+            self._refine_config = replace(
+                base,
+                effector_points_mm=(
+                    (float(lp[0]), float(lp[1]), float(lp[2])),
+                    (float(rp[0]), float(rp[1]), float(rp[2])),
+                ),
+            )
         self._initial_q = None if initial_q is None else np.asarray(initial_q, dtype=float)
         self._q: FloatArray | None = None
         self._feet: FloatArray | None = None
@@ -311,21 +333,14 @@ class HybridTracker:
         self._balance_model: BalanceModel | None = None
         self._tracks = {n: _Track() for n in self.marker_sets}
         self._filter: OneEuroFilter | None = None
-        #: Log of gap events: (time_s, marker set, "bridging" | "released" | "recovered").
+        #: Log of events: (time_s, marker set or "feet",
+        #: "bridging" | "released" | "recovered" | "replanted").
         self.events: list[tuple[float, str, str]] = []
 
     # ------------------------------------------------------------------ pieces
 
-    def refiner(self) -> Refiner | None:
-        """The video refinement in use (looked up once), or None."""
-        if not self._refiner_looked_up:
-            self._refiner_looked_up = True
-            try:
-                from mocapkit.tracking.arm_refinement import refine_arms
-            except ImportError:
-                self._refiner = None
-            else:
-                self._refiner = refine_arms
+    def refiner(self) -> Refiner:
+        """The video refinement in use (`refine_arms` unless another was given)."""
         return self._refiner
 
     def _targets(self, sample: HybridSample) -> tuple[FloatArray, list[str], list[str]]:
@@ -373,13 +388,16 @@ class HybridTracker:
         return targets, bridged, released
 
     def initial_pose(self, targets: FloatArray) -> FloatArray:
-        """Relaxed pose with the pelvis below the head marker and facing from the hands.
+        """Relaxed pose with the pelvis below the head marker, facing the camera.
 
         Root x, y put the model's head over the head marker; the root height stays at
         the model's standing height (feet on the floor z = 0 of a scaled model). With
-        the ``root_yaw`` DoF, the yaw makes the body's right (+X at rest) point from the
-        left-hand to the right-hand marker, projected horizontally (the hands are
-        roughly symmetric about the sagittal plane at the start of a take).
+        the ``root_yaw`` DoF the subject is assumed to start facing the camera, as in
+        the paper's set-up (the camera stands in front of the player): the body's
+        front (+Y at rest) points horizontally from the head marker to the camera.
+        Without a camera the body's right (+X at rest) points from the left-hand to
+        the right-hand marker (hands roughly symmetric about the sagittal plane), which
+        is ambiguous when the arms cross or one is raised; pass ``initial_q`` then.
         """
         sk = self.skeleton
         q = (
@@ -390,7 +408,17 @@ class HybridTracker:
         if self._initial_q is not None:
             return np.clip(q, sk.lower, sk.upper)
         names = list(self.marker_sets)
-        if "root_yaw" in sk.dof_names and "left_hand" in names and "right_hand" in names:
+        head_target = targets[names.index("head")] if "head" in names else np.full(3, np.nan)
+        if (
+            "root_yaw" in sk.dof_names
+            and self.camera is not None
+            and np.all(np.isfinite(head_target))
+        ):
+            front = self.camera.center_in_world - head_target
+            if np.hypot(front[0], front[1]) > 1e-6:
+                # R_z(yaw) @ (0, 1, 0) = (-sin yaw, cos yaw) must point along ``front``
+                q[sk.dof_index("root_yaw")] = math.atan2(-front[0], front[1])
+        elif "root_yaw" in sk.dof_names and "left_hand" in names and "right_hand" in names:
             lh, rh = targets[names.index("left_hand")], targets[names.index("right_hand")]
             if np.all(np.isfinite(lh)) and np.all(np.isfinite(rh)):
                 right = rh - lh
@@ -401,6 +429,39 @@ class HybridTracker:
             q[0] += targets[names.index("head"), 0] - head_now[0]
             q[1] += targets[names.index("head"), 1] - head_now[1]
         return np.clip(q, sk.lower, sk.upper)
+
+    def _replant_if_stepped(
+        self,
+        q: FloatArray,
+        targets: FloatArray,
+        marker_residual_mm: FloatArray,
+        sample: HybridSample,
+    ) -> tuple[FloatArray, int]:
+        """Move the planted feet when they keep head or hands off their markers.
+
+        The paper holds the feet where they started (§3); a subject who steps or turns
+        then drags head and hands away from their markers. When an active marker
+        effector stays more than ``replant_mm`` off after the solve, the frame is solved
+        again with the feet free, the feet are put down where that pose has them (at
+        their floor height) and held there from now on. Returns the pose and the extra
+        iterations.
+        """
+        assert self._feet is not None
+        n = len(self.marker_sets)
+        worst = np.nanmax(marker_residual_mm) if np.any(np.isfinite(marker_residual_mm)) else 0.0
+        if not worst > self.config.replant_mm:
+            return q, 0
+        free = targets.copy()
+        free[n:] = np.nan
+        res_free = self.solver.solve(q, free)
+        feet = self.solver.effector_positions(res_free.q)[n:]
+        feet[:, 2] = self._feet[:, 2]  # stay on the floor
+        self._feet = feet
+        self._support = support_points(self.skeleton, res_free.q)
+        targets[n:] = feet
+        res = self.solver.solve(res_free.q, targets)
+        self.events.append((sample.time_s, "feet", "replanted"))
+        return res.q, res_free.iterations + res.iterations
 
     # ------------------------------------------------------------------ update
 
@@ -439,6 +500,9 @@ class HybridTracker:
             res = self.solver.solve(self._q, targets)
             q = res.q
             iterations += res.iterations
+            if self.config.plant_feet and self.config.replant_mm > 0 and not self.config.paper:
+                q, extra = self._replant_if_stepped(q, targets, res.residual_mm[:n], sample)
+                iterations += extra
         refined = False
         ref = (
             self.refiner()
@@ -452,7 +516,7 @@ class HybridTracker:
                 if name in ("left_hand", "right_hand") and np.all(np.isfinite(targets[i]))
             }
             q = np.asarray(
-                ref(sk, self.camera, q, sample.image, hands, self.config.refine_config), dtype=float
+                ref(sk, self.camera, q, sample.image, hands, self._refine_config), dtype=float
             )
             sk.check_q(q, "refiner output")
             refined = True

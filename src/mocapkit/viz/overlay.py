@@ -52,7 +52,8 @@ def segment_silhouettes(
     world = forward_kinematics(skeleton, qa)
     if joints is None:
         idx = [
-            j for j in range(skeleton.n_joints)
+            j
+            for j in range(skeleton.n_joints)
             if skeleton.bone_length_mm[j] > 0 and skeleton.radii_mm[j].max() > 0
         ]
     else:

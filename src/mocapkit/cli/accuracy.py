@@ -1,0 +1,54 @@
+"""``mocapkit accuracy``: a tracker's accuracy on sessions rendered from real motion clips."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from mocapkit.errors import SessionError
+from mocapkit.pipelines.accuracy import format_rows, hybrid_accuracy, summary, to_json
+from mocapkit.pipelines.demo import find_shared_data
+
+
+def register(subparsers: Any) -> None:
+    """Add ``accuracy hybrid``."""
+    p = subparsers.add_parser(
+        "accuracy",
+        help="render sessions from real motion clips, track them and report the accuracy",
+    )
+    methods = p.add_subparsers(dest="method", metavar="METHOD")
+    methods.required = True
+    h = methods.add_parser(
+        "hybrid",
+        help="elbow and upper-body errors of the hybrid tracker, IK only and with video",
+    )
+    h.add_argument("--mocap", help="folder of motion clips (default: ../shared/data/mocap)")
+    h.add_argument("--clips", nargs="*", help="clip file names (default: the standard set)")
+    h.add_argument("--work", default="accuracy-output", help="folder for sessions and results")
+    h.add_argument("--seed", type=int, default=0)
+    h.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    h.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the accuracy study and print it."""
+    mocap = args.mocap
+    if mocap is None:
+        data = find_shared_data()
+        if data is None:
+            raise SessionError("no --mocap folder given and ../shared/data/mocap not found")
+        mocap = data / "mocap"
+    say = (lambda _line: None) if args.json else print
+    if not args.json:
+        print(format_rows([]))
+    rows = hybrid_accuracy(mocap, args.work, args.clips, args.seed, say=say)
+    if args.json:
+        print(to_json(rows))
+    else:
+        s = summary(rows)
+        print(
+            f"mean: elbow {s['elbow_ik_mm']:.1f} -> {s['elbow_video_mm']:.1f} mm "
+            f"({s['elbow_reduction']:.0%} less with video); upper-body MPJPE "
+            f"{s['mpjpe_ik_mm']:.1f} -> {s['mpjpe_video_mm']:.1f} mm"
+        )
+    return 0

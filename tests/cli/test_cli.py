@@ -1,0 +1,100 @@
+"""The ``mocapkit`` entry point: subcommand discovery, refusals with exit code 2, the demo."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+from mocapkit.cli.main import main
+
+SUBCOMMANDS = ("calibrate", "synth", "eval", "track", "bench", "demo")
+
+
+def test_help_lists_every_subcommand(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    # the subcommand column of argparse's help: "    NAME   help text" (help may wrap)
+    listed = set(re.findall(r"^ {4}(\w+)(?:\s|$)", out, flags=re.MULTILINE))
+    missing = [name for name in SUBCOMMANDS if name not in listed]
+    assert not missing, f"mocapkit --help does not list {missing}:\n{out}"
+
+
+def test_track_help_lists_hybrid(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit):
+        main(["track", "--help"])
+    assert re.search(r"^ {4}hybrid\s", capsys.readouterr().out, flags=re.MULTILINE)
+
+
+def test_unknown_subcommand_is_a_usage_error(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["dance"])
+    assert exc.value.code == 2
+    assert "invalid choice: 'dance'" in capsys.readouterr().err
+
+
+def test_track_hybrid_needs_session_or_markers(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    assert main(["track", "hybrid", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert "mocapkit track: error:" in err
+    assert "expected a SESSION folder or --markers FILE, found neither" in err
+    assert "Traceback" not in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_track_hybrid_refuses_both_session_and_markers(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    args = ["track", "hybrid", str(tmp_path), "--markers", str(tmp_path / "m.c3d")]
+    assert main([*args, "--out", str(tmp_path / "out")]) == 2
+    assert "either a SESSION folder or --markers FILE, not both" in capsys.readouterr().err
+
+
+def test_eval_missing_result_names_the_path(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    missing = tmp_path / "no_such_result"
+    assert main(["eval", str(missing), "--truth", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("mocapkit eval: error:")
+    assert str(missing) in err and "not found" in err
+
+
+def test_eval_missing_truth_session_names_the_path(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    result = tmp_path / "result"
+    result.mkdir()
+    (result / "joints.csv").write_text("time_s,head_x_mm,head_y_mm,head_z_mm\n0.0,1,2,3\n")
+    missing = tmp_path / "no_such_session"
+    assert main(["eval", str(result), "--truth", str(missing)]) == 2
+    err = capsys.readouterr().err
+    assert str(missing) in err and "session folder not found" in err
+
+
+def test_demo_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out), "--seconds", "1"]) == 0
+    text = capsys.readouterr().out
+    rows = {}
+    for title in ("elbow error", "MPJPE", "PA-MPJPE"):
+        m = re.search(rf"^{title}\s+(\d+\.\d)\s+(\d+\.\d)$", text, flags=re.MULTILINE)
+        assert m, f"no {title!r} row in the demo's table:\n{text}"
+        rows[title] = (float(m.group(1)), float(m.group(2)))
+    assert re.search(r"^coverage\s+100%\s+100%$", text, flags=re.MULTILINE), text
+    # plausible upper-body errors (mm) for a tracker driven by head and hand markers:
+    # not zero (it is not reading the truth) and far below a body length
+    for ik_only, with_video in rows.values():
+        assert 1.0 < ik_only < 400.0 and 1.0 < with_video < 400.0
+    for sub in ("result_ik_only", "result_with_video"):
+        for name in ("motion.npz", "joints.csv", "motion.bvh"):
+            assert (out / sub / name).is_file(), f"{sub}/{name} missing"
+    for name in ("session.json", "cameras.json", "markers.csv", "truth.npz"):
+        assert (out / "session" / name).is_file(), f"session/{name} missing"
+    assert (out / "session" / "video" / "mono.mp4").is_file()
+    assert f"open {out / 'result_with_video' / 'motion.bvh'} in Blender" in text

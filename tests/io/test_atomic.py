@@ -1,0 +1,78 @@
+"""atomic_write: a failed write keeps the previous file and leaves no temporary behind."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mocapkit.io.atomic import atomic_save_npz, atomic_write
+
+
+class WriterCrash(RuntimeError):
+    pass
+
+
+def test_failed_text_write_keeps_old_file_and_no_temp(tmp_path: Path) -> None:
+    target = tmp_path / "joints.csv"
+    target.write_text("old contents\n")
+    with pytest.raises(WriterCrash), atomic_write(target, "w") as fh:
+        fh.write("new header\n")
+        fh.write("half a row,")
+        fh.flush()
+        raise WriterCrash("disk full half way")
+    assert target.read_text() == "old contents\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["joints.csv"]
+
+
+def test_failed_binary_write_of_new_file_leaves_nothing(tmp_path: Path) -> None:
+    target = tmp_path / "sub" / "motion.npz"
+    with pytest.raises(WriterCrash), atomic_write(target, "wb") as fh:
+        fh.write(b"\x00" * 1000)
+        raise WriterCrash
+    assert not target.exists()
+    assert list((tmp_path / "sub").iterdir()) == []
+
+
+def test_interrupt_also_cleans_up(tmp_path: Path) -> None:
+    target = tmp_path / "a.txt"
+    target.write_text("keep")
+    with pytest.raises(KeyboardInterrupt), atomic_write(target) as fh:
+        fh.write("partial")
+        raise KeyboardInterrupt
+    assert target.read_text() == "keep"
+    assert [p.name for p in tmp_path.iterdir()] == ["a.txt"]
+
+
+def test_success_replaces_and_creates_folder(tmp_path: Path) -> None:
+    target = tmp_path / "new" / "out.txt"
+    with atomic_write(target, "w") as fh:
+        fh.write("é")
+    assert target.read_text(encoding="utf-8") == "é"
+    with atomic_write(target, "w") as fh:
+        fh.write("second")
+    assert target.read_text() == "second"
+    assert [p.name for p in target.parent.iterdir()] == ["out.txt"]
+
+
+def test_failed_npz_save_keeps_old_file(tmp_path: Path) -> None:
+    target = tmp_path / "truth.npz"
+    atomic_save_npz(target, a=np.arange(3))
+
+    class Unsaveable:
+        def __array__(self, dtype: object = None, copy: object = None) -> np.ndarray:
+            raise WriterCrash("cannot convert")
+
+    with pytest.raises(WriterCrash):
+        atomic_save_npz(target, a=np.arange(5), b=Unsaveable())
+    with np.load(target) as data:
+        np.testing.assert_array_equal(data["a"], np.arange(3))
+    assert [p.name for p in tmp_path.iterdir()] == ["truth.npz"]
+
+
+def test_bad_mode_refused(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match=r"mode must be 'w' or 'wb', found 'a'"):
+        with atomic_write(tmp_path / "x", "a"):
+            pass
+    assert list(tmp_path.iterdir()) == []
