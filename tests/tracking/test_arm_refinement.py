@@ -15,6 +15,7 @@ from mocapkit.errors import ShapeError, UnknownNameError
 from mocapkit.skeleton import joint_positions, load_preset
 from mocapkit.tracking.arm_refinement import (
     SIDES,
+    ArmDiagnostics,
     RefineConfig,
     arm_cost_nb,
     arm_joint_names,
@@ -61,7 +62,7 @@ CAMERA = Camera(
 def _render(q: np.ndarray) -> np.ndarray:
     rng = np.random.default_rng(7)
     bg = (rng.normal(0, 1, (480, 640, 3)) * 12 + 170).clip(0, 255).astype(np.uint8)
-    bg = cv2.GaussianBlur(bg, (0, 0), 2)  # lightly textured background
+    bg = np.asarray(cv2.GaussianBlur(bg, (0, 0), 2), dtype=np.uint8)  # light texture
     colours = {n: (40, 60, 200) for n in ("l_humerus", "l_radius", "l_hand")}
     colours.update({n: (200, 80, 40) for n in ("r_humerus", "r_radius", "r_hand")})
     return draw_body(bg, SKEL, CAMERA, q, colours, default_colour=(90, 120, 90))
@@ -200,7 +201,7 @@ def test_refinement_recovers_a_perturbed_swivel(scene, deg):
     q, img, targets = scene
     for side in SIDES:
         start = swivel_arm(SKEL, q, side, math.radians(deg))
-        diag = {}
+        diag: dict[str, ArmDiagnostics] = {}
         refined = refine_arms(SKEL, CAMERA, start, img, targets, RefineConfig(), diagnostics=diag)
         assert abs(_swivel_deg(q, refined, side)) < 2.0
         d = diag[side]
@@ -216,7 +217,7 @@ def test_plain_paper_search_and_scipy_solver(scene):
     start = swivel_arm(SKEL, q, "right", math.radians(10.0))
     plain = RefineConfig(swivel_scan_rad=0.0)
     for cfg in (plain, RefineConfig(swivel_scan_rad=0.0, solver="scipy")):
-        diag = {}
+        diag: dict[str, ArmDiagnostics] = {}
         refined = refine_arms(
             SKEL, CAMERA, start, img, {"right": targets["right"]}, cfg, diagnostics=diag
         )

@@ -3,7 +3,8 @@
 Layout (all lengths in mm, times in s)::
 
     session.json                 {"format": 1, "units": "mm", "subject": {"height_mm": ...,
-                                  "bone_lengths_mm": {segment: mm}}, "cameras": "cameras.json",
+                                  "bone_lengths_mm": {segment: mm}, "segment_vectors_mm":
+                                  {trunk segment: [x, y, z]}}, "cameras": "cameras.json",
                                   "marker_sets": {"head": ["LFHD", ...], ...},
                                   "marker_offsets_mm": {"head": {"segment": "head",
                                   "offset_mm": [0, 100, 0]}, ...},
@@ -47,7 +48,7 @@ from numpy.typing import ArrayLike, NDArray
 from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import FormatError, SessionError, ShapeError
 from mocapkit.io.atomic import atomic_write
-from mocapkit.skeleton.model import CANONICAL_JOINTS, CANONICAL_SEGMENTS
+from mocapkit.skeleton.model import CANONICAL_JOINTS, CANONICAL_SEGMENTS, TRUNK_SEGMENTS
 
 FloatArray = NDArray[np.float64]
 FORMAT_VERSION = 1
@@ -511,6 +512,26 @@ class Session:
                     f"one of {sorted(CANONICAL_SEGMENTS)}"
                 )
         self.bone_lengths_mm: dict[str, float] = {str(k): float(v) for k, v in bones.items()}
+        vectors = subject.get("segment_vectors_mm", {})
+        if not isinstance(vectors, dict):
+            raise FormatError(
+                f"{info_path}: subject.segment_vectors_mm: expected segment name -> [x, y, z] "
+                f"(mm), found {vectors!r}"
+            )
+        self.segment_vectors_mm: dict[str, FloatArray] = {}
+        for k, v in vectors.items():
+            if k not in TRUNK_SEGMENTS:
+                raise FormatError(
+                    f"{info_path}: subject.segment_vectors_mm: segment {k!r} has no fixed rest "
+                    f"direction; expected one of {list(TRUNK_SEGMENTS)}"
+                )
+            vec = np.asarray(v, dtype=float)
+            if vec.shape != (3,) or not np.all(np.isfinite(vec)):
+                raise FormatError(
+                    f"{info_path}: subject.segment_vectors_mm.{k}: expected 3 finite numbers, "
+                    f"found {v!r}"
+                )
+            self.segment_vectors_mm[str(k)] = vec
         self.marker_offsets: dict[str, tuple[str, FloatArray]] = _parse_marker_offsets(
             info.get("marker_offsets_mm", {}), info_path
         )

@@ -20,7 +20,7 @@ from mocapkit.io.motion import Motion
 from mocapkit.progress import Progress
 from mocapkit.skeleton.model import Skeleton
 from mocapkit.skeleton.presets import load_preset
-from mocapkit.skeleton.scaling import fit_segment_lengths, scale_skeleton
+from mocapkit.skeleton.scaling import fit_segments, scale_skeleton
 from mocapkit.tracking.hybrid import (
     MARKER_SETS,
     HybridConfig,
@@ -36,19 +36,22 @@ def hybrid_skeleton(
     height_mm: float | None = None,
     bone_lengths_mm: Mapping[str, float] | None = None,
     root_rotation: bool = True,
+    segment_vectors_mm: Mapping[str, ArrayLike] | None = None,
 ) -> Skeleton:
     """``zhang21`` scaled to a subject, for the hybrid tracker.
 
     With ``root_rotation`` the root gets a free yaw (limits removed, so a subject may
     turn round) while root pitch and roll are held at 0: with feet planted and only
     head and hands observed, whole-body tilt is not determined by the markers.
-    The model is scaled to the stature, then its canonical segments are stretched to
-    the measured ``bone_lengths_mm`` (names of `CANONICAL_SEGMENTS`).
+    The model is scaled to the stature, then its canonical segments are fitted to the
+    measured ``bone_lengths_mm`` and, for the trunk, ``segment_vectors_mm`` (where the
+    shoulders and hips sit relative to the neck base and the pelvis; names of
+    `CANONICAL_SEGMENTS`).
     """
     sk = load_preset("zhang21", ("root_rotation",) if root_rotation else ())
     sk = scale_skeleton(sk, height_mm=height_mm)
-    if bone_lengths_mm:
-        sk = fit_segment_lengths(sk, bone_lengths_mm)
+    if bone_lengths_mm or segment_vectors_mm:
+        sk = fit_segments(sk, bone_lengths_mm, segment_vectors_mm)
     if root_rotation:
         lower, upper = sk.lower.copy(), sk.upper.copy()
         lower[sk.dof_index("root_yaw")], upper[sk.dof_index("root_yaw")] = -np.inf, np.inf
@@ -137,7 +140,11 @@ def track_hybrid_session(
         use_video=use_video,
         marker_offsets_mm=effector_offsets(session.marker_offsets, session.path),
     )
-    sk = hybrid_skeleton(session.height_mm, session.bone_lengths_mm)
+    sk = hybrid_skeleton(
+        session.height_mm,
+        session.bone_lengths_mm,
+        segment_vectors_mm=session.segment_vectors_mm,
+    )
     cams = session.video_cameras
     if not cams:
         raise SessionError(

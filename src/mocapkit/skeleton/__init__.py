@@ -19,14 +19,16 @@ from mocapkit.skeleton.model import (
     CANONICAL_SEGMENTS,
     PRISMATIC,
     REVOLUTE,
+    TRUNK_SEGMENTS,
     UPPER_BODY_JOINTS,
     Skeleton,
 )
 from mocapkit.skeleton.presets import load_preset, preset_names, preset_options
 from mocapkit.skeleton.scaling import (
-    fit_segment_lengths,
+    fit_segments,
     scale_skeleton,
     segment_lengths_mm,
+    segment_vectors_mm,
     standing_height_mm,
 )
 
@@ -36,12 +38,13 @@ __all__ = [
     "CANONICAL_SEGMENTS",
     "PRISMATIC",
     "REVOLUTE",
+    "TRUNK_SEGMENTS",
     "UPPER_BODY_JOINTS",
     "Skeleton",
     "canonical_positions",
     "carried_mass",
     "center_of_mass",
-    "fit_segment_lengths",
+    "fit_segments",
     "forward_kinematics",
     "jacobian",
     "joint_positions",
@@ -53,6 +56,7 @@ __all__ = [
     "scale_skeleton",
     "segment_com",
     "segment_lengths_mm",
+    "segment_vectors_mm",
     "standing_height_mm",
     "subtree_com",
     "subtree_mass",

@@ -82,6 +82,17 @@ CANONICAL_SEGMENTS: dict[str, tuple[str, str]] = {
     "right_shank": ("right_knee", "right_ankle"),
 }
 
+#: Segments whose rest direction is the same in any standing rest pose (a T-pose and the
+#: anatomical position differ only in the limbs), so their rest vectors can be given.
+TRUNK_SEGMENTS: tuple[str, ...] = (
+    "trunk",
+    "head",
+    "left_clavicle",
+    "right_clavicle",
+    "left_pelvis",
+    "right_pelvis",
+)
+
 
 def _frozen(a: Any, dtype: Any, shape: tuple[int, ...] | None, what: str) -> NDArray[Any]:
     arr = np.array(a, dtype=dtype, copy=True)

@@ -5,8 +5,10 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from mocapkit.errors import ShapeError, unknown_name
+from mocapkit.geometry.rotations import matrix_from_axis_angle
 from mocapkit.skeleton.kinematics import canonical_positions, joint_positions
 from mocapkit.skeleton.model import CANONICAL_SEGMENTS, PRISMATIC, FloatArray, Skeleton
 
@@ -97,6 +99,21 @@ def scale_skeleton(
     return sk
 
 
+def segment_vectors_mm(skeleton: Skeleton) -> dict[str, FloatArray]:
+    """Rest-pose vectors (3,) from the proximal to the distal canonical joint of each
+    canonical segment (`CANONICAL_SEGMENTS`), in mm, world axes of the rest pose.
+
+    Only segments whose two canonical joints the skeleton provides are listed.
+    """
+    names = skeleton.canonical_names
+    pos = dict(zip(names, canonical_positions(skeleton, skeleton.zero_pose()), strict=True))
+    return {
+        seg: pos[b] - pos[a]
+        for seg, (a, b) in CANONICAL_SEGMENTS.items()
+        if a in pos and b in pos
+    }
+
+
 def segment_lengths_mm(skeleton: Skeleton) -> dict[str, float]:
     """Lengths of the canonical segments (`CANONICAL_SEGMENTS`) in the rest pose, mm.
 
@@ -104,13 +121,7 @@ def segment_lengths_mm(skeleton: Skeleton) -> dict[str, float]:
     trunk of a skeleton with a flexible spine is measured straight (rest pose), as a
     lab measures it on a standing subject.
     """
-    names = skeleton.canonical_names
-    pos = dict(zip(names, canonical_positions(skeleton, skeleton.zero_pose()), strict=True))
-    return {
-        seg: float(np.linalg.norm(pos[b] - pos[a]))
-        for seg, (a, b) in CANONICAL_SEGMENTS.items()
-        if a in pos and b in pos
-    }
+    return {k: float(np.linalg.norm(v)) for k, v in segment_vectors_mm(skeleton).items()}
 
 
 def _segment_path(skeleton: Skeleton, ja: int, jb: int, a_mm: FloatArray) -> list[int]:
@@ -131,34 +142,78 @@ def _segment_path(skeleton: Skeleton, ja: int, jb: int, a_mm: FloatArray) -> lis
     return path
 
 
-def fit_segment_lengths(skeleton: Skeleton, lengths_mm: Mapping[str, float]) -> Skeleton:
-    """Stretch a model so its canonical segments have a subject's measured lengths.
+def _rotation_between(u: FloatArray, v: FloatArray) -> FloatArray:
+    """The smallest rotation (3, 3) taking direction ``u`` onto direction ``v``."""
+    a = u / np.linalg.norm(u)
+    b = v / np.linalg.norm(v)
+    axis = np.cross(a, b)
+    s = float(np.linalg.norm(axis))
+    c = float(np.clip(a @ b, -1.0, 1.0))
+    if s < 1e-12:
+        if c > 0:
+            return np.eye(3)
+        # opposite directions: half a turn about any axis normal to u
+        n = np.cross(a, [1.0, 0.0, 0.0])
+        if np.linalg.norm(n) < 1e-6:
+            n = np.cross(a, [0.0, 1.0, 0.0])
+        return matrix_from_axis_angle(n, np.pi)
+    return matrix_from_axis_angle(axis, float(np.arctan2(s, c)))
 
-    For a segment from canonical joint A to canonical joint B, every rest offset on the
-    kinematic path from A's joint down to B's joint is scaled by ``length / current``,
-    together with B's canonical point and any sibling attached at the same place (the
-    clavicles move with the top of the spine), so directions are kept and only lengths
-    change. Segments are fitted proximal first (the order of `CANONICAL_SEGMENTS`).
+
+def fit_segments(
+    skeleton: Skeleton,
+    lengths_mm: Mapping[str, float] | None = None,
+    vectors_mm: Mapping[str, ArrayLike] | None = None,
+) -> Skeleton:
+    """Fit a model's canonical segments to a subject's measured lengths or rest vectors.
+
+    For a segment from canonical joint A to canonical joint B, the rest offsets on the
+    kinematic path from A's joint down to B's joint (and B's canonical point, and any
+    sibling attached at the same place: the clavicles move with the top of the spine)
+    are scaled by ``length / current``; with a rest vector they are also turned by the
+    smallest rotation taking the current A->B direction onto the measured one. Joint
+    frames and DoF axes are not turned. Segments are fitted proximal first (the order of
+    `CANONICAL_SEGMENTS`); a segment given both ways follows its vector.
 
     Parameters
     ----------
     skeleton : Skeleton
-    lengths_mm : mapping of str to float
-        Segment name (a key of `CANONICAL_SEGMENTS`) -> length in mm.
+    lengths_mm : mapping of str to float, optional
+        Segment name (a key of `CANONICAL_SEGMENTS`) -> length (mm).
+    vectors_mm : mapping of str to array_like (3,), optional
+        Segment name -> vector from A to B (mm) with the subject standing in the
+        anatomical position (x to the right, y forward, z up).
     """
-    for seg, length in lengths_mm.items():
+    lengths = dict(lengths_mm or {})
+    vectors = {k: np.asarray(v, dtype=float) for k, v in (vectors_mm or {}).items()}
+    for seg in (*lengths, *vectors):
         if seg not in CANONICAL_SEGMENTS:
-            raise unknown_name("body segment", seg, CANONICAL_SEGMENTS, "bone lengths")
+            raise unknown_name("body segment", seg, CANONICAL_SEGMENTS, "subject measurements")
+    for seg, length in lengths.items():
         if not (np.isfinite(length) and length > 0):
             raise ShapeError(f"bone length of {seg!r}: expected a positive length, found {length}")
+    for seg, vec in vectors.items():
+        if vec.shape != (3,) or not np.all(np.isfinite(vec)) or np.linalg.norm(vec) == 0:
+            raise ShapeError(
+                f"rest vector of {seg!r}: expected 3 finite numbers, not all 0, found {vec}"
+            )
     sk = skeleton
     for seg, (a, b) in CANONICAL_SEGMENTS.items():
-        if seg not in lengths_mm or a not in sk.canonical or b not in sk.canonical:
+        if (seg not in lengths and seg not in vectors) or a not in sk.canonical:
             continue
-        current = segment_lengths_mm(sk).get(seg, 0.0)
-        if current <= 1e-9:
+        if b not in sk.canonical:
             continue
-        f = float(lengths_mm[seg]) / current
+        current = segment_vectors_mm(sk).get(seg)
+        if current is None or np.linalg.norm(current) <= 1e-9:
+            continue
+        if seg in vectors:
+            target = vectors[seg]
+            rot = _rotation_between(current, target)
+            f = float(np.linalg.norm(target) / np.linalg.norm(current))
+        else:
+            rot = np.eye(3)
+            f = float(lengths[seg]) / float(np.linalg.norm(current))
+        m = f * rot
         ja = sk.joint_index(sk.canonical[a][0])
         jb_name, b_point = sk.canonical[b]
         jb = sk.joint_index(jb_name)
@@ -171,18 +226,19 @@ def fit_segment_lengths(skeleton: Skeleton, lengths_mm: Mapping[str, float]) -> 
             old = offsets[k].copy()
             for c in sk.children(parent):
                 if np.allclose(offsets[c], old, atol=1e-6):
-                    offsets[c] = old * f
+                    offsets[c] = m @ old
             if np.allclose(ends[parent], old, atol=1e-6):
-                ends[parent] = old * f
+                ends[parent] = m @ old
         canonical = dict(sk.canonical)
         if np.any(np.asarray(b_point) != 0):
-            # B is a point inside its joint's segment (the head centre): scale it and the
+            # B is a point inside its joint's segment (the head centre): move it and the
             # segment it lies on, so the point keeps its relative place
-            bp = np.asarray(b_point, dtype=float) * f
+            bp = m @ np.asarray(b_point, dtype=float)
             canonical[b] = (jb_name, (float(bp[0]), float(bp[1]), float(bp[2])))
-            ends[jb] = ends[jb] * f
+            old_end = sk.bone_end_mm[jb].copy()
+            ends[jb] = m @ old_end
             for c in sk.children(jb):
-                if np.allclose(offsets[c], sk.bone_end_mm[jb], atol=1e-6):
+                if np.allclose(offsets[c], old_end, atol=1e-6):
                     offsets[c] = ends[jb]
         sk = sk.replace(offsets_mm=offsets, bone_end_mm=ends, canonical=canonical)
     return sk

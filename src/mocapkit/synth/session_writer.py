@@ -34,7 +34,13 @@ from mocapkit.io.motion import Motion
 from mocapkit.io.session import Truth, write_keypoints_csv, write_session_json, write_timestamps_csv
 from mocapkit.progress import Progress
 from mocapkit.skeleton.model import PRISMATIC
-from mocapkit.skeleton.scaling import scale_skeleton, segment_lengths_mm, standing_height_mm
+from mocapkit.skeleton.model import TRUNK_SEGMENTS
+from mocapkit.skeleton.scaling import (
+    scale_skeleton,
+    segment_lengths_mm,
+    segment_vectors_mm,
+    standing_height_mm,
+)
 from mocapkit.synth.realism import (
     RealismOptions,
     corrupt_markers,
@@ -345,6 +351,13 @@ def synthesize_session(
             # measured on the motion's own skeleton, as a lab measures its subject
             "bone_lengths_mm": {
                 k: round(v, 1) for k, v in segment_lengths_mm(motion.skeleton).items()
+            },
+            # trunk geometry of the standing subject (a static trial): where the
+            # shoulders and hips sit relative to the neck base and the pelvis
+            "segment_vectors_mm": {
+                k: [round(float(x), 1) for x in v]
+                for k, v in segment_vectors_mm(motion.skeleton).items()
+                if k in TRUNK_SEGMENTS
             },
         },
         "marker_offsets_mm": declared_marker_offsets(motion.skeleton),

@@ -30,10 +30,11 @@ transform, projection with the camera's K and OpenCV distortion, bilinear look-u
 The simplex search is `nelder_mead_arm_nb`, a Numba transcription of SciPy's
 ``minimize(method="Nelder-Mead")`` (non-adaptive coefficients, bounds by clipping,
 the same stopping tests on ``xatol``/``fatol``/``maxfev``), tested to give SciPy's
-iterates on smooth functions. It exists because SciPy's pure-Python loop costs
-tens of microseconds per evaluation, about ten times the cost itself, which
-alone would break the frame budget of the hybrid tracker (>= 120 fps with both
-arms). ``solver="scipy"`` runs SciPy itself on the same compiled cost.
+iterates on smooth functions and on the arm cost; it calls `arm_cost_nb` as a global
+so that Numba caches it on disk (see the notes above `_nelder_mead_core`). It exists
+because SciPy's pure-Python loop costs tens of microseconds per evaluation, about ten
+times the cost itself, which alone would break the frame budget of the hybrid tracker
+(>= 120 fps with both arms). ``solver="scipy"`` runs SciPy itself on the same compiled cost.
 Recipe Z step 4: explicit initial simplex of +-``simplex_step_rad`` (0.1 rad) per
 DoF (SciPy's default 5 % steps are far too small for angles), ``xatol=1e-3``,
 ``maxfev`` about 300, joint-limit bounds.
@@ -707,6 +708,8 @@ def _sort_simplex(sim: FloatArray, fsim: FloatArray) -> None:
 # Element loops for the row copies of the simplex: slice assignment (``a[:] = b``)
 # compiles to a broadcasting check with a formatted error path, several times the
 # code of the loop, in every one of the dozen places the search copies a vertex.
+# Plain calls, not ``inline="always"``: Numba's IR inlining re-runs its front end per
+# call site (the search compiled in ~8 s instead of ~3 s), and LLVM inlines them anyway.
 @numba.njit(cache=True)
 def _row_to(m: FloatArray, i: int, out: FloatArray) -> None:
     """``out[:] = m[i]``."""
