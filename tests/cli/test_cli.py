@@ -98,3 +98,12 @@ def test_demo_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
         assert (out / "session" / name).is_file(), f"session/{name} missing"
     assert (out / "session" / "video" / "mono.mp4").is_file()
     assert f"open {out / 'result_with_video' / 'motion.bvh'} in Blender" in text
+
+
+def test_track_hybrid_refuses_options_that_do_not_apply(tmp_path, capsys) -> None:
+    code = main(["track", "hybrid", str(tmp_path), "--out", str(tmp_path / "o"), "--free-feet"])
+    assert code == 2
+    assert "--free-feet apply to --markers" in capsys.readouterr().err
+    code = main(["track", "hybrid", "--markers", "m.c3d", "--paper", "--out", str(tmp_path / "o")])
+    assert code == 2
+    assert "--paper apply to a SESSION" in capsys.readouterr().err

@@ -249,7 +249,7 @@ def test_round_trip_cmu_excerpt(shared_data: Path, tmp_path: Path) -> None:
     excerpt = Motion.from_q(full.skeleton, full.time_s[:60], full.q[:60], "excerpt")
     out = tmp_path / "excerpt.bvh"
     write_bvh(out, excerpt)
-    back = read_bvh(out, unit_mm=10.0)
+    back = read_bvh(out, unit_mm=1000.0)
     assert back.n_frames == 60  # not mistaken for an added rest frame
     a, b = _positions_by_name(excerpt), _positions_by_name(back)
     assert set(a) == set(b)
@@ -257,7 +257,7 @@ def test_round_trip_cmu_excerpt(shared_data: Path, tmp_path: Path) -> None:
     assert worst < 1e-6, worst
     np.testing.assert_allclose(back.joints_mm, excerpt.joints_mm, atol=1e-6, rtol=0)
     np.testing.assert_allclose(back.time_s, excerpt.time_s, atol=1e-9)
-    # the default unit rule sees a CMU-named skeleton in cm and still reads it right
+    # the default unit rule sees a CMU-named skeleton in metres and still reads it right
     again = read_bvh(out)
     np.testing.assert_allclose(again.joints_mm, excerpt.joints_mm, atol=1e-6, rtol=0)
 
@@ -271,8 +271,8 @@ def test_round_trip_zhang21_random_poses(tmp_path: Path, rng: np.random.Generato
     motion = Motion.from_q(skel, np.arange(n) / 60.0, q, "random")
     out = tmp_path / "zhang.bvh"
     write_bvh(out, motion)
-    back = read_bvh(out)  # stature rule: centimetres
-    assert "unit 10 mm" in back.source and "zhang21" in back.source
+    back = read_bvh(out)  # stature rule: metres
+    assert "unit 1000 mm" in back.source and "zhang21" in back.source
     a, b = _positions_by_name(motion), _positions_by_name(back)
     assert set(a) == set(b)
     worst = max(np.abs(a[k] - b[k]).max() for k in a)
@@ -320,7 +320,7 @@ def test_written_standing_pose_has_head_up_along_bvh_y(tmp_path: Path) -> None:
     pos = _file_frame_rest_positions(text)
     np.testing.assert_allclose(values[:3], pos["root"], atol=1e-9)  # root channel = its offset
     head, foot = pos["head"], pos["l_foot"]
-    assert head[1] - foot[1] > 120.0  # cm: head well above the feet along +Y
+    assert head[1] - foot[1] > 1.2  # metres: head well above the feet along +Y
     assert pos["r_humerus"][0] < pos["l_humerus"][0]  # right side towards -X, facing +Z
     assert "CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation" in text
 

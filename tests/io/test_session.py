@@ -188,3 +188,35 @@ def test_keypoints_csv_roundtrip_and_errors(tmp_path):
     (tmp_path / "bad2.csv").write_text("time_s,head_x_px,head_y_px\n0,1\n")
     with pytest.raises(FormatError, match="line 2: expected 3 columns, found 2"):
         read_keypoints_csv(tmp_path / "bad2.csv")
+
+
+def test_subject_measurements_and_marker_offsets_are_read(session_dir):
+    from mocapkit.skeleton import TRUNK_SEGMENTS
+
+    s = load_session(session_dir)
+    assert set(s.segment_vectors_mm) == set(TRUNK_SEGMENTS)
+    assert s.bone_lengths_mm["left_upper_arm"] > 0
+    segment, offset = s.marker_offsets["head"]
+    assert segment == "head"
+    np.testing.assert_allclose(offset, [0.0, 100.0, 0.0])
+    assert s.marker_offsets["right_hand"][0] == "right_wrist"
+
+
+def test_bad_subject_measurements_rejected(copy):
+    import json
+
+    info = json.loads((copy / "session.json").read_text())
+    info["subject"]["bone_lengths_mm"] = {"arm": 300}
+    (copy / "session.json").write_text(json.dumps(info))
+    with pytest.raises(FormatError, match="unknown segment 'arm'"):
+        load_session(copy)
+    info["subject"]["bone_lengths_mm"] = {}
+    info["subject"]["segment_vectors_mm"] = {"left_forearm": [0, 0, -200]}
+    (copy / "session.json").write_text(json.dumps(info))
+    with pytest.raises(FormatError, match="'left_forearm' has no fixed rest direction"):
+        load_session(copy)
+    info["subject"]["segment_vectors_mm"] = {}
+    info["marker_offsets_mm"] = {"head": {"segment": "skull", "offset_mm": [0, 100, 0]}}
+    (copy / "session.json").write_text(json.dumps(info))
+    with pytest.raises(FormatError, match=r"marker_offsets_mm.head.segment: expected a canonical"):
+        load_session(copy)

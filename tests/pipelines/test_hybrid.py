@@ -204,3 +204,20 @@ def test_session_without_hand_set_is_refused(wave_session, tmp_path):
     ):
         track_hybrid_session(copy, tmp_path / "out")
     assert not (tmp_path / "out").exists()
+
+
+def test_declared_offsets_map_onto_effectors() -> None:
+    from mocapkit.errors import SessionError
+    from mocapkit.pipelines.hybrid import effector_offsets
+
+    declared = {
+        "head": ("head", np.array([0.0, 100.0, 0.0])),
+        "left_hand": ("left_wrist", np.array([0.0, 35.0, -80.0])),
+        "left_elbow_ref": ("left_elbow", np.array([0.0, -45.0, 0.0])),  # not an effector
+    }
+    assert effector_offsets(declared) == {
+        "head": (0.0, 100.0, 0.0),
+        "left_hand": (0.0, 35.0, -80.0),
+    }
+    with pytest.raises(SessionError, match="expects 'right_wrist', found 'right_elbow'"):
+        effector_offsets({"right_hand": ("right_elbow", np.zeros(3))})

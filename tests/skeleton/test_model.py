@@ -144,3 +144,62 @@ def test_skeleton_is_immutable() -> None:
         sk.offsets_mm[0, 0] = 1.0
     with pytest.raises(AttributeError):
         sk.name = "other"  # type: ignore[misc]
+
+
+def test_segment_lengths_and_vectors_of_zhang21() -> None:
+    from mocapkit.skeleton import segment_lengths_mm, segment_vectors_mm
+
+    sk = load_preset("zhang21")
+    lengths = segment_lengths_mm(sk)
+    assert lengths["left_upper_arm"] == pytest.approx(300.0)
+    assert lengths["trunk"] == pytest.approx(156 + 171 + 142)
+    assert lengths["head"] == pytest.approx(90 + 50)  # neck base to the head centre
+    np.testing.assert_allclose(segment_vectors_mm(sk)["right_clavicle"], [184.6, 0, -45])
+
+
+def test_fit_segments_sets_lengths_and_trunk_directions() -> None:
+    from mocapkit.skeleton import fit_segments, segment_lengths_mm, segment_vectors_mm
+
+    sk = load_preset("zhang21")
+    target = {"left_upper_arm": 280.0, "right_forearm": 210.0, "trunk": 400.0, "head": 250.0}
+    vectors = {"left_clavicle": [-180.0, -18.0, 77.0], "right_pelvis": [90.0, 10.0, -60.0]}
+    fit = fit_segments(sk, target, vectors)
+    got = segment_lengths_mm(fit)
+    for seg, length in target.items():
+        assert got[seg] == pytest.approx(length, abs=1e-9), seg
+    vec = segment_vectors_mm(fit)
+    for seg, v in vectors.items():
+        np.testing.assert_allclose(vec[seg], v, atol=1e-9)
+    # untouched segments keep their length; the clavicles ride on the top of the trunk
+    assert got["left_thigh"] == pytest.approx(386.0)
+    assert got["right_clavicle"] == pytest.approx(segment_lengths_mm(sk)["right_clavicle"])
+    # joint frames are not turned: the rest pose still has every frame parallel to the world
+    from mocapkit.skeleton import forward_kinematics
+
+    rot = forward_kinematics(fit, fit.zero_pose())[:, :3, :3]
+    np.testing.assert_allclose(rot, np.broadcast_to(np.eye(3), rot.shape), atol=1e-12)
+
+
+def test_fit_segments_rejects_bad_input() -> None:
+    from mocapkit.skeleton import fit_segments
+
+    sk = load_preset("zhang21")
+    with pytest.raises(UnknownNameError, match="unknown body segment 'arm'"):
+        fit_segments(sk, {"arm": 300.0})
+    with pytest.raises(ShapeError, match="expected a positive length"):
+        fit_segments(sk, {"left_forearm": -1.0})
+    with pytest.raises(ShapeError, match="rest vector of 'trunk'"):
+        fit_segments(sk, vectors_mm={"trunk": [0.0, 0.0, 0.0]})
+
+
+def test_clavicle_option_lifts_and_protracts_the_shoulders() -> None:
+    sk = load_preset("zhang21", ["clavicle"])
+    assert sk.n_dofs == load_preset("zhang21").n_dofs + 4
+    for side, prefix in (("left", "l"), ("right", "r")):
+        rest = canonical_positions(sk, sk.zero_pose(), [f"{side}_shoulder"])[0]
+        q = sk.zero_pose()
+        q[sk.dof_index(f"{prefix}_clavicle_elevation")] = 0.3
+        assert canonical_positions(sk, q, [f"{side}_shoulder"])[0][2] > rest[2] + 50
+        q = sk.zero_pose()
+        q[sk.dof_index(f"{prefix}_clavicle_protraction")] = 0.3
+        assert canonical_positions(sk, q, [f"{side}_shoulder"])[0][1] > rest[1] + 50

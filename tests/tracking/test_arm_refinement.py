@@ -12,7 +12,7 @@ from scipy.optimize import Bounds, minimize
 
 from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
 from mocapkit.errors import ShapeError, UnknownNameError
-from mocapkit.skeleton import joint_positions, load_preset
+from mocapkit.skeleton import forward_kinematics, joint_positions, load_preset
 from mocapkit.tracking.arm_refinement import (
     SIDES,
     ArmDiagnostics,
@@ -20,6 +20,7 @@ from mocapkit.tracking.arm_refinement import (
     arm_cost_nb,
     arm_joint_names,
     arm_problem,
+    arm_roi,
     initial_simplex,
     nelder_mead_arm_nb,
     nelder_mead_nb,
@@ -268,3 +269,18 @@ def test_bad_inputs_raise(scene):
     stick = load_preset("upper_stick")
     with pytest.raises(UnknownNameError, match="unknown joint 'l_humerus' in skeleton"):
         refine_arms(stick, CAMERA, np.zeros(stick.n_dofs), img, targets)
+
+
+@pytest.mark.parametrize("side", SIDES)
+def test_roi_covers_every_scanned_elbow(side):
+    q = _pose()
+    world = forward_kinematics(SKEL, q)
+    cfg = RefineConfig()
+    x0, y0, x1, y1 = arm_roi(SKEL, CAMERA, world, side, 0.0, cfg.swivel_scan_rad)
+    elbow = SKEL.joint_index(arm_joint_names(side)[1])
+    for angle in np.linspace(-cfg.swivel_scan_rad, cfg.swivel_scan_rad, 73):
+        px = CAMERA.project(joint_positions(SKEL, swivel_arm(SKEL, q, side, angle))[elbow])
+        assert x0 - 1 <= px[0] <= x1 + 1 and y0 - 1 <= px[1] <= y1 + 1, math.degrees(angle)
+    # without a scan the box only holds the current arm
+    small = arm_roi(SKEL, CAMERA, world, side, 0.0, 0.0)
+    assert (small[2] - small[0]) * (small[3] - small[1]) < (x1 - x0) * (y1 - y0)

@@ -173,3 +173,21 @@ def test_bad_inputs(truth):
     tracker = HybridTracker(sk, config=HybridConfig(ik=IKConfig(), use_video=False))
     with pytest.raises(ShapeError, match="markers_mm\\['head'\\]"):
         tracker.update(HybridSample(0.0, {"head": np.zeros(2)}))
+
+
+def test_feet_replanted_when_the_subject_steps(truth):
+    """A 600 mm side step: planted feet keep the head off its marker unless re-planted."""
+    sk, t, _q, pos = truth
+    shifted = pos.copy()
+    shifted[20:, :, 0] += np.minimum(np.arange(40), 10)[:, None] * 60.0  # 600 mm over 10 frames
+    results = {}
+    for replant in (0.0, 15.0):
+        cfg = HybridConfig(use_video=False, replant_mm=replant, smoothing_polish_tol_mm=1.0)
+        tracker = HybridTracker(sk, config=cfg)
+        poses = [tracker.update(s) for s in samples(t, shifted)]
+        head = [p.residual_mm["head"] for p in poses[-10:]]
+        results[replant] = (max(head), [e for e in tracker.events if e[1] == "feet"])
+    assert results[0.0][0] > 50.0 and results[0.0][1] == []  # held where they started
+    # stepped with the subject: the head ends within the re-plant trigger of its marker
+    assert results[15.0][0] <= 15.0 and results[15.0][1]
+    assert results[15.0][0] < 0.25 * results[0.0][0]

@@ -56,6 +56,11 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             raise SessionError(
                 "track hybrid: give either a SESSION folder or --markers FILE, not both"
             )
+        unused = [o for o, on in (("--no-video", args.no_video), ("--paper", args.paper)) if on]
+        if unused:
+            raise SessionError(
+                f"track hybrid: {', '.join(unused)} apply to a SESSION; --markers runs IK only"
+            )
         motion = track_hybrid_markers(
             args.markers, args.marker_set, args.height_mm, args.out, plant_feet=not args.free_feet
         )
@@ -63,6 +68,20 @@ def _run_hybrid(args: argparse.Namespace) -> int:
         if not args.session:
             raise SessionError(
                 "track hybrid: expected a SESSION folder or --markers FILE, found neither"
+            )
+        unused = [
+            o
+            for o, on in (
+                ("--marker-set", bool(args.marker_set)),
+                ("--height-mm", args.height_mm is not None),
+                ("--free-feet", args.free_feet),
+            )
+            if on
+        ]
+        if unused:
+            raise SessionError(
+                f"track hybrid: {', '.join(unused)} apply to --markers; a SESSION takes its "
+                "marker sets and subject from session.json"
             )
         motion = track_hybrid_session(
             args.session, args.out, use_video=not args.no_video, paper=args.paper

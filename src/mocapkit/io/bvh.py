@@ -518,7 +518,7 @@ def _fill_missing(q: FloatArray) -> FloatArray:
 def write_bvh(
     path: str | os.PathLike[str],
     motion: Motion,
-    unit_mm: float = 10.0,
+    unit_mm: float = 1000.0,
     frame_time_s: float | None = None,
 ) -> None:
     """Write a motion of any skeleton as BVH (Y up, atomically).
@@ -528,7 +528,8 @@ def write_bvh(
     path : path-like
     motion : Motion
     unit_mm : float
-        Millimetres per file unit; default 10 (centimetres, the common BVH unit).
+        Millimetres per file unit; default 1000 (metres), so Blender, which reads one BVH
+        unit as one metre, imports the subject at true size.
     frame_time_s : float, optional
         ``Frame Time``; default the median step of ``motion.time_s`` (BVH assumes a
         constant rate), or 1/30 s for a single frame.

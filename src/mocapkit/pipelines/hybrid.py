@@ -37,6 +37,7 @@ def hybrid_skeleton(
     bone_lengths_mm: Mapping[str, float] | None = None,
     root_rotation: bool = True,
     segment_vectors_mm: Mapping[str, ArrayLike] | None = None,
+    clavicle: bool = False,
 ) -> Skeleton:
     """``zhang21`` scaled to a subject, for the hybrid tracker.
 
@@ -48,7 +49,8 @@ def hybrid_skeleton(
     shoulders and hips sit relative to the neck base and the pelvis; names of
     `CANONICAL_SEGMENTS`).
     """
-    sk = load_preset("zhang21", ("root_rotation",) if root_rotation else ())
+    options = (("root_rotation",) if root_rotation else ()) + (("clavicle",) if clavicle else ())
+    sk = load_preset("zhang21", options)
     sk = scale_skeleton(sk, height_mm=height_mm)
     if bone_lengths_mm or segment_vectors_mm:
         sk = fit_segments(sk, bone_lengths_mm, segment_vectors_mm)

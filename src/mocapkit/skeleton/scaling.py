@@ -108,9 +108,7 @@ def segment_vectors_mm(skeleton: Skeleton) -> dict[str, FloatArray]:
     names = skeleton.canonical_names
     pos = dict(zip(names, canonical_positions(skeleton, skeleton.zero_pose()), strict=True))
     return {
-        seg: pos[b] - pos[a]
-        for seg, (a, b) in CANONICAL_SEGMENTS.items()
-        if a in pos and b in pos
+        seg: pos[b] - pos[a] for seg, (a, b) in CANONICAL_SEGMENTS.items() if a in pos and b in pos
     }
 
 

@@ -33,8 +33,7 @@ from mocapkit.errors import MocapError, SessionError, ShapeError
 from mocapkit.io.motion import Motion
 from mocapkit.io.session import Truth, write_keypoints_csv, write_session_json, write_timestamps_csv
 from mocapkit.progress import Progress
-from mocapkit.skeleton.model import PRISMATIC
-from mocapkit.skeleton.model import TRUNK_SEGMENTS
+from mocapkit.skeleton.model import PRISMATIC, TRUNK_SEGMENTS
 from mocapkit.skeleton.scaling import (
     scale_skeleton,
     segment_lengths_mm,
@@ -306,13 +305,18 @@ def synthesize_session(
     if np.any(np.diff(t_video) <= 0):
         raise ShapeError("video time stamps collapsed; increase --seconds or lower the jitter")
     dt_m = 1.0 / opts.marker_rate_hz
-    n_mark = int(np.floor((duration - 0.5 * dt_m) * opts.marker_rate_hz + 1e-9)) + 1
+    # the marker system runs independently of the camera and is already streaming when
+    # the first video frame is taken: its first sample lies before t = 0 (by 0.05-0.75 of
+    # its interval after jitter), so every video frame has a newest marker sample
+    start_m = -float(rng_time.uniform(0.3 * dt_m, 0.5 * dt_m))
+    # ... and every video frame up to the last one has a sample within one interval
+    n_mark = int(np.floor((duration - start_m) * opts.marker_rate_hz + 1e-9)) + 1
     t_mark = jittered_times(
         n_mark,
         opts.marker_rate_hz,
         opts.realism.marker_jitter_s,
         rng_time,
-        start_s=float(rng_time.uniform(0.0, 0.5 * dt_m)),
+        start_s=start_m,
     )
 
     # -------------------------------------------------------- static data

@@ -47,6 +47,10 @@ IK pose recovers. Before the simplex, the cost is therefore evaluated at
 ``swivel_scan_steps`` swivel angles over +-``swivel_scan_rad`` with the hand held
 exactly on its marker (Azad's 1-D swivel, recipe Z "better, hold the hand exactly");
 the simplex starts from the best. ``swivel_scan_rad=0`` runs the paper's plain search.
+The default scans the whole circle in 5 deg steps: on sessions rendered from CMU clips
+the IK swivel is often 90 deg or more off (an elbow raised sideways while the relaxed
+pose hangs it down), and a +-40 deg scan left those arms where IK put them. The region
+of interest covers the elbow's scanned arc (`arm_roi`).
 """
 
 from __future__ import annotations
@@ -164,8 +168,8 @@ class RefineConfig:
         (0.0, 0.0, 0.0),
     )
     solver: Literal["numba", "scipy"] = "numba"
-    swivel_scan_rad: float = math.radians(40.0)
-    swivel_scan_steps: int = 17
+    swivel_scan_rad: float = math.pi
+    swivel_scan_steps: int = 73
 
     def __post_init__(self) -> None:
         checks = {
@@ -1136,10 +1140,35 @@ def pack_arm_geometry(
     return geo
 
 
-def arm_roi(skeleton: Skeleton, camera: Camera, world: FloatArray, side: str, pad_px: float) -> Roi:
-    """Bounding box of the projected shoulder, elbow, wrist and hand end, padded (§5.2, Fig. 5)."""
+def arm_roi(
+    skeleton: Skeleton,
+    camera: Camera,
+    world: FloatArray,
+    side: str,
+    pad_px: float,
+    swivel_rad: float = 0.0,
+) -> Roi:
+    """Bounding box of the projected shoulder, elbow, wrist and hand end, padded (§5.2, Fig. 5).
+
+    With a swivel scan of half-range ``swivel_rad`` the box also covers the elbow
+    positions the scan visits: the arc of the circle the elbow describes about the
+    shoulder-wrist axis (sampled every 15 deg), so no scanned pose falls outside it.
+    """
     idx = [skeleton.joint_index(n) for n in arm_joint_names(side)]
-    return roi_around_points(camera.project(world[idx, :3, 3]), camera.image_size, pad_px)
+    points = world[idx, :3, 3]
+    if swivel_rad > 0:
+        shoulder, elbow, wrist = points[0], points[1], points[2]
+        axis = wrist - shoulder
+        n = float(np.linalg.norm(axis))
+        if n > 1e-9:
+            axis /= n
+            foot = shoulder + float((elbow - shoulder) @ axis) * axis
+            u = elbow - foot
+            v = np.cross(axis, u)
+            angles = np.linspace(-swivel_rad, swivel_rad, max(3, int(swivel_rad / 0.26) * 2 + 1))
+            arc = foot + np.cos(angles)[:, None] * u + np.sin(angles)[:, None] * v
+            points = np.vstack([points, arc])
+    return roi_around_points(camera.project(points), camera.image_size, pad_px)
 
 
 def arm_problem(
@@ -1179,7 +1208,7 @@ def arm_problem(
         )
     if world is None:
         world = forward_kinematics(skeleton, qa)
-    roi = arm_roi(skeleton, camera, world, side, cfg.roi_pad_px)
+    roi = arm_roi(skeleton, camera, world, side, cfg.roi_pad_px, cfg.swivel_scan_rad)
     dmap = roi_distance_map(frame, roi, cfg.edges)
     geo = pack_arm_geometry(
         skeleton, camera, qa, side, hand_target_mm, cfg, dmap.origin_px, world=world
