@@ -151,9 +151,8 @@ def left_jacobian_so3(rotvec: ArrayLike) -> FloatArray:
 
 
 @numba.njit(cache=True, fastmath=False)
-def axis_angle_matrix_nb(axis: FloatArray, angle: float, out: FloatArray) -> None:
-    """Write the Rodrigues matrix of a unit ``axis`` (3,) and ``angle`` into ``out`` (3, 3)."""
-    x, y, z = axis[0], axis[1], axis[2]
+def _rodrigues_nb(x: float, y: float, z: float, angle: float, out: FloatArray) -> None:
+    """Write the rotation about the unit axis ``(x, y, z)`` by ``angle`` into ``out``."""
     c = np.cos(angle)
     s = np.sin(angle)
     t = 1.0 - c
@@ -169,6 +168,12 @@ def axis_angle_matrix_nb(axis: FloatArray, angle: float, out: FloatArray) -> Non
 
 
 @numba.njit(cache=True, fastmath=False)
+def axis_angle_matrix_nb(axis: FloatArray, angle: float, out: FloatArray) -> None:
+    """Write the Rodrigues matrix of a unit ``axis`` (3,) and ``angle`` into ``out`` (3, 3)."""
+    _rodrigues_nb(axis[0], axis[1], axis[2], angle, out)
+
+
+@numba.njit(cache=True, fastmath=False)
 def rotvec_matrix_nb(r: FloatArray, out: FloatArray) -> None:
     """Write ``exp([r]x)`` for a rotation vector ``r`` (3,) into ``out`` (3, 3)."""
     p = np.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
@@ -178,19 +183,7 @@ def rotvec_matrix_nb(r: FloatArray, out: FloatArray) -> None:
         out[1, 0], out[1, 1], out[1, 2] = r[2], 1.0, -r[0]
         out[2, 0], out[2, 1], out[2, 2] = -r[1], r[0], 1.0
         return
-    x, y, z = r[0] / p, r[1] / p, r[2] / p
-    c = np.cos(p)
-    s = np.sin(p)
-    t = 1.0 - c
-    out[0, 0] = c + x * x * t
-    out[0, 1] = x * y * t - z * s
-    out[0, 2] = x * z * t + y * s
-    out[1, 0] = y * x * t + z * s
-    out[1, 1] = c + y * y * t
-    out[1, 2] = y * z * t - x * s
-    out[2, 0] = z * x * t - y * s
-    out[2, 1] = z * y * t + x * s
-    out[2, 2] = c + z * z * t
+    _rodrigues_nb(r[0] / p, r[1] / p, r[2] / p, p, out)
 
 
 @numba.njit(cache=True, fastmath=False)

@@ -55,10 +55,9 @@ from mocapkit.ik.secondary import (
     secondary_task_nb,
 )
 from mocapkit.skeleton.kinematics import (
-    fk_pose_nb,
+    fk_points_jacobian_pose_nb,
     kinematic_arrays,
     points_and_jacobian,
-    points_jacobian_pose_nb,
 )
 from mocapkit.skeleton.model import PRISMATIC, REVOLUTE, Skeleton
 
@@ -375,7 +374,7 @@ def solve_ik_nb(
     inv_mu = 1.0 / mu
     use_secondary = gain > 0.0
 
-    fk_pose_nb(
+    fk_points_jacobian_pose_nb(
         q,
         parents,
         offsets,
@@ -383,19 +382,13 @@ def solve_ik_nb(
         dof_count,
         dof_kind,
         dof_axis,
-        world,
-        axis_world,
-        pivot_world,
-    )
-    points_jacobian_pose_nb(
-        world,
-        axis_world,
-        pivot_world,
-        dof_kind,
         dof_joint,
         ancestors,
         eff_joint,
         eff_point,
+        world,
+        axis_world,
+        pivot_world,
         pts,
         jac,
     )
@@ -480,7 +473,7 @@ def solve_ik_nb(
             trace[it, 1] = max_rev
             trace[it, 2] = max_psi
             trace[it, 3] = max_pris
-        fk_pose_nb(
+        fk_points_jacobian_pose_nb(
             q,
             parents,
             offsets,
@@ -488,19 +481,13 @@ def solve_ik_nb(
             dof_count,
             dof_kind,
             dof_axis,
-            world,
-            axis_world,
-            pivot_world,
-        )
-        points_jacobian_pose_nb(
-            world,
-            axis_world,
-            pivot_world,
-            dof_kind,
             dof_joint,
             ancestors,
             eff_joint,
             eff_point,
+            world,
+            axis_world,
+            pivot_world,
             pts,
             jac,
         )

@@ -135,6 +135,20 @@ def _sided(
     return out
 
 
+#: Limb joints named Left*/Right* + Shoulder (upper arm), Elbow, Wrist, Hip, Knee, Ankle,
+#: shared by the CMU 3dsMax-friendly and the Hips/Ab/Chest conventions.
+_LEFT_RIGHT_LIMBS: tuple[dict[str, str], dict[str, str]] = tuple(  # type: ignore[assignment]
+    {
+        "shoulder": f"{side}Shoulder",
+        "elbow": f"{side}Elbow",
+        "wrist": f"{side}Wrist",
+        "hip": f"{side}Hip",
+        "knee": f"{side}Knee",
+        "ankle": f"{side}Ankle",
+    }
+    for side in ("Left", "Right")
+)
+
 #: Naming tables (data). Neck choice per convention: the joint at the base of the
 #: neck, where the clavicles start (top of the thorax). In the CMU files that is the
 #: start of the ASF bone ``lowerneck`` (MotionBuilder-friendly BVH: ``Neck``;
@@ -169,22 +183,7 @@ NAMING_CONVENTIONS: tuple[NamingConvention, ...] = (
         frozenset({"Hips", "LHipJoint", "LeftHip", "lowerneck", "LeftCollar", "Chest2"}),
         _sided(
             {"pelvis": "Hips", "neck": "lowerneck", "head": "Head"},
-            {
-                "shoulder": "LeftShoulder",
-                "elbow": "LeftElbow",
-                "wrist": "LeftWrist",
-                "hip": "LeftHip",
-                "knee": "LeftKnee",
-                "ankle": "LeftAnkle",
-            },
-            {
-                "shoulder": "RightShoulder",
-                "elbow": "RightElbow",
-                "wrist": "RightWrist",
-                "hip": "RightHip",
-                "knee": "RightKnee",
-                "ankle": "RightAnkle",
-            },
+            *_LEFT_RIGHT_LIMBS,
         ),
     ),
     NamingConvention(
@@ -192,22 +191,7 @@ NAMING_CONVENTIONS: tuple[NamingConvention, ...] = (
         frozenset({"Hips", "Ab", "Chest", "LeftCollar", "LeftHip"}),
         _sided(
             {"pelvis": "Hips", "neck": "Neck", "head": "Head"},
-            {
-                "shoulder": "LeftShoulder",
-                "elbow": "LeftElbow",
-                "wrist": "LeftWrist",
-                "hip": "LeftHip",
-                "knee": "LeftKnee",
-                "ankle": "LeftAnkle",
-            },
-            {
-                "shoulder": "RightShoulder",
-                "elbow": "RightElbow",
-                "wrist": "RightWrist",
-                "hip": "RightHip",
-                "knee": "RightKnee",
-                "ankle": "RightAnkle",
-            },
+            *_LEFT_RIGHT_LIMBS,
         ),
     ),
     NamingConvention(

@@ -244,6 +244,53 @@ def points_jacobian_pose_nb(
 
 
 @numba.njit(cache=True)
+def fk_points_jacobian_pose_nb(
+    q: FloatArray,
+    parents: IntArray,
+    offsets: FloatArray,
+    dof_start: IntArray,
+    dof_count: IntArray,
+    dof_kind: IntArray,
+    dof_axis: FloatArray,
+    dof_joint: IntArray,
+    ancestors: NDArray[np.bool_],
+    target_joint: IntArray,
+    target_point: FloatArray,
+    world: FloatArray,
+    axis_world: FloatArray,
+    pivot_world: FloatArray,
+    points_out: FloatArray,
+    jac_out: FloatArray,
+) -> None:
+    """FK of one pose ``q`` (D,) into the scratch arrays, then its points (K, 3) and
+    Jacobian (3K, D): `fk_pose_nb` followed by `points_jacobian_pose_nb`."""
+    fk_pose_nb(
+        q,
+        parents,
+        offsets,
+        dof_start,
+        dof_count,
+        dof_kind,
+        dof_axis,
+        world,
+        axis_world,
+        pivot_world,
+    )
+    points_jacobian_pose_nb(
+        world,
+        axis_world,
+        pivot_world,
+        dof_kind,
+        dof_joint,
+        ancestors,
+        target_joint,
+        target_point,
+        points_out,
+        jac_out,
+    )
+
+
+@numba.njit(cache=True)
 def points_jacobian_batch_nb(
     q: FloatArray,
     parents: IntArray,
@@ -266,7 +313,7 @@ def points_jacobian_batch_nb(
     axis_world = np.empty((n_dofs, 3))
     pivot_world = np.empty((n_dofs, 3))
     for n in range(q.shape[0]):
-        fk_pose_nb(
+        fk_points_jacobian_pose_nb(
             q[n],
             parents,
             offsets,
@@ -274,19 +321,13 @@ def points_jacobian_batch_nb(
             dof_count,
             dof_kind,
             dof_axis,
-            world,
-            axis_world,
-            pivot_world,
-        )
-        points_jacobian_pose_nb(
-            world,
-            axis_world,
-            pivot_world,
-            dof_kind,
             dof_joint,
             ancestors,
             target_joint,
             target_point,
+            world,
+            axis_world,
+            pivot_world,
             points_out[n],
             jac_out[n],
         )
@@ -488,6 +529,7 @@ __all__ = [
     "carried_mass",
     "center_of_mass",
     "fk_batch_nb",
+    "fk_points_jacobian_pose_nb",
     "fk_pose_nb",
     "forward_kinematics",
     "jacobian",
