@@ -110,9 +110,7 @@ _G_LITERAL = 93
 _G_NSEG = 94
 _G_USE_TARGET = 95
 _G_EULER = 96  # shoulder axes as signed basis vectors: 3 axis indices, 3 signs (-1 if not)
-_G_TEMPORAL_W = 102  # temporal prior weight, cost per rad (0: no prior)
-_G_PREVIOUS = 103  # (4,) the arm's parameters in the previous frame's refined pose, rad
-_G_SIZE = 107
+_G_SIZE = 102
 
 _MAX_SEG = 3
 _MIN_Z_MM = 1.0  # points closer than this to the camera plane count as off-image
@@ -153,10 +151,6 @@ class RefineConfig:
         runs the paper's plain search from the IK pose).
     swivel_scan_steps : int
         Number of swivel angles scanned (including 0 when odd).
-    temporal_weight_px_per_rad : float
-        Temporal prior: cost (px of mean chamfer) per rad of change of the arm's 4
-        parameters from the previous frame's refined arm (Euclidean norm), when
-        `refine_arms` is given ``previous_q``. 0 turns it off (each frame independent).
     """
 
     edges: EdgeConfig = field(default_factory=EdgeConfig)
@@ -176,7 +170,6 @@ class RefineConfig:
     solver: Literal["numba", "scipy"] = "numba"
     swivel_scan_rad: float = math.pi
     swivel_scan_steps: int = 73
-    temporal_weight_px_per_rad: float = 0.0
 
     def __post_init__(self) -> None:
         checks = {
@@ -189,7 +182,6 @@ class RefineConfig:
             "roi_pad_px": self.roi_pad_px >= 0,
             "swivel_scan_rad": 0 <= self.swivel_scan_rad <= math.pi,
             "swivel_scan_steps": self.swivel_scan_steps >= 1,
-            "temporal_weight_px_per_rad": self.temporal_weight_px_per_rad >= 0,
         }
         for name, ok in checks.items():
             if not ok:
@@ -572,24 +564,11 @@ def _in_quad(q: FloatArray, px: float, py: float) -> bool:
 
 @numba.njit(cache=True)
 def arm_cost_nb(x: FloatArray, geo: FloatArray, dmap: NDArray[np.float32]) -> float:
-    """Eq. 14: image term plus ``lambda * ||t - s||`` for arm parameters ``x`` (4,).
-
-    With a temporal prior packed in ``geo`` (`pack_arm_geometry`'s ``previous_q``), plus
-    ``w * ||x - x_prev||`` (rad): linear, not squared, so that a clear image edge a
-    given chamfer margin away still wins over a large swivel change.
-    """
+    """Eq. 14: image term plus ``lambda * ||t - s||`` for arm parameters ``x`` (4,)."""
     image, hand = arm_cost_terms_nb(x, geo, dmap)
-    cost = image
     if geo[_G_USE_TARGET] != 0.0:
-        cost = image + geo[_G_LAMBDA] * hand
-    w = geo[_G_TEMPORAL_W]
-    if w != 0.0:
-        d2 = 0.0
-        for i in range(4):
-            d = x[i] - geo[_G_PREVIOUS + i]
-            d2 += d * d
-        cost += w * math.sqrt(d2)
-    return cost
+        return image + geo[_G_LAMBDA] * hand
+    return image
 
 
 @numba.njit(cache=True)
@@ -973,7 +952,7 @@ def nelder_mead_arm_nb(
 
     Parameters
     ----------
-    geo : ndarray, shape (107,)
+    geo : ndarray, shape (102,)
         Packed arm geometry (`ArmProblem.geo`).
     dmap : ndarray of float32, shape (H, W)
         Truncated edge distance map of the arm's RoI, px.
@@ -1003,7 +982,7 @@ class ArmProblem:
     side : str
     dofs : ndarray of int, shape (4,)
         Indices of the arm's DoFs in the skeleton's ``q``.
-    geo : ndarray, shape (107,)
+    geo : ndarray, shape (102,)
         Packed geometry for the compiled kernels.
     distance : DistanceMap
     lower, upper : ndarray, shape (4,)
@@ -1082,7 +1061,7 @@ def pack_arm_geometry(
     distance_origin_px: tuple[int, int] = (0, 0),
     world: FloatArray | None = None,
 ) -> FloatArray:
-    """The flat geometry vector (107,) of one arm for the compiled kernels.
+    """The flat geometry vector (102,) of one arm for the compiled kernels.
 
     Parameters
     ----------
