@@ -117,3 +117,17 @@ def test_bad_q_rejected() -> None:
         joint_positions(sk, q)
     with pytest.raises(ShapeError, match=r"points_in_joint: expected shape \(1, 3\)"):
         jacobian(sk, sk.zero_pose(), ["head"], np.zeros((2, 3)))
+
+
+def test_kernel_layout_cache_does_not_keep_skeletons_alive() -> None:
+    import gc
+
+    from mocapkit.skeleton.kinematics import _KINEMATIC_ARRAYS
+
+    before = len(_KINEMATIC_ARRAYS)
+    sk = load_preset("upper_stick")
+    joint_positions(sk, sk.zero_pose())
+    assert len(_KINEMATIC_ARRAYS) == before + 1
+    del sk
+    gc.collect()
+    assert len(_KINEMATIC_ARRAYS) == before

@@ -14,8 +14,8 @@ unless the DoF's joint is the point's joint or one of its ancestors.
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
-from functools import cache
 
 import numba
 import numpy as np
@@ -58,10 +58,22 @@ class KinematicArrays:
         self.ancestors = np.ascontiguousarray(skeleton.ancestors_mask())
 
 
-@cache
+_KINEMATIC_ARRAYS: weakref.WeakKeyDictionary[Skeleton, KinematicArrays] = (
+    weakref.WeakKeyDictionary()
+)
+
+
 def kinematic_arrays(skeleton: Skeleton) -> KinematicArrays:
-    """The kernel layout of a skeleton (cached per skeleton object)."""
-    return KinematicArrays(skeleton)
+    """The kernel layout of a skeleton, cached per skeleton object.
+
+    The cache holds skeletons weakly, so a process that fits many subjects does not keep
+    every model alive.
+    """
+    arrays = _KINEMATIC_ARRAYS.get(skeleton)
+    if arrays is None:
+        arrays = KinematicArrays(skeleton)
+        _KINEMATIC_ARRAYS[skeleton] = arrays
+    return arrays
 
 
 # ------------------------------------------------------------------ kernels
