@@ -308,6 +308,22 @@ def project_nullspace_nb(vr: FloatArray, rank: int, x: FloatArray, out: FloatArr
 
 
 @numba.njit(cache=True)
+def residuals_nb(targets: FloatArray, pts: FloatArray, residual: FloatArray) -> float:
+    """Write each effector's distance to its target into ``residual`` (K,); return the
+    largest (the stopping and stall criteria use it)."""
+    worst = 0.0
+    for k in range(pts.shape[0]):
+        d = math.sqrt(
+            (targets[k, 0] - pts[k, 0]) ** 2
+            + (targets[k, 1] - pts[k, 1]) ** 2
+            + (targets[k, 2] - pts[k, 2]) ** 2
+        )
+        residual[k] = d
+        worst = max(worst, d)
+    return worst
+
+
+@numba.njit(cache=True)
 def solve_ik_nb(
     q: FloatArray,
     parents: NDArray[np.int64],
@@ -392,14 +408,7 @@ def solve_ik_nb(
         pts,
         jac,
     )
-    err = 0.0
-    for k in range(k_eff):
-        d = math.sqrt(
-            (targets[k, 0] - pts[k, 0]) ** 2
-            + (targets[k, 1] - pts[k, 1]) ** 2
-            + (targets[k, 2] - pts[k, 2]) ** 2
-        )
-        err = max(err, d)
+    err = residuals_nb(targets, pts, residual)
     it = 0
     best_err = err
     since_best = 0
@@ -491,26 +500,13 @@ def solve_ik_nb(
             pts,
             jac,
         )
-        err = 0.0
-        for k in range(k_eff):
-            d2 = math.sqrt(
-                (targets[k, 0] - pts[k, 0]) ** 2
-                + (targets[k, 1] - pts[k, 1]) ** 2
-                + (targets[k, 2] - pts[k, 2]) ** 2
-            )
-            err = max(err, d2)
+        err = residuals_nb(targets, pts, residual)
         if err < best_err * (1.0 - stall_fraction):
             best_err = err
             since_best = 0
         else:
             since_best += 1
         it += 1
-    for k in range(k_eff):
-        residual[k] = math.sqrt(
-            (targets[k, 0] - pts[k, 0]) ** 2
-            + (targets[k, 1] - pts[k, 1]) ** 2
-            + (targets[k, 2] - pts[k, 2]) ** 2
-        )
     return it
 
 
