@@ -198,7 +198,12 @@ def test_subject_measurements_and_marker_offsets_are_read(session_dir):
     assert s.bone_lengths_mm["left_upper_arm"] > 0
     segment, offset = s.marker_offsets["head"]
     assert segment == "head"
-    np.testing.assert_allclose(offset, [0.0, 100.0, 0.0])
+    # the set centre is the mean of the glasses' three markers (bridge and temples)
+    np.testing.assert_allclose(offset, [0.0, 73.333, 0.0])
+    members = s.marker_member_offsets["head"]
+    assert list(members) == s.marker_sets["head"]
+    np.testing.assert_allclose(members["head"], [0.0, 100.0, 0.0])
+    np.testing.assert_allclose(np.mean(list(members.values()), axis=0), offset, atol=1e-3)
     assert s.marker_offsets["right_hand"][0] == "right_wrist"
 
 

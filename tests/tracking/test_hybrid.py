@@ -191,3 +191,111 @@ def test_feet_replanted_when_the_subject_steps(truth):
     # stepped with the subject: the head ends within the re-plant trigger of its marker
     assert results[15.0][0] <= 15.0 and results[15.0][1]
     assert results[15.0][0] < 0.25 * results[0.0][0]
+
+
+#: Three markers on the glasses and on each hand-held object (mm from the effector point).
+MEMBERS = {
+    "head": {
+        "bridge": (0.0, 100.0, 0.0),
+        "temple_l": (-70.0, 60.0, 0.0),
+        "temple_r": (70.0, 60.0, 0.0),
+    },
+    "left_hand": {
+        "lh_a": (0.0, 0.0, -80.0),
+        "lh_b": (0.0, 0.0, -130.0),
+        "lh_c": (40.0, 0.0, -80.0),
+    },
+    "right_hand": {
+        "rh_a": (0.0, 0.0, -80.0),
+        "rh_b": (0.0, 0.0, -130.0),
+        "rh_c": (-40.0, 0.0, -80.0),
+    },
+}
+
+
+@pytest.fixture(scope="module")
+def turned():
+    """The waving sequence on a model with a free root yaw, turned 150 deg from the
+    default facing, with its marker-set centres and member markers."""
+    sk = load_preset("zhang21", ["root_rotation"])
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False, member_offsets_mm=MEMBERS))
+    n = 40
+    t = np.arange(n) / RATE
+    q = np.tile(tracker.solver.secondary.omega, (n, 1))
+    for d, name in enumerate(sk.dof_names):
+        if "shoulder" in name or "elbow" in name:
+            q[:, d] += 0.4 * np.sin(2 * np.pi * 0.7 * t + d) + 0.4
+    q[:, sk.dof_index("root_yaw")] = np.radians(150.0)
+    q = np.clip(q, sk.lower, sk.upper)
+    eff = np.stack([tracker.solver.effector_positions(qq) for qq in q])
+    member_names = [m for _, m in tracker.members]
+    seq = [
+        HybridSample(
+            float(t[i]),
+            {s: eff[i, k] for k, s in enumerate(tracker.marker_sets)},
+            members_mm={m: eff[i, 5 + k] for k, m in enumerate(member_names)},
+        )
+        for i in range(n)
+    ]
+    return sk, q, seq
+
+
+def test_member_markers_show_the_turn(turned):
+    """Set centres alone leave the body's turn free; the glasses' members fix it."""
+    sk, q, seq = turned
+    truth = canonical_positions(sk, q)
+    errors = {}
+    for members in (False, True):
+        cfg = HybridConfig(use_video=False, member_offsets_mm=MEMBERS if members else {})
+        tracker = HybridTracker(sk, config=cfg)
+        poses = [tracker.update(s) for s in seq]
+        est = np.stack([p.joints_mm for p in poses])
+        errors[members] = float(np.linalg.norm(est - truth, axis=-1).mean())
+        if members:
+            yaw = np.array([p.q[sk.dof_index("root_yaw")] for p in poses])
+            turn = np.angle(np.exp(1j * (yaw - q[:, sk.dof_index("root_yaw")])))
+            assert np.abs(np.degrees(turn)).max() < 2.0
+            assert pose_members_close(poses[-1], tracker)
+    assert errors[True] < 10.0
+    assert errors[False] > 5.0 * errors[True]
+
+
+def pose_members_close(pose, tracker) -> bool:
+    return all(pose.residual_mm[m] < 10.0 for _, m in tracker.members)
+
+
+def test_oriented_arms_are_not_refined(turned):
+    """An arm whose hand set's orientation is seen is fixed by the markers; only the
+    other arm goes to the video refinement."""
+    sk, q, seq = turned
+    calls = []
+
+    def refiner(skeleton, camera, q_in, image, hands, config):
+        calls.append(sorted(hands))
+        return q_in
+
+    members = {k: v for k, v in MEMBERS.items() if k != "right_hand"}
+    cfg = HybridConfig(member_offsets_mm=members)
+    tracker = HybridTracker(sk, camera=object(), config=cfg, refiner=refiner, initial_q=q[0])
+    s = seq[0]
+    tracker.update(
+        HybridSample(s.time_s, s.markers_mm, image=np.zeros((4, 4)), members_mm=s.members_mm)
+    )
+    assert calls == [["right_hand"]]
+    # the left hand's members lost: that arm is refined again
+    gone = {m: v for m, v in s.members_mm.items() if not m.startswith("lh_")}
+    tracker.update(
+        HybridSample(s.time_s + 0.02, s.markers_mm, image=np.zeros((4, 4)), members_mm=gone)
+    )
+    assert calls[-1] == ["left_hand", "right_hand"]
+
+
+def test_bad_member_inputs(turned):
+    sk, _q, seq = turned
+    with pytest.raises(UnknownNameError, match="marker set 'tail'.*member_offsets_mm"):
+        HybridTracker(sk, config=HybridConfig(member_offsets_mm={"tail": {"a": (0, 0, 0)}}))
+    with pytest.raises(ShapeError, match=r"member_offsets_mm\['head'\]\['a'\]: expected 3 finite"):
+        HybridTracker(sk, config=HybridConfig(member_offsets_mm={"head": {"a": (0, np.nan, 0)}}))
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False, member_offsets_mm=MEMBERS))
+    with pytest.raises(ShapeError, match=r"members_mm\['bridge'\]: expected 3 coordinates"):
+        tracker.update(HybridSample(0.0, seq[0].markers_mm, members_mm={"bridge": np.zeros(4)}))

@@ -27,6 +27,11 @@ def register(subparsers: Any) -> None:
     h.add_argument("--work", default="accuracy-output", help="folder for sessions and results")
     h.add_argument("--seed", type=int, default=0)
     h.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    h.add_argument(
+        "--positions-only",
+        action="store_true",
+        help="use the marker sets' positions only, as the paper does (not their orientation)",
+    )
     h.set_defaults(func=run)
 
 
@@ -41,7 +46,9 @@ def run(args: argparse.Namespace) -> int:
     say = (lambda _line: None) if args.json else print
     if not args.json:
         print(format_rows([]))
-    rows = hybrid_accuracy(mocap, args.work, args.clips, args.seed, say=say)
+    rows = hybrid_accuracy(
+        mocap, args.work, args.clips, args.seed, say=say, oriented=not args.positions_only
+    )
     if args.json:
         print(to_json(rows))
     else:

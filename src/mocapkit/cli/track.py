@@ -23,7 +23,13 @@ def register(subparsers: Any) -> None:
     hyb.add_argument(
         "--paper",
         action="store_true",
-        help="follow the paper literally (no smoothing, proportional balance)",
+        help="follow the paper literally (no smoothing, proportional balance, marker-set "
+        "positions only, no clavicles)",
+    )
+    hyb.add_argument(
+        "--positions-only",
+        action="store_true",
+        help="use the marker sets' positions only, not the orientation their members show",
     )
     hyb.add_argument("--markers", help="raw marker file (.c3d, .trc, .csv) instead of a session")
     hyb.add_argument(
@@ -56,7 +62,15 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             raise SessionError(
                 "track hybrid: give either a SESSION folder or --markers FILE, not both"
             )
-        unused = [o for o, on in (("--no-video", args.no_video), ("--paper", args.paper)) if on]
+        unused = [
+            o
+            for o, on in (
+                ("--no-video", args.no_video),
+                ("--paper", args.paper),
+                ("--positions-only", args.positions_only),
+            )
+            if on
+        ]
         if unused:
             raise SessionError(
                 f"track hybrid: {', '.join(unused)} apply to a SESSION; --markers runs IK only"
@@ -84,7 +98,11 @@ def _run_hybrid(args: argparse.Namespace) -> int:
                 "marker sets and subject from session.json"
             )
         motion = track_hybrid_session(
-            args.session, args.out, use_video=not args.no_video, paper=args.paper
+            args.session,
+            args.out,
+            use_video=not args.no_video,
+            paper=args.paper,
+            oriented_sets=() if args.positions_only else None,
         )
     print(f"tracked {motion.n_frames} frames -> {args.out}")
     return 0

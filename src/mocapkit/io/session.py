@@ -7,7 +7,8 @@ Layout (all lengths in mm, times in s)::
                                   {trunk segment: [x, y, z]}}, "cameras": "cameras.json",
                                   "marker_sets": {"head": ["LFHD", ...], ...},
                                   "marker_offsets_mm": {"head": {"segment": "head",
-                                  "offset_mm": [0, 100, 0]}, ...},
+                                  "offset_mm": [0, 100, 0], "members_mm": {"LFHD":
+                                  [x, y, z], ...}}, ...},
                                   "reference_markers": [...], "rates": {"video_hz": 30,
                                   "markers_hz": 120}}
     cameras.json                 see `mocapkit.io.cameras`
@@ -27,7 +28,8 @@ Subject bone lengths are keyed by `mocapkit.skeleton.CANONICAL_SEGMENTS` names (
 measures: upper arm, forearm, clavicle, trunk, ...). Marker offsets say where a marker set
 sits on the body (glasses in front of the head, an object held in the hand): the canonical
 joint it rides on and its offset in that body part's anatomical frame (x right, y forward,
-z up in the anatomical position).
+z up in the anatomical position); optionally each member marker's own offset in that frame
+(``members_mm``), which lets a tracker read the set's orientation as well as its position.
 """
 
 from __future__ import annotations
@@ -532,8 +534,14 @@ class Session:
                     f"found {v!r}"
                 )
             self.segment_vectors_mm[str(k)] = vec
+        offsets_doc = info.get("marker_offsets_mm", {})
         self.marker_offsets: dict[str, tuple[str, FloatArray]] = _parse_marker_offsets(
-            info.get("marker_offsets_mm", {}), info_path
+            offsets_doc, info_path
+        )
+        #: Per marker set with declared ``members_mm``: member -> offset (3,) mm in the
+        #: anatomical frame of the set's body part.
+        self.marker_member_offsets: dict[str, dict[str, FloatArray]] = _parse_member_offsets(
+            offsets_doc, info_path
         )
         rates = info.get("rates", {})
         if not isinstance(rates, dict):
@@ -611,6 +619,14 @@ class Session:
                         f"{info_path}: marker set {set_name!r} uses markers {lost} that "
                         f"{present[0]} does not hold (it has {sorted(have)})"
                     )
+        for set_name, members_mm in self.marker_member_offsets.items():
+            declared = self.marker_sets.get(set_name)
+            strange = [m for m in members_mm if declared is not None and m not in declared]
+            if strange:
+                raise SessionError(
+                    f"{info_path}: marker_offsets_mm.{set_name}.members_mm names {strange}, "
+                    f"which are not members of marker set {set_name!r} (members: {declared})"
+                )
 
         # ---------------------------------------------------------------- keypoints, truth
         self.keypoints: dict[str, Keypoints] = {}
@@ -861,10 +877,12 @@ def _parse_marker_offsets(doc: Any, where: Path) -> dict[str, tuple[str, FloatAr
     out: dict[str, tuple[str, FloatArray]] = {}
     for name, entry in doc.items():
         field = f"{where}: marker_offsets_mm.{name}"
-        if not isinstance(entry, dict) or set(entry) != {"segment", "offset_mm"}:
+        if not isinstance(entry, dict) or not (
+            {"segment", "offset_mm"} <= set(entry) <= {"segment", "offset_mm", "members_mm"}
+        ):
             raise FormatError(
-                f"{field}: expected {{'segment': canonical joint, 'offset_mm': [x, y, z]}}, "
-                f"found {entry!r}"
+                f"{field}: expected {{'segment': canonical joint, 'offset_mm': [x, y, z]}} "
+                f"and optionally 'members_mm': {{marker: [x, y, z]}}, found {entry!r}"
             )
         seg = entry["segment"]
         if seg not in CANONICAL_JOINTS:
@@ -876,6 +894,27 @@ def _parse_marker_offsets(doc: Any, where: Path) -> dict[str, tuple[str, FloatAr
         if off.shape != (3,) or not np.all(np.isfinite(off)):
             raise FormatError(f"{field}.offset_mm: expected 3 finite numbers, found {off!r}")
         out[str(name)] = (str(seg), off)
+    return out
+
+
+def _parse_member_offsets(doc: Any, where: Path) -> dict[str, dict[str, FloatArray]]:
+    """``marker_offsets_mm.<set>.members_mm``: member marker -> offset (3,) mm (same frame
+    as the set's ``offset_mm``); call after `_parse_marker_offsets` has checked ``doc``."""
+    out: dict[str, dict[str, FloatArray]] = {}
+    for name, entry in doc.items():
+        members = entry.get("members_mm")
+        if members is None:
+            continue
+        field = f"{where}: marker_offsets_mm.{name}.members_mm"
+        if not isinstance(members, dict) or not members:
+            raise FormatError(f"{field}: expected {{marker: [x, y, z], ...}}, found {members!r}")
+        parsed: dict[str, FloatArray] = {}
+        for marker, value in members.items():
+            off = np.asarray(value, dtype=float) if isinstance(value, list) else np.zeros(0)
+            if off.shape != (3,) or not np.all(np.isfinite(off)):
+                raise FormatError(f"{field}.{marker}: expected 3 finite numbers, found {value!r}")
+            parsed[str(marker)] = off
+        out[str(name)] = parsed
     return out
 
 

@@ -79,6 +79,13 @@ HEAD_MARKER_FORWARD_MM = 100.0
 HAND_MARKER_ALONG_MM = 80.0
 HAND_MARKER_OUT_MM = 35.0
 ELBOW_MARKER_OUT_MM = 45.0
+#: The other two markers of each rigid marker set (the hybrid paper's marker sets are
+#: several markers on the 3-D glasses and on each hand-held object, Fig. 9): on the
+#: glasses' temples (mm in the head frame: right, forward, up), and on the hand-held
+#: object 50 mm further along it and 40 mm to its side.
+HEAD_TEMPLE_MM = (70.0, 60.0, 0.0)
+HAND_OBJECT_TIP_MM = 50.0
+HAND_OBJECT_SIDE_MM = 40.0
 
 MARKER_NAMES: tuple[str, ...] = (
     "head",
@@ -86,7 +93,19 @@ MARKER_NAMES: tuple[str, ...] = (
     "right_hand",
     "left_elbow_ref",
     "right_elbow_ref",
+    "head_left",
+    "head_right",
+    "left_hand_tip",
+    "left_hand_side",
+    "right_hand_tip",
+    "right_hand_side",
 )
+#: Members of each tracker marker set (the first is the set's primary marker).
+MARKER_SET_MEMBERS: dict[str, tuple[str, ...]] = {
+    "head": ("head", "head_left", "head_right"),
+    "left_hand": ("left_hand", "left_hand_tip", "left_hand_side"),
+    "right_hand": ("right_hand", "right_hand_tip", "right_hand_side"),
+}
 
 _NAMED_COLOURS_BGR = {
     "red": (40, 40, 190),
@@ -413,12 +432,17 @@ def build_body(
     # ------------------------------------------------------------ markers
     markers = np.empty((n_t, len(MARKER_NAMES), 3))
     markers[:, 0] = head + HEAD_MARKER_FORWARD_MM * fwd_head
+    mi = MARKER_NAMES.index
+    for name, sx in (("head_left", -1.0), ("head_right", 1.0)):
+        x, y, z = HEAD_TEMPLE_MM
+        markers[:, mi(name)] = head + sx * x * side_head + y * fwd_head + z * head_up
     for k, side in ((1, "left"), (2, "right")):
         wj = owner[f"{side}_wrist"]
         along = forearm_rest(side)  # the hand continues the forearm
         point = np.asarray(skeleton.canonical[f"{side}_wrist"][1], dtype=float)
-        local = point + _hand_marker_local(along)
-        markers[:, k] = joints[:, wj] + rot[:, wj] @ local
+        local = point + _hand_object_local(along)
+        for m, name in enumerate(MARKER_SET_MEMBERS[f"{side}_hand"]):
+            markers[:, mi(name)] = joints[:, wj] + rot[:, wj] @ local[m]
         grip = joints[:, wj] + rot[:, wj] @ (point + 45.0 * along)
         g, m = add(grip), add(markers[:, k])
         prims.append(Primitive(CAPSULE, (g, m), (11.0, 11.0), (40, 40, 45), -6.0))
@@ -454,13 +478,22 @@ def _forearm_rest(skeleton: Skeleton, rest_world: FloatArray, side: str) -> Floa
     return d / n if n > 1e-6 else np.array([0.0, 0.0, -1.0])
 
 
-def _hand_marker_local(along: FloatArray) -> FloatArray:
-    """Hand marker offset from the wrist in the wrist frame (mm), for a rest forearm
-    direction ``along``: on the hand-held object, beyond the wrist along the forearm line
-    and out towards the rest pose's front."""
+def _hand_object_local(along: FloatArray) -> FloatArray:
+    """Offsets (3, 3) from the wrist in the wrist frame (mm) of the hand-held object's
+    markers (`MARKER_SET_MEMBERS` order), for a rest forearm direction ``along``: the
+    primary beyond the wrist along the forearm line and out towards the rest pose's
+    front; the tip further along; the side one off to the object's side."""
     out = np.array([0.0, 1.0, 0.0]) - along[1] * along
     out = out / max(float(np.linalg.norm(out)), 1e-9)
-    return HAND_MARKER_ALONG_MM * along + HAND_MARKER_OUT_MM * out
+    lateral = np.cross(along, out)
+    primary = HAND_MARKER_ALONG_MM * along + HAND_MARKER_OUT_MM * out
+    return np.stack(
+        [
+            primary,
+            primary + HAND_OBJECT_TIP_MM * along,
+            primary + HAND_OBJECT_SIDE_MM * lateral,
+        ]
+    )
 
 
 def declared_marker_offsets(skeleton: Skeleton) -> dict[str, dict[str, object]]:
@@ -473,9 +506,9 @@ def declared_marker_offsets(skeleton: Skeleton) -> dict[str, dict[str, object]]:
     position by the smallest rotation taking the rest forearm onto -z.
     """
     rest_world = forward_kinematics(skeleton, skeleton.zero_pose())
-    out: dict[str, dict[str, object]] = {
-        "head": {"segment": "head", "offset_mm": [0.0, HEAD_MARKER_FORWARD_MM, 0.0]}
-    }
+    x, y, z = HEAD_TEMPLE_MM
+    head = np.array([[0.0, HEAD_MARKER_FORWARD_MM, 0.0], [-x, y, z], [x, y, z]])
+    out: dict[str, dict[str, object]] = {"head": _declared_set("head", head)}
     down = np.array([0.0, 0.0, -1.0])
     for side in ("left", "right"):
         along = _forearm_rest(skeleton, rest_world, side)
@@ -483,12 +516,25 @@ def declared_marker_offsets(skeleton: Skeleton) -> dict[str, dict[str, object]]:
         angle = float(np.arctan2(np.linalg.norm(axis), float(along @ down)))
         n = float(np.linalg.norm(axis))
         anat_from_rest = matrix_from_axis_angle(axis / n, angle) if n > 1e-9 else np.eye(3)
-        offset = anat_from_rest @ _hand_marker_local(along)
-        out[f"{side}_hand"] = {
-            "segment": f"{side}_wrist",
-            "offset_mm": [round(float(v), 3) for v in offset],
-        }
+        members = _hand_object_local(along) @ anat_from_rest.T
+        out[f"{side}_hand"] = _declared_set(f"{side}_hand", members, f"{side}_wrist")
     return out
+
+
+def _declared_set(
+    name: str, members_mm: FloatArray, segment: str | None = None
+) -> dict[str, object]:
+    """A ``marker_offsets_mm`` entry: the set centre (mean of the members, as
+    `mocapkit.io.marker_sets` evaluates a set) and each member's offset."""
+
+    def r(v: FloatArray) -> list[float]:
+        return [round(float(c), 3) for c in v]
+
+    return {
+        "segment": segment or name,
+        "offset_mm": r(members_mm.mean(axis=0)),
+        "members_mm": {m: r(p) for m, p in zip(MARKER_SET_MEMBERS[name], members_mm)},
+    }
 
 
 # ====================================================================== rasterisation

@@ -50,6 +50,7 @@ from mocapkit.synth.realism import (
 )
 from mocapkit.synth.render import (
     MARKER_NAMES,
+    MARKER_SET_MEMBERS,
     Appearance,
     CameraRenderer,
     build_body,
@@ -62,7 +63,7 @@ FloatArray = NDArray[np.float64]
 BUILTIN_PREFIX = "builtin:"
 #: Height of the lowest joint of a clip above the floor after placement (mm).
 FLOOR_CLEARANCE_MM = 30.0
-#: Marker sets of synthetic sessions: markers are named directly, one per set.
+#: Marker sets of synthetic sessions (members: `MARKER_SET_MEMBERS`).
 TRACKER_SETS = ("head", "left_hand", "right_hand")
 REFERENCE_MARKERS = ("left_elbow_ref", "right_elbow_ref")
 VIDEO_FORMATS = ("mp4", "png")
@@ -366,7 +367,7 @@ def synthesize_session(
         },
         "marker_offsets_mm": declared_marker_offsets(motion.skeleton),
         "cameras": "cameras.json",
-        "marker_sets": {s: [s] for s in TRACKER_SETS},
+        "marker_sets": {s: list(MARKER_SET_MEMBERS[s]) for s in TRACKER_SETS},
         "reference_markers": list(REFERENCE_MARKERS),
         "rates": {"video_hz": opts.fps, "markers_hz": opts.marker_rate_hz},
         "synthetic": {

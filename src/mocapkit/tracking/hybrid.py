@@ -90,6 +90,19 @@ class HybridConfig:
         After smoothing, effectors further than this from their markers are put back
         by IK. A tolerance near the marker noise keeps the smoothing (a tight one would
         re-inject the noise into the redundant DoFs, e.g. the elbow swivel).
+    member_offsets_mm : mapping of str to mapping of str to (3,) array_like
+        Per marker set, its member markers' offsets (mm) in the effector joint's frame,
+        from the default effector point (as ``marker_offsets_mm``). Each member then
+        becomes a point effector of its own, so the IK sees the set's orientation as well
+        as its position; for the glasses this fixes the body's turn, which the three set
+        centres leave free (`zhang21` has no spine or neck twist, so the head's yaw is
+        the trunk's). An extension: the paper uses the set positions only. Members
+        are used while seen and their set is not bridged or released.
+    start_upright : bool
+        The subject starts standing upright: the first pose is lifted or lowered so
+        that the model's head meets the head marker, and the feet are planted where
+        that pose has them (a subject on a step or a box, a floor that is not at z = 0).
+        False keeps the feet of the first pose on z = 0.
     replant_mm : float
         With planted feet: when a marker effector stays further than this off its
         marker, the subject has stepped; the feet are put down again under the new
@@ -113,6 +126,8 @@ class HybridConfig:
     plant_feet: bool = True
     smoothing_polish_tol_mm: float = 5.0
     replant_mm: float = 15.0
+    member_offsets_mm: Mapping[str, Mapping[str, Sequence[float]]] = field(default_factory=dict)
+    start_upright: bool = True
 
     def __post_init__(self) -> None:
         if not self.gap_limit_s >= 0:
@@ -152,12 +167,16 @@ class HybridSample:
         Time stamp of the marker sample used (the newest one); ``time_s`` by default.
     image : ndarray, optional
         Video frame (H, W) or (H, W, 3) for the refinement.
+    members_mm : mapping of str to array_like (3,), optional
+        Member markers of the sets in ``HybridConfig.member_offsets_mm``, by marker name
+        (NaN or absent when occluded).
     """
 
     time_s: float
     markers_mm: Mapping[str, ArrayLike]
     marker_time_s: float | None = None
     image: NDArray[Any] | None = None
+    members_mm: Mapping[str, ArrayLike] = field(default_factory=dict)
 
 
 @dataclass
@@ -182,7 +201,7 @@ class HybridPose:
         Balance increments applied to the spine.
     marker_time_s : float
     refined : bool
-        Whether the video refinement ran.
+        Whether the video refinement ran (on at least one arm).
     """
 
     time_s: float
@@ -298,11 +317,32 @@ class HybridTracker:
             e = effs[name]
             p = np.add(e.point_mm, o)
             effs[name] = Effector(e.name, e.joint, (float(p[0]), float(p[1]), float(p[2])))
+        base_effs = dict(marker_effectors or default_marker_effectors(skeleton))
+        #: (marker set, member marker) of each member effector, after the feet.
+        self.members: tuple[tuple[str, str], ...] = ()
+        member_effs: list[Effector] = []
+        for name, members in self.config.member_offsets_mm.items():
+            if name not in effs:
+                raise unknown_name("marker set", name, effs, "HybridConfig.member_offsets_mm")
+            for member, off in members.items():
+                o = np.asarray(off, dtype=float)
+                if o.shape != (3,) or not np.all(np.isfinite(o)):
+                    raise ShapeError(
+                        f"HybridConfig.member_offsets_mm[{name!r}][{member!r}]: expected 3 "
+                        f"finite numbers (mm), found {off!r}"
+                    )
+                e = base_effs[name]
+                p = np.add(e.point_mm, o)
+                member_effs.append(
+                    Effector(f"{name}/{member}", e.joint, (float(p[0]), float(p[1]), float(p[2])))
+                )
+                self.members += ((name, member),)
         self.marker_sets = tuple(effs)
-        effectors = [effs[n] for n in self.marker_sets] + [
-            Effector("left_foot", "l_foot"),
-            Effector("right_foot", "r_foot"),
-        ]
+        effectors = (
+            [effs[n] for n in self.marker_sets]
+            + [Effector("left_foot", "l_foot"), Effector("right_foot", "r_foot")]
+            + member_effs
+        )
         self.solver = SDLSSolver(skeleton, effectors, self.config.ik)
         polish_cfg = replace(
             self.config.ik,
@@ -346,7 +386,19 @@ class HybridTracker:
     def _targets(self, sample: HybridSample) -> tuple[FloatArray, list[str], list[str]]:
         t_m = sample.time_s if sample.marker_time_s is None else float(sample.marker_time_s)
         n = len(self.marker_sets)
-        targets = np.full((n + 2, 3), np.nan)
+        targets = np.full((n + 2 + len(self.members), 3), np.nan)
+        for k, (set_name, member) in enumerate(self.members):
+            raw = sample.members_mm.get(member)
+            p = None if raw is None else np.asarray(raw, dtype=float).reshape(-1)
+            if p is not None and p.shape != (3,):
+                raise ShapeError(
+                    f"sample.members_mm[{member!r}]: expected 3 coordinates (mm), "
+                    f"found shape {p.shape}"
+                )
+            raw_set = sample.markers_mm.get(set_name)
+            set_seen = raw_set is not None and bool(np.all(np.isfinite(raw_set)))
+            if p is not None and set_seen and np.all(np.isfinite(p)):
+                targets[n + 2 + k] = p
         bridged: list[str] = []
         released: list[str] = []
         for i, name in enumerate(self.marker_sets):
@@ -390,14 +442,17 @@ class HybridTracker:
     def initial_pose(self, targets: FloatArray) -> FloatArray:
         """Relaxed pose with the pelvis below the head marker, facing the camera.
 
-        Root x, y put the model's head over the head marker; the root height stays at
-        the model's standing height (feet on the floor z = 0 of a scaled model). With
+        Root x, y put the model's head over the head marker; with
+        ``HybridConfig.start_upright`` the root height puts the head at the marker's
+        height too, otherwise it stays at the model's standing height (feet on z = 0). With
         the ``root_yaw`` DoF the subject is assumed to start facing the camera, as in
         the paper's set-up (the camera stands in front of the player): the body's
         front (+Y at rest) points horizontally from the head marker to the camera.
         Without a camera the body's right (+X at rest) points from the left-hand to
         the right-hand marker (hands roughly symmetric about the sagittal plane), which
         is ambiguous when the arms cross or one is raised; pass ``initial_q`` then.
+        When the head set's members are seen (``member_offsets_mm``), the body is
+        turned so the model's head faces the way the glasses do instead.
         """
         sk = self.skeleton
         q = (
@@ -424,11 +479,44 @@ class HybridTracker:
                 right = rh - lh
                 if np.hypot(right[0], right[1]) > 1e-6:
                     q[sk.dof_index("root_yaw")] = math.atan2(right[1], right[0])
+        if "root_yaw" in sk.dof_names:
+            turn = self._member_turn_rad(q, targets, "head")
+            if turn is not None:
+                q[sk.dof_index("root_yaw")] += turn
         if "head" in names and np.all(np.isfinite(targets[names.index("head")])):
             head_now = self.solver.effector_positions(q)[names.index("head")]
             q[0] += targets[names.index("head"), 0] - head_now[0]
             q[1] += targets[names.index("head"), 1] - head_now[1]
+            if self.config.start_upright:
+                q[2] += targets[names.index("head"), 2] - head_now[2]
         return np.clip(q, sk.lower, sk.upper)
+
+    def _n_members_seen(self, targets: FloatArray, set_name: str) -> int:
+        n = len(self.marker_sets)
+        return sum(
+            1
+            for k, (s, _) in enumerate(self.members)
+            if s == set_name and np.all(np.isfinite(targets[n + 2 + k]))
+        )
+
+    def _member_turn_rad(self, q: FloatArray, targets: FloatArray, set_name: str) -> float | None:
+        """The turn about the vertical that best aligns the model's member markers of one
+        set with the seen ones (least squares over the horizontal components of the
+        members' offsets from their set centre); None with fewer than two seen members."""
+        n = len(self.marker_sets)
+        rows = [n + 2 + k for k, (s, _) in enumerate(self.members) if s == set_name]
+        seen = [r for r in rows if np.all(np.isfinite(targets[r]))]
+        if len(seen) < 2:
+            return None
+        model = self.solver.effector_positions(q)[seen, :2]
+        observed = targets[seen, :2]
+        a = model - model.mean(axis=0)
+        b = observed - observed.mean(axis=0)
+        cross = float(np.sum(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]))
+        dot = float(np.sum(a * b))
+        if math.hypot(cross, dot) < 1e-9:
+            return None
+        return math.atan2(cross, dot)
 
     def _replant_if_stepped(
         self,
@@ -452,13 +540,13 @@ class HybridTracker:
         if not worst > self.config.replant_mm:
             return q, 0
         free = targets.copy()
-        free[n:] = np.nan
+        free[n : n + 2] = np.nan
         res_free = self.solver.solve(q, free)
-        feet = self.solver.effector_positions(res_free.q)[n:]
+        feet = self.solver.effector_positions(res_free.q)[n : n + 2]
         feet[:, 2] = self._feet[:, 2]  # stay on the floor
         self._feet = feet
         self._support = support_points(self.skeleton, res_free.q)
-        targets[n:] = feet
+        targets[n : n + 2] = feet
         res = self.solver.solve(res_free.q, targets)
         self.events.append((sample.time_s, "feet", "replanted"))
         return res.q, res_free.iterations + res.iterations
@@ -483,11 +571,11 @@ class HybridTracker:
         iterations = 0
         if self._q is None:
             q = self.initial_pose(targets)
-            feet = self.solver.effector_positions(q)[n:]
+            feet = self.solver.effector_positions(q)[n : n + 2]
             self._feet = feet
             self._support = support_points(sk, q)
             self._root_z0 = float(q[sk.dof_index("root_tz")])
-            targets[n:] = feet if self.config.plant_feet else np.nan
+            targets[n : n + 2] = feet if self.config.plant_feet else np.nan
             for _ in range(max(self.config.init_iterations, 1)):
                 res = self.solver.solve(q, targets)
                 q = res.q
@@ -496,7 +584,7 @@ class HybridTracker:
                 self._balance_model = calibrate_balance(self.solver, q)
         else:
             assert self._feet is not None
-            targets[n:] = self._feet if self.config.plant_feet else np.nan
+            targets[n : n + 2] = self._feet if self.config.plant_feet else np.nan
             res = self.solver.solve(self._q, targets)
             q = res.q
             iterations += res.iterations
@@ -510,16 +598,25 @@ class HybridTracker:
             else None
         )
         if ref is not None:
+            # an arm whose hand set's orientation is seen (two or more members) is fixed
+            # by the markers up to the shoulder: the forearm's direction is the set's, so
+            # the swivel the refinement resolves is no longer ambiguous
+            oriented = {
+                name for name in self.marker_sets if self._n_members_seen(targets, name) >= 2
+            }
             hands = {
                 name: targets[i].copy()
                 for i, name in enumerate(self.marker_sets)
-                if name in ("left_hand", "right_hand") and np.all(np.isfinite(targets[i]))
+                if name in ("left_hand", "right_hand")
+                and name not in oriented
+                and np.all(np.isfinite(targets[i]))
             }
-            q = np.asarray(
-                ref(sk, self.camera, q, sample.image, hands, self._refine_config), dtype=float
-            )
-            sk.check_q(q, "refiner output")
-            refined = True
+            if hands:
+                q = np.asarray(
+                    ref(sk, self.camera, q, sample.image, hands, self._refine_config), dtype=float
+                )
+                sk.check_q(q, "refiner output")
+                refined = True
         # warm start of the next frame: the pose before the balance post-process, so
         # the spine bow is recomputed from dh each frame rather than accumulated
         self._q = q.copy()
@@ -548,7 +645,7 @@ class HybridTracker:
             q = res.q
             iterations += res.iterations
         resid_arr = np.linalg.norm(self.solver.effector_positions(q) - targets, axis=1)
-        names = self.marker_sets + FEET
+        names = self.marker_sets + FEET + tuple(m for _, m in self.members)
         residual = {nm: float(r) for nm, r in zip(names, resid_arr, strict=True)}
         joints = canonical_positions(sk, q)
         return HybridPose(
