@@ -225,3 +225,26 @@ def test_bad_subject_measurements_rejected(copy):
     (copy / "session.json").write_text(json.dumps(info))
     with pytest.raises(FormatError, match=r"marker_offsets_mm.head.segment: expected a canonical"):
         load_session(copy)
+
+
+def test_bad_member_offsets_rejected(copy):
+    import json
+
+    info = json.loads((copy / "session.json").read_text())
+    head = info["marker_offsets_mm"]["head"]
+    info["marker_offsets_mm"]["head"] = {**head, "members_mm": {"head": [0, "x", 0]}}
+    (copy / "session.json").write_text(json.dumps(info))
+    with pytest.raises(FormatError, match=r"members_mm.head: expected 3 finite numbers"):
+        load_session(copy)
+    info["marker_offsets_mm"]["head"] = {**head, "members_mm": {"LFHD": [0, 100, 0]}}
+    (copy / "session.json").write_text(json.dumps(info))
+    with pytest.raises(SessionError, match=r"members_mm names \['LFHD'\], which are not members"):
+        load_session(copy)
+    info["marker_offsets_mm"]["head"] = {**head, "colour": "red"}
+    (copy / "session.json").write_text(json.dumps(info))
+    with pytest.raises(FormatError, match=r"optionally 'members_mm'"):
+        load_session(copy)
+    info["marker_offsets_mm"]["head"] = {**head, "offset_mm": [0, "100", 0]}
+    (copy / "session.json").write_text(json.dumps(info))
+    with pytest.raises(FormatError, match=r"head.offset_mm: expected 3 finite numbers"):
+        load_session(copy)

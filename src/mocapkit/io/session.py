@@ -866,6 +866,16 @@ def load_session(path: str | os.PathLike[str]) -> Session:
     return Session(path)
 
 
+def _vector3(value: Any) -> FloatArray | None:
+    """``value`` as 3 finite floats (a JSON list of numbers), or None."""
+    if not isinstance(value, list) or len(value) != 3:
+        return None
+    if not all(isinstance(v, int | float) and not isinstance(v, bool) for v in value):
+        return None
+    out = np.asarray(value, dtype=float)
+    return out if np.all(np.isfinite(out)) else None
+
+
 def _parse_marker_offsets(doc: Any, where: Path) -> dict[str, tuple[str, FloatArray]]:
     """``marker_offsets_mm``: marker set -> (canonical joint it rides on, offset (3,) mm).
 
@@ -890,9 +900,11 @@ def _parse_marker_offsets(doc: Any, where: Path) -> dict[str, tuple[str, FloatAr
                 f"{field}.segment: expected a canonical joint ({', '.join(CANONICAL_JOINTS)}), "
                 f"found {seg!r}"
             )
-        off = np.asarray(entry["offset_mm"], dtype=float)
-        if off.shape != (3,) or not np.all(np.isfinite(off)):
-            raise FormatError(f"{field}.offset_mm: expected 3 finite numbers, found {off!r}")
+        off = _vector3(entry["offset_mm"])
+        if off is None:
+            raise FormatError(
+                f"{field}.offset_mm: expected 3 finite numbers, found {entry['offset_mm']!r}"
+            )
         out[str(name)] = (str(seg), off)
     return out
 
@@ -910,8 +922,8 @@ def _parse_member_offsets(doc: Any, where: Path) -> dict[str, dict[str, FloatArr
             raise FormatError(f"{field}: expected {{marker: [x, y, z], ...}}, found {members!r}")
         parsed: dict[str, FloatArray] = {}
         for marker, value in members.items():
-            off = np.asarray(value, dtype=float) if isinstance(value, list) else np.zeros(0)
-            if off.shape != (3,) or not np.all(np.isfinite(off)):
+            off = _vector3(value)
+            if off is None:
                 raise FormatError(f"{field}.{marker}: expected 3 finite numbers, found {value!r}")
             parsed[str(marker)] = off
         out[str(name)] = parsed
