@@ -244,7 +244,9 @@ def track_hybrid_marker_arrays(
     height_mm : float
         Subject stature (scales ``zhang21``).
     config : HybridConfig, optional
-        Default: ``HybridConfig(use_video=False)``.
+        Default: ``HybridConfig(use_video=False, start_upright=False)``: a lab's marker
+        frame has its floor at z = 0, and where a raw head set sits on the head is not
+        known, so the model stands on that floor rather than hanging from the set.
 
     Returns
     -------
@@ -261,7 +263,7 @@ def track_hybrid_marker_arrays(
         if a.shape != (t.size, 3):
             raise ShapeError(f"sets_mm[{name!r}]: expected shape ({t.size}, 3), found {a.shape}")
         arrays[name] = a
-    cfg = config or HybridConfig(use_video=False)
+    cfg = config or HybridConfig(use_video=False, start_upright=False)
     sk = hybrid_skeleton(height_mm)
     tracker = HybridTracker(sk, None, cfg)
     samples = (
@@ -320,7 +322,7 @@ def track_hybrid_markers(
     pos = evaluate_marker_sets(markers, sets)
     if height_mm is None:
         height_mm = float(estimate_height_mm(markers, head=sets[names.index("head")]))
-    cfg = config or HybridConfig(use_video=False, plant_feet=plant_feet)
+    cfg = config or HybridConfig(use_video=False, plant_feet=plant_feet, start_upright=False)
     sk, q, _ = track_hybrid_marker_arrays(
         markers.time_s, {n: pos[:, i] for i, n in enumerate(names)}, height_mm, cfg
     )
