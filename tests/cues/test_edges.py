@@ -1,4 +1,5 @@
-"""Edge distance transform: brute force, truncation, equalisation table, RoI = full frame."""
+"""Edge distance transform: brute force, truncation, equalisation table, RoI = full frame,
+oriented chamfer maps."""
 
 from __future__ import annotations
 
@@ -13,7 +14,10 @@ from mocapkit.cues.edges import (
     edge_distance_maps,
     edge_distance_transform,
     equalize_lut,
+    oriented_distance_maps,
+    prepare_frame,
     roi_around_points,
+    roi_distance_map,
     to_grey,
 )
 from mocapkit.errors import ShapeError
@@ -125,3 +129,73 @@ def test_bad_inputs_raise():
         EdgeConfig(canny_low=200, canny_high=100)
     with pytest.raises(ShapeError, match="mask: expected one of"):
         distance_to_edges(np.zeros((3, 3), np.uint8), mask="7")
+
+
+def _edge_bins(edges: np.ndarray, smoothed: np.ndarray, n_bins: int) -> np.ndarray:
+    """Orientation bin of every pixel's edge line, from OpenCV's 3x3 Sobel (reference)."""
+    gx = cv2.Sobel(smoothed.astype(np.float32), cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(smoothed.astype(np.float32), cv2.CV_32F, 0, 1, ksize=3)
+    line = np.mod(np.arctan2(gy, gx) + 0.5 * np.pi, np.pi)
+    return np.floor(line * n_bins / np.pi + 0.5).astype(int) % n_bins
+
+
+@pytest.mark.parametrize("step", [1, 2])
+def test_oriented_maps_equal_brute_force_per_bin(rng, step):
+    smoothed = cv2.GaussianBlur(_shapes_image(rng)[:, :, 1], (5, 5), 0)
+    edges = cv2.Canny(smoothed, 50, 150)
+    n_bins, cap = 6, 18.0
+    maps = oriented_distance_maps(edges, smoothed, n_bins, cap, mask="precise", step_px=step)
+    h2, w2 = -(-edges.shape[0] // step), -(-edges.shape[1] // step)
+    assert maps.shape == (n_bins, h2, w2) and maps.dtype == np.float32
+    bins = _edge_bins(edges, smoothed, n_bins)
+    for k in range(n_bins):
+        near = (edges > 0) & (np.abs((bins - k + 1) % n_bins) <= 2)
+        grid = np.zeros((h2, w2), np.uint8)
+        ys, xs = np.nonzero(near)
+        grid[ys // step, xs // step] = 1
+        want = (
+            np.minimum(_brute_force(grid) * step, cap) if grid.any() else np.full_like(maps[k], cap)
+        )
+        np.testing.assert_allclose(maps[k], want, rtol=1e-5, atol=1e-4)
+
+
+def test_oriented_maps_keep_only_edges_running_the_bins_way():
+    # a bright bar at 30 deg: its two long sides are edges at 30 deg (bin 1 of 6)
+    img = np.zeros((200, 200), np.uint8)
+    c, s = np.cos(np.radians(30)), np.sin(np.radians(30))
+    corners = np.array([[-70, -12], [70, -12], [70, 12], [-70, 12]], float)
+    rot = corners @ np.array([[c, s], [-s, c]]) + 100.0
+    cv2.fillConvexPoly(img, np.round(rot * 16).astype(np.int32), 220, cv2.LINE_AA, 4)
+    smoothed = cv2.GaussianBlur(img, (5, 5), 0)
+    edges = cv2.Canny(smoothed, 50, 150)
+    maps = oriented_distance_maps(edges, smoothed, 6, 25.0, step_px=1)
+    # a point on the bar's long side (not near its ends)
+    side = np.round(np.array([0.0, 12.0]) @ np.array([[c, s], [-s, c]]) + 100.0).astype(int)
+    x, y = side
+    assert maps[1][y, x] <= 2.0  # 30 deg: the side's own bin
+    assert maps[4][y, x] >= 20.0  # 120 deg: perpendicular, only the far ends' edges
+    plain = distance_to_edges(edges, 25.0)
+    assert plain[y, x] <= 2.0
+
+
+def test_roi_map_with_orientation_bins_adds_oriented_maps_of_the_padded_crop(rng):
+    img = _shapes_image(rng)
+    cfg = EdgeConfig(cap_px=20.0, orientation_bins=8)
+    roi = (60, 40, 150, 160)
+    dm = roi_distance_map(prepare_frame(img, cfg), roi, cfg)
+    plain = roi_distance_map(
+        prepare_frame(img, EdgeConfig(cap_px=20.0)), roi, EdgeConfig(cap_px=20.0)
+    )
+    np.testing.assert_array_equal(dm.distance_px, plain.distance_px)
+    assert dm.oriented_px is not None and dm.oriented_px.shape[0] == 8
+    m = cfg.margin_px
+    assert dm.oriented_origin_px == (roi[0] - m, roi[1] - m) and dm.oriented_step_px == 2
+    # every oriented map is at least the plain distance (fewer edges), up to the grid
+    ox, oy = dm.oriented_origin_px
+    inner = dm.oriented_px[
+        :, (roi[1] - oy) // 2 : (roi[3] - oy) // 2, (roi[0] - ox) // 2 : (roi[2] - ox) // 2
+    ]
+    coarse = plain.distance_px[::2, ::2][: inner.shape[1], : inner.shape[2]]
+    assert np.all(inner.min(axis=0) >= coarse - 2.0)
+    with pytest.raises(ShapeError, match="orientation_bins: expected 0"):
+        EdgeConfig(orientation_bins=1)

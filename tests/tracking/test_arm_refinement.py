@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -11,6 +12,7 @@ from numba import njit
 from scipy.optimize import Bounds, minimize
 
 from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
+from mocapkit.cues.edges import EdgeConfig
 from mocapkit.errors import ShapeError, UnknownNameError
 from mocapkit.skeleton import forward_kinematics, joint_positions, load_preset
 from mocapkit.tracking.arm_refinement import (
@@ -148,7 +150,7 @@ def test_nelder_mead_arm_nb_reproduces_scipy_on_the_arm_cost(scene, side):
     q, img, targets = scene
     start = swivel_arm(SKEL, q, side, math.radians(12.0))
     p = arm_problem(SKEL, CAMERA, start, side, img, targets[side])
-    dmap = p.distance.distance_px
+    dmap = p.maps
     sim = initial_simplex(p.x0, 0.1)
     res = minimize(
         lambda x: arm_cost_nb(x, p.geo, dmap),
@@ -197,6 +199,31 @@ def test_cost_is_lowest_at_the_true_pose(scene):
                 assert p.cost(x) > true_cost
 
 
+def test_oriented_cost_reads_each_outline_line_in_the_map_of_its_direction(scene):
+    q, img, targets = scene
+    p = arm_problem(SKEL, CAMERA, q, "left", img, targets["left"], RefineConfig(edges=EdgeConfig()))
+    assert p.maps.shape[0] == 1  # the paper's plain chamfer: one map
+    rng = np.random.default_rng(3)
+    xs = p.x0 + rng.normal(0.0, 0.2, (20, 4))
+    # K copies of the plain map: the same cost whatever bin each line reads
+    same = replace(p, maps=np.ascontiguousarray(np.repeat(p.maps, 8, axis=0)))
+    for x in xs:
+        assert same.cost(x) == pytest.approx(p.cost(x), rel=1e-12)
+    # an arm hanging straight down, seen from the front: every outline line runs
+    # vertically in the image (90 deg: bin 4 of 8), so with map k constant k the mean is 4
+    hang = SKEL.zero_pose()
+    world = joint_positions(SKEL, hang)
+    wrist = world[SKEL.joint_index(arm_joint_names("left")[2])]
+    down = arm_problem(SKEL, CAMERA, hang, "left", img, wrist, RefineConfig())
+    assert down.maps.shape[0] == 8
+    k_maps = np.ascontiguousarray(
+        np.broadcast_to(np.arange(8, dtype=np.float32)[:, None, None], down.maps.shape)
+    )
+    image_term, hand = replace(down, maps=k_maps).cost_terms(down.x0)
+    assert hand == pytest.approx(0.0, abs=1e-9)
+    assert image_term == pytest.approx(4.0, abs=1e-12)
+
+
 @pytest.mark.parametrize("deg", [-20.0, -15.0, 15.0, 20.0])
 def test_refinement_recovers_a_perturbed_swivel(scene, deg):
     q, img, targets = scene
@@ -241,7 +268,7 @@ def test_literal_sum_counts_silhouette_pixels(scene):
         RefineConfig(literal_sum=True, include_hand=False),
     )
     ones = type(p.distance)(np.ones_like(p.distance.distance_px), p.distance.origin_px, 25.0)
-    p1 = type(p)(p.side, p.dofs, p.geo, ones, p.lower, p.upper, p.x0)
+    p1 = type(p)(p.side, p.dofs, p.geo, ones, p.lower, p.upper, p.x0, ones.distance_px[None])
     mask = np.zeros((480, 640), np.uint8)
     draw_body(np.zeros((480, 640, 3), np.uint8), SKEL, CAMERA, q)  # exercise the renderer
     from mocapkit.viz.overlay import segment_silhouettes

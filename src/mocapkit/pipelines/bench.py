@@ -216,7 +216,7 @@ def bench_hybrid(
         frame = prepare_frame(frames[mid], cfg.edges)
         prob = arm_problem(sk, cam, q_true[mid], "left", frame, canon[mid, 1], cfg)
         xs = prob.x0 + np.random.default_rng(seed).normal(0, 0.05, (20_000, 4))
-        dmap = prob.distance.distance_px
+        dmap = prob.maps
         eval_rate, _ = _median_rate(lambda: arm_cost_many_nb(xs, prob.geo, dmap), len(xs), repeats)
         roi = prob.distance.roi
         edge_rate, _ = _median_rate(

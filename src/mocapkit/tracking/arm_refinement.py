@@ -110,7 +110,8 @@ _G_LITERAL = 93
 _G_NSEG = 94
 _G_USE_TARGET = 95
 _G_EULER = 96  # shoulder axes as signed basis vectors: 3 axis indices, 3 signs (-1 if not)
-_G_SIZE = 102
+_G_MAP_STEP = 102  # grid spacing of the distance maps (px; 2 for the oriented ones)
+_G_SIZE = 103
 
 _MAX_SEG = 3
 _MIN_Z_MM = 1.0  # points closer than this to the camera plane count as off-image
@@ -123,7 +124,11 @@ class RefineConfig:
     Parameters
     ----------
     edges : EdgeConfig
-        Edge distance transform (cap, Canny thresholds, equalisation).
+        Edge distance transform (cap, Canny thresholds, equalisation). By default an
+        oriented chamfer with 8 orientation bins (an extension of the paper's plain
+        chamfer, which ``EdgeConfig()`` gives and ``paper=True`` uses): on the five
+        accuracy clips with marker positions only it cut the mean elbow error with
+        video from 129 mm to 100 mm (4 bins: 116 mm, 12 bins: 100 mm).
     hand_weight_px_per_mm : float
         ``lambda`` of eq. 14: cost (px of mean chamfer) per mm of hand displacement.
     sample_step_px : float
@@ -153,7 +158,7 @@ class RefineConfig:
         Number of swivel angles scanned (including 0 when odd).
     """
 
-    edges: EdgeConfig = field(default_factory=EdgeConfig)
+    edges: EdgeConfig = field(default_factory=lambda: EdgeConfig(orientation_bins=8))
     hand_weight_px_per_mm: float = 2.0
     sample_step_px: float = 3.0
     include_hand: bool = True
@@ -298,8 +303,9 @@ def _project_one(
 def _lookup(u: float, v: float, geo: FloatArray, dmap: NDArray[np.float32]) -> float:
     """Bilinear distance at image point (u, v); the cap outside the map (same rule as
     `DistanceMap.lookup`)."""
-    x = u - geo[_G_ORIGIN]
-    y = v - geo[_G_ORIGIN + 1]
+    step = geo[_G_MAP_STEP]
+    x = (u - geo[_G_ORIGIN] - 0.5 * (step - 1.0)) / step
+    y = (v - geo[_G_ORIGIN + 1] - 0.5 * (step - 1.0)) / step
     h = dmap.shape[0]
     w = dmap.shape[1]
     if not (x >= 0.0 and y >= 0.0 and x < w - 1 and y < h - 1):
@@ -465,16 +471,22 @@ def _n_samples(p0u: float, p0v: float, p1u: float, p1v: float, step: float) -> i
 def arm_cost_terms_nb(
     x: FloatArray, geo: FloatArray, dmap: NDArray[np.float32]
 ) -> tuple[float, float]:
-    """Image term and hand offset (mm) of eq. 14 for arm parameters ``x`` (4,)."""
+    """Image term and hand offset (mm) of eq. 14 for arm parameters ``x`` (4,).
+
+    ``dmap`` holds K distance maps (K, h, w): one (the paper's chamfer) or one per edge
+    orientation bin, each outline line then read in the map of its own image direction
+    (`mocapkit.cues.edges.oriented_distance_maps`).
+    """
     lines = np.empty((_MAX_SEG, 2, 2, 3))
     eff = np.empty(3)
     n_seg = _segment_outlines_nb(x, geo, lines, eff)
     tgt = geo[_G_TARGET : _G_TARGET + 3]
     hand = math.sqrt((eff[0] - tgt[0]) ** 2 + (eff[1] - tgt[1]) ** 2 + (eff[2] - tgt[2]) ** 2)
     if geo[_G_LITERAL] != 0.0:
-        return _literal_sum_nb(lines, n_seg, geo, dmap), hand
+        return _literal_sum_nb(lines, n_seg, geo, dmap[0]), hand
     cap = geo[_G_CAP]
     step = geo[_G_STEP]
+    n_bins = dmap.shape[0]
     total = 0.0
     count = 0
     for s in range(n_seg):
@@ -485,15 +497,21 @@ def arm_cost_terms_nb(
             u1, v1, ok1 = _project_one(p1[0], p1[1], p1[2], geo, False)
             if not (ok0 and ok1):
                 n = 2
+                b = 0
             else:
                 n = _n_samples(u0, v0, u1, v1, step)
+                b = 0
+                if n_bins > 1:
+                    ang = math.atan2(v1 - v0, u1 - u0) % math.pi
+                    b = int(ang * n_bins / math.pi + 0.5) % n_bins  # ang >= 0
+            d2 = dmap[b]
             for j in range(n):
                 f = j / (n - 1)
                 px = p0[0] + f * (p1[0] - p0[0])
                 py = p0[1] + f * (p1[1] - p0[1])
                 pz = p0[2] + f * (p1[2] - p0[2])
                 u, v, ok = _project_one(px, py, pz, geo, False)
-                total += _lookup(u, v, geo, dmap) if ok else cap
+                total += _lookup(u, v, geo, d2) if ok else cap
                 count += 1
     return total / count, hand
 
@@ -989,6 +1007,9 @@ class ArmProblem:
         Joint limits.
     x0 : ndarray, shape (4,)
         Start (the IK pose), clipped into the limits.
+    maps : ndarray of float32, shape (K, h, w)
+        The distance maps the cost reads (``geo`` holds their origin and grid step):
+        the oriented ones when the frame has them, else the plain map as one bin.
     """
 
     side: str
@@ -998,14 +1019,15 @@ class ArmProblem:
     lower: FloatArray
     upper: FloatArray
     x0: FloatArray
+    maps: NDArray[np.float32]
 
     def cost(self, x: ArrayLike) -> float:
         """Eq. 14 at arm parameters ``x`` (4,)."""
-        return float(arm_cost_nb(self._x(x), self.geo, self.distance.distance_px))
+        return float(arm_cost_nb(self._x(x), self.geo, self.maps))
 
     def cost_terms(self, x: ArrayLike) -> tuple[float, float]:
         """``(image term, hand offset mm)`` at ``x`` (4,)."""
-        image, hand = arm_cost_terms_nb(self._x(x), self.geo, self.distance.distance_px)
+        image, hand = arm_cost_terms_nb(self._x(x), self.geo, self.maps)
         return float(image), float(hand)
 
     def joints_mm(self, x: ArrayLike) -> FloatArray:
@@ -1126,6 +1148,7 @@ def pack_arm_geometry(
     geo[_G_DIST : _G_DIST + 8] = dist
     geo[_G_ORIGIN : _G_ORIGIN + 2] = distance_origin_px
     geo[_G_CAP] = config.edges.cap_px
+    geo[_G_MAP_STEP] = 1.0
     geo[_G_STEP] = config.sample_step_px
     geo[_G_LAMBDA] = config.hand_weight_px_per_mm
     geo[_G_LITERAL] = 1.0 if config.literal_sum else 0.0
@@ -1217,7 +1240,13 @@ def arm_problem(
     lower = np.ascontiguousarray(skeleton.lower[dofs], dtype=float)
     upper = np.ascontiguousarray(skeleton.upper[dofs], dtype=float)
     x0 = np.clip(qa[dofs], lower, upper)
-    return ArmProblem(side, dofs, geo, dmap, lower, upper, x0)
+    if dmap.oriented_px is not None and not cfg.literal_sum:
+        maps = dmap.oriented_px
+        geo[_G_ORIGIN : _G_ORIGIN + 2] = dmap.oriented_origin_px
+        geo[_G_MAP_STEP] = float(dmap.oriented_step_px)
+    else:
+        maps = np.ascontiguousarray(dmap.distance_px[None])
+    return ArmProblem(side, dofs, geo, dmap, lower, upper, x0, maps)
 
 
 def initial_simplex(x0: FloatArray, step_rad: float) -> FloatArray:
@@ -1231,7 +1260,7 @@ def initial_simplex(x0: FloatArray, step_rad: float) -> FloatArray:
 def solve_arm(problem: ArmProblem, config: RefineConfig) -> tuple[FloatArray, ArmDiagnostics]:
     """Run the downhill simplex on one arm problem; returns the best ``x`` (4,) and diagnostics."""
     diag = ArmDiagnostics(side=problem.side, roi=problem.distance.roi)
-    dmap = problem.distance.distance_px
+    dmap = problem.maps
     x0 = problem.x0
     diag.cost_before = problem.cost(x0)
     diag.chamfer_before, diag.hand_offset_before_mm = problem.cost_terms(x0)

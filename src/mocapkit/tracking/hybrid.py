@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from mocapkit.cues.edges import EdgeConfig
 from mocapkit.errors import ShapeError, unknown_name
 from mocapkit.ik.sdls import Effector, IKConfig, SDLSSolver
 from mocapkit.skeleton.kinematics import canonical_positions
@@ -83,7 +84,8 @@ class HybridConfig:
     marker_offsets_mm : mapping of str to (3,) array_like
         Marker-set offsets in the effector's joint frame, added to the effector point.
     refine_config : Any
-        Passed through to the refiner.
+        Passed through to the refiner. Default `RefineConfig()` (oriented chamfer);
+        in paper mode the paper's plain chamfer, ``RefineConfig(edges=EdgeConfig())``.
     init_iterations : int
         Cold-start solves (of ``ik.max_iterations`` each) on the first sample.
     smoothing_polish_tol_mm : float
@@ -351,10 +353,18 @@ class HybridTracker:
             tol_mm=self.config.smoothing_polish_tol_mm,
         )
         self._polish = SDLSSolver(skeleton, effectors, polish_cfg)
+        # After the video refinement, the balance step's restore of head and hands must
+        # not run the relaxed-pose task: it would pull the refined arms back to the IK's
+        # swivel (the paper: "each process modifies only a specific part of the pose").
+        self._restore = SDLSSolver(
+            skeleton, effectors, replace(self.config.ik, secondary_gain=0.0, min_iterations=0)
+        )
         self._refiner: Refiner = refine_arms if refiner is None else refiner
         # the refiner's hand penalty must pull towards the same points the IK places on
         # the markers, offsets included
-        base = self.config.refine_config or RefineConfig()
+        base = self.config.refine_config or (
+            RefineConfig(edges=EdgeConfig()) if self.config.paper else RefineConfig()
+        )
         self._refine_config = base
         if isinstance(base, RefineConfig) and "left_hand" in effs and "right_hand" in effs:
             lp, rp = effs["left_hand"].point_mm, effs["right_hand"].point_mm
@@ -622,7 +632,7 @@ class HybridTracker:
         self._q = q.copy()
         assert self._support is not None
         bal = balance_pose(
-            self.solver,
+            self._restore if refined else self.solver,
             q,
             targets,
             self._root_z0,
