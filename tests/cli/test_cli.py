@@ -107,3 +107,20 @@ def test_track_hybrid_refuses_options_that_do_not_apply(tmp_path, capsys) -> Non
     code = main(["track", "hybrid", "--markers", "m.c3d", "--paper", "--out", str(tmp_path / "o")])
     assert code == 2
     assert "--paper apply to a SESSION" in capsys.readouterr().err
+    code = main(["track", "hybrid", "--markers", "m.c3d", "--oriented-sets", "head", "--out", "o"])
+    assert code == 2
+    assert "--oriented-sets apply to a SESSION" in capsys.readouterr().err
+    code = main(
+        [
+            "track",
+            "hybrid",
+            str(tmp_path),
+            "--out",
+            "o",
+            "--positions-only",
+            "--oriented-sets",
+            "head",
+        ]
+    )
+    assert code == 2
+    assert "either --positions-only or --oriented-sets" in capsys.readouterr().err

@@ -10,6 +10,7 @@ from mocapkit.errors import SessionError, ShapeError
 from mocapkit.pipelines.hybrid import (
     bench_ik,
     hybrid_skeleton,
+    parse_oriented_sets,
     track_hybrid_marker_arrays,
     track_hybrid_markers,
     track_hybrid_session,
@@ -25,6 +26,36 @@ def test_hybrid_skeleton_root_yaw_free():
     yaw = sk.dof_index("root_yaw")
     assert sk.lower[yaw] == -np.inf and sk.upper[yaw] == np.inf
     assert sk.lower[sk.dof_index("root_pitch")] == sk.upper[sk.dof_index("root_pitch")] == 0.0
+
+
+def test_hybrid_skeleton_twist_turns_the_head_apart_from_the_shoulders():
+    plain, twist = hybrid_skeleton(1750.0), hybrid_skeleton(1750.0, twist=True)
+    assert "neck_rotation" not in plain.dof_names
+    assert {"spine_rotation", "neck_rotation"} <= set(twist.dof_names)
+    names = ["head", "left_shoulder", "right_shoulder", "pelvis"]
+    q = twist.zero_pose()
+    q[twist.dof_index("neck_rotation")] = 0.5
+    moved = canonical_positions(twist, q, names) - canonical_positions(
+        twist, twist.zero_pose(), names
+    )
+    # the head point lies on the neck's axis: it stays; only the face turns (members)
+    assert np.allclose(moved, 0.0, atol=1e-9)
+    q = twist.zero_pose()
+    q[twist.dof_index("spine_rotation")] = 0.5
+    moved = canonical_positions(twist, q, names) - canonical_positions(
+        twist, twist.zero_pose(), names
+    )
+    assert np.linalg.norm(moved[1]) > 50.0 and np.linalg.norm(moved[2]) > 50.0
+    assert np.allclose(moved[3], 0.0, atol=1e-9)
+
+
+def test_parse_oriented_sets():
+    assert parse_oriented_sets("none") == ()
+    assert parse_oriented_sets("head, right_hand") == ("head", "right_hand")
+    with pytest.raises(KeyError, match="marker set 'tail'.*--oriented-sets"):
+        parse_oriented_sets("head,tail")
+    with pytest.raises(ShapeError, match="--oriented-sets: expected 'none'"):
+        parse_oriented_sets(",")
 
 
 def test_tennis_serve_elbows(shared_data, tmp_path):

@@ -22,6 +22,11 @@ from mocapkit.skeleton import (
 
 CASES = [
     ("zhang21", ("root_rotation",), ["head", "l_hand_end", "r_hand_end", "l_foot", "r_foot"]),
+    (
+        "zhang21",
+        ("root_rotation", "clavicle", "spine_rotation", "neck_rotation"),
+        ["head_end", "l_hand_end", "r_hand_end", "l_foot", "r_foot"],
+    ),
     ("azad14", ("adaptive_shoulder",), ["l_hand", "r_hand", "head_end"]),
     ("upper_stick", (), ["l_wrist", "r_wrist", "head_end"]),
 ]

@@ -193,6 +193,42 @@ def test_feet_replanted_when_the_subject_steps(truth):
     assert results[15.0][0] < 0.25 * results[0.0][0]
 
 
+def _ankle_heights(poses, sk) -> np.ndarray:
+    names = list(sk.canonical_names)
+    return np.array(
+        [[p.joints_mm[names.index(a), 2] for a in ("left_ankle", "right_ankle")] for p in poses]
+    )
+
+
+def test_replanted_feet_step_up_onto_a_box_but_never_below_the_floor(truth):
+    """Re-planted feet keep the height the body needs (a step up onto a 300 mm box),
+    but not below the floor they started on (a step and a 500 mm drop of every marker,
+    more than the legs can crouch)."""
+    sk, t, _q, pos = truth
+    ramp = np.minimum(np.arange(40), 10)[:, None] / 10.0
+    up = pos.copy()
+    up[20:, :, 1] += ramp * 400.0
+    up[20:, :, 2] += ramp * 300.0
+    down = pos.copy()
+    down[20:, :, 0] += ramp * 600.0
+    down[20:, :, 2] -= ramp * 500.0
+    cfg = HybridConfig(use_video=False, smoothing_polish_tol_mm=1.0)
+    tracker = HybridTracker(sk, config=cfg)
+    poses = [tracker.update(s) for s in samples(t, up)]
+    ankles = _ankle_heights(poses, sk)
+    assert [e for e in tracker.events if e[1] == "feet"]
+    assert np.all(ankles[-5:] > ankles[0] + 250.0)  # standing on the box
+    assert max(p.residual_mm["head"] for p in poses[-5:]) <= cfg.replant_mm
+    tracker = HybridTracker(sk, config=cfg)
+    poses = [tracker.update(s) for s in samples(t, down)]
+    ankles = _ankle_heights(poses, sk)
+    assert [e for e in tracker.events if e[1] == "feet"]
+    # the feet are put down on the floor, not where the stretched legs of the free
+    # solve reach (about 500 mm lower); the solve may pull them a little below it when
+    # head and hands are out of reach, as here
+    assert ankles.min() >= ankles[0].min() - 60.0
+
+
 #: Three markers on the glasses and on each hand-held object (mm from the effector point).
 MEMBERS = {
     "head": {

@@ -8,6 +8,7 @@ from typing import Any
 from mocapkit.errors import SessionError
 from mocapkit.pipelines.accuracy import format_rows, hybrid_accuracy, summary, to_json
 from mocapkit.pipelines.demo import find_shared_data
+from mocapkit.pipelines.hybrid import parse_oriented_sets
 
 
 def register(subparsers: Any) -> None:
@@ -32,6 +33,12 @@ def register(subparsers: Any) -> None:
         action="store_true",
         help="use the marker sets' positions only, as the paper does (not their orientation)",
     )
+    h.add_argument(
+        "--oriented-sets",
+        metavar="SETS",
+        help="marker sets whose orientation the tracker sees, comma-separated (head, "
+        "left_hand, right_hand) or 'none' (default: all)",
+    )
     h.set_defaults(func=run)
 
 
@@ -46,8 +53,16 @@ def run(args: argparse.Namespace) -> int:
     say = (lambda _line: None) if args.json else print
     if not args.json:
         print(format_rows([]))
+    if args.positions_only and args.oriented_sets is not None:
+        raise SessionError("accuracy hybrid: give either --positions-only or --oriented-sets")
+    oriented = None if args.oriented_sets is None else parse_oriented_sets(args.oriented_sets)
     rows = hybrid_accuracy(
-        mocap, args.work, args.clips, args.seed, say=say, oriented=not args.positions_only
+        mocap,
+        args.work,
+        args.clips,
+        args.seed,
+        say=say,
+        oriented_sets=() if args.positions_only else oriented,
     )
     if args.json:
         print(to_json(rows))

@@ -29,7 +29,14 @@ def register(subparsers: Any) -> None:
     hyb.add_argument(
         "--positions-only",
         action="store_true",
-        help="use the marker sets' positions only, not the orientation their members show",
+        help="use the marker sets' positions only, not the orientation their members show "
+        "(= --oriented-sets none)",
+    )
+    hyb.add_argument(
+        "--oriented-sets",
+        metavar="SETS",
+        help="marker sets whose orientation the IK uses, comma-separated (head, left_hand, "
+        "right_hand) or 'none' (default: all that session.json declares members for)",
     )
     hyb.add_argument("--markers", help="raw marker file (.c3d, .trc, .csv) instead of a session")
     hyb.add_argument(
@@ -55,7 +62,11 @@ def register(subparsers: Any) -> None:
 
 def _run_hybrid(args: argparse.Namespace) -> int:
     from mocapkit.errors import SessionError
-    from mocapkit.pipelines.hybrid import track_hybrid_markers, track_hybrid_session
+    from mocapkit.pipelines.hybrid import (
+        parse_oriented_sets,
+        track_hybrid_markers,
+        track_hybrid_session,
+    )
 
     if args.markers:
         if args.session:
@@ -68,6 +79,7 @@ def _run_hybrid(args: argparse.Namespace) -> int:
                 ("--no-video", args.no_video),
                 ("--paper", args.paper),
                 ("--positions-only", args.positions_only),
+                ("--oriented-sets", args.oriented_sets is not None),
             )
             if on
         ]
@@ -97,12 +109,19 @@ def _run_hybrid(args: argparse.Namespace) -> int:
                 f"track hybrid: {', '.join(unused)} apply to --markers; a SESSION takes its "
                 "marker sets and subject from session.json"
             )
+        if args.positions_only and args.oriented_sets is not None:
+            raise SessionError(
+                "track hybrid: give either --positions-only or --oriented-sets, not both"
+            )
+        oriented = (
+            parse_oriented_sets(args.oriented_sets) if args.oriented_sets is not None else None
+        )
         motion = track_hybrid_session(
             args.session,
             args.out,
             use_video=not args.no_video,
             paper=args.paper,
-            oriented_sets=() if args.positions_only else None,
+            oriented_sets=() if args.positions_only else oriented,
         )
     print(f"tracked {motion.n_frames} frames -> {args.out}")
     return 0

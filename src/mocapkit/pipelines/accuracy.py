@@ -59,7 +59,7 @@ def hybrid_accuracy(
     clips: Sequence[str] | None = None,
     seed: int = 0,
     say: Callable[[str], None] = lambda _line: None,
-    oriented: bool = True,
+    oriented_sets: Sequence[str] | None = None,
 ) -> list[ClipAccuracy]:
     """Render, track (IK only and with video) and evaluate each clip.
 
@@ -73,9 +73,9 @@ def hybrid_accuracy(
         Clip file names, default the keys of `HYBRID_CLIPS` (unknown ones: 0-8 s).
     seed : int
         Rendering seed.
-    oriented : bool
-        Let the tracker see the marker sets' orientation (its default); False uses their
-        positions only, as the paper does.
+    oriented_sets : sequence of str, optional
+        Marker sets whose orientation the tracker sees (default: all, its default);
+        ``()`` uses their positions only, as the paper does.
     """
     rows = []
     for clip in clips or tuple(HYBRID_CLIPS):
@@ -90,7 +90,7 @@ def hybrid_accuracy(
         reports = {}
         for label, video in (("ik", False), ("video", True)):
             track_hybrid_session(
-                session, base / label, use_video=video, oriented_sets=None if oriented else ()
+                session, base / label, use_video=video, oriented_sets=oriented_sets
             )
             reports[label] = evaluate_result(base / label, session, joints=UPPER_BODY_JOINTS)
         row = ClipAccuracy(
