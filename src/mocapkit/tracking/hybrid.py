@@ -110,8 +110,9 @@ class HybridConfig:
         marker, the subject has stepped; the feet are put down again under the new
         pose (0 keeps them where they started, as the paper does). Measured on the
         accuracy clips with oriented marker sets (IK only): upper-body MPJPE 41.5, 40.8
-        and 42.3 mm at 5, 8 and 11 mm, 52.4 mm at 15 mm with the feet held at their
-        first height.
+        and 42.3 mm at 5, 8 and 11 mm, 44.5 mm at 15 mm, 52.4 mm at 15 mm with the
+        feet held at their first height. Raw marker files use 15 mm
+        (`mocapkit.pipelines.hybrid.RAW_MARKERS_REPLANT_MM`).
     plant_feet : bool
         Hold the feet at their initial positions (the paper's assumption). Set False
         for takes where the subject walks; the feet are then free (no foot effector)
@@ -548,11 +549,15 @@ class HybridTracker:
         then drags head and hands away from their markers. When an active marker
         effector stays more than ``replant_mm`` off after the solve, the frame is solved
         again with the feet free, the feet are put down where that pose has them and
-        held there from now on. They keep that pose's height, so a subject who steps up
-        onto a box or climbs stands on it (holding the old floor height would hang
-        the body from the head marker with the legs stretched down to a floor it has
-        left), but never go below the floor (`_floor_z_mm`). Returns the pose and the
-        extra iterations.
+        held there from now on. Where the floor is not known (``start_upright``: the
+        first pose hangs from the head marker) they keep that pose's height, so a
+        subject who steps up onto a box or climbs stands on it (holding the old height
+        would hang the body from the head marker with the legs stretched down to a
+        floor it has left), but never go below the floor (`_floor_z_mm`). Where it is
+        known (``start_upright=False``: the lab floor, z = 0) they stay on it, since the
+        free pose's straight legs would put the feet of a subject who jumps or reaches
+        up far above where they are (a tennis serve: 440 mm against the ankle markers'
+        165 mm). Returns the pose and the extra iterations.
         """
         assert self._feet is not None
         n = len(self.marker_sets)
@@ -563,7 +568,10 @@ class HybridTracker:
         free[n : n + 2] = np.nan
         res_free = self.solver.solve(q, free)
         feet = self.solver.effector_positions(res_free.q)[n : n + 2]
-        np.maximum(feet[:, 2], self._floor_z_mm, out=feet[:, 2])
+        if self.config.start_upright:
+            np.maximum(feet[:, 2], self._floor_z_mm, out=feet[:, 2])
+        else:
+            feet[:, 2] = self._feet[:, 2]  # the lab floor is known: stay on it
         self._feet = feet
         self._support = support_points(self.skeleton, res_free.q)
         targets[n : n + 2] = feet
