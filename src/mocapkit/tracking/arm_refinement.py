@@ -127,8 +127,10 @@ class RefineConfig:
         Edge distance transform (cap, Canny thresholds, equalisation). By default an
         oriented chamfer with 8 orientation bins (an extension of the paper's plain
         chamfer, which ``EdgeConfig()`` gives and ``paper=True`` uses): on the five
-        accuracy clips with marker positions only it cut the mean elbow error with
-        video from 129 mm to 100 mm (4 bins: 116 mm, 12 bins: 100 mm).
+        accuracy clips with marker positions only, the mean elbow error with video is
+        97 mm against 136 mm with the plain chamfer (144 mm IK only; docs/hybrid.md).
+        8 bins was chosen on an earlier version of the tracker, where 4 bins gave
+        116 mm and 8 or 12 bins 100 mm.
     hand_weight_px_per_mm : float
         ``lambda`` of eq. 14: cost (px of mean chamfer) per mm of hand displacement.
     sample_step_px : float
