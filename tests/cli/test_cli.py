@@ -83,15 +83,16 @@ def test_demo_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     text = capsys.readouterr().out
     rows = {}
     for title in ("elbow error", "MPJPE", "PA-MPJPE"):
-        m = re.search(rf"^{title}\s+(\d+\.\d)\s+(\d+\.\d)$", text, flags=re.MULTILINE)
+        m = re.search(rf"^{title}" + r"\s+(\d+\.\d)" * 4 + "$", text, flags=re.MULTILINE)
         assert m, f"no {title!r} row in the demo's table:\n{text}"
-        rows[title] = (float(m.group(1)), float(m.group(2)))
-    assert re.search(r"^coverage\s+100%\s+100%$", text, flags=re.MULTILINE), text
+        rows[title] = tuple(float(g) for g in m.groups())
+    assert re.search(r"^coverage(\s+100%){4}$", text, flags=re.MULTILINE), text
     # plausible upper-body errors (mm) for a tracker driven by head and hand markers:
     # not zero (it is not reading the truth) and far below a body length
-    for ik_only, with_video in rows.values():
-        assert 1.0 < ik_only < 400.0 and 1.0 < with_video < 400.0
-    for sub in ("result_ik_only", "result_with_video"):
+    for row in rows.values():
+        assert all(1.0 < err_mm < 400.0 for err_mm in row), row
+    subs = ("ik_only", "with_video", "positions_only_ik", "positions_only_video")
+    for sub in (f"result_{s}" for s in subs):
         for name in ("motion.npz", "joints.csv", "motion.bvh"):
             assert (out / sub / name).is_file(), f"{sub}/{name} missing"
     for name in ("session.json", "cameras.json", "markers.csv", "truth.npz"):

@@ -14,8 +14,9 @@ def register(subparsers: Any) -> None:
         "demo",
         help="render a built-in table-tennis rally, track it and report the accuracy",
         description="Renders builtin:table-tennis as a synthetic session (video, head and "
-        "hand markers), tracks it with the hybrid method with and without video, and "
-        "evaluates both against the ground truth.",
+        "hand markers), tracks it with the hybrid method with and without video, using the "
+        "marker sets' orientation (default) and their positions only (the paper's input), "
+        "and evaluates all four against the ground truth.",
     )
     p.add_argument("--out", default="demo-output", help="output folder (default: demo-output)")
     p.add_argument("--seconds", type=float, default=4.0, help="length of the excerpt (s)")
