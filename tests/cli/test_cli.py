@@ -125,3 +125,16 @@ def test_track_hybrid_refuses_options_that_do_not_apply(tmp_path, capsys) -> Non
     )
     assert code == 2
     assert "either --positions-only or --oriented-sets" in capsys.readouterr().err
+    code = main(
+        ["track", "hybrid", "--markers", "m.c3d", "--max-elbow-speed", "5000", "--out", "o"]
+    )
+    assert code == 2
+    assert "--max-elbow-speed apply to a SESSION" in capsys.readouterr().err
+    for flag in ("--paper", "--no-video"):
+        code = main(
+            ["track", "hybrid", str(tmp_path), "--out", "o", flag, "--max-elbow-speed", "5000"]
+        )
+        assert code == 2
+        assert "elbow-jump penalty, which --paper and --no-video do not run" in (
+            capsys.readouterr().err
+        )

@@ -252,3 +252,15 @@ def test_declared_offsets_map_onto_effectors() -> None:
     }
     with pytest.raises(SessionError, match="expects 'right_wrist', found 'right_elbow'"):
         effector_offsets({"right_hand": ("right_elbow", np.zeros(3))})
+
+
+def test_session_max_elbow_speed(wave_session):
+    """0 turns the elbow-jump penalty off; a speed no arm reaches leaves it without effect
+    on a slow wave; the paper mode and negative speeds are refused."""
+    free = track_hybrid_session(wave_session, None, oriented_sets=(), max_elbow_speed_mm_per_s=1e9)
+    off = track_hybrid_session(wave_session, None, oriented_sets=(), max_elbow_speed_mm_per_s=0.0)
+    np.testing.assert_allclose(free.joints_mm, off.joints_mm, atol=1e-9)
+    with pytest.raises(ShapeError, match="paper mode has no elbow-jump penalty"):
+        track_hybrid_session(wave_session, None, paper=True, max_elbow_speed_mm_per_s=100.0)
+    with pytest.raises(ShapeError, match=r"expected a speed >= 0 mm/s .*found -1.0"):
+        track_hybrid_session(wave_session, None, max_elbow_speed_mm_per_s=-1.0)

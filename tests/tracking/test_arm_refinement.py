@@ -311,3 +311,83 @@ def test_roi_covers_every_scanned_elbow(side):
     # without a scan the box only holds the current arm
     small = arm_roi(SKEL, CAMERA, world, side, 0.0, 0.0)
     assert (small[2] - small[0]) * (small[3] - small[1]) < (x1 - x0) * (y1 - y0)
+
+
+def test_elbow_jump_penalty_is_a_hinge_on_the_elbow_distance(scene):
+    q, img, targets = scene
+    world = joint_positions(SKEL, q)
+    elbow = world[SKEL.joint_index(arm_joint_names("left")[1])]
+
+    def left(config, **kw):
+        return arm_problem(SKEL, CAMERA, q, "left", img, targets["left"], config, **kw)
+
+    off = left(RefineConfig())
+    cfg = RefineConfig(elbow_jump_weight_per_mm=0.2)
+    direction = np.array([0.6, 0.0, 0.8])
+    for dist_mm, free_mm, expected in ((50.0, 80.0, 0.0), (150.0, 80.0, 0.2 * 70.0)):
+        p = left(cfg, previous_elbow_mm=elbow + dist_mm * direction, elbow_free_mm=free_mm)
+        assert p.cost(p.x0) - off.cost(off.x0) == pytest.approx(expected, abs=1e-9)
+    # no previous elbow, a non-finite one, or a weight of 0: no penalty
+    for config, kw in (
+        (cfg, {}),
+        (cfg, {"previous_elbow_mm": np.full(3, np.nan)}),
+        (RefineConfig(elbow_jump_weight_per_mm=0.0), {"previous_elbow_mm": elbow + 500.0}),
+    ):
+        p = left(config, **kw)
+        assert p.cost(p.x0) == pytest.approx(off.cost(off.x0), abs=1e-12)
+
+
+def test_elbow_jump_penalty_settles_an_ambiguous_swivel_near_the_previous_elbow(scene):
+    """A frame with no edges leaves every swivel equally good; the penalty picks the one
+    whose elbow is nearest the previous frame's, wherever that is."""
+    q, _img, targets = scene
+    blank = np.full((480, 640, 3), 128, np.uint8)
+    cfg = RefineConfig(elbow_jump_weight_per_mm=0.1, elbow_speed_mm_per_s=300.0)
+    elbow = SKEL.joint_index(arm_joint_names("right")[1])
+    for previous_deg, start_deg in ((0.0, 70.0), (70.0, 0.0), (-40.0, 30.0)):
+        previous_q = swivel_arm(SKEL, q, "right", math.radians(previous_deg))
+        assert np.all((previous_q >= SKEL.lower) & (previous_q <= SKEL.upper))  # reachable
+        start = swivel_arm(SKEL, q, "right", math.radians(start_deg))
+        refined = refine_arms(
+            SKEL,
+            CAMERA,
+            start,
+            blank,
+            {"right": targets["right"]},
+            cfg,
+            previous_elbows_mm={"right": joint_positions(SKEL, previous_q)[elbow]},
+            elapsed_s=0.02,  # 6 mm free
+        )
+        assert abs(_swivel_deg(previous_q, refined, "right")) < 3.0, (previous_deg, start_deg)
+
+
+def test_elbow_jump_settings_checked():
+    with pytest.raises(ShapeError, match="RefineConfig.elbow_jump_weight_per_mm"):
+        RefineConfig(elbow_jump_weight_per_mm=-1.0)
+    with pytest.raises(ShapeError, match="RefineConfig.elbow_speed_mm_per_s"):
+        RefineConfig(elbow_speed_mm_per_s=-5.0)
+
+
+def test_limb_at_the_camera_plane_costs_the_cap(scene):
+    """A forearm just in front of a distorting lens and far off its axis projects to
+    outline lines about 1e9 px long. Every sample is off the map, so the image term is the
+    cap, and the sample count is bounded by the map's size rather than that length (a
+    131_03 hop once spent a minute on one evaluation)."""
+    q, img, targets = scene
+    world = joint_positions(SKEL, q)
+    elbow = world[SKEL.joint_index(arm_joint_names("left")[1])]
+    wrist = world[SKEL.joint_index(arm_joint_names("left")[2])]
+    along = (wrist - elbow) / np.linalg.norm(wrist - elbow)
+    lateral = np.cross(along, [0.0, 0.0, 1.0])
+    lateral /= np.linalg.norm(lateral)
+    # looking along the forearm from 50 mm behind the elbow and 2 m beside it
+    eye = elbow - 50.0 * along + 2000.0 * lateral
+    barrel = np.array([-0.10, 0.03, 0.0, 0.0, 0.0])
+    near = Camera(
+        "near", (640, 480), intrinsics_from_fov((640, 480), 60), barrel, look_at(eye, eye + along)
+    )
+    p = arm_problem(SKEL, near, q, "left", img, targets["left"])
+    u = near.project(np.stack([elbow, wrist]))[:, 0]
+    assert np.all(np.isfinite(u)) and np.abs(u[0] - u[1]) > 1e6  # the projection blows up
+    image_term, _hand = p.cost_terms(p.x0)
+    assert image_term == pytest.approx(RefineConfig().edges.cap_px)

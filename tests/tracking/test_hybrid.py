@@ -7,7 +7,7 @@ import pytest
 
 from mocapkit.errors import ShapeError, UnknownNameError
 from mocapkit.ik.sdls import IKConfig
-from mocapkit.skeleton import canonical_positions, load_preset
+from mocapkit.skeleton import canonical_positions, forward_kinematics, load_preset
 from mocapkit.tracking.balance import BalanceConfig
 from mocapkit.tracking.hybrid import (
     HybridConfig,
@@ -335,3 +335,40 @@ def test_bad_member_inputs(turned):
     tracker = HybridTracker(sk, config=HybridConfig(use_video=False, member_offsets_mm=MEMBERS))
     with pytest.raises(ShapeError, match=r"members_mm\['bridge'\]: expected 3 coordinates"):
         tracker.update(HybridSample(0.0, seq[0].markers_mm, members_mm={"bridge": np.zeros(4)}))
+
+
+@pytest.mark.parametrize("paper", [False, True])
+def test_refiner_gets_the_previous_elbows_carried_by_the_trunk(truth, paper):
+    """The elbow-jump penalty's input: the last frame's elbows, in the frame of each
+    shoulder's parent, carried to the world by the current pose (none in paper mode)."""
+    sk, t, _q, pos = truth
+    calls = []
+
+    def refiner(skeleton, camera, q_in, image, hands, config, **kw):
+        calls.append((q_in.copy(), kw))
+        return q_in
+
+    tracker = HybridTracker(sk, camera=object(), config=HybridConfig(paper=paper), refiner=refiner)
+    image = np.zeros((4, 4))
+    outputs = []
+    for s in samples(t[:3], pos[:3]):
+        pose = tracker.update(HybridSample(s.time_s, s.markers_mm, image=image))
+        outputs.append(pose)
+    assert len(calls) == 3 and calls[0][1] == {}
+    if paper:
+        assert all(kw == {} for _q_in, kw in calls)
+        return
+    for k in (1, 2):
+        q_in, kw = calls[k]
+        assert kw["elapsed_s"] == pytest.approx(t[k] - t[k - 1])
+        prev_world = forward_kinematics(sk, outputs[k - 1].q)
+        now_world = forward_kinematics(sk, q_in)
+        for side, (humerus, radius) in {
+            "left": ("l_humerus", "l_radius"),
+            "right": ("r_humerus", "r_radius"),
+        }.items():
+            parent = sk.parents[sk.joint_index(humerus)]
+            elbow_prev = prev_world[sk.joint_index(radius), :3, 3]
+            local = prev_world[parent, :3, :3].T @ (elbow_prev - prev_world[parent, :3, 3])
+            expected = now_world[parent, :3, :3] @ local + now_world[parent, :3, 3]
+            np.testing.assert_allclose(kw["previous_elbows_mm"][side], expected, atol=1e-9)

@@ -68,9 +68,10 @@ def run(args: argparse.Namespace) -> int:
         print(to_json(rows))
     else:
         s = summary(rows)
+        change_pct = round(-100.0 * s["elbow_reduction"])  # 0, not -0, when unchanged
         print(
             f"mean: elbow {s['elbow_ik_mm']:.1f} -> {s['elbow_video_mm']:.1f} mm "
-            f"({s['elbow_reduction']:.0%} less with video); upper-body MPJPE "
+            f"({change_pct:+d} % with video); upper-body MPJPE "
             f"{s['mpjpe_ik_mm']:.1f} -> {s['mpjpe_video_mm']:.1f} mm"
         )
     return 0

@@ -38,6 +38,15 @@ def register(subparsers: Any) -> None:
         help="marker sets whose orientation the IK uses, comma-separated (head, left_hand, "
         "right_hand) or 'none' (default: all that session.json declares members for)",
     )
+    hyb.add_argument(
+        "--max-elbow-speed",
+        type=float,
+        default=None,
+        metavar="MM_PER_S",
+        help="elbow speed the video refinement takes as free when it keeps elbows from "
+        "jumping between frames (default 3000; raise it for fast sports, 0 turns the "
+        "penalty off)",
+    )
     hyb.add_argument("--markers", help="raw marker file (.c3d, .trc, .csv) instead of a session")
     hyb.add_argument(
         "--marker-set",
@@ -80,6 +89,7 @@ def _run_hybrid(args: argparse.Namespace) -> int:
                 ("--paper", args.paper),
                 ("--positions-only", args.positions_only),
                 ("--oriented-sets", args.oriented_sets is not None),
+                ("--max-elbow-speed", args.max_elbow_speed is not None),
             )
             if on
         ]
@@ -109,6 +119,11 @@ def _run_hybrid(args: argparse.Namespace) -> int:
                 f"track hybrid: {', '.join(unused)} apply to --markers; a SESSION takes its "
                 "marker sets and subject from session.json"
             )
+        if args.max_elbow_speed is not None and (args.paper or args.no_video):
+            raise SessionError(
+                "track hybrid: --max-elbow-speed tunes the video refinement's elbow-jump "
+                "penalty, which --paper and --no-video do not run"
+            )
         if args.positions_only and args.oriented_sets is not None:
             raise SessionError(
                 "track hybrid: give either --positions-only or --oriented-sets, not both"
@@ -122,6 +137,7 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             use_video=not args.no_video,
             paper=args.paper,
             oriented_sets=() if args.positions_only else oriented,
+            max_elbow_speed_mm_per_s=args.max_elbow_speed,
         )
     print(f"tracked {motion.n_frames} frames -> {args.out}")
     return 0

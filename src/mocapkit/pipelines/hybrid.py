@@ -21,6 +21,7 @@ from mocapkit.progress import Progress
 from mocapkit.skeleton.model import Skeleton
 from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments, scale_skeleton
+from mocapkit.tracking.arm_refinement import RefineConfig
 from mocapkit.tracking.hybrid import (
     MARKER_SETS,
     HybridConfig,
@@ -164,6 +165,7 @@ def track_hybrid_session(
     oriented_sets: Sequence[str] | None = None,
     clavicle: bool | None = None,
     twist: bool | None = None,
+    max_elbow_speed_mm_per_s: float | None = None,
 ) -> Motion:
     """Track a recording session with head and hand marker sets plus one camera.
 
@@ -195,6 +197,10 @@ def track_hybrid_session(
         default on when the head set's orientation is seen (its members drive the IK),
         since only then is the head's turn known apart from the trunk's; off in paper
         mode.
+    max_elbow_speed_mm_per_s : float, optional
+        Elbow speed the video refinement's elbow-jump penalty leaves free
+        (`RefineConfig.elbow_speed_mm_per_s`, default 3000 mm/s); 0 turns the penalty
+        off. Raise it for sports with fast arms. Not with ``paper`` (no penalty there).
     """
     from mocapkit.io.session import load_session
 
@@ -207,9 +213,27 @@ def track_hybrid_session(
         )
     if oriented_sets is None:
         oriented_sets = () if paper else ORIENTED_SETS
+    refine_config = None
+    if max_elbow_speed_mm_per_s is not None:
+        if paper:
+            raise ShapeError(
+                "max_elbow_speed_mm_per_s: the paper mode has no elbow-jump penalty; "
+                "give one or the other"
+            )
+        if not max_elbow_speed_mm_per_s >= 0:
+            raise ShapeError(
+                "max_elbow_speed_mm_per_s: expected a speed >= 0 mm/s (0: no penalty), "
+                f"found {max_elbow_speed_mm_per_s}"
+            )
+        refine_config = (
+            RefineConfig(elbow_jump_weight_per_mm=0.0)
+            if max_elbow_speed_mm_per_s == 0
+            else RefineConfig(elbow_speed_mm_per_s=float(max_elbow_speed_mm_per_s))
+        )
     cfg = config or HybridConfig(
         paper=paper,
         use_video=use_video,
+        refine_config=refine_config,
         marker_offsets_mm=effector_offsets(session.marker_offsets, session.path),
         member_offsets_mm=member_offsets(
             session.marker_member_offsets, session.marker_offsets, oriented_sets, session.path

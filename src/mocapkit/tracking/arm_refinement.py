@@ -51,6 +51,18 @@ The default scans the whole circle in 5 deg steps: on sessions rendered from CMU
 the IK swivel is often 90 deg or more off (an elbow raised sideways while the relaxed
 pose hangs it down), and a +-40 deg scan left those arms where IK put them. The region
 of interest covers the elbow's scanned arc (`arm_roi`).
+
+Elbow-jump penalty (a deviation, on by default, off in the paper mode). One view's
+outlines leave some swivels ambiguous: an arm pointing at the camera is a short blob
+whose outline also fits the torso's inner edges, and a folded arm's elbow towards or
+away from the camera projects alike. The per-frame search then jumps between such
+minima from one frame to the next, 200-500 mm at a time. The cost therefore adds
+``elbow_jump_weight_per_mm`` times how far the elbow lies beyond
+``elbow_speed_mm_per_s * dt`` from the previous frame's elbow (a hinge: free within a
+plausible speed, so it does not hold on to an old swivel the way a quadratic prior on
+the angles did). 3 m/s covers the clips' true elbow speeds (99th percentiles
+0.5-3.7 m/s); sports with faster arms (a serve, a throw) need a higher speed or the
+weight 0. Measured in ``docs/hybrid.md``.
 """
 
 from __future__ import annotations
@@ -111,7 +123,10 @@ _G_NSEG = 94
 _G_USE_TARGET = 95
 _G_EULER = 96  # shoulder axes as signed basis vectors: 3 axis indices, 3 signs (-1 if not)
 _G_MAP_STEP = 102  # grid spacing of the distance maps (px; 2 for the oriented ones)
-_G_SIZE = 103
+_G_ELBOW_PREV = 103  # (3,) the elbow of the previous frame, world mm
+_G_ELBOW_W = 106  # weight of the elbow-jump penalty, cost per mm (0: off)
+_G_ELBOW_FREE = 107  # elbow displacement from the previous frame that is free, mm
+_G_SIZE = 108
 
 _MAX_SEG = 3
 _MIN_Z_MM = 1.0  # points closer than this to the camera plane count as off-image
@@ -127,8 +142,9 @@ class RefineConfig:
         Edge distance transform (cap, Canny thresholds, equalisation). By default an
         oriented chamfer with 8 orientation bins (an extension of the paper's plain
         chamfer, which ``EdgeConfig()`` gives and ``paper=True`` uses): on the five
-        accuracy clips with marker positions only, the mean elbow error with video is
-        97 mm against 136 mm with the plain chamfer (144 mm IK only; docs/hybrid.md).
+        accuracy clips with marker positions only and no elbow-jump penalty, the mean
+        elbow error with video is 97 mm against 136 mm with the plain chamfer (144 mm IK
+        only; docs/hybrid.md).
         8 bins was chosen on an earlier version of the tracker, where 4 bins gave
         116 mm and 8 or 12 bins 100 mm.
     hand_weight_px_per_mm : float
@@ -158,6 +174,13 @@ class RefineConfig:
         runs the paper's plain search from the IK pose).
     swivel_scan_steps : int
         Number of swivel angles scanned (including 0 when odd).
+    elbow_jump_weight_per_mm : float
+        Cost per mm that the elbow lies beyond the free distance from the previous
+        frame's elbow (the module's "elbow-jump penalty"); 0 turns it off. Applies only
+        where `refine_arms` is given ``previous_elbows_mm``.
+    elbow_speed_mm_per_s : float
+        Elbow speed that costs nothing: the free distance is this times the time since
+        the previous frame.
     """
 
     edges: EdgeConfig = field(default_factory=lambda: EdgeConfig(orientation_bins=8))
@@ -177,6 +200,8 @@ class RefineConfig:
     solver: Literal["numba", "scipy"] = "numba"
     swivel_scan_rad: float = math.pi
     swivel_scan_steps: int = 73
+    elbow_jump_weight_per_mm: float = 0.1
+    elbow_speed_mm_per_s: float = 3000.0
 
     def __post_init__(self) -> None:
         checks = {
@@ -189,6 +214,8 @@ class RefineConfig:
             "roi_pad_px": self.roi_pad_px >= 0,
             "swivel_scan_rad": 0 <= self.swivel_scan_rad <= math.pi,
             "swivel_scan_steps": self.swivel_scan_steps >= 1,
+            "elbow_jump_weight_per_mm": self.elbow_jump_weight_per_mm >= 0,
+            "elbow_speed_mm_per_s": self.elbow_speed_mm_per_s >= 0,
         }
         for name, ok in checks.items():
             if not ok:
@@ -465,6 +492,8 @@ def _segment_outlines_nb(x: FloatArray, geo: FloatArray, lines: FloatArray, eff:
 @numba.njit(cache=True)
 def _n_samples(p0u: float, p0v: float, p1u: float, p1v: float, step: float) -> int:
     length = math.sqrt((p1u - p0u) ** 2 + (p1v - p0v) ** 2)
+    if not length < 1e9:  # near the camera plane (or NaN): callers cap the count
+        length = 1e9
     n = math.ceil(length / step) + 1
     return max(n, 2)
 
@@ -489,6 +518,11 @@ def arm_cost_terms_nb(
     cap = geo[_G_CAP]
     step = geo[_G_STEP]
     n_bins = dmap.shape[0]
+    # A limb close to the camera plane projects to lines millions of px long; every
+    # sample off the map costs the cap anyway, so a line gets at most as many samples
+    # as twice the map's perimeter needs (a 131_03 hop otherwise spent a minute on
+    # one evaluation).
+    max_n = int(4.0 * (dmap.shape[1] + dmap.shape[2]) * geo[_G_MAP_STEP] / step) + 2
     total = 0.0
     count = 0
     for s in range(n_seg):
@@ -501,7 +535,7 @@ def arm_cost_terms_nb(
                 n = 2
                 b = 0
             else:
-                n = _n_samples(u0, v0, u1, v1, step)
+                n = min(_n_samples(u0, v0, u1, v1, step), max_n)
                 b = 0
                 if n_bins > 1:
                     ang = math.atan2(v1 - v0, u1 - u0) % math.pi
@@ -586,9 +620,25 @@ def _in_quad(q: FloatArray, px: float, py: float) -> bool:
 def arm_cost_nb(x: FloatArray, geo: FloatArray, dmap: NDArray[np.float32]) -> float:
     """Eq. 14: image term plus ``lambda * ||t - s||`` for arm parameters ``x`` (4,)."""
     image, hand = arm_cost_terms_nb(x, geo, dmap)
-    if geo[_G_USE_TARGET] != 0.0:
-        return image + geo[_G_LAMBDA] * hand
-    return image
+    cost = image + geo[_G_LAMBDA] * hand if geo[_G_USE_TARGET] != 0.0 else image
+    if geo[_G_ELBOW_W] > 0.0:
+        cost += geo[_G_ELBOW_W] * _elbow_jump_mm_nb(x, geo)
+    return cost
+
+
+@numba.njit(cache=True)
+def _elbow_jump_mm_nb(x: FloatArray, geo: FloatArray) -> float:
+    """How far (mm) the elbow of ``x`` lies beyond the free distance from the previous one."""
+    rots = np.empty((3, 3, 3))
+    orig = np.empty((3, 3))
+    eff = np.empty(3)
+    _arm_frames_nb(x, geo, rots, orig, eff)
+    d = math.sqrt(
+        (orig[1, 0] - geo[_G_ELBOW_PREV]) ** 2
+        + (orig[1, 1] - geo[_G_ELBOW_PREV + 1]) ** 2
+        + (orig[1, 2] - geo[_G_ELBOW_PREV + 2]) ** 2
+    )
+    return max(0.0, d - geo[_G_ELBOW_FREE])
 
 
 @numba.njit(cache=True)
@@ -1205,6 +1255,8 @@ def arm_problem(
     hand_target_mm: ArrayLike | None,
     config: RefineConfig | None = None,
     world: FloatArray | None = None,
+    previous_elbow_mm: ArrayLike | None = None,
+    elbow_free_mm: float = 0.0,
 ) -> ArmProblem:
     """Build one arm's problem: RoI from the pose, its distance map, the packed geometry.
 
@@ -1218,6 +1270,11 @@ def arm_problem(
     config : RefineConfig, optional
     world : ndarray (J, 4, 4), optional
         FK of ``q`` if already computed.
+    previous_elbow_mm : array_like (3,), optional
+        The previous frame's elbow (world mm) for the elbow-jump penalty; ignored when
+        None, not finite, or ``config.elbow_jump_weight_per_mm`` is 0.
+    elbow_free_mm : float
+        Elbow displacement from ``previous_elbow_mm`` that costs nothing (mm).
     """
     cfg = config or RefineConfig()
     qa = np.asarray(q, dtype=float)
@@ -1238,6 +1295,12 @@ def arm_problem(
     geo = pack_arm_geometry(
         skeleton, camera, qa, side, hand_target_mm, cfg, dmap.origin_px, world=world
     )
+    if previous_elbow_mm is not None and cfg.elbow_jump_weight_per_mm > 0:
+        prev = np.asarray(previous_elbow_mm, dtype=float)
+        if prev.shape == (3,) and np.all(np.isfinite(prev)):
+            geo[_G_ELBOW_PREV : _G_ELBOW_PREV + 3] = prev
+            geo[_G_ELBOW_W] = cfg.elbow_jump_weight_per_mm
+            geo[_G_ELBOW_FREE] = elbow_free_mm
     dofs = arm_dofs(skeleton, side)
     lower = np.ascontiguousarray(skeleton.lower[dofs], dtype=float)
     upper = np.ascontiguousarray(skeleton.upper[dofs], dtype=float)
@@ -1323,6 +1386,8 @@ def refine_arms(
     config: RefineConfig | None = None,
     *,
     diagnostics: dict[str, ArmDiagnostics] | None = None,
+    previous_elbows_mm: Mapping[str, ArrayLike] | None = None,
+    elapsed_s: float = 0.0,
 ) -> FloatArray:
     """Refine both arms of an IK pose against one video frame (Zhang et al. §5).
 
@@ -1346,6 +1411,12 @@ def refine_arms(
     config : RefineConfig, optional
     diagnostics : dict, optional
         When given, receives one `ArmDiagnostics` per side.
+    previous_elbows_mm : mapping {"left"|"right": array (3,)}, optional
+        Each side's elbow in the previous frame (world mm), for the elbow-jump penalty
+        (`RefineConfig.elbow_jump_weight_per_mm`); a side that is absent has none.
+    elapsed_s : float
+        Time since that frame (s); the free distance is
+        ``config.elbow_speed_mm_per_s * elapsed_s``.
 
     Returns
     -------
@@ -1372,7 +1443,19 @@ def refine_arms(
             if diagnostics is not None:
                 diagnostics[side] = ArmDiagnostics(side=side, reason="no hand target")
             continue
-        problem = arm_problem(skeleton, camera, qa, side, frame, target, cfg, world=world)
+        prev = None if previous_elbows_mm is None else previous_elbows_mm.get(side)
+        problem = arm_problem(
+            skeleton,
+            camera,
+            qa,
+            side,
+            frame,
+            target,
+            cfg,
+            world=world,
+            previous_elbow_mm=prev,
+            elbow_free_mm=cfg.elbow_speed_mm_per_s * elapsed_s,
+        )
         if problem.distance.distance_px.size == 0:
             if diagnostics is not None:
                 diagnostics[side] = ArmDiagnostics(

@@ -21,6 +21,7 @@ paper's proportional balance rule).
 
 from __future__ import annotations
 
+import inspect
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -32,9 +33,9 @@ from numpy.typing import ArrayLike, NDArray
 from mocapkit.cues.edges import EdgeConfig
 from mocapkit.errors import ShapeError, unknown_name
 from mocapkit.ik.sdls import Effector, IKConfig, SDLSSolver
-from mocapkit.skeleton.kinematics import canonical_positions
+from mocapkit.skeleton.kinematics import canonical_positions, forward_kinematics
 from mocapkit.skeleton.model import PRISMATIC, Skeleton
-from mocapkit.tracking.arm_refinement import RefineConfig, refine_arms
+from mocapkit.tracking.arm_refinement import SIDES, RefineConfig, arm_joint_names, refine_arms
 from mocapkit.tracking.balance import (
     BalanceConfig,
     BalanceModel,
@@ -50,6 +51,17 @@ MARKER_SETS: tuple[str, ...] = ("head", "left_hand", "right_hand")
 FEET: tuple[str, ...] = ("left_foot", "right_foot")
 
 Refiner = Callable[..., FloatArray]
+
+
+def _takes_previous_elbows(refiner: Refiner) -> bool:
+    """Whether ``refiner`` accepts ``previous_elbows_mm`` and ``elapsed_s`` (as `refine_arms`)."""
+    try:
+        params = inspect.signature(refiner).parameters.values()
+    except (TypeError, ValueError):  # builtins and some compiled callables have none
+        return False
+    names = {p.name for p in params}
+    var_kw = any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params)
+    return var_kw or {"previous_elbows_mm", "elapsed_s"} <= names
 
 
 def default_marker_effectors(skeleton: Skeleton) -> dict[str, Effector]:
@@ -84,8 +96,11 @@ class HybridConfig:
     marker_offsets_mm : mapping of str to (3,) array_like
         Marker-set offsets in the effector's joint frame, added to the effector point.
     refine_config : Any
-        Passed through to the refiner. Default `RefineConfig()` (oriented chamfer);
-        in paper mode the paper's plain chamfer, ``RefineConfig(edges=EdgeConfig())``.
+        Passed through to the refiner. Default `RefineConfig()` (oriented chamfer,
+        elbow-jump penalty); in paper mode the paper's plain chamfer without the
+        penalty, ``RefineConfig(edges=EdgeConfig(), elbow_jump_weight_per_mm=0)``. With a
+        `RefineConfig` whose penalty is on, the refiner is also given the previous
+        frame's elbows and the time since (``previous_elbows_mm``, ``elapsed_s``).
     init_iterations : int
         Cold-start solves (of ``ik.max_iterations`` each) on the first sample.
     smoothing_polish_tol_mm : float
@@ -291,6 +306,10 @@ class HybridTracker:
     refiner : callable, optional
         ``refine(skeleton, camera, q, image, hand_targets_mm, config) -> q``; by default
         ``mocapkit.tracking.arm_refinement.refine_arms`` when that module is installed.
+        When ``config`` is a `RefineConfig` with the elbow-jump penalty on (its
+        default) and the refiner accepts them, calls after the first also pass
+        ``previous_elbows_mm`` (side -> the previous frame's elbow carried by the
+        current trunk, world mm) and ``elapsed_s``.
     initial_q : array_like, shape (D,), optional
         Start pose; by default the relaxed pose placed under the head marker
         (`initial_pose`).
@@ -367,7 +386,9 @@ class HybridTracker:
         # the refiner's hand penalty must pull towards the same points the IK places on
         # the markers, offsets included
         base = self.config.refine_config or (
-            RefineConfig(edges=EdgeConfig()) if self.config.paper else RefineConfig()
+            RefineConfig(edges=EdgeConfig(), elbow_jump_weight_per_mm=0.0)
+            if self.config.paper
+            else RefineConfig()
         )
         self._refine_config = base
         if isinstance(base, RefineConfig) and "left_hand" in effs and "right_hand" in effs:
@@ -379,8 +400,17 @@ class HybridTracker:
                     (float(rp[0]), float(rp[1]), float(rp[2])),
                 ),
             )
+        #: whether the refiner gets the previous frame's elbows (the elbow-jump penalty)
+        self._elbow_prior = (
+            self.config.use_video
+            and isinstance(self._refine_config, RefineConfig)
+            and self._refine_config.elbow_jump_weight_per_mm > 0
+            and _takes_previous_elbows(self._refiner)
+        )
         self._initial_q = None if initial_q is None else np.asarray(initial_q, dtype=float)
         self._q: FloatArray | None = None
+        self._prev_elbows: dict[str, FloatArray] | None = None
+        self._prev_time_s = 0.0
         self._feet: FloatArray | None = None
         self._support: FloatArray | None = None
         self._root_z0 = 0.0
@@ -581,9 +611,38 @@ class HybridTracker:
 
     # ------------------------------------------------------------------ update
 
+    def _elbows_in_shoulder_parents(self, q: FloatArray) -> dict[str, FloatArray]:
+        """Each elbow in the frame of its shoulder's parent (the trunk or clavicle), mm.
+
+        The elbow-jump penalty compares elbows in this frame, carried to the world by
+        the current trunk, so a trunk that turns between frames (a root-yaw correction)
+        is not taken for a jumping elbow.
+        """
+        sk = self.skeleton
+        world = forward_kinematics(sk, q)
+        out = {}
+        for side in SIDES:
+            humerus, radius = arm_joint_names(side)[:2]
+            parent = world[sk.parents[sk.joint_index(humerus)]]
+            elbow = world[sk.joint_index(radius), :3, 3]
+            out[side] = parent[:3, :3].T @ (elbow - parent[:3, 3])
+        return out
+
+    def _previous_elbows_in_world(self, q: FloatArray) -> dict[str, FloatArray]:
+        """The previous frame's elbows (`_elbows_in_shoulder_parents`) under pose ``q``."""
+        assert self._prev_elbows is not None
+        sk = self.skeleton
+        world = forward_kinematics(sk, q)
+        out = {}
+        for side in SIDES:
+            parent = world[sk.parents[sk.joint_index(arm_joint_names(side)[0])]]
+            out[side] = parent[:3, :3] @ self._prev_elbows[side] + parent[:3, 3]
+        return out
+
     def reset(self) -> None:
         """Forget the state (pose, feet, gaps, filter); the next sample initialises again."""
         self._q = None
+        self._prev_elbows = None
         self._feet = None
         self._filter = None
         self._tracks = {n: _Track() for n in self.marker_sets}
@@ -642,8 +701,15 @@ class HybridTracker:
                 and np.all(np.isfinite(targets[i]))
             }
             if hands:
+                extra_kw = {}
+                cfg_r = self._refine_config
+                if self._elbow_prior and self._prev_elbows is not None:
+                    extra_kw = {
+                        "previous_elbows_mm": self._previous_elbows_in_world(q),
+                        "elapsed_s": float(sample.time_s - self._prev_time_s),
+                    }
                 q = np.asarray(
-                    ref(sk, self.camera, q, sample.image, hands, self._refine_config), dtype=float
+                    ref(sk, self.camera, q, sample.image, hands, cfg_r, **extra_kw), dtype=float
                 )
                 sk.check_q(q, "refiner output")
                 refined = True
@@ -678,6 +744,9 @@ class HybridTracker:
         names = self.marker_sets + FEET + tuple(m for _, m in self.members)
         residual = {nm: float(r) for nm, r in zip(names, resid_arr, strict=True)}
         joints = canonical_positions(sk, q)
+        if self._elbow_prior:
+            self._prev_elbows = self._elbows_in_shoulder_parents(q)
+            self._prev_time_s = float(sample.time_s)
         return HybridPose(
             time_s=float(sample.time_s),
             q=q,
