@@ -14,7 +14,12 @@ from mocapkit.io.session import Session, load_session
 from mocapkit.synth.realism import RealismOptions
 from mocapkit.synth.render import parse_colour
 from mocapkit.synth.rigs import make_rig
-from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+from mocapkit.synth.session_writer import (
+    MIN_CAMERA_DEPTH_MM,
+    SynthOptions,
+    keep_cameras_away,
+    synthesize_session,
+)
 
 CLIPS = (
     "13_26.bvh",
@@ -248,3 +253,47 @@ def test_session_montage(tmp_path):
     write_session_json(empty / "session.json", {})
     with pytest.raises(SessionError, match="a video under video/"):
         session_montage(empty, 0.0)
+
+
+def test_cameras_step_back_from_a_subject_who_comes_close():
+    cams = make_rig("all", np.zeros(3), np.array([0.0, 1.0, 0.0]), 1300.0)
+    far = np.array([[[0.0, 0.0, 1300.0], [100.0, 200.0, 900.0]]])
+    same, moved = keep_cameras_away(cams, far)
+    assert moved == 0.0 and same is cams
+    # the subject walks 2.5 m towards the cameras: a joint ends 300 mm in front of the mono lens
+    near = np.concatenate([far, far + np.array([0.0, 2500.0, 0.0])])
+    depth_before = min(
+        float(np.min(near.reshape(-1, 3) @ c.camera_from_world[2, :3] + c.camera_from_world[2, 3]))
+        for c in cams
+    )
+    moved_cams, moved = keep_cameras_away(cams, near)
+    assert moved == pytest.approx(MIN_CAMERA_DEPTH_MM - depth_before)
+    for before, after in zip(cams, moved_cams, strict=True):
+        depth = near.reshape(-1, 3) @ after.camera_from_world[2, :3] + after.camera_from_world[2, 3]
+        assert depth.min() >= MIN_CAMERA_DEPTH_MM - 1e-6
+        # straight back along the optical axis: same orientation, centre moved by `moved`
+        np.testing.assert_allclose(
+            after.camera_from_world[:3, :3], before.camera_from_world[:3, :3]
+        )
+        step = before.center_in_world - after.center_in_world
+        np.testing.assert_allclose(step, moved * before.camera_from_world[2, :3], atol=1e-9)
+    baseline = moved_cams[1].center_in_world - moved_cams[2].center_in_world
+    np.testing.assert_allclose(
+        baseline, cams[1].center_in_world - cams[2].center_in_world, atol=1e-9
+    )
+
+
+def test_walking_clip_never_reaches_the_lens(shared_data, tmp_path):
+    """CMU 131_03 walks about 3 m towards where the camera stands at its start."""
+    out = tmp_path / "s"
+    summary = synthesize_session(
+        str(shared_data / "mocap" / "131_03.bvh"),
+        out,
+        SynthOptions(rig="mono", seconds=8.0, fps=5.0, image_size=(64, 48)),
+    )
+    assert any("moved back" in n for n in summary.notes), summary.notes
+    s = load_session(out)
+    cam = s.camera("mono")
+    depth = s.truth.joints_mm @ cam.camera_from_world[2, :3] + cam.camera_from_world[2, 3]
+    assert np.nanmin(depth) >= MIN_CAMERA_DEPTH_MM - 1e-6
+    check_consistent(s)

@@ -9,7 +9,9 @@ Pipeline of `synthesize_session`:
    horizontally so that the pelvis is at the world origin at time 0. The subject then
    stays in view at the start; clips that travel may leave the view later (keypoints are
    NaN there).
-3. Cameras of the chosen rig are placed in front of the subject's initial facing direction.
+3. Cameras of the chosen rig are placed in front of the subject's initial facing direction,
+   moved back along their axes where the subject would come closer than 1 m
+   (`keep_cameras_away`).
 4. Per video frame (jittered times) the fleshed-out body is drawn into each camera over
    a seeded room, with motion blur, lens distortion, lighting and sensor noise.
 5. Markers (head on glasses, hands on hand-held objects, elbow reference markers) are
@@ -22,13 +24,14 @@ from __future__ import annotations
 import json
 import shutil
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import MocapError, SessionError, ShapeError
 from mocapkit.io.motion import Motion
 from mocapkit.io.session import Truth, write_keypoints_csv, write_session_json, write_timestamps_csv
@@ -131,6 +134,53 @@ class SynthSummary:
         ]
         lines += [f"  note: {n}" for n in self.notes]
         return "\n".join(lines)
+
+
+#: Nearest a joint may come to a synthetic camera (depth along its optical axis, mm).
+MIN_CAMERA_DEPTH_MM = 1000.0
+
+
+def keep_cameras_away(
+    cameras: list[Camera], joints_in_world_mm: NDArray[np.float64]
+) -> tuple[list[Camera], float]:
+    """Move a rig back along its optical axes until no joint comes closer than 1 m.
+
+    The rig is placed in front of the subject's start (`mocapkit.synth.rigs.make_rig`);
+    a subject who walks or hops towards it would otherwise come up to, and through, the
+    lens (CMU 131_03 in its first 8 s: the pelvis ends 0.1 m behind the camera plane),
+    which no recording would show. Every camera moves by the same distance along its own
+    axis, so a stereo pair keeps its baseline and parallel axes.
+
+    Parameters
+    ----------
+    cameras : list of Camera
+    joints_in_world_mm : ndarray, shape (T, J, 3)
+        The excerpt's joints, world mm (NaN allowed).
+
+    Returns
+    -------
+    cameras : list of Camera
+        Moved copies (the same objects when none had to move).
+    moved_mm : float
+        How far they were moved back (0 when not at all).
+    """
+    pts = np.asarray(joints_in_world_mm, dtype=float).reshape(-1, 3)
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
+    if pts.size == 0:
+        return cameras, 0.0
+    nearest = min(
+        float(np.min(pts @ c.camera_from_world[2, :3] + c.camera_from_world[2, 3]))
+        for c in cameras
+    )
+    moved = max(0.0, MIN_CAMERA_DEPTH_MM - nearest)
+    if moved == 0.0:
+        return cameras, 0.0
+    out = []
+    for c in cameras:
+        camera_from_world = c.camera_from_world.copy()
+        camera_from_world[2, 3] += moved  # the camera steps back along its own axis
+        out.append(replace(c, camera_from_world=camera_from_world))
+    return out, moved
 
 
 def load_motion_source(spec: str, asf: str | None = None) -> Motion:
@@ -296,6 +346,13 @@ def synthesize_session(
     appearance = Appearance.random(rng_look, opts.shirt_colour, opts.sleeve)
     body = build_body(motion.skeleton, t_local, np.asarray(motion.q)[i0:i1], appearance, shift)
     cameras = make_rig(opts.rig, np.zeros(3), fwd, chest, opts.image_size, rng_look)
+    cameras, pulled_back_mm = keep_cameras_away(cameras, joints_all[i0:i1] + shift)
+    if pulled_back_mm > 0:
+        notes.append(
+            f"the subject comes towards the cameras; they were moved back "
+            f"{pulled_back_mm:.0f} mm so that no joint comes closer than "
+            f"{MIN_CAMERA_DEPTH_MM:.0f} mm"
+        )
 
     # -------------------------------------------------------- times
     n_video = int(np.floor(duration * opts.fps + 1e-9)) + 1
