@@ -168,10 +168,7 @@ def keep_cameras_away(
     pts = pts[np.all(np.isfinite(pts), axis=1)]
     if pts.size == 0:
         return cameras, 0.0
-    nearest = min(
-        float(np.min(pts @ c.camera_from_world[2, :3] + c.camera_from_world[2, 3]))
-        for c in cameras
-    )
+    nearest = min(float(np.min(c.to_camera(pts)[:, 2])) for c in cameras)
     moved = max(0.0, MIN_CAMERA_DEPTH_MM - nearest)
     if moved == 0.0:
         return cameras, 0.0

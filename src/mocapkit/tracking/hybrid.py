@@ -611,33 +611,41 @@ class HybridTracker:
 
     # ------------------------------------------------------------------ update
 
-    def _elbows_in_shoulder_parents(self, q: FloatArray) -> dict[str, FloatArray]:
-        """Each elbow in the frame of its shoulder's parent (the trunk or clavicle), mm.
-
-        The elbow-jump penalty compares elbows in this frame, carried to the world by
-        the current trunk, so a trunk that turns between frames (a root-yaw correction)
-        is not taken for a jumping elbow.
-        """
+    def _shoulder_parents_and_elbows(
+        self, q: FloatArray
+    ) -> dict[str, tuple[FloatArray, FloatArray]]:
+        """Per side: the world transform (4, 4) of the shoulder's parent (the trunk or
+        clavicle) and the elbow (3,) in the world, mm, under pose ``q``."""
         sk = self.skeleton
         world = forward_kinematics(sk, q)
         out = {}
         for side in SIDES:
             humerus, radius = arm_joint_names(side)[:2]
-            parent = world[sk.parents[sk.joint_index(humerus)]]
-            elbow = world[sk.joint_index(radius), :3, 3]
-            out[side] = parent[:3, :3].T @ (elbow - parent[:3, 3])
+            out[side] = (
+                world[sk.parents[sk.joint_index(humerus)]],
+                world[sk.joint_index(radius), :3, 3],
+            )
         return out
+
+    def _elbows_in_shoulder_parents(self, q: FloatArray) -> dict[str, FloatArray]:
+        """Each elbow in the frame of its shoulder's parent, mm.
+
+        The elbow-jump penalty compares elbows in this frame, carried to the world by
+        the current trunk, so a trunk that turns between frames (a root-yaw correction)
+        is not taken for a jumping elbow.
+        """
+        return {
+            side: parent[:3, :3].T @ (elbow - parent[:3, 3])
+            for side, (parent, elbow) in self._shoulder_parents_and_elbows(q).items()
+        }
 
     def _previous_elbows_in_world(self, q: FloatArray) -> dict[str, FloatArray]:
         """The previous frame's elbows (`_elbows_in_shoulder_parents`) under pose ``q``."""
         assert self._prev_elbows is not None
-        sk = self.skeleton
-        world = forward_kinematics(sk, q)
-        out = {}
-        for side in SIDES:
-            parent = world[sk.parents[sk.joint_index(arm_joint_names(side)[0])]]
-            out[side] = parent[:3, :3] @ self._prev_elbows[side] + parent[:3, 3]
-        return out
+        return {
+            side: parent[:3, :3] @ self._prev_elbows[side] + parent[:3, 3]
+            for side, (parent, _elbow) in self._shoulder_parents_and_elbows(q).items()
+        }
 
     def reset(self) -> None:
         """Forget the state (pose, feet, gaps, filter); the next sample initialises again."""
