@@ -54,3 +54,7 @@ def unknown_name(kind: str, name: str, valid: Iterable[str], where: str = "") ->
     shown = ", ".join(choices[:40]) + (" ..." if len(choices) > 40 else "")
     origin = f" in {where}" if where else ""
     return UnknownNameError(f"unknown {kind} {name!r}{origin}; expected one of: {shown}")
+
+
+class ConfigError(MocapError, ValueError):
+    """A setting is out of range, or two settings or options conflict."""

@@ -1,0 +1,199 @@
+"""Limbs, spine and feet of any skeleton, found through its canonical joint names.
+
+Generic code (IK, trackers, balance, refinement, evaluation) never names a preset's own
+joints (``l_humerus``, ``l_shoulder``, ...): it asks this module for the joints and DoFs
+of an arm, a leg, the spine or the feet, which are derived from `Skeleton.canonical`
+and the kinematic tree. So the same code runs on ``zhang21``, ``azad14`` and
+``upper_stick``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mocapkit.errors import UnknownNameError, unknown_name
+from mocapkit.skeleton.model import PRISMATIC, Skeleton
+
+IntArray = NDArray[np.int64]
+
+SIDES: tuple[str, ...] = ("left", "right")
+LIMB_KINDS: tuple[str, ...] = ("arm", "leg")
+
+#: Canonical joints of each limb kind, proximal to distal.
+_LIMB_CANONICAL: dict[str, tuple[str, str, str]] = {
+    "arm": ("shoulder", "elbow", "wrist"),
+    "leg": ("hip", "knee", "ankle"),
+}
+
+
+@dataclass(frozen=True)
+class Limb:
+    """One arm or leg of a skeleton: joint indices and DoFs, found by canonical names.
+
+    Attributes
+    ----------
+    name : str
+        ``"left_arm"``, ``"right_leg"``, ...
+    side : {"left", "right"}
+    kind : {"arm", "leg"}
+    parent : int
+        Joint the limb hangs from (the parent of the ``root`` joint: the thorax or
+        clavicle for an arm, the pelvis for a leg).
+    root, middle, end : int
+        Joints that hold the canonical shoulder/hip, elbow/knee and wrist/ankle.
+    tip : int
+        The first child of ``end`` (hand or foot end site), or ``-1`` where it has none.
+    dofs : ndarray of int, shape (K,)
+        Rotational DoFs of the joints from ``root`` to ``end`` inclusive (shoulder and
+        elbow for ``zhang21``'s arm; a ball shoulder and the elbow for ``azad14``).
+    translation_dofs : ndarray of int, shape (P,)
+        Prismatic DoFs on the same joints (``azad14``'s adaptive shoulder offset).
+    chain : ndarray of int
+        All joints from ``root`` to ``end`` inclusive, in kinematic order.
+    """
+
+    name: str
+    side: str
+    kind: str
+    parent: int
+    root: int
+    middle: int
+    end: int
+    tip: int
+    dofs: IntArray
+    translation_dofs: IntArray
+    chain: IntArray
+
+    @property
+    def joints(self) -> tuple[int, int, int]:
+        """``(root, middle, end)`` joint indices."""
+        return (self.root, self.middle, self.end)
+
+
+def _canonical_joint(skeleton: Skeleton, cname: str, what: str) -> int:
+    if cname not in skeleton.canonical:
+        raise unknown_name(
+            "canonical joint", cname, skeleton.canonical, f"skeleton {skeleton.name!r} ({what})"
+        )
+    return skeleton.joint_index(skeleton.canonical[cname][0])
+
+
+def _path(parents: IntArray, top: int, bottom: int) -> IntArray:
+    """Joints from ``top`` down to ``bottom`` inclusive; empty if ``top`` is no ancestor."""
+    out = [bottom]
+    j = bottom
+    while j != top:
+        j = int(parents[j])
+        if j < 0:
+            return np.zeros(0, dtype=np.int64)
+        out.append(j)
+    return np.asarray(out[::-1], dtype=np.int64)
+
+
+def limb(skeleton: Skeleton, name: str) -> Limb:
+    """The arm or leg ``name`` (``"left_arm"``, ``"right_leg"``, ...) of a skeleton.
+
+    Raises
+    ------
+    UnknownNameError
+        For a name that is not ``{side}_{kind}``, or a skeleton whose canonical joints
+        lack this limb (``upper_stick`` has no legs).
+    """
+    valid = [f"{s}_{k}" for s in SIDES for k in LIMB_KINDS]
+    if name not in valid:
+        raise unknown_name("limb", name, valid)
+    side, kind = name.split("_")
+    root_c, mid_c, end_c = (f"{side}_{c}" for c in _LIMB_CANONICAL[kind])
+    root = _canonical_joint(skeleton, root_c, name)
+    middle = _canonical_joint(skeleton, mid_c, name)
+    end = _canonical_joint(skeleton, end_c, name)
+    chain = _path(skeleton.parents, root, end)
+    if chain.size == 0 or middle not in chain:
+        raise UnknownNameError(
+            f"skeleton {skeleton.name!r}: canonical {root_c}, {mid_c}, {end_c} do not lie on "
+            f"one chain (joints {skeleton.joint_names[root]!r}, "
+            f"{skeleton.joint_names[middle]!r}, {skeleton.joint_names[end]!r})"
+        )
+    on_chain = np.isin(skeleton.dof_joint, chain)
+    prismatic = skeleton.dof_kind == PRISMATIC
+    children = skeleton.children(end)
+    return Limb(
+        name=name,
+        side=side,
+        kind=kind,
+        parent=int(skeleton.parents[root]),
+        root=root,
+        middle=middle,
+        end=end,
+        tip=int(children[0]) if children.size else -1,
+        dofs=np.flatnonzero(on_chain & ~prismatic).astype(np.int64),
+        translation_dofs=np.flatnonzero(on_chain & prismatic).astype(np.int64),
+        chain=chain,
+    )
+
+
+def arm(skeleton: Skeleton, side: str) -> Limb:
+    """The ``"left"`` or ``"right"`` arm; see `limb`."""
+    if side not in SIDES:
+        raise unknown_name("side", side, SIDES)
+    return limb(skeleton, f"{side}_arm")
+
+
+def leg(skeleton: Skeleton, side: str) -> Limb:
+    """The ``"left"`` or ``"right"`` leg; see `limb`."""
+    if side not in SIDES:
+        raise unknown_name("side", side, SIDES)
+    return limb(skeleton, f"{side}_leg")
+
+
+def has_limb(skeleton: Skeleton, name: str) -> bool:
+    """Whether the skeleton's canonical joints provide the limb ``name``."""
+    try:
+        limb(skeleton, name)
+    except UnknownNameError:
+        return False
+    return True
+
+
+def head_joint(skeleton: Skeleton) -> int:
+    """Joint holding the canonical head point."""
+    return _canonical_joint(skeleton, "head", "head")
+
+
+def spine_joints(skeleton: Skeleton) -> IntArray:
+    """Joints strictly between the canonical pelvis and neck, pelvis to neck order.
+
+    For ``zhang21`` these are ``spine1..spine3``; a model whose trunk is one rigid
+    segment without a canonical pelvis (``azad14``) has none.
+    """
+    if "pelvis" not in skeleton.canonical:
+        return np.zeros(0, dtype=np.int64)
+    pelvis = _canonical_joint(skeleton, "pelvis", "spine")
+    neck = _canonical_joint(skeleton, "neck", "spine")
+    path = _path(skeleton.parents, pelvis, neck)
+    if path.size == 0:
+        raise UnknownNameError(
+            f"skeleton {skeleton.name!r}: canonical neck ({skeleton.joint_names[neck]!r}) does "
+            f"not hang below the canonical pelvis ({skeleton.joint_names[pelvis]!r})"
+        )
+    return path[1:-1]
+
+
+def spine_dofs(skeleton: Skeleton) -> IntArray:
+    """Rotational DoFs of the spine joints (see `spine_joints`), pelvis to neck order."""
+    joints = spine_joints(skeleton)
+    mask = np.isin(skeleton.dof_joint, joints) & (skeleton.dof_kind != PRISMATIC)
+    return np.flatnonzero(mask).astype(np.int64)
+
+
+def foot_joints(skeleton: Skeleton, side: str) -> IntArray:
+    """The canonical ankle joint of one side and all joints below it (foot, toe, end sites)."""
+    return skeleton.subtree(leg(skeleton, side).end)
+
+
+def dof_names_of(skeleton: Skeleton, dofs: IntArray) -> tuple[str, ...]:
+    """Names of DoF indices, for messages and reports."""
+    return tuple(skeleton.dof_names[int(d)] for d in dofs)
