@@ -9,10 +9,16 @@ normalises "with respect to anthropometric data" without saying how; here:
 1. each link's observed length is a high percentile of its projected lengths (100 = the
    paper's maximum; a lower one keeps a few noisy frames from stretching the link);
 2. each observed length implies a stature ``length / ratio`` with the body proportions of
-   the library's reference model (`zhang21`, `ANTHROPOMETRIC_RATIOS`); the median of
-   these is the video's stature;
-3. a link never seen near parallel (observed below ``1 - slack`` of its anthropometric
-   length at that stature) takes the anthropometric length instead.
+   `ANTHROPOMETRIC_RATIOS`; the median of these is the video's stature;
+3. a link never seen, or never near parallel (observed below ``1 - slack`` of its
+   anthropometric length at that stature), takes the anthropometric length instead.
+
+The ratios are segment length over standing height between canonical joints, medians
+over the ten CMU clips of ``shared/data/mocap`` as the library reads them (the canonical
+neck and pelvis of those files differ from `zhang21`'s, whose trunk ratio is 0.28 against
+0.15-0.25 there, so the library's own model would mislead the fallback). The defaults
+(90th percentile, slack 0.4) were picked on three synthetic clips, where the 90th
+percentile of the projected lengths lay within 0.9-1.18 of the true lengths.
 
 Lengths come out in the units of the input (px for image positions). `pixels_per_mm`
 turns them into mm from a known stature (session.json) or, failing that, the
@@ -22,7 +28,6 @@ reference stature.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from functools import cache
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -35,19 +40,28 @@ FloatArray = NDArray[np.float64]
 DEFAULT_HEIGHT_MM = 1700.0
 
 
-@cache
-def _ratios() -> dict[str, float]:
-    from mocapkit.skeleton.presets import load_preset
-    from mocapkit.skeleton.scaling import segment_lengths_mm, standing_height_mm
-
-    sk = load_preset("zhang21")
-    h = standing_height_mm(sk)
-    return {k: float(v) / h for k, v in segment_lengths_mm(sk).items()}
+#: Segment length / standing height (see the module docstring for the source).
+ANTHROPOMETRIC_RATIOS: dict[str, float] = {
+    "trunk": 0.227,
+    "head": 0.165,
+    "left_clavicle": 0.13,
+    "right_clavicle": 0.13,
+    "left_upper_arm": 0.19,
+    "right_upper_arm": 0.19,
+    "left_forearm": 0.13,
+    "right_forearm": 0.13,
+    "left_pelvis": 0.09,
+    "right_pelvis": 0.09,
+    "left_thigh": 0.27,
+    "right_thigh": 0.27,
+    "left_shank": 0.285,
+    "right_shank": 0.285,
+}
 
 
 def anthropometric_ratios(segments: Sequence[str]) -> FloatArray:
-    """Segment length over stature for each segment name (reference model `zhang21`)."""
-    table = _ratios()
+    """Segment length over stature for each segment name (`ANTHROPOMETRIC_RATIOS`)."""
+    table = ANTHROPOMETRIC_RATIOS
     missing = [s for s in segments if s not in table]
     if missing:
         from mocapkit.errors import unknown_name
@@ -66,8 +80,8 @@ def _partner(segment: str) -> str | None:
 def estimate_link_lengths(
     projected: ArrayLike,
     segments: Sequence[str],
-    percentile: float = 100.0,
-    slack: float = 0.15,
+    percentile: float = 90.0,
+    slack: float = 0.4,
 ) -> tuple[FloatArray, float]:
     """Link lengths from their projected lengths over a sequence.
 

@@ -138,6 +138,13 @@ class Decoder:
             path[k - 2] = self._back[k - 2][path[k - 1], path[k]]
         return path
 
+    def forward_costs(self) -> FloatArray:
+        """Best cost of a path ending in each state of the newest frame (N_k,)."""
+        if self._cost is None:
+            raise ShapeError("Decoder.forward_costs: no frame pushed yet")
+        c = self._cost
+        return np.asarray(c if c.ndim == 1 else c.min(axis=0), dtype=float)
+
     def best_cost(self) -> float:
         """Total weight of the best path so far."""
         assert self._cost is not None
