@@ -38,6 +38,7 @@ from mocapkit.tracking.mono.stick import (
     ANGLE,
     BACKWARD,
     CAPSULE,
+    ELBOW_PLANE,
     HINGE_SIGN,
     Checks,
     StickArrays,
@@ -137,6 +138,21 @@ def _fails(pos: FloatArray, stick: StickArrays, checks: Checks, c: int) -> bool:
             pos[stick.parent[a]], pos[stick.child[a]], pos[stick.parent[b]], pos[stick.child[b]]
         )
         return d < par[0]
+    if kind == ELBOW_PLANE:
+        up = -_vec(pos, stick, lk[2])
+        up = up / np.sqrt(up @ up)
+        right = _vec(pos, stick, lk[4]) - _vec(pos, stick, lk[3])
+        right = right - (right @ up) * up
+        right = right / np.sqrt(right @ right)
+        fwd = np.cross(up, right)
+        u = _vec(pos, stick, lk[0])
+        u = u / np.sqrt(u @ u)
+        if u @ up > par[1]:
+            return False
+        f = _vec(pos, stick, lk[1])
+        w = f - (f @ u) * u
+        nw = np.sqrt(w @ w)
+        return nw > 1e-9 * np.sqrt(f @ f) and -(w @ fwd) > par[0] * nw
     # BACKWARD and HINGE_SIGN share the body frame: up = -link1, right = link3 - link2
     up = -_vec(pos, stick, lk[1]) if kind == BACKWARD else np.zeros(3)
     right = _vec(pos, stick, lk[3]) - _vec(pos, stick, lk[2])

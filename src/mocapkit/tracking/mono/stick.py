@@ -22,6 +22,10 @@ recorded in `LimitConfig`:
 - the upper arm at most 60 deg behind the frontal plane (AAOS shoulder extension 60 deg),
   the thigh at most 30 deg (AAOS hip extension);
 - the knee bends only backwards (up to 15 deg the other way for hip rotation and noise);
+- the elbow bends the forearm at most 30 deg backwards (behind the frontal plane, measured
+  on the forearm's component normal to the upper arm) while the upper arm is below 17 deg
+  above the horizontal: with the humerus' rotation range of about +-90 deg, a flexed elbow
+  cannot point the hand backwards then (overhead, a hand behind the head is possible);
 - capsules (recipe M: 40-50 mm arms, 120 mm torso) may not overlap for forearm-trunk,
   forearm-head, forearm-forearm, forearm-other upper arm, shank-shank. The trunk capsule
   here is 90 mm around the neck-pelvis line (the spine line lies behind the belly, so the
@@ -66,6 +70,7 @@ ANGLE = 0
 BACKWARD = 1
 HINGE_SIGN = 2
 CAPSULE = 3
+ELBOW_PLANE = 4
 
 
 class Checks(NamedTuple):
@@ -81,8 +86,12 @@ class Checks(NamedTuple):
         `HINGE_SIGN`: (proximal x distal) . right <= ``params[c, 0]`` |proximal||distal| for
         proximal ``links[c, 0]``, distal ``links[c, 1]``, right from ``links[c, 2:4]`` as above.
         `CAPSULE`: the segments of links ``links[c, 0]`` and ``links[c, 1]`` stay at least
-        ``params[c, 0]`` mm apart.
-    links : (C, 4) int
+        ``params[c, 0]`` mm apart. `ELBOW_PLANE`: with upper arm ``links[c, 0]`` at most
+        ``params[c, 1]`` (a sine) above the horizontal of the body frame (up = minus link
+        ``links[c, 2]``, right = link ``links[c, 4]`` minus link ``links[c, 3]``), the
+        forearm ``links[c, 1]`` bends away from the upper arm's line backwards by at most
+        asin(``params[c, 0]``).
+    links : (C, 5) int
     params : (C, 2) float
     level : (C,) int
         Search level (link index) at which the check runs: the last link it reads.
@@ -121,6 +130,8 @@ class LimitConfig:
     """Joint-angle limits (deg) and capsule radii (mm); see the module docstring."""
 
     elbow_min_included_deg: float = 30.0
+    elbow_max_backward_deg: float = 30.0
+    elbow_plane_max_elevation_deg: float = 17.0
     knee_min_included_deg: float = 30.0
     clavicle_pair_min_deg: float = 120.0
     clavicle_trunk_deg: tuple[float, float] = (50.0, 130.0)
@@ -232,13 +243,13 @@ def stick_model(legs: bool = False, limits: LimitConfig | None = None) -> StickM
         names.append(c)
     idx = {n: i for i, n in enumerate(names)}
     seg = {s: i for i, (_, _, s) in enumerate(links)}
-    rows: list[tuple[int, tuple[int, int, int, int], tuple[float, float]]] = []
+    rows: list[tuple[int, tuple[int, ...], tuple[float, float]]] = []
 
     def cos(deg: float) -> float:
         return float(np.cos(np.radians(deg)))
 
     def angle(a: str, b: str, lo_deg: float, hi_deg: float) -> None:
-        rows.append((ANGLE, (seg[a], seg[b], -1, -1), (cos(hi_deg) - 1e-12, cos(lo_deg) + 1e-12)))
+        rows.append((ANGLE, (seg[a], seg[b]), (cos(hi_deg) - 1e-12, cos(lo_deg) + 1e-12)))
 
     if lim.joint_limits:
         lo, hi = lim.clavicle_trunk_deg
@@ -260,6 +271,22 @@ def stick_model(legs: bool = False, limits: LimitConfig | None = None) -> StickM
                         seg["right_clavicle"],
                     ),
                     (float(np.sin(np.radians(lim.shoulder_max_extension_deg))), 0.0),
+                )
+            )
+            rows.append(
+                (
+                    ELBOW_PLANE,
+                    (
+                        seg[f"{side}_upper_arm"],
+                        seg[f"{side}_forearm"],
+                        seg["trunk"],
+                        seg["left_clavicle"],
+                        seg["right_clavicle"],
+                    ),
+                    (
+                        float(np.sin(np.radians(lim.elbow_max_backward_deg))),
+                        float(np.sin(np.radians(lim.elbow_plane_max_elevation_deg))),
+                    ),
                 )
             )
         if legs:
@@ -305,7 +332,7 @@ def stick_model(legs: bool = False, limits: LimitConfig | None = None) -> StickM
         def capsule(a: str, b: str) -> None:
             ra = radius[a.split("_", 1)[-1] if a not in radius else a]
             rb = radius[b.split("_", 1)[-1] if b not in radius else b]
-            rows.append((CAPSULE, (seg[a], seg[b], -1, -1), (ra + rb, 0.0)))
+            rows.append((CAPSULE, (seg[a], seg[b]), (ra + rb, 0.0)))
 
         for side, other in (("left", "right"), ("right", "left")):
             capsule(f"{side}_forearm", "trunk")
@@ -317,7 +344,8 @@ def stick_model(legs: bool = False, limits: LimitConfig | None = None) -> StickM
             capsule("left_thigh", "right_shank")
             capsule("right_thigh", "left_shank")
     kind = np.array([r[0] for r in rows], dtype=np.int64)
-    lk = np.array([r[1] for r in rows], dtype=np.int64).reshape(-1, 4)
+    lk = np.array([(*r[1], *([-1] * (5 - len(r[1])))) for r in rows], dtype=np.int64)
+    lk = lk.reshape(-1, 5)
     params = np.array([r[2] for r in rows], dtype=float).reshape(-1, 2)
     level = lk.max(axis=1) if len(rows) else np.zeros(0, dtype=np.int64)
     order = np.argsort(level, kind="stable")

@@ -288,16 +288,23 @@ class MonoTracker:
         return n, depth * np.array([n[0, 0], n[0, 1], 1.0]), depth
 
     def _depth_bound(self, n: FloatArray) -> float:
-        """Upper bound on the neck's depth from the links that hang from it (mm)."""
+        """Upper bound on the neck's depth from the links that hang from it (mm).
+
+        The neck at depth Z is ``Z r`` with r = (x_n, y_n, 1); its distance to a child's
+        viewing ray (unit c) is ``Z |r x c|``, at most the link's length.
+        """
         assert self.camera is not None
-        rays = np.concatenate([n, np.ones((n.shape[0], 1))], axis=1)
-        rays /= np.linalg.norm(rays, axis=1, keepdims=True)
+        r = np.array([n[0, 0], n[0, 1], 1.0])
         from_root = self.model.parent == 0
-        cos = rays[self.model.child[from_root]] @ rays[0]
+        kids = n[self.model.child[from_root]]
+        c = np.concatenate([kids, np.ones((kids.shape[0], 1))], axis=1)
+        c /= np.linalg.norm(c, axis=1, keepdims=True)
+        # the noise margin shrinks each ray's angle to the neck's ray by margin_px / f
+        sin_a = np.linalg.norm(np.cross(r / np.linalg.norm(r), c), axis=1)
         margin = self.config.depth_margin_px / float(self.camera.K[0, 0])
-        ang = np.arccos(np.clip(cos, -1.0, 1.0)) - margin
+        ang = np.arcsin(np.clip(sin_a, 0.0, 1.0)) - margin
         with np.errstate(invalid="ignore", divide="ignore"):
-            z = self.lengths[from_root] / np.sin(np.maximum(ang, 1e-9))
+            z = self.lengths[from_root] / (np.linalg.norm(r) * np.sin(np.maximum(ang, 1e-9)))
         return float(np.nanmin(z)) if np.isfinite(z).any() else float("nan")
 
     def _process(self, k: int) -> list[MonoFrame]:
