@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.eval.metrics import evaluate_result
-from mocapkit.io.openpose import MAPPED_JOINTS, openpose_from_canonical, write_openpose_frame
+from mocapkit.io.openpose import openpose_from_canonical, write_openpose_frame
 from mocapkit.io.session import load_session
 from mocapkit.pipelines.mono import MonoRun, track_mono
 from mocapkit.skeleton.model import UPPER_BODY_JOINTS

@@ -86,7 +86,7 @@ def test_online_with_a_long_lag_equals_offline_and_a_short_lag_answers_in_time()
     lengths = np.linalg.norm(
         model.link_vectors(cam.to_camera(joints[0, [names.index(n) for n in model.joint_names]])),
         axis=-1,
-    )  # noqa: E501
+    )
     tracker = MonoTracker(lengths, cam, 1 / FPS, cfg, model)
     for k in range(20):
         out = tracker.push(k / FPS, px[k])
@@ -97,7 +97,7 @@ def test_online_with_a_long_lag_equals_offline_and_a_short_lag_answers_in_time()
 
 
 def test_pose_fit_reproduces_skeleton_poses() -> None:
-    joints, names, q = stick_motion(10)
+    joints, names, _ = stick_motion(10)
     sk = load_preset("upper_stick")
     q2 = fit_stick_pose(sk, names, joints)
     np.testing.assert_allclose(canonical_positions(sk, q2, names), joints, atol=1e-6)

@@ -152,7 +152,7 @@ def _fails(pos: FloatArray, stick: StickArrays, checks: Checks, c: int) -> bool:
         f = _vec(pos, stick, lk[1])
         w = f - (f @ u) * u
         nw = np.sqrt(w @ w)
-        return nw > 1e-9 * np.sqrt(f @ f) and -(w @ fwd) > par[0] * nw
+        return bool(nw > 1e-9 * np.sqrt(f @ f)) and bool(-(w @ fwd) > par[0] * nw)
     # BACKWARD and HINGE_SIGN share the body frame: up = -link1, right = link3 - link2
     up = -_vec(pos, stick, lk[1]) if kind == BACKWARD else np.zeros(3)
     right = _vec(pos, stick, lk[3]) - _vec(pos, stick, lk[2])
