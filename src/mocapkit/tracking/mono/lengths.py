@@ -17,7 +17,7 @@ The ratios are segment length over standing height between canonical joints, med
 over the ten CMU clips of ``shared/data/mocap`` as the library reads them (the canonical
 neck and pelvis of those files differ from `zhang21`'s, whose trunk ratio is 0.28 against
 0.15-0.25 there, so the library's own model would mislead the fallback). The defaults
-(90th percentile, slack 0.4) were picked on three synthetic clips, where the 90th
+(90th percentile, slack 0.15) were picked on three synthetic clips, where the 90th
 percentile of the projected lengths lay within 0.9-1.18 of the true lengths.
 
 Lengths come out in the units of the input (px for image positions). `pixels_per_mm`
@@ -81,7 +81,7 @@ def estimate_link_lengths(
     projected: ArrayLike,
     segments: Sequence[str],
     percentile: float = 90.0,
-    slack: float = 0.4,
+    slack: float = 0.15,
 ) -> tuple[FloatArray, float]:
     """Link lengths from their projected lengths over a sequence.
 
@@ -131,6 +131,11 @@ def estimate_link_lengths(
     stature = float(np.nanmedian(pooled / ratios))
     expected = ratios * stature
     short = ~(pooled >= (1.0 - slack) * expected)  # also NaN: never seen
+    # the trunk and head keep what the video shows unless never seen: their canonical ends
+    # (neck, pelvis, head) differ most between skeleton sources (trunk/stature 0.15 in the
+    # CMU BVH files, 0.23 in the ASF/AMC ones)
+    steady = np.isin(np.asarray(segments), ("trunk", "head"))
+    short &= ~steady | np.isnan(pooled)
     lengths = np.where(short, expected, pooled)
     return lengths, stature
 
