@@ -62,7 +62,7 @@ def test_track_mono_writes_the_result_folder_and_fit(tmp_path: Path) -> None:
 
 def test_cli_video_lengths_and_openpose_input(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
-) -> None:  # noqa: E501
+) -> None:
     session = _session(tmp_path / "s")
     assert main(["track", "mono", str(session), "--out", str(tmp_path / "r"), "--json"]) == 0
     assert '"survivors_mean"' in capsys.readouterr().out
@@ -76,8 +76,8 @@ def test_cli_video_lengths_and_openpose_input(
         full[:, MAPPED_JOINTS.index(n)] = px[:, i]
     # the detector also sees hips a little below the pelvis (the stick has none)
     pelvis = px[:, jn.index("pelvis")]
-    full[:, MAPPED_JOINTS.index("left_hip")] = pelvis + [20.0, 8.0]
-    full[:, MAPPED_JOINTS.index("right_hip")] = pelvis + [-20.0, 8.0]
+    full[:, MAPPED_JOINTS.index("left_hip")] = pelvis + np.array([20.0, 8.0])
+    full[:, MAPPED_JOINTS.index("right_hip")] = pelvis + np.array([-20.0, 8.0])
     write_openpose_with_bystander(tmp_path / "op", MAPPED_JOINTS, full, seed=1)
     code = main(
         ["track", "mono", str(session), "--out", str(tmp_path / "r2"), "--keypoints",
