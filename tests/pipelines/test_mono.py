@@ -92,3 +92,12 @@ def test_session_lengths_must_be_complete(tmp_path: Path) -> None:
     session = _session(tmp_path / "s")
     with pytest.raises(SessionError, match="bone_lengths_mm lacks"):
         track_mono(session, None, use_session_lengths=True)
+
+
+def test_bench_mono_reports_its_figures() -> None:
+    from mocapkit.pipelines.bench import BENCHMARKS
+
+    out = BENCHMARKS["mono"](repeats=1, n_frames=12)
+    assert out["fps"] > 0 and out["first_order_fps"] > 0 and out["offline_fps"] > 0
+    assert 0.0 <= float(out["pruned_share"]) <= 1.0
+    assert float(out["survivors_mean"]) <= float(out["candidates_mean"])

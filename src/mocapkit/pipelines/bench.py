@@ -22,6 +22,7 @@ import numpy as np
 from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
 from mocapkit.errors import ShapeError, unknown_name
 from mocapkit.io.atomic import atomic_write
+from mocapkit.pipelines.mono_bench import bench_mono
 from mocapkit.skeleton import canonical_positions, forward_kinematics, load_preset
 from mocapkit.skeleton.kinematics import points_and_jacobian
 
@@ -247,6 +248,7 @@ def bench_hybrid(
 BENCHMARKS: dict[str, Callable[..., dict[str, Any]]] = {
     "kinematics": bench_kinematics,
     "hybrid": bench_hybrid,
+    "mono": bench_mono,
 }
 
 

@@ -93,18 +93,40 @@ def _omega_nd(a: FloatArray, b: FloatArray, inv_dt: float) -> FloatArray:
 
 
 @nb.njit(cache=True)
-def _pair_omegas(va: FloatArray, vb: FloatArray, inv_dt: float) -> FloatArray:
-    """omega of every link for every state pair: (Na, Nb, L, 3) from (Na, L, 3), (Nb, L, 3)."""
+def _pair_omegas(va: FloatArray, vb: FloatArray, inv_dt: float) -> tuple[FloatArray, FloatArray]:
+    """omega (Na, Nb, L, 3) and summed |omega| (Na, Nb) from (Na, L, 3), (Nb, L, 3)."""
     na, nl = va.shape[0], va.shape[1]
     nbs = vb.shape[0]
     out = np.zeros((na, nbs, nl, 3))
+    rot = np.zeros((na, nbs))
     for i in range(na):
         for j in range(nbs):
+            acc = 0.0
             for k in range(nl):
-                if np.isnan(va[i, k, 0]) or np.isnan(vb[j, k, 0]):
+                ax, ay, az = va[i, k, 0], va[i, k, 1], va[i, k, 2]
+                bx, by, bz = vb[j, k, 0], vb[j, k, 1], vb[j, k, 2]
+                if np.isnan(ax) or np.isnan(bx):
                     continue  # an unseen link adds nothing
-                _omega(va[i, k], vb[j, k], inv_dt, out[i, j, k])
-    return out
+                cx = ay * bz - az * by
+                cy = az * bx - ax * bz
+                cz = ax * by - ay * bx
+                sn = np.sqrt(cx * cx + cy * cy + cz * cz)
+                c = ax * bx + ay * by + az * bz
+                if sn <= 1e-12 * np.sqrt(
+                    (ax * ax + ay * ay + az * az) * (bx * bx + by * by + bz * bz)
+                ):
+                    if c < 0.0:  # opposite: half a turn about some perpendicular axis
+                        _omega(va[i, k], vb[j, k], inv_dt, out[i, j, k])
+                        acc += np.pi * inv_dt
+                    continue
+                ang = np.arctan2(sn, c) * inv_dt
+                f = ang / sn
+                out[i, j, k, 0] = cx * f
+                out[i, j, k, 1] = cy * f
+                out[i, j, k, 2] = cz * f
+                acc += ang
+            rot[i, j] = acc
+    return out, rot
 
 
 def pair_omegas(vectors_a: ArrayLike, vectors_b: ArrayLike, dt_s: float) -> FloatArray:
@@ -124,7 +146,21 @@ def pair_omegas(vectors_a: ArrayLike, vectors_b: ArrayLike, dt_s: float) -> Floa
         raise ShapeError(
             f"pair_omegas: expected (Na, L, 3) and (Nb, L, 3), found {a.shape}, {b.shape}"
         )
-    return np.asarray(_pair_omegas(a, b, 1.0 / dt_s))
+    return np.asarray(_pair_omegas(a, b, 1.0 / dt_s)[0])
+
+
+def pair_omegas_and_rotation(
+    vectors_a: ArrayLike, vectors_b: ArrayLike, dt_s: float
+) -> tuple[FloatArray, FloatArray]:
+    """`pair_omegas` and its `rotation_cost` in one pass."""
+    a = np.ascontiguousarray(vectors_a, dtype=float)
+    b = np.ascontiguousarray(vectors_b, dtype=float)
+    if a.ndim != 3 or b.ndim != 3 or a.shape[1:] != b.shape[1:] or a.shape[2] != 3:
+        raise ShapeError(
+            f"pair_omegas: expected (Na, L, 3) and (Nb, L, 3), found {a.shape}, {b.shape}"
+        )
+    w, r = _pair_omegas(a, b, 1.0 / dt_s)
+    return np.asarray(w), np.asarray(r)
 
 
 def rotation_cost(omegas: ArrayLike) -> FloatArray:

@@ -57,8 +57,7 @@ from mocapkit.tracking.mono.flips import enumerate_poses
 from mocapkit.tracking.mono.motion_cost import (
     acceleration_cost,
     joint_acceleration_cost,
-    pair_omegas,
-    rotation_cost,
+    pair_omegas_and_rotation,
 )
 from mocapkit.tracking.mono.smoother import KeypointSmoother
 from mocapkit.tracking.mono.stick import LimitConfig, StickModel, stick_model
@@ -319,7 +318,13 @@ class MonoTracker:
             positions = np.full((1, self.model.n_joints, 3), np.nan)
             n_cand, pruned_all = 0, False
         vectors = self.model.link_vectors(positions)
-        keep = self._beam_select(vectors)
+        prev = self._layers[-1] if self._layers else None
+        w_full = r_full = None
+        if prev is not None:
+            w_full, r_full = pair_omegas_and_rotation(
+                prev.vectors, vectors, self._dt(prev.index, k)
+            )
+        keep = self._beam_select(vectors.shape[0], r_full)
         layer = _Layer(
             k,
             self._times[k],
@@ -333,7 +338,7 @@ class MonoTracker:
             keep,
         )
         self._layers.append(layer)
-        decided = self._push_decoder(layer)
+        decided = self._push_decoder(layer, w_full, r_full)
         out = []
         for frame, state in decided:
             out.append(self._frame(frame, state))
@@ -344,39 +349,37 @@ class MonoTracker:
         d = self._times[b] - self._times[a]
         return d if d > 0 else self.dt_s
 
-    def _beam_select(self, vectors: FloatArray) -> IntArray:
+    def _beam_select(self, n: int, rotation: FloatArray | None) -> IntArray:
         """States of this layer the pair-state decoder keeps (all of them under the cap).
 
         The beam runs a first-order (rotation) forward pass over the full layers and keeps
         the ``max_pair_states`` states of lowest forward cost.
         """
-        n = vectors.shape[0]
         if self._decoder.order == 1:
             return np.arange(n)
-        if not self._layers:
+        if rotation is None:
             self._beam.push(np.zeros(n))
         else:
-            prev = self._layers[-1]
-            w = pair_omegas(prev.vectors, vectors, self._dt(prev.index, prev.index + 1))
-            self._beam.push(np.zeros(n), rotation_cost(w))
+            self._beam.push(np.zeros(n), rotation)
         if n <= self.config.max_pair_states:
             return np.arange(n)
         cost = self._beam.forward_costs()
         return np.sort(np.argsort(cost, kind="stable")[: self.config.max_pair_states])
 
-    def _push_decoder(self, layer: _Layer) -> list[tuple[int, int]]:
+    def _push_decoder(
+        self, layer: _Layer, w_full: FloatArray | None, r_full: FloatArray | None
+    ) -> list[tuple[int, int]]:
         cfg = self.config
         sel = layer.keep
         u = np.zeros(sel.shape[0])
-        if len(self._layers) == 1:
+        if w_full is None or r_full is None:
             return self._decoder.push(u)
         prev = self._layers[-2]
-        dt1 = self._dt(prev.index, layer.index)
-        va, vb = prev.vectors[prev.keep], layer.vectors[sel]
-        w_b = pair_omegas(va, vb, dt1)
+        pick = np.ix_(prev.keep, sel)
         if cfg.cost == "rotation":
-            return self._decoder.push(u, rotation_cost(w_b))
-        pair = np.zeros((va.shape[0], vb.shape[0]))
+            return self._decoder.push(u, r_full[pick])
+        w_b = w_full[pick]
+        pair = np.zeros((prev.keep.shape[0], sel.shape[0]))
         if len(self._layers) == 2:
             self._last_w = w_b
             return self._decoder.push(u, pair)
