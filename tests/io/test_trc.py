@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mocapkit.errors import FormatError, ShapeError
-from mocapkit.io.markers import read_markers
+from mocapkit.io.marker_files import read_markers
 from mocapkit.io.trc import read_trc, write_trc
 
 # Printed with 1e-6 mm resolution: half a unit of the last digit, plus the double rounding

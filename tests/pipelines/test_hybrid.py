@@ -60,7 +60,7 @@ def test_parse_oriented_sets():
 
 def test_tennis_serve_elbows(shared_data, tmp_path):
     """IK only on real markers; elbows judged against LELB/RELB (lateral epicondyle skin)."""
-    from mocapkit.io.markers import read_markers
+    from mocapkit.io.marker_files import read_markers
 
     path = shared_data / "c3d" / "kinematics_tennis_serve.c3d"
     markers = read_markers(path)
@@ -172,7 +172,8 @@ def _copy_session(src, dst):
 
 
 def test_session_writes_result_folder_on_video_time_line(wave_session, wave_result):
-    from mocapkit.io.motion import load_motion_npz, read_joints_csv
+    from mocapkit.io.joints_csv import read_joints_csv
+    from mocapkit.io.motion_npz import load_motion_npz
     from mocapkit.io.session import load_session
 
     motion, out = wave_result

@@ -17,6 +17,7 @@ from numpy.typing import ArrayLike, NDArray
 from mocapkit.errors import SessionError, ShapeError, unknown_name
 from mocapkit.ik.sdls import IKConfig, SDLSSolver
 from mocapkit.io.motion import Motion
+from mocapkit.io.motion_files import write_result_folder
 from mocapkit.progress import Progress
 from mocapkit.skeleton.model import Skeleton
 from mocapkit.skeleton.presets import load_preset
@@ -284,7 +285,7 @@ def track_hybrid_session(
         f"{'on' if cfg.use_video else 'off'}) on {session.path}",
     )
     if out_dir is not None:
-        motion.write_result_folder(out_dir)
+        write_result_folder(out_dir, motion)
     return motion
 
 
@@ -379,8 +380,8 @@ def track_hybrid_markers(
     left-hand to the right-hand set (`HybridTracker.initial_pose`); feet are planted
     where that first pose puts them, on the floor z = 0.
     """
+    from mocapkit.io.marker_files import read_markers
     from mocapkit.io.marker_sets import estimate_height_mm, evaluate_marker_sets, parse_marker_sets
-    from mocapkit.io.markers import read_markers
 
     markers = read_markers(markers_path)
     sets = parse_marker_sets(list(marker_sets))
@@ -407,7 +408,7 @@ def track_hybrid_markers(
         sk, markers.time_s, q, source=f"hybrid tracker IK on {Path(markers_path).name}"
     )
     if out_dir is not None:
-        motion.write_result_folder(out_dir)
+        write_result_folder(out_dir, motion)
     return motion
 
 

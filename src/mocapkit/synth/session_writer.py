@@ -34,7 +34,9 @@ from numpy.typing import NDArray
 from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import MocapError, SessionError, ShapeError
 from mocapkit.io.motion import Motion
-from mocapkit.io.session import Truth, write_keypoints_csv, write_session_json, write_timestamps_csv
+from mocapkit.io.session import write_session_json
+from mocapkit.io.session_csv import write_keypoints_csv, write_timestamps_csv
+from mocapkit.io.truth import Truth
 from mocapkit.progress import Progress
 from mocapkit.skeleton.model import PRISMATIC, TRUNK_SEGMENTS
 from mocapkit.skeleton.scaling import (
@@ -377,7 +379,7 @@ def synthesize_session(
     # -------------------------------------------------------- static data
     _prepare_out(out, opts.overwrite)
     from mocapkit.io.cameras import write_cameras
-    from mocapkit.io.markers import write_markers_csv
+    from mocapkit.io.marker_csv import write_markers_csv
 
     write_cameras(out / "cameras.json", cameras)
     joints_local = joints_all[i0:i1] + shift

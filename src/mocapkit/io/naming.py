@@ -1,0 +1,212 @@
+"""Naming tables: how each known motion-file convention names the canonical joints.
+
+A reader detects the convention of a file's joint names (`detect_convention`) and
+builds the skeleton's canonical map from it (`canonical_map`); joints a convention
+does not name are left out, never guessed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mocapkit.skeleton.model import CANONICAL_JOINTS
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class NamingConvention:
+    """How one family of files names its joints, and which joint gives each canonical joint.
+
+    ``joints`` maps canonical name -> file joint name; the canonical point is that
+    joint's origin, except for ``head``, which is the midpoint of the named joint's
+    segment (half its ``bone_end_mm``). ``signature`` lists names that identify the
+    convention (all must be present).
+    """
+
+    name: str
+    signature: frozenset[str]
+    joints: Mapping[str, str]
+
+
+def _sided(
+    central: Mapping[str, str], left: Mapping[str, str], right: Mapping[str, str]
+) -> dict[str, str]:
+    out = dict(central)
+    out.update({f"left_{k}": v for k, v in left.items()})
+    out.update({f"right_{k}": v for k, v in right.items()})
+    return out
+
+
+#: Limb joints named Left*/Right* + Shoulder (upper arm), Elbow, Wrist, Hip, Knee, Ankle,
+#: shared by the CMU 3dsMax-friendly and the Hips/Ab/Chest conventions.
+_LEFT_RIGHT_LIMBS: tuple[dict[str, str], dict[str, str]] = tuple(  # type: ignore[assignment]
+    {
+        "shoulder": f"{side}Shoulder",
+        "elbow": f"{side}Elbow",
+        "wrist": f"{side}Wrist",
+        "hip": f"{side}Hip",
+        "knee": f"{side}Knee",
+        "ankle": f"{side}Ankle",
+    }
+    for side in ("Left", "Right")
+)
+
+#: Naming tables (data). Neck choice per convention: the joint at the base of the
+#: neck, where the clavicles start (top of the thorax). In the CMU files that is the
+#: start of the ASF bone ``lowerneck`` (MotionBuilder-friendly BVH: ``Neck``;
+#: 3dsMax-friendly BVH: ``lowerneck``); in Boxing_Toes-style files ``Neck`` (which
+#: sits where the collars start).
+NAMING_CONVENTIONS: tuple[NamingConvention, ...] = (
+    NamingConvention(
+        "CMU MotionBuilder-friendly BVH (cgspeed)",
+        frozenset({"Hips", "LHipJoint", "LeftUpLeg", "Spine1", "Neck1", "LeftForeArm"}),
+        _sided(
+            {"pelvis": "Hips", "neck": "Neck", "head": "Head"},
+            {
+                "shoulder": "LeftArm",
+                "elbow": "LeftForeArm",
+                "wrist": "LeftHand",
+                "hip": "LeftUpLeg",
+                "knee": "LeftLeg",
+                "ankle": "LeftFoot",
+            },
+            {
+                "shoulder": "RightArm",
+                "elbow": "RightForeArm",
+                "wrist": "RightHand",
+                "hip": "RightUpLeg",
+                "knee": "RightLeg",
+                "ankle": "RightFoot",
+            },
+        ),
+    ),
+    NamingConvention(
+        "CMU 3dsMax-friendly BVH (cgspeed)",
+        frozenset({"Hips", "LHipJoint", "LeftHip", "lowerneck", "LeftCollar", "Chest2"}),
+        _sided(
+            {"pelvis": "Hips", "neck": "lowerneck", "head": "Head"},
+            *_LEFT_RIGHT_LIMBS,
+        ),
+    ),
+    NamingConvention(
+        "Hips/Ab/Chest BVH (Boxing_Toes style)",
+        frozenset({"Hips", "Ab", "Chest", "LeftCollar", "LeftHip"}),
+        _sided(
+            {"pelvis": "Hips", "neck": "Neck", "head": "Head"},
+            *_LEFT_RIGHT_LIMBS,
+        ),
+    ),
+    NamingConvention(
+        "CMU ASF/AMC (Acclaim)",
+        frozenset({"root", "lfemur", "ltibia", "lhumerus", "lradius", "lowerneck"}),
+        _sided(
+            {"pelvis": "root", "neck": "lowerneck", "head": "head"},
+            {
+                "shoulder": "lhumerus",
+                "elbow": "lradius",
+                "wrist": "lwrist",
+                "hip": "lfemur",
+                "knee": "ltibia",
+                "ankle": "lfoot",
+            },
+            {
+                "shoulder": "rhumerus",
+                "elbow": "rradius",
+                "wrist": "rwrist",
+                "hip": "rfemur",
+                "knee": "rtibia",
+                "ankle": "rfoot",
+            },
+        ),
+    ),
+    NamingConvention(
+        "mocapkit zhang21 preset",
+        frozenset({"root", "spine1", "l_humerus", "l_radius", "l_femur", "l_tibia"}),
+        _sided(
+            {"pelvis": "root", "neck": "neck", "head": "head"},
+            {
+                "shoulder": "l_humerus",
+                "elbow": "l_radius",
+                "wrist": "l_hand",
+                "hip": "l_femur",
+                "knee": "l_tibia",
+                "ankle": "l_foot",
+            },
+            {
+                "shoulder": "r_humerus",
+                "elbow": "r_radius",
+                "wrist": "r_hand",
+                "hip": "r_femur",
+                "knee": "r_tibia",
+                "ankle": "r_foot",
+            },
+        ),
+    ),
+    NamingConvention(
+        "mocapkit upper_stick preset",
+        frozenset({"waist", "neck", "l_shoulder", "l_elbow", "l_wrist"}),
+        _sided(
+            {"pelvis": "waist", "neck": "neck", "head": "head"},
+            {"shoulder": "l_shoulder", "elbow": "l_elbow", "wrist": "l_wrist"},
+            {"shoulder": "r_shoulder", "elbow": "r_elbow", "wrist": "r_wrist"},
+        ),
+    ),
+)
+
+
+def detect_convention(joint_names: Sequence[str]) -> tuple[NamingConvention | None, bool]:
+    """The naming convention of a set of joint names.
+
+    Returns ``(convention, exact)``: ``exact`` is true when the convention's whole
+    signature is present. Otherwise the convention sharing the most canonical joint
+    names is returned with ``exact=False`` (``None`` when none shares any), so that
+    a reader can fill the canonical joints it recognises and leave out the rest.
+    """
+    names = set(joint_names)
+    for conv in NAMING_CONVENTIONS:
+        if conv.signature <= names:
+            return conv, True
+    scored = [
+        (sum(v in names for v in c.joints.values()), i) for i, c in enumerate(NAMING_CONVENTIONS)
+    ]
+    best, idx = max(scored)
+    return (NAMING_CONVENTIONS[idx], False) if best > 0 else (None, False)
+
+
+def canonical_map(
+    joint_names: Sequence[str], bone_end_mm: FloatArray, convention: NamingConvention | None
+) -> dict[str, tuple[str, tuple[float, float, float]]]:
+    """Canonical map (canonical name -> (joint, point in joint frame mm)) for a skeleton.
+
+    Only joints present by exact name are used; canonical joints whose file joint
+    is missing are left out (never guessed).
+
+    Parameters
+    ----------
+    joint_names : sequence of str, length J
+    bone_end_mm : ndarray, shape (J, 3)
+        Segment ends (mm, joint frame); the head point is half the head joint's.
+    convention : NamingConvention or None
+    """
+    if convention is None:
+        return {}
+    index = {n: j for j, n in enumerate(joint_names)}
+    out: dict[str, tuple[str, tuple[float, float, float]]] = {}
+    for cname in CANONICAL_JOINTS:
+        jname = convention.joints.get(cname)
+        if jname is None or jname not in index:
+            continue
+        if cname == "head":
+            half = 0.5 * np.asarray(bone_end_mm[index[jname]], dtype=float)
+            out[cname] = (jname, (float(half[0]), float(half[1]), float(half[2])))
+        else:
+            out[cname] = (jname, (0.0, 0.0, 0.0))
+    return out
+
+
+__all__ = ["NAMING_CONVENTIONS", "NamingConvention", "canonical_map", "detect_convention"]
