@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.skeleton.model import CANONICAL_JOINTS
+from mocapkit.skeleton.presets import load_preset
 
 FloatArray = NDArray[np.float64]
 
@@ -55,6 +56,21 @@ _LEFT_RIGHT_LIMBS: tuple[dict[str, str], dict[str, str]] = tuple(  # type: ignor
     }
     for side in ("Left", "Right")
 )
+
+#: mocapkit presets whose BVH exports (`mocapkit.io.bvh.write_bvh`) are read back by name.
+_PRESETS_WRITTEN_AS_FILES = ("zhang21", "upper_stick")
+
+
+def _preset_convention(preset: str) -> NamingConvention:
+    """The convention of a file written from a mocapkit preset, taken from the preset itself.
+
+    Its joints are the preset's canonical map (so the preset's own joint names live only
+    in its TOML table); its signature is every joint that map names.
+    """
+    canonical = load_preset(preset).canonical
+    joints = {c: canonical[c][0] for c in CANONICAL_JOINTS if c in canonical}
+    return NamingConvention(f"mocapkit {preset} preset", frozenset(joints.values()), joints)
+
 
 #: Naming tables (data). Neck choice per convention: the joint at the base of the
 #: neck, where the clavicles start (top of the thorax). In the CMU files that is the
@@ -124,38 +140,7 @@ NAMING_CONVENTIONS: tuple[NamingConvention, ...] = (
             },
         ),
     ),
-    NamingConvention(
-        "mocapkit zhang21 preset",
-        frozenset({"root", "spine1", "l_humerus", "l_radius", "l_femur", "l_tibia"}),
-        _sided(
-            {"pelvis": "root", "neck": "neck", "head": "head"},
-            {
-                "shoulder": "l_humerus",
-                "elbow": "l_radius",
-                "wrist": "l_hand",
-                "hip": "l_femur",
-                "knee": "l_tibia",
-                "ankle": "l_foot",
-            },
-            {
-                "shoulder": "r_humerus",
-                "elbow": "r_radius",
-                "wrist": "r_hand",
-                "hip": "r_femur",
-                "knee": "r_tibia",
-                "ankle": "r_foot",
-            },
-        ),
-    ),
-    NamingConvention(
-        "mocapkit upper_stick preset",
-        frozenset({"waist", "neck", "l_shoulder", "l_elbow", "l_wrist"}),
-        _sided(
-            {"pelvis": "waist", "neck": "neck", "head": "head"},
-            {"shoulder": "l_shoulder", "elbow": "l_elbow", "wrist": "l_wrist"},
-            {"shoulder": "r_shoulder", "elbow": "r_elbow", "wrist": "r_wrist"},
-        ),
-    ),
+    *(_preset_convention(name) for name in _PRESETS_WRITTEN_AS_FILES),
 )
 
 
