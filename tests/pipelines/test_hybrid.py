@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mocapkit.cli.main import main
-from mocapkit.errors import SessionError, ShapeError
+from mocapkit.errors import ConfigError, SessionError, ShapeError
 from mocapkit.pipelines.hybrid import (
     bench_ik,
     hybrid_skeleton,
@@ -54,7 +54,7 @@ def test_parse_oriented_sets():
     assert parse_oriented_sets("head, right_hand") == ("head", "right_hand")
     with pytest.raises(KeyError, match="marker set 'tail'.*--oriented-sets"):
         parse_oriented_sets("head,tail")
-    with pytest.raises(ShapeError, match="--oriented-sets: expected 'none'"):
+    with pytest.raises(ConfigError, match="--oriented-sets: expected 'none'"):
         parse_oriented_sets(",")
 
 
@@ -261,7 +261,7 @@ def test_session_max_elbow_speed(wave_session):
     free = track_hybrid_session(wave_session, None, oriented_sets=(), max_elbow_speed_mm_per_s=1e9)
     off = track_hybrid_session(wave_session, None, oriented_sets=(), max_elbow_speed_mm_per_s=0.0)
     np.testing.assert_allclose(free.joints_mm, off.joints_mm, atol=1e-9)
-    with pytest.raises(ShapeError, match="paper mode has no elbow-jump penalty"):
+    with pytest.raises(ConfigError, match="paper mode has no elbow-jump penalty"):
         track_hybrid_session(wave_session, None, paper=True, max_elbow_speed_mm_per_s=100.0)
-    with pytest.raises(ShapeError, match=r"expected a speed >= 0 mm/s .*found -1.0"):
+    with pytest.raises(ConfigError, match=r"expected a speed >= 0 mm/s .*found -1.0"):
         track_hybrid_session(wave_session, None, max_elbow_speed_mm_per_s=-1.0)

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mocapkit.errors import SessionError, ShapeError, unknown_name
+from mocapkit.errors import ConfigError, SessionError, ShapeError, unknown_name
 from mocapkit.ik.sdls import IKConfig, SDLSSolver
 from mocapkit.io.motion import Motion
 from mocapkit.io.motion_files import write_result_folder
@@ -133,7 +133,7 @@ def parse_oriented_sets(text: str) -> tuple[str, ...]:
         if n not in ORIENTED_SETS:
             raise unknown_name("marker set", n, ORIENTED_SETS, "--oriented-sets")
     if not names:
-        raise ShapeError(
+        raise ConfigError(
             "--oriented-sets: expected 'none' or comma-separated marker sets "
             f"({', '.join(ORIENTED_SETS)}), found {text!r}"
         )
@@ -217,12 +217,12 @@ def track_hybrid_session(
     refine_config = None
     if max_elbow_speed_mm_per_s is not None:
         if paper:
-            raise ShapeError(
+            raise ConfigError(
                 "max_elbow_speed_mm_per_s: the paper mode has no elbow-jump penalty; "
                 "give one or the other"
             )
         if not max_elbow_speed_mm_per_s >= 0:
-            raise ShapeError(
+            raise ConfigError(
                 "max_elbow_speed_mm_per_s: expected a speed >= 0 mm/s (0: no penalty), "
                 f"found {max_elbow_speed_mm_per_s}"
             )
@@ -388,7 +388,7 @@ def track_hybrid_markers(
     names = [s.name for s in sets]
     missing = [n for n in MARKER_SETS if n not in names]
     if missing:
-        raise ShapeError(
+        raise ConfigError(
             f"marker_sets: the hybrid tracker needs sets {list(MARKER_SETS)}; "
             f"missing {missing} (given {names})"
         )
@@ -426,7 +426,7 @@ def bench_ik(n_frames: int = 2000, repeats: int = 5, rate_hz: float = 50.0) -> d
         ``max_residual_mm``, ``converged_fraction``, ``n_frames``.
     """
     if n_frames < 1 or repeats < 1:
-        raise ShapeError(
+        raise ConfigError(
             f"bench_ik: expected n_frames >= 1 and repeats >= 1, found {n_frames}, {repeats}"
         )
     sk = load_preset("zhang21")
