@@ -907,8 +907,8 @@ class SDLSSolver:
         frz = (
             np.zeros(sk.n_dofs, dtype=bool)
             if frozen is None
-            else np.ascontiguousarray(frozen, dtype=bool)
-        )
+            else np.array(frozen, dtype=bool, order="C")  # a fresh writable array: one
+        )  # kernel signature, whatever flags the caller's array has
         if frz.shape != (sk.n_dofs,):
             raise ShapeError(f"frozen: expected shape ({sk.n_dofs},), found {frz.shape}")
         idx = np.flatnonzero(act)
