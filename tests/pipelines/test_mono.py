@@ -12,7 +12,9 @@ from mocapkit.cli.main import main
 from mocapkit.errors import SessionError
 from mocapkit.eval.metrics import evaluate_result
 from mocapkit.io.cameras import write_cameras
-from mocapkit.io.session import Truth, write_keypoints_csv, write_session_json
+from mocapkit.io.session import write_session_json
+from mocapkit.io.session_csv import write_keypoints_csv
+from mocapkit.io.truth import Truth
 from mocapkit.pipelines.mono import FIT_FILE, track_mono
 from mocapkit.pipelines.mono_accuracy import write_openpose_with_bystander
 from mocapkit.skeleton.model import UPPER_BODY_JOINTS

@@ -46,7 +46,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import FormatError, SessionError, ShapeError
-from mocapkit.io.session import Keypoints
+from mocapkit.io.session_csv import Keypoints
 
 FloatArray = NDArray[np.float64]
 

@@ -24,7 +24,9 @@ from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import SessionError
 from mocapkit.io.atomic import atomic_write
 from mocapkit.io.motion import Motion
-from mocapkit.io.session import Keypoints, Session, load_session, read_keypoints_csv
+from mocapkit.io.motion_files import write_result_folder
+from mocapkit.io.session import Session, load_session
+from mocapkit.io.session_csv import Keypoints, read_keypoints_csv
 from mocapkit.progress import Progress
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
 from mocapkit.skeleton.presets import load_preset
@@ -310,6 +312,6 @@ def track_mono(
     q = fit_stick_pose(skeleton, names, joints)
     motion = Motion(skeleton, t, q, tuple(names), joints, f"mono tracker on {session.path}")
     if out_dir is not None:
-        out = motion.write_result_folder(out_dir)
+        out = write_result_folder(out_dir, motion)
         write_fit_csv(out / FIT_FILE, frames)
     return MonoRun(motion, frames, lengths, model, scale)
