@@ -103,3 +103,32 @@ def test_bench_mono_reports_its_figures() -> None:
     assert out["fps"] > 0 and out["first_order_fps"] > 0 and out["offline_fps"] > 0
     assert 0.0 <= float(out["pruned_share"]) <= 1.0
     assert float(out["survivors_mean"]) <= float(out["candidates_mean"])
+
+
+def test_refined_lengths_read_each_link_at_its_own_depth() -> None:
+    from mocapkit.pipelines.mono import refined_lengths
+    from mocapkit.tracking.mono.stick import stick_model
+    from mocapkit.tracking.mono.tracker import MonoFrame
+    from tests.tracking.mono.conftest import random_pose
+
+    rng = np.random.default_rng(70)
+    model = stick_model()
+    frames = []
+    true = None
+    for k in range(40):
+        pos, true = random_pose(rng, model, 0.0 if k % 4 == 0 else 40.0)
+        if k % 4 == 0:
+            # every link in the plane z = 3000 mm, parallel to the image
+            pos[:, 2] = 3000.0
+            for i in range(model.n_links):
+                d = pos[model.child[i]] - pos[model.parent[i]]
+                d[2] = 0.0
+                pos[model.child[i]] = pos[model.parent[i]] + true[i] * d / np.linalg.norm(d)
+        frames.append(MonoFrame(k, k / 30, pos, 0, 1, 1, False, 0.0, 3000.0))
+    assert true is not None
+    got = refined_lengths(frames, model, true)
+    np.testing.assert_allclose(
+        np.linalg.norm(model.link_vectors(frames[0].joints_in_camera), axis=1), true
+    )
+    # off the optical axis a parallel link is not quite normal to its ray: within 2 %
+    np.testing.assert_allclose(got, true, rtol=0.02)

@@ -241,6 +241,47 @@ def write_fit_csv(path: str | os.PathLike[str], frames: list[MonoFrame]) -> None
         fh.write(buf.getvalue())
 
 
+def _run(
+    lengths: FloatArray,
+    cam: Camera,
+    dt: float,
+    cfg: MonoConfig,
+    model: StickModel,
+    t: FloatArray,
+    px: FloatArray,
+) -> list[MonoFrame]:
+    tracker = MonoTracker(lengths, cam, dt, cfg, model)
+    frames: list[MonoFrame] = []
+    with Progress(len(t), "track mono") as prog:
+        for ti, p in zip(t, px):
+            frames += tracker.push(float(ti), p)
+            prog.update()
+    frames += tracker.finish()
+    frames.sort(key=lambda f: f.index)
+    return frames
+
+
+def refined_lengths(frames: list[MonoFrame], model: StickModel, lengths: FloatArray) -> FloatArray:
+    """Link lengths measured again at each link's own depth from tracked poses (mm).
+
+    The first estimate (`video_lengths`) reads every link in normalised image units and
+    scales them by one stature, as if all links lay at one depth; a forearm reaching
+    towards the camera then looks long. Here each link's extent across its own viewing
+    direction (the link vector minus its component along the ray through its midpoint) is
+    taken from the tracked poses, in mm, and the same statistic as `video_lengths` (90th
+    percentile, left and right sharing the longer, fallback for links never near
+    parallel) gives new lengths, rescaled so that their sum equals the old one (the
+    absolute scale stays tied to the stature).
+    """
+    pos = np.stack([f.joints_in_camera for f in frames])
+    vec = pos[:, model.child] - pos[:, model.parent]
+    mid = 0.5 * (pos[:, model.child] + pos[:, model.parent])
+    ray = mid / np.linalg.norm(mid, axis=-1, keepdims=True)
+    lateral = vec - (vec * ray).sum(axis=-1, keepdims=True) * ray
+    new, _ = estimate_link_lengths(np.linalg.norm(lateral, axis=-1), model.segments)
+    return np.asarray(new * (lengths.sum() / new.sum()), dtype=float)
+
+
 def track_mono(
     session_path: str | os.PathLike[str],
     out_dir: str | os.PathLike[str] | None,
@@ -249,6 +290,7 @@ def track_mono(
     config: MonoConfig | None = None,
     use_session_lengths: bool = False,
     pixels: FloatArray | None = None,
+    length_passes: int = 2,
 ) -> MonoRun:
     """Track a session with the monocular tracker and write the result folder.
 
@@ -267,6 +309,9 @@ def track_mono(
         Take link lengths from session.json instead of the video.
     pixels : (T, K, 2) float, optional
         Replace the keypoints' pixels of the stick's joints (e.g. with noise added).
+    length_passes : int
+        With video lengths and the perspective model: track this many times, each pass
+        measuring the lengths again from the previous pass's poses (`refined_lengths`).
     """
     session = load_session(session_path)
     cam_name = (
@@ -295,14 +340,11 @@ def track_mono(
             lengths = lengths * scale
     else:
         lengths, scale = video_lengths(px, model, cam, cfg, dt, session.height_mm)
-    tracker = MonoTracker(lengths, cam, dt, cfg, model)
-    frames: list[MonoFrame] = []
-    with Progress(len(t), "track mono") as prog:
-        for ti, p in zip(t, px):
-            frames += tracker.push(float(ti), p)
-            prog.update()
-    frames += tracker.finish()
-    frames.sort(key=lambda f: f.index)
+    frames = _run(lengths, cam, dt, cfg, model, t, px)
+    refine = length_passes > 1 and not use_session_lengths and cfg.camera_model == "perspective"
+    for _ in range(length_passes - 1 if refine else 0):
+        lengths = refined_lengths(frames, model, lengths)
+        frames = _run(lengths, cam, dt, cfg, model, t, px)
     world = to_world(frames, model, cam, cfg, scale)
     lengths_mm = lengths / scale if ortho else lengths
     skeleton = output_skeleton(model, lengths_mm)
