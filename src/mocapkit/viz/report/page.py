@@ -10,6 +10,7 @@ on the page) and flip through JPEG frames when no video codec was available.
 from __future__ import annotations
 
 import html
+import json
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -50,7 +51,7 @@ class Section:
         Plain sentences shown under the title.
     animation_opts : dict, optional
         When given, the section's first figure starts its animation on load with these
-        options (`plotly.io.to_html`'s ``auto_play``).
+        options (`Plotly.animate`'s).
     """
 
     title: str
@@ -97,9 +98,18 @@ dl.facts dt { font-weight: 600; } dl.facts dd { margin: 0; }
 """
 
 # Marks every <video> with data-state="loaded" or "error" (and says so under the video),
-# and flips through JPEG frames for the fallback without a video codec.
-_SCRIPT = """
-document.querySelectorAll('video').forEach(function (v) {
+# flips through JPEG frames for the fallback without a video codec, and keeps plotly's
+# interrupted animations out of the console.
+_HEAD_SCRIPT = """
+// Plotly.animate rejects its promise without a reason when a newer animation interrupts
+// it (Pause, the slider, Play again); that is how plotly.js stops an animation, not an
+// error, so such rejections are not reported. Any other rejection still is.
+window.addEventListener('unhandledrejection', function (event) {
+  if (event.reason === undefined) { event.preventDefault(); }
+});
+"""
+
+_SCRIPT = """document.querySelectorAll('video').forEach(function (v) {
   function loaded() { v.dataset.state = 'loaded'; }
   function failed() {
     v.dataset.state = 'error';
@@ -120,6 +130,15 @@ document.querySelectorAll('img[data-frames]').forEach(function (img) {
   }, 1000 / parseFloat(img.dataset.fps));
 });
 """
+
+
+def _autoplay_script(options: dict[str, object] | None) -> str:
+    """Start the figure's animation once it is drawn; an interrupted animation (Pause, the
+    slider) rejects its promise, which is how plotly.js stops one, so it is caught."""
+    return (
+        f"return Plotly.animate('{{plot_id}}', null, {json.dumps(options)})"
+        ".catch(function () {});"
+    )
 
 
 def _video_html(label: str, video: WebVideo, folder: Path) -> str:
@@ -173,8 +192,10 @@ def write_report_page(folder: str | os.PathLike[str], page: ReportPage) -> Path:
                     fig,
                     include_plotlyjs=False if plotly_included else "directory",
                     full_html=False,
-                    auto_play=animate,
-                    animation_opts=section.animation_opts if animate else None,
+                    # plotly's own auto_play leaves the animation's promise unhandled, so
+                    # stopping it (Pause, the slider) reports an error; start it here instead
+                    auto_play=False,
+                    post_script=_autoplay_script(section.animation_opts) if animate else None,
                     div_id=f"figure{n_fig}",
                     config={"displaylogo": False, "responsive": True},
                 )
@@ -197,7 +218,8 @@ def write_report_page(folder: str | os.PathLike[str], page: ReportPage) -> Path:
     facts = "".join(f"<dt>{html.escape(k)}</dt><dd>{html.escape(v)}</dd>" for k, v in page.facts)
     doc = (
         '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
-        f"<title>{html.escape(page.title)}</title><style>{_STYLE}</style></head><body>"
+        f"<title>{html.escape(page.title)}</title><style>{_STYLE}</style>"
+        f"<script>{_HEAD_SCRIPT}</script></head><body>"
         f'<h1>{html.escape(page.title)}</h1><dl class="facts">{facts}</dl>'
         + "\n".join(parts)
         + f"<script>{_SCRIPT}</script></body></html>\n"
