@@ -55,7 +55,7 @@ MAX_ANIMATION_FRAMES = 300
 LINKED_SUFFIXES = (".bvh", ".trc", ".csv", ".npz", ".c3d", ".json")
 
 _CAPTURED_BGR = (26, 140, 255)
-_TRUTH_BGR = (44, 160, 44)
+_TRUTH_BGR = (60, 210, 60)
 
 
 @dataclass(frozen=True)

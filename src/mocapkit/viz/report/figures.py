@@ -166,10 +166,11 @@ def skeleton_animation(
         margin={"l": 0, "r": 0, "t": 40, "b": 0},
         scene={
             **axes,
+            "domain": {"x": [0.0, 1.0], "y": [0.1, 1.0]},  # above the slider
             "aspectmode": "manual",
             "aspectratio": {"x": float(ratio[0]), "y": float(ratio[1]), "z": float(ratio[2])},
             # a view from the front left, a little above (the subject faces +Y, Z up)
-            "camera": {"eye": {"x": -0.9, "y": 1.1, "z": 0.35}, "up": {"x": 0, "y": 0, "z": 1}},
+            "camera": {"eye": {"x": -1.0, "y": 1.25, "z": 0.4}, "up": {"x": 0, "y": 0, "z": 1}},
         },
         legend={"x": 0.01, "y": 0.98},
         updatemenus=[
@@ -208,7 +209,16 @@ def skeleton_animation(
                 "x": 0.15,
                 "len": 0.85,
                 "y": 0.0,
-                "currentvalue": {"prefix": "t = ", "suffix": " s"},
+                "currentvalue": {
+                    "prefix": "t = ",
+                    "suffix": " s",
+                    "font": {"color": "#444", "size": 13},
+                },
+                # one step per frame: their labels would overlap, so only the current
+                # value shows the time
+                "font": {"color": "rgba(0,0,0,0)"},
+                "ticklen": 0,
+                "minorticklen": 0,
                 "steps": [
                     {"label": f"{t[f]:.2f}", "method": "animate", "args": [[str(f)], still]}
                     for f in range(t.shape[0])
