@@ -224,3 +224,17 @@ def test_web_video_round_trip_and_interruption(tmp_path):
             w2.write(np.zeros((10, 10, 3), np.uint8))
     assert sorted(p.name for p in tmp_path.iterdir()) == [video.path.name]
 
+
+
+def test_jpeg_fallback_without_web_codec(npz_result, small_session, tmp_path, monkeypatch):
+    import mocapkit.viz.web_video as web_video
+
+    monkeypatch.setattr(web_video, "web_codec", lambda: None)
+    page = build_report(npz_result, session=small_session, out_dir=tmp_path / "r")
+    text = page.read_text(encoding="utf-8")
+    assert "<video" not in text and "no web video codec" in text
+    img = next(r for t, r in page_refs(page) if t == "img")
+    frames = sorted((page.parent / img).parent.glob("*.jpg"))
+    assert img == "overlay_mono/000000.jpg"
+    assert len(frames) == load_session(small_session).video("mono").n_frames
+    assert "truth" not in trace_names(page)  # --session alone brings no truth

@@ -263,7 +263,7 @@ def _video_section(
         video = write_overlay_video(folder, f"overlay_{cam}", source, camera, layers, body)
         if video.codec == JPEG_SEQUENCE:
             notes.append(
-                "No web video codec (VP9, VP8) works in this OpenCV: the overlays are JPEG "
+                "No web video codec (VP8, VP9) works in this OpenCV: the overlays are JPEG "
                 "frames flipped by the page."
             )
         videos.append((f"camera {cam}", video))
