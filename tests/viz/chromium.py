@@ -168,6 +168,16 @@ class Chromium:
             raise ChromiumError(f"{expression}: {res['exceptionDetails']}")
         return res["result"].get("value")
 
+    def wait_for(self, expression: str, timeout_s: float = 30.0) -> Any:
+        """Poll a JavaScript expression until it is truthy (its value) or time runs out
+        (its last value): the page's state decides, not a fixed delay."""
+        deadline = time.monotonic() + timeout_s
+        value = self.evaluate(expression)
+        while not value and time.monotonic() < deadline:
+            self.pump(0.25)
+            value = self.evaluate(expression)
+        return value
+
     def screenshot(self, clip: dict[str, float] | None = None, full_page: bool = False) -> bytes:
         """PNG of the viewport, of a page rectangle ``clip`` (x, y, width, height in CSS
         px), or of the whole page."""

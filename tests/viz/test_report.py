@@ -225,7 +225,6 @@ def test_web_video_round_trip_and_interruption(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == [video.path.name]
 
 
-
 def test_jpeg_fallback_without_web_codec(npz_result, small_session, tmp_path, monkeypatch):
     import mocapkit.viz.web_video as web_video
 

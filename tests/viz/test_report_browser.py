@@ -39,7 +39,12 @@ def report_page(npz_result, small_session, tmp_path_factory):
 def test_report_in_chromium(report_page):
     assert CHROMIUM is not None
     with Chromium(CHROMIUM, 1280, 900) as browser:
-        browser.open(report_page.as_uri(), settle_s=3.0)
+        browser.open(report_page.as_uri(), settle_s=1.0)
+        browser.wait_for(
+            "document.querySelectorAll('.js-plotly-plot .main-svg').length >= 2 &&"
+            " Array.from(document.querySelectorAll('video')).every(function (v) {"
+            " return v.dataset.state; })"
+        )
         # every plotly figure drew: the 3D view (WebGL canvas) and the error plot (SVG)
         plots = browser.evaluate(
             "Array.from(document.querySelectorAll('.js-plotly-plot')).map(function (d) {"
@@ -75,11 +80,7 @@ def test_report_in_chromium(report_page):
         # software WebGL on a busy machine may draw a frame in a second: wait for the
         # slider to leave the first frame (the state, not a time, decides)
         active = "document.getElementById('figure0').layout.sliders[0].active"
-        for _ in range(60):
-            browser.pump(0.5)
-            if browser.evaluate(active) > 1:
-                break
-        assert browser.evaluate(active) > 1, "Play did not move the animation"
+        assert browser.wait_for(f"{active} > 1"), "Play did not move the animation"
         later = _image(browser.screenshot(rect))
         assert first.shape == later.shape
         changed = np.any(first != later, axis=2).mean()
