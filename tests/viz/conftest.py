@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from mocapkit.io.motion import Motion
+from mocapkit.io.motion_files import write_result_folder
 from mocapkit.io.session import load_session
 from mocapkit.skeleton.kinematics import canonical_positions
 from mocapkit.skeleton.presets import load_preset
@@ -41,7 +42,7 @@ def npz_result(small_session, tmp_path_factory) -> Path:
     q[:, 0] += 100.0 * np.sin(2 * np.pi * t)
     q[5] = np.nan  # one frame without a pose
     out = tmp_path_factory.mktemp("report") / "result"
-    Motion.from_q(sk, t, q, source="test motion").write_result_folder(out)
+    write_result_folder(out, Motion.from_q(sk, t, q, source="test motion"))
     return out
 
 

@@ -14,8 +14,8 @@ import pytest
 
 from mocapkit.cli.main import main
 from mocapkit.errors import ConfigError, FormatError, SessionError, ShapeError
-from mocapkit.io.markers import read_markers
-from mocapkit.io.motion import read_joints_csv
+from mocapkit.io.joints_csv import read_joints_csv
+from mocapkit.io.marker_files import read_markers
 from mocapkit.io.session import load_session
 from mocapkit.pipelines.report import build_report, read_fit_table
 from mocapkit.viz.report.figures import PointLayer, fit_figures, skeleton_animation

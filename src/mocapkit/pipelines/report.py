@@ -24,10 +24,13 @@ from numpy.typing import NDArray
 from mocapkit.errors import ConfigError, FormatError, SessionError
 from mocapkit.eval.metrics import EvalReport, evaluate_joints, match_by_time
 from mocapkit.io.atomic import atomic_folder
-from mocapkit.io.markers import MarkerData, read_markers
-from mocapkit.io.motion import load_motion_npz, read_joints_csv
-from mocapkit.io.session import Session, Truth, load_session, load_truth
+from mocapkit.io.joints_csv import read_joints_csv
+from mocapkit.io.marker_files import read_markers
+from mocapkit.io.markers import MarkerData
+from mocapkit.io.motion_npz import load_motion_npz
+from mocapkit.io.session import Session, load_session
 from mocapkit.io.trc import write_trc
+from mocapkit.io.truth import Truth, load_truth
 from mocapkit.skeleton.model import Skeleton
 from mocapkit.viz.overlay_video import OverlayLayer, write_overlay_video
 from mocapkit.viz.report.figures import (

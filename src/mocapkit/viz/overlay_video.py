@@ -18,7 +18,7 @@ from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import ShapeError
-from mocapkit.io.session import VideoSource
+from mocapkit.io.video import VideoSource
 from mocapkit.progress import Progress
 from mocapkit.skeleton.model import Skeleton
 from mocapkit.viz.overlay import draw_body, draw_sticks
