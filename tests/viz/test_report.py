@@ -136,6 +136,8 @@ def test_refuses_folders_that_are_not_results(npz_result, small_session, tmp_pat
     (tmp_path / "notes.txt").write_text("x")
     with pytest.raises(SessionError, match=r"not a result folder: expected motion.npz or joints"):
         build_report(tmp_path)
+    with pytest.raises(SessionError, match="this is a session folder: give the result folder"):
+        build_report(small_session)
     with pytest.raises(SessionError, match="result folder not found"):
         build_report(tmp_path / "missing")
     with pytest.raises(SessionError, match="expected a result folder .* found a file"):

@@ -125,9 +125,15 @@ def load_result(folder: str | os.PathLike[str]) -> ResultData:
         t, names, joints = read_joints_csv(p / "joints.csv")
         return ResultData(p, t, names, joints, None, None, str(p / "joints.csv"))
     found = sorted(e.name for e in p.iterdir())
+    hint = (
+        "; this is a session folder: give the result folder, and the session with --truth "
+        "or --session"
+        if (p / "session.json").is_file()
+        else ""
+    )
     raise SessionError(
         f"{p}: not a result folder: expected motion.npz or joints.csv (written by "
-        f"mocapkit track), found {found[:8] or 'an empty folder'}"
+        f"mocapkit track), found {found[:8] or 'an empty folder'}{hint}"
     )
 
 
