@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from mocapkit.cli.main import main
-from mocapkit.errors import SessionError
+from mocapkit.errors import ConfigError, SessionError
 from mocapkit.eval.metrics import evaluate_result
 from mocapkit.io.cameras import write_cameras
 from mocapkit.io.session import write_session_json
@@ -132,3 +132,17 @@ def test_refined_lengths_read_each_link_at_its_own_depth() -> None:
     )
     # off the optical axis a parallel link is not quite normal to its ray: within 2 %
     np.testing.assert_allclose(got, true, rtol=0.02)
+
+
+def test_no_trunk_in_any_frame_is_refused(tmp_path: Path) -> None:
+    session = _session(tmp_path / "s")
+    joints, names, _ = stick_motion(N)
+    from mocapkit.tracking.mono.stick import stick_model
+
+    model = stick_model()
+    px = camera().project(joints[:, [names.index(n) for n in model.joint_names]])
+    px[:, model.joint_names.index("pelvis")] = np.nan
+    with pytest.raises(SessionError, match="neck and pelvis are seen together in no frame"):
+        track_mono(session, None, pixels=px)
+    with pytest.raises(ConfigError, match="either --skin or --keypoints"):
+        track_mono(session, None, keypoints=tmp_path, skin=True)

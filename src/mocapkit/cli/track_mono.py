@@ -46,6 +46,12 @@ def add_mono_parser(methods: Any) -> None:
         help="online fixed-lag Viterbi with this lag (latency: lag + 5 smoother frames); "
         "default: exact offline",
     )
+    p.add_argument(
+        "--skin",
+        action="store_true",
+        help="read the 2-D joints off the video by skin blobs (paper §3.3; needs a waist "
+        "cue such as the paper's golden belt for the trunk)",
+    )
     p.add_argument("--legs", action="store_true", help="track the legs too")
     p.add_argument(
         "--session-lengths",
@@ -68,6 +74,7 @@ def _run_mono(args: argparse.Namespace) -> int:
         keypoints=args.keypoints,
         config=cfg,
         use_session_lengths=args.session_lengths,
+        skin=args.skin,
     )
     summary = run.summary()
     if args.json:

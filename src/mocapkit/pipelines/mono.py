@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
-from mocapkit.errors import SessionError
+from mocapkit.errors import ConfigError, SessionError
 from mocapkit.io.atomic import atomic_write
 from mocapkit.io.motion import Motion
 from mocapkit.io.motion_files import write_result_folder
@@ -107,6 +107,29 @@ def load_keypoints(
             )
         return read_openpose_folder(p, times)
     return read_keypoints_csv(p)
+
+
+def skin_keypoints(session: Session, camera: str) -> Keypoints:
+    """2-D joints of the stick from the camera's video by skin blobs (paper §3.3).
+
+    `mocapkit.tracking.mono.skin_tracking.SkinTracker` on every frame; joints it cannot
+    read (no waist blob: no pelvis, no shoulders) are NaN.
+    """
+    from mocapkit.tracking.mono.skin_tracking import SKIN_JOINTS, SkinTracker
+
+    video = session.video(camera)
+    tracker = SkinTracker()
+    px = np.full((video.n_frames, len(SKIN_JOINTS), 2), np.nan)
+    stream = video.open()
+    try:
+        with Progress(video.n_frames, "skin blobs") as prog:
+            for k in range(video.n_frames):
+                stream.advance_to(k)
+                px[k] = tracker.update(stream.retrieve(k)).joints_px
+                prog.update()
+    finally:
+        stream.close()
+    return Keypoints(video.time_s, SKIN_JOINTS, px, f"{video.path} (skin blobs)")
 
 
 def stick_pixels(keypoints: Keypoints, model: StickModel) -> FloatArray:
@@ -291,6 +314,7 @@ def track_mono(
     use_session_lengths: bool = False,
     pixels: FloatArray | None = None,
     length_passes: int = 2,
+    skin: bool = False,
 ) -> MonoRun:
     """Track a session with the monocular tracker and write the result folder.
 
@@ -309,6 +333,9 @@ def track_mono(
         Take link lengths from session.json instead of the video.
     pixels : (T, K, 2) float, optional
         Replace the keypoints' pixels of the stick's joints (e.g. with noise added).
+    skin : bool
+        Read the 2-D joints off the camera's video by skin blobs (`skin_keypoints`)
+        instead of keypoints.
     length_passes : int
         With video lengths and the perspective model: track this many times, each pass
         measuring the lengths again from the previous pass's poses (`refined_lengths`).
@@ -324,7 +351,11 @@ def track_mono(
     cam = session.camera(cam_name)
     cfg = config or MonoConfig()
     model = stick_model(cfg.legs, cfg.limits)
-    kp = load_keypoints(session, cam_name, keypoints)
+    if skin and keypoints is not None:
+        raise ConfigError("track mono: give either --skin or --keypoints, not both")
+    if skin:
+        session.require(video=True, cameras=[cam_name])
+    kp = skin_keypoints(session, cam_name) if skin else load_keypoints(session, cam_name, keypoints)
     px = stick_pixels(kp, model) if pixels is None else np.asarray(pixels, dtype=float)
     t = np.asarray(kp.time_s, dtype=float)
     dt = float(np.median(np.diff(t))) if t.shape[0] > 1 else 1.0 / 30.0
@@ -340,11 +371,23 @@ def track_mono(
             lengths = lengths * scale
     else:
         lengths, scale = video_lengths(px, model, cam, cfg, dt, session.height_mm)
+    seen = np.isfinite(px[:, [0, model.child[model.link_index("trunk")]]]).all(axis=(1, 2))
+    if not seen.any():
+        raise SessionError(
+            f"{kp.source}: neck and pelvis are seen together in no frame, so no pose can be "
+            "built (with --skin: the waist cue, the paper's golden belt, was never found)"
+        )
     frames = _run(lengths, cam, dt, cfg, model, t, px)
     refine = length_passes > 1 and not use_session_lengths and cfg.camera_model == "perspective"
     for _ in range(length_passes - 1 if refine else 0):
         lengths = refined_lengths(frames, model, lengths)
-        frames = _run(lengths, cam, dt, cfg, model, t, px)
+        seen = np.isfinite(px[:, [0, model.child[model.link_index("trunk")]]]).all(axis=(1, 2))
+    if not seen.any():
+        raise SessionError(
+            f"{kp.source}: neck and pelvis are seen together in no frame, so no pose can be "
+            "built (with --skin: the waist cue, the paper's golden belt, was never found)"
+        )
+    frames = _run(lengths, cam, dt, cfg, model, t, px)
     world = to_world(frames, model, cam, cfg, scale)
     lengths_mm = lengths / scale if ortho else lengths
     skeleton = output_skeleton(model, lengths_mm)

@@ -126,7 +126,7 @@ def estimate_link_lengths(
     for i, s in enumerate(segments):
         other = _partner(s)
         if other in index:
-            pooled[i] = np.nanmax([obs[i], obs[index[other]]])
+            pooled[i] = np.fmax(obs[i], obs[index[other]])
     ratios = anthropometric_ratios(segments)
     stature = float(np.nanmedian(pooled / ratios))
     expected = ratios * stature
