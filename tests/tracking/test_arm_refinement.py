@@ -385,3 +385,14 @@ def test_refinement_recovers_a_perturbed_swivel_on_either_model(preset):
         for side in SIDES:
             assert abs(_swivel_deg(q, refined, side, sk)) < 2.0, (side, deg)
             assert diag[side].hand_offset_after_mm < 2.0
+
+
+def test_arm_shape_scores_a_hand_only_where_it_has_a_bone():
+    from mocapkit.tracking.arm_refinement import arm_shape
+
+    zhang, azad = SKEL, load_preset("azad14")
+    assert arm_shape(zhang, "left", (0.0, 0.0, 0.0)).n_segments == 3
+    assert arm_shape(zhang, "left", (0.0, 0.0, 0.0), include_hand=False).n_segments == 2
+    assert arm_shape(azad, "right", (0.0, 0.0, 0.0)).n_segments == 2  # azad14's hand is a point
+    with pytest.raises(UnknownNameError, match="unknown arm side 'up'"):
+        arm_shape(zhang, "up", (0.0, 0.0, 0.0))
