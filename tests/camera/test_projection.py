@@ -63,3 +63,14 @@ def test_thin_prism_terms_rejected() -> None:
         camera_arrays(np.eye(3), dist, np.eye(4))
     with pytest.raises(ShapeError, match=r"expected points \(\.\.\., 3\)"):
         project(camera_arrays(np.eye(3), [], np.eye(4)), np.zeros((4, 2)))
+
+
+def test_distort_normalized_is_the_kernel_with_unit_intrinsics(rng) -> None:
+    from mocapkit.camera import distort_normalized
+
+    x, y = rng.uniform(-0.6, 0.6, (2, 7, 3))
+    xd, yd = distort_normalized(x, y, RATIONAL)
+    pts = np.stack([x, y, np.ones_like(x)], axis=-1).reshape(-1, 3)
+    ref, _ = cv2.projectPoints(pts, np.zeros(3), np.zeros(3), np.eye(3), np.array(RATIONAL))
+    got = np.stack([xd, yd], -1).reshape(-1, 2)
+    np.testing.assert_allclose(got, ref.reshape(-1, 2), atol=1e-12)

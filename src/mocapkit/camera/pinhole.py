@@ -155,6 +155,8 @@ def distort_normalized(
 ) -> tuple[FloatArray, FloatArray]:
     """Apply OpenCV's radial/tangential (and rational) distortion to normalised coordinates.
 
+    The projection kernel (`mocapkit.camera.projection`) with ``K = I`` at depth 1.
+
     Parameters
     ----------
     x, y : array_like, shape (...)
@@ -163,21 +165,10 @@ def distort_normalized(
         ``k1, k2, p1, p2[, k3[, k4, k5, k6]]``; thin-prism and tilt terms (n = 12, 14)
         are not supported here and raise `ShapeError` when non-zero.
     """
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
-    d = np.zeros(14)
-    dd = np.ravel(np.asarray(dist, dtype=float))
-    d[: dd.shape[0]] = dd
-    if np.any(d[8:] != 0):
-        raise ShapeError(
-            "distortion: thin-prism/tilt coefficients (s1..s4, tx, ty) are not supported"
-        )
-    k1, k2, p1, p2, k3, k4, k5, k6 = d[:8]
-    r2 = x * x + y * y
-    radial = (1 + k1 * r2 + k2 * r2**2 + k3 * r2**3) / (1 + k4 * r2 + k5 * r2**2 + k6 * r2**3)
-    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
-    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-    return xd, yd
+    xa, ya = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+    unit = camera_arrays(np.eye(3), dist, np.eye(4))
+    px = project(unit, np.stack([xa, ya, np.ones_like(xa)], axis=-1), in_world=False)
+    return px[..., 0], px[..., 1]
 
 
 def look_at(eye_mm: ArrayLike, target_mm: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> FloatArray:

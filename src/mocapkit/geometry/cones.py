@@ -8,8 +8,8 @@ which the viewing ray is tangent to the surface. For the unit axis ``u``, slope
 condition on the radial unit vector ``e`` reduces to ``e . w = k (u . A) - r_A``: the
 same for every point along the axis, so each generator is a straight ruling from
 ``A + r_A e`` to ``B + r_B e``. This is exact under perspective, unlike offsetting the
-projected axis by ``r f / z`` (used by the arm refinement, Zhang et al. 2011 §5, errata
-Z11, and the overlay). End caps are not part of the outline.
+projected axis by ``r f / z``; the arm refinement's outline chamfer (Zhang et al. 2011 §5,
+errata Z11) and the overlay use it. End caps are not part of the outline.
 """
 
 from __future__ import annotations
