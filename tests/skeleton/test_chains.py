@@ -18,10 +18,16 @@ def _random_pose(sk, rng: np.random.Generator) -> np.ndarray:
 
 
 @pytest.mark.parametrize(
-    ("preset", "limb_of"), [("zhang21", arm), ("zhang21", leg), ("azad14", arm)]
+    ("preset", "options", "limb_of"),
+    [
+        ("zhang21", (), arm),
+        ("zhang21", (), leg),
+        ("azad14", (), arm),
+        ("azad14", ("adaptive_shoulder",), arm),  # prismatic shoulder offsets held fixed
+    ],
 )
-def test_chain_frames_equal_forward_kinematics(preset, limb_of, rng) -> None:
-    sk = load_preset(preset)
+def test_chain_frames_equal_forward_kinematics(preset, options, limb_of, rng) -> None:
+    sk = load_preset(preset, options)
     for side in ("left", "right"):
         limb = limb_of(sk, side)
         for _ in range(5):

@@ -396,3 +396,20 @@ def test_arm_shape_scores_a_hand_only_where_it_has_a_bone():
     assert arm_shape(azad, "right", (0.0, 0.0, 0.0)).n_segments == 2  # azad14's hand is a point
     with pytest.raises(UnknownNameError, match="unknown arm side 'up'"):
         arm_shape(zhang, "up", (0.0, 0.0, 0.0))
+
+
+def test_arms_that_the_refinement_cannot_take_raise():
+    from mocapkit.skeleton.serialize import skeleton_from_dict, skeleton_to_dict
+    from mocapkit.tracking.arm_refinement import arm_limb
+
+    def moved(**canonical: str):
+        data = skeleton_to_dict(SKEL)
+        for name, joint in canonical.items():
+            data["canonical"][name] = {"joint": joint, "point_mm": [0.0, 0.0, 0.0]}
+        return skeleton_from_dict(data)
+
+    with pytest.raises(ShapeError, match="without joints between"):
+        arm_limb(moved(left_wrist="l_hand_end"), "left")
+    shifted = moved(left_shoulder="l_radius", left_elbow="l_hand", left_wrist="l_hand_end")
+    with pytest.raises(ShapeError, match=r"3 rotational DoFs at 'l_radius'.*found \[1, 0, 0\]"):
+        arm_limb(shifted, "left")
