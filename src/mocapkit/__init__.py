@@ -16,6 +16,9 @@ from mocapkit.errors import (
 
 __version__ = "0.1.0"
 
+# after __version__, which the batch module reads
+from mocapkit.pipelines.batch import batch
+
 __all__ = [
     "CalibrationError",
     "FormatError",
@@ -24,4 +27,5 @@ __all__ = [
     "ShapeError",
     "UnknownNameError",
     "__version__",
+    "batch",
 ]
