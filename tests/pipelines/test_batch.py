@@ -313,7 +313,17 @@ def test_cli_exit_code_counts_failed_takes(study, tmp_path, capsys):
     assert code == 2
     printed = capsys.readouterr().out
     assert "2 takes: 0 done, 0 skipped, 2 failed" in printed
-    assert (
-        main(["batch", str(study), "--out", "x", "--scheduler", "tcp://h:1", "--workers", "2"]) == 2
-    )
+    # --scheduler: an existing cluster (here an in-process one, reached by its address)
+    from distributed import LocalCluster
+
+    with LocalCluster(
+        processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None
+    ) as cluster:
+        args = ["batch", str(study), "--out", str(tmp_path / "out")]
+        assert main([*args, "--scheduler", cluster.scheduler_address, "--force"]) == 2
+    assert "2 takes: 0 done, 0 skipped, 2 failed" in capsys.readouterr().out
+    assert main(["batch", str(study), "--out", str(study)]) == 2
+    assert "is the study folder" in capsys.readouterr().err
+    bad = ["batch", str(study), "--out", "x", "--scheduler", "tcp://h:1", "--workers", "2"]
+    assert main(bad) == 2
     assert "size a local cluster, not --scheduler" in capsys.readouterr().err

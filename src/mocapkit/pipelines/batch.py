@@ -287,8 +287,8 @@ def completed_row(
         )
         if not ok:
             return None
-        row = doc["row"]
-        return TakeRow(**{k: (math.nan if v is None else v) for k, v in row.items()})
+        row: dict[str, Any] = {k: (math.nan if v is None else v) for k, v in doc["row"].items()}
+        return TakeRow(**row)
     except (OSError, ValueError, KeyError, TypeError):
         return None
 
@@ -384,14 +384,19 @@ def run_take(job: TakeJob) -> TakeRow:
             fingerprint = source_fingerprint(take.source)
             with atomic_folder(folder) as tmp:
                 figures = _track_into(job, method, tmp)
+                nan = math.nan
                 row = TakeRow(
                     take.name,
                     take.kind,
                     method,
-                    frames=int(figures.pop("frames")),
+                    frames=int(figures["frames"]),
+                    coverage=figures["coverage"],
+                    fit_px=figures.get("fit_px", nan),
+                    mpjpe_mm=figures.get("mpjpe_mm", nan),
+                    pa_mpjpe_mm=figures.get("pa_mpjpe_mm", nan),
+                    elbow_mm=figures.get("elbow_mm", nan),
                     seconds=time.perf_counter() - start,
                     status="done",
-                    **figures,
                 )
                 doc = {
                     "format": TAKE_FORMAT,
@@ -542,6 +547,12 @@ def batch(
     StudyResult
         Rows in take order; ``n_failed`` takes failed (their ``error`` says why).
 
+    Notes
+    -----
+    With ``auto``, the method chosen is recorded in each take's row; a complete take is not
+    redone when a tracker installed since would change the choice (``force`` or an
+    explicit ``method`` redoes it).
+
     Raises
     ------
     UnknownNameError, ConfigError
@@ -569,6 +580,8 @@ def batch(
 
     joint_subset(joints)
     out = Path(out_dir).resolve()
+    if out == Path(study_dir).resolve():
+        raise ConfigError(f"batch: the results folder {out_dir} is the study folder; give another")
     takes = discover_takes(study_dir, markers_glob, exclude=[out])
     if not takes:
         raise SessionError(
