@@ -209,7 +209,8 @@ def test_batch_on_an_in_process_cluster(study, tmp_path, client):
     result = batch(study, out, "auto", client=client, say=lines.append)
     assert [r.take for r in result.rows] == sorted(TAKES)
     assert result.n_failed == 1 and result.counts == {"done": 3, "skipped": 0, "failed": 1}
-    assert lines == ["dask dashboard: none (pip install 'mocapkit[dashboard]' adds it)"]
+    # an address where bokeh is installed, else a line saying there is none
+    assert len(lines) == 1 and lines[0].startswith("dask dashboard: ")
     table = {r["take"]: r for r in _read_csv(out / "study.csv")}
     assert table["s3/t4"]["status"] == "failed" and "mono.mp4" in table["s3/t4"]["error"]
     assert table["s3/t4"]["frames"] == "" and table["s3/t4"]["mpjpe_mm"] == ""
