@@ -328,3 +328,34 @@ def test_cli_exit_code_counts_failed_takes(study, tmp_path, capsys):
     bad = ["batch", str(study), "--out", "x", "--scheduler", "tcp://h:1", "--workers", "2"]
     assert main(bad) == 2
     assert "size a local cluster, not --scheduler" in capsys.readouterr().err
+
+
+def test_raw_marker_files_tracked_by_hybrid_ik(study, tmp_path, client):
+    from mocapkit.io.markers import read_markers, write_markers
+
+    markers = read_markers(study / "s1" / "t1" / "markers.csv")
+    write_markers(study / "raw" / "serve.trc", markers)
+    for name in TAKES[1:]:
+        shutil.rmtree(study / name)
+    sets = [
+        "head=head+head_left+head_right",
+        "left_hand=left_hand+left_hand_tip+left_hand_side",
+        "right_hand=right_hand+right_hand_tip+right_hand_side",
+    ]
+    out = tmp_path / "out"
+    result = batch(
+        study, out, client=client, markers_glob="**/*.trc", marker_sets=sets, joints="all"
+    )
+    rows = {r.take: r for r in result.rows}
+    raw = rows["raw/serve"]
+    assert raw.kind == "markers" and raw.method == "hybrid" and raw.status == "done"
+    # IK at the marker rate, no keypoints or truth to compare with
+    assert raw.frames == markers.time_s.shape[0] and raw.coverage == 1.0
+    assert np.isnan([raw.fit_px, raw.mpjpe_mm]).all()
+    assert "serve.trc" in json.loads((out / "raw" / "serve" / TAKE_FILE).read_text())["source"]
+    assert rows["s1/t1"].status == "done" and np.isfinite(rows["s1/t1"].mpjpe_mm)
+    # other marker sets are other options: the marker take is redone, the session is not
+    again = batch(
+        study, out, client=client, markers_glob="**/*.trc", marker_sets=sets[::-1], joints="all"
+    )
+    assert {r.take: r.status for r in again.rows} == {"raw/serve": "done", "s1/t1": "skipped"}

@@ -164,10 +164,10 @@ class StudyResult:
         return sum(r.status == "failed" for r in self.rows)
 
     def table(self) -> str:
-        """The study table as aligned text (errors cut to 60 characters)."""
+        """The study table as aligned text (errors cut to 120 characters)."""
         cells = [list(STUDY_COLUMNS)] + [r.csv_fields() for r in self.rows]
         for c in cells[1:]:
-            c[-1] = c[-1] if len(c[-1]) <= 60 else c[-1][:57] + "..."
+            c[-1] = c[-1] if len(c[-1]) <= 120 else c[-1][:117] + "..."
         widths = [max(len(c[i]) for c in cells) for i in range(len(STUDY_COLUMNS))]
         return "\n".join("  ".join(v.ljust(w) for v, w in zip(c, widths)).rstrip() for c in cells)
 
