@@ -7,6 +7,7 @@ rest faces +Y with their right side towards +X.
 
 from mocapkit.errors import (
     CalibrationError,
+    ConfigError,
     FormatError,
     MocapError,
     SessionError,
@@ -21,6 +22,7 @@ from mocapkit.pipelines.batch import batch
 
 __all__ = [
     "CalibrationError",
+    "ConfigError",
     "FormatError",
     "MocapError",
     "SessionError",

@@ -46,7 +46,7 @@ import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mocapkit.errors import ShapeError, unknown_name
+from mocapkit.errors import ConfigError, ShapeError, unknown_name
 from mocapkit.ik.secondary import (
     SecondaryTask,
     carried_mass_planted,
@@ -141,35 +141,37 @@ class IKConfig:
 
     def __post_init__(self) -> None:
         if not (0.0 < self.gamma_rad <= math.pi):
-            raise ShapeError(
+            raise ConfigError(
                 f"IKConfig.gamma_rad: expected a value in (0, pi], found {self.gamma_rad}"
             )
         if self.dmax_mm is not None and not self.dmax_mm > 0:
-            raise ShapeError(f"IKConfig.dmax_mm: expected a positive length, found {self.dmax_mm}")
+            raise ConfigError(f"IKConfig.dmax_mm: expected a positive length, found {self.dmax_mm}")
         if not self.tol_mm > 0:
-            raise ShapeError(f"IKConfig.tol_mm: expected a positive tolerance, found {self.tol_mm}")
+            raise ConfigError(
+                f"IKConfig.tol_mm: expected a positive tolerance, found {self.tol_mm}"
+            )
         if self.stall_iterations < 0 or not 0 <= self.stall_fraction < 1:
-            raise ShapeError(
+            raise ConfigError(
                 "IKConfig: expected stall_iterations >= 0 and 0 <= stall_fraction < 1, found "
                 f"{self.stall_iterations}, {self.stall_fraction}"
             )
         if self.max_iterations < 1 or not 0 <= self.min_iterations <= self.max_iterations:
-            raise ShapeError(
+            raise ConfigError(
                 "IKConfig: expected 1 <= max_iterations and 0 <= min_iterations <= max_iterations, "
                 f"found max_iterations={self.max_iterations}, min_iterations={self.min_iterations}"
             )
         if not 0.0 <= self.secondary_gain <= 1.0:
-            raise ShapeError(
+            raise ConfigError(
                 f"IKConfig.secondary_gain: expected k in [0, 1] (recipe: 0.1-0.5), "
                 f"found {self.secondary_gain}"
             )
         if not self.secondary_max_step_rad > 0:
-            raise ShapeError(
+            raise ConfigError(
                 "IKConfig.secondary_max_step_rad: expected a positive angle, found "
                 f"{self.secondary_max_step_rad}"
             )
         if self.clamp not in ("hard", "soft"):
-            raise ShapeError(f"IKConfig.clamp: expected 'hard' or 'soft', found {self.clamp!r}")
+            raise ConfigError(f"IKConfig.clamp: expected 'hard' or 'soft', found {self.clamp!r}")
 
 
 @dataclass
@@ -588,7 +590,7 @@ def dof_weights(
     mu = np.sqrt(np.maximum(m, m_min) / m_min)
     length = leg_length_mm(skeleton) if prismatic_length_mm is None else float(prismatic_length_mm)
     if not length > 0:
-        raise ShapeError(f"prismatic_length_mm: expected a positive length, found {length}")
+        raise ConfigError(f"prismatic_length_mm: expected a positive length, found {length}")
     mu = np.where(rot, mu, mu / length)
     return mu
 
@@ -632,10 +634,10 @@ class SDLSSolver:
         self.config = config or IKConfig()
         self.effectors = tuple(effectors) if effectors is not None else default_effectors(skeleton)
         if not self.effectors:
-            raise ShapeError("SDLSSolver: expected at least one effector, found none")
+            raise ConfigError("SDLSSolver: expected at least one effector, found none")
         names = [e.name for e in self.effectors]
         if len(set(names)) != len(names):
-            raise ShapeError(f"SDLSSolver: effector names must be unique, found {names}")
+            raise ConfigError(f"SDLSSolver: effector names must be unique, found {names}")
         planted = tuple(p for p in planted_joints if p in skeleton.joint_names)
         self.planted_joints = planted
         self.secondary = SecondaryTask(skeleton, planted, omega)
