@@ -14,11 +14,9 @@ from mocapkit.errors import (
     ShapeError,
     UnknownNameError,
 )
+from mocapkit.pipelines.batch import batch
 
 __version__ = "0.1.0"
-
-# after __version__, which the batch module reads
-from mocapkit.pipelines.batch import batch
 
 __all__ = [
     "CalibrationError",

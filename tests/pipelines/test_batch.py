@@ -92,7 +92,7 @@ def test_discover_takes_at_any_depth_skipping_results_and_temporaries(study):
 
 
 def test_discover_marker_files_but_not_those_inside_sessions(study):
-    from mocapkit.io.markers import read_markers, write_markers
+    from mocapkit.io.marker_files import read_markers, write_markers
 
     markers = read_markers(study / "s1" / "t1" / "markers.csv")
     write_markers(study / "s2" / "raw" / "trial9.trc", markers)
@@ -331,7 +331,7 @@ def test_cli_exit_code_counts_failed_takes(study, tmp_path, capsys):
 
 
 def test_raw_marker_files_tracked_by_hybrid_ik(study, tmp_path, client):
-    from mocapkit.io.markers import read_markers, write_markers
+    from mocapkit.io.marker_files import read_markers, write_markers
 
     markers = read_markers(study / "s1" / "t1" / "markers.csv")
     write_markers(study / "raw" / "serve.trc", markers)

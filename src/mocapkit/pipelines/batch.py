@@ -35,7 +35,6 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any, TextIO
 
-from mocapkit import __version__
 from mocapkit.errors import ConfigError, SessionError
 from mocapkit.io.atomic import atomic_folder, atomic_write, remove_stale_temporaries
 from mocapkit.pipelines.registry import AUTO, choose_method, session_tracker
@@ -202,7 +201,7 @@ def discover_takes(
     SessionError
         The study folder is missing, or two takes would share a result folder.
     """
-    from mocapkit.io.markers import SUPPORTED_MARKER_EXTENSIONS
+    from mocapkit.io.marker_files import SUPPORTED_MARKER_EXTENSIONS
 
     root = Path(study_dir).resolve()
     if not root.is_dir():
@@ -294,6 +293,17 @@ def completed_row(
 
 
 # ====================================================================== one take
+
+
+def _version() -> str:
+    # from the installed metadata: importing the package's top level from here would
+    # tie it in a cycle (the top level exports `batch`)
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("mocapkit")
+    except PackageNotFoundError:
+        return "unknown"
 
 
 def _resolve_method(take: Take, requested: str) -> str:
@@ -405,7 +415,7 @@ def run_take(job: TakeJob) -> TakeRow:
                     "source": str(take.source),
                     "source_fingerprint": fingerprint,
                     "options": job.options,
-                    "mocapkit_version": __version__,
+                    "mocapkit_version": _version(),
                     "finished_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
                     "files": {
                         f.name: f.stat().st_size for f in sorted(tmp.iterdir()) if f.is_file()
