@@ -293,7 +293,7 @@ def test_killed_run_resumes_without_redoing_or_mixing(study, tmp_path):
     for n in finished:  # not redone: the very same files
         assert (out / n / TAKE_FILE).read_bytes() == kept[n]
         assert (out / n / "motion.npz").stat().st_ino == inode[n]
-    from mocapkit.io.motion import load_motion_npz
+    from mocapkit.io.motion_npz import load_motion_npz
 
     for n in TAKES:
         doc = json.loads((out / n / TAKE_FILE).read_text())
