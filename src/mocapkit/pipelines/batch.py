@@ -320,8 +320,9 @@ def keypoint_fit_px(
     Uses the first camera with video that has keypoints; frames are matched by time
     stamp (`mocapkit.eval.metrics.match_by_time`), joints by canonical name. NaN when the
     session has no keypoints or nothing can be compared. This is how well the result
-    agrees with what the images show, for any method; on synthetic sessions the
-    keypoints are the truth's projections plus detector noise.
+    agrees with what the images show, for any method (in a real session, with a 2-D
+    detector's keypoints); on synthetic sessions the keypoints are the truth's exact
+    projections, so there it is the accuracy seen in the image.
     """
     import numpy as np
 
