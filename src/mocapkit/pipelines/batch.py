@@ -648,6 +648,8 @@ def batch(
                 rate_unit="takes/min",
                 rate_scale=60.0,
             ) as prog:
+                prog.status = f"0 failed, {len(jobs)} remaining"
+                prog.update(0)  # the line shows from the start, not from the first take
                 for future in as_completed(futures):
                     job = futures[future]
                     try:
