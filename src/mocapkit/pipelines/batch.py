@@ -351,16 +351,17 @@ def _track_into(job: TakeJob, method: str, folder: Path) -> dict[str, float]:
     """Track the take into ``folder``, evaluate it; the row's figures."""
     import numpy as np
 
-    from mocapkit.eval.metrics import evaluate_result, joint_subset
+    from mocapkit.eval.metrics import evaluate_result, joint_subset, load_result_joints
 
     take, opts = job.take, job.options
     if take.kind == "markers":
         from mocapkit.pipelines.hybrid import track_hybrid_markers
 
-        motion = track_hybrid_markers(take.source, opts["marker_sets"], None, folder)
+        track_hybrid_markers(take.source, opts["marker_sets"], None, folder)
     else:
-        motion = session_tracker(method)(take.source, folder)
-    joints = np.asarray(motion.joints_mm)
+        session_tracker(method)(take.source, folder)
+    # figures from the folder written, whatever the tracker returns (Motion, a run record)
+    _, _, joints = load_result_joints(folder)
     figures = {
         "frames": float(joints.shape[0]),
         "coverage": float(np.all(np.isfinite(joints), axis=(1, 2)).mean()) if joints.size else 0.0,

@@ -1,8 +1,9 @@
 """The tracking methods a batch can run: method name -> the function tracking a session.
 
-Every entry is a library function ``f(session_dir, out_dir) -> Motion`` that tracks one
-session folder and writes its result folder (``motion.npz``, ``joints.csv``,
-``motion.bvh``), such as `mocapkit.pipelines.hybrid.track_hybrid_session`. Entries are
+Every entry is a library function ``f(session_dir, out_dir)`` that tracks one session
+folder and writes its result folder (``motion.npz``, ``joints.csv``, ``motion.bvh``),
+such as `mocapkit.pipelines.hybrid.track_hybrid_session`; what it returns (a Motion, a
+run record) is not used: the batch reads the folder. Entries are
 ``"module:function"`` paths resolved on first use, so a method whose module is not part
 of this installation yet (stereo and mono are being built) is listed but not available,
 and a Dask worker resolves the same function by importing it. A tracker added later
@@ -25,14 +26,14 @@ from typing import Any, cast
 
 from mocapkit.errors import ConfigError, SessionError, unknown_name
 
-#: A tracker: ``f(session_dir, out_dir) -> Motion`` writing the result folder ``out_dir``.
+#: A tracker: ``f(session_dir, out_dir)`` writing the result folder ``out_dir``.
 SessionTracker = Callable[[str | os.PathLike[str], str | os.PathLike[str]], Any]
 
 #: Method name -> ``"module:function"`` (or a function registered at run time).
 TRACKERS: dict[str, str | SessionTracker] = {
     "hybrid": "mocapkit.pipelines.hybrid:track_hybrid_session",
     "stereo": "mocapkit.pipelines.stereo:track_stereo_session",
-    "mono": "mocapkit.pipelines.mono:track_mono_session",
+    "mono": "mocapkit.pipelines.mono:track_mono",
 }
 
 #: The choice that picks a method per session (`choose_method`).
@@ -41,7 +42,7 @@ AUTO = "auto"
 
 def register_tracker(name: str, tracker: str | SessionTracker) -> None:
     """Add or replace the tracker of method ``name`` (a ``"module:function"`` path or a
-    function ``f(session_dir, out_dir) -> Motion``)."""
+    function ``f(session_dir, out_dir)`` writing the result folder)."""
     if not name or name == AUTO or not name.isidentifier():
         raise ConfigError(
             f"register_tracker: expected a method name (a Python identifier, not {AUTO!r}), "
