@@ -40,11 +40,7 @@ CORE_USING_SIDE: frozenset[str] = frozenset({"pipelines", "cli"})
 
 #: Upward imports that are known and being removed, with the branch that removes them.
 #: Each entry must still occur: when its import is gone, delete the entry.
-KNOWN_UPWARD_IMPORTS: Mapping[tuple[str, str], str] = {
-    # bb-kernels' branch moves the shared outline kernel out of tracking and removes
-    # this edge; drop the entry when that branch is merged.
-    ("mocapkit.viz.overlay", "mocapkit.tracking.arm_refinement"): "bb-kernels",
-}
+KNOWN_UPWARD_IMPORTS: Mapping[tuple[str, str], str] = {}
 
 #: Imports of the top-level package's public face: the library calls it exports on
 #: purpose (each with why). Not upward imports to remove.

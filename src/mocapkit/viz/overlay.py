@@ -2,7 +2,7 @@
 
 Each segment with a length and radii is drawn as its silhouette under the camera:
 the quadrilateral between its two contour generators
-(`mocapkit.tracking.arm_refinement.cone_contour_generators_nb`, exact under
+(`mocapkit.geometry.cones.cone_contour_generators_nb`, exact under
 perspective) plus a disc of the projected radius at each end, so limbs look like
 tapered capsules. Segments are painted far to near. Corners are projected with the
 camera's distortion and joined by straight lines, which is exact for a distortion-free
@@ -18,10 +18,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.camera.pinhole import Camera
+from mocapkit.camera.projection import NEAR_PLANE_MM
 from mocapkit.errors import ShapeError
+from mocapkit.geometry.cones import cone_contour_generators_nb
 from mocapkit.skeleton.kinematics import forward_kinematics
-from mocapkit.skeleton.model import Skeleton
-from mocapkit.tracking.arm_refinement import cone_contour_generators_nb
+from mocapkit.skeleton.model import CANONICAL_SEGMENTS, Skeleton
 
 FloatArray = NDArray[np.float64]
 Colour = tuple[int, int, int]
@@ -45,7 +46,8 @@ def segment_silhouettes(
     Returns
     -------
     list of (joint name, quad (4, 2) px, end discs (2, 3) as ``u, v, radius px``, depth mm)
-        Segments with an end behind the camera are left out.
+        Segments with an end that is not visible (nearer than 1 mm to the camera plane,
+        `mocapkit.camera.projection`) are left out.
     """
     qa = np.asarray(q, dtype=float)
     skeleton.check_q(qa)
@@ -58,17 +60,14 @@ def segment_silhouettes(
         ]
     else:
         idx = [skeleton.joint_index(n) for n in joints]
-    cam_r = camera.camera_from_world[:3, :3]
-    cam_t = camera.camera_from_world[:3, 3]
     fx = float(camera.K[0, 0])
     out = []
     lines = np.empty((2, 2, 3))
     for j in idx:
         a_w = world[j, :3, 3]
         b_w = world[j, :3, :3] @ skeleton.bone_end_mm[j] + a_w
-        a = cam_r @ a_w + cam_t
-        b = cam_r @ b_w + cam_t
-        if a[2] <= 1.0 or b[2] <= 1.0:
+        a, b = camera.to_camera(np.stack([a_w, b_w]))
+        if a[2] < NEAR_PLANE_MM or b[2] < NEAR_PLANE_MM:
             continue
         ra, rb = (float(r) for r in skeleton.radii_mm[j])
         cone_contour_generators_nb(a, b, ra, rb, lines)
@@ -124,6 +123,58 @@ def draw_body(
     return image
 
 
+def draw_sticks(
+    image: NDArray[np.uint8],
+    camera: Camera,
+    joint_names: Sequence[str],
+    joints_mm: ArrayLike,
+    colour: Colour = (0, 165, 255),
+    thickness: int = 2,
+) -> NDArray[np.uint8]:
+    """Draw canonical joints as dots joined by the `CANONICAL_SEGMENTS` sticks, in place.
+
+    Parameters
+    ----------
+    image : ndarray of uint8, shape (H, W, 3)
+        BGR canvas of the camera's size.
+    camera : Camera
+    joint_names : sequence of str, length K
+        Canonical joint names of the rows of ``joints_mm``.
+    joints_mm : array_like, shape (K, 3)
+        Joint positions in the world frame (mm); joints with NaN, and sticks touching
+        them, are left out, as are joints behind the camera.
+    colour : BGR
+    thickness : int
+        Line width (px); dots have this radius plus one.
+    """
+    pts = np.asarray(joints_mm, dtype=float).reshape(-1, 3)
+    if pts.shape[0] != len(joint_names):
+        raise ShapeError(
+            f"joints_mm: expected {len(joint_names)} joints (one per name), found {pts.shape[0]}"
+        )
+    in_camera = pts @ camera.camera_from_world[:3, :3].T + camera.camera_from_world[:3, 3]
+    ok = np.all(np.isfinite(pts), axis=1) & (in_camera[:, 2] > 1.0)
+    px = np.full((pts.shape[0], 2), np.nan)
+    if np.any(ok):
+        px[ok] = camera.project_camera_points(in_camera[ok])
+    ok &= np.all(np.isfinite(px), axis=1)
+    index = {n: k for k, n in enumerate(joint_names)}
+    shift = 4  # sub-pixel precision of OpenCV's drawing
+    scale = 1 << shift
+    fixed = np.round(np.where(ok[:, None], px, 0.0) * scale).astype(np.int64)
+    for a, b in CANONICAL_SEGMENTS.values():
+        ia, ib = index.get(a), index.get(b)
+        if ia is None or ib is None or not (ok[ia] and ok[ib]):
+            continue
+        pa = (int(fixed[ia, 0]), int(fixed[ia, 1]))
+        pb = (int(fixed[ib, 0]), int(fixed[ib, 1]))
+        cv2.line(image, pa, pb, colour, thickness, cv2.LINE_AA, shift)
+    for k in np.flatnonzero(ok):
+        centre = (int(fixed[k, 0]), int(fixed[k, 1]))
+        cv2.circle(image, centre, (thickness + 1) * scale, colour, -1, cv2.LINE_AA, shift)
+    return image
+
+
 def draw_points(
     image: NDArray[np.uint8], points_px: ArrayLike, colour: Colour = (0, 255, 255), radius: int = 1
 ) -> NDArray[np.uint8]:
@@ -134,4 +185,4 @@ def draw_points(
     return image
 
 
-__all__ = ["draw_body", "draw_points", "segment_silhouettes"]
+__all__ = ["draw_body", "draw_points", "draw_sticks", "segment_silhouettes"]
