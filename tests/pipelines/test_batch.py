@@ -328,6 +328,16 @@ def test_cli_exit_code_counts_failed_takes(study, tmp_path, capsys):
     bad = ["batch", str(study), "--out", "x", "--scheduler", "tcp://h:1", "--workers", "2"]
     assert main(bad) == 2
     assert "size a local cluster, not --scheduler" in capsys.readouterr().err
+    # bad values are usage errors, before any work
+    for bad, says in (
+        (["--workers", "0"], "argument --workers: expected an integer >= 1, found 0"),
+        (["--joints", "knees"], "argument --joints: unknown canonical joint 'knees'"),
+        (["--marker-set", "head"], "argument --marker-set: marker set 'head'"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            main(["batch", str(study), "--out", str(tmp_path / "o"), *bad])
+        assert exc.value.code == 2 and says in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
 
 
 def test_raw_marker_files_tracked_by_hybrid_ik(study, tmp_path, client):

@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+from mocapkit.cli.args import checked_by, number
+from mocapkit.eval.metrics import joint_subset
+from mocapkit.io.marker_sets import parse_marker_set
 from mocapkit.pipelines.registry import AUTO, TRACKERS
 
 _EPILOG = """\
@@ -47,12 +50,14 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "--marker-set",
         action="append",
         default=[],
+        type=checked_by(parse_marker_set, "marker set"),
         metavar="NAME=M1+M2",
         help="marker set of the --markers-glob files (head, left_hand, right_hand); repeat",
     )
     p.add_argument(
         "--joints",
         default="upper",
+        type=checked_by(joint_subset, "joints"),
         help="joints evaluated against truth: 'upper' (default), 'all' or a list",
     )
     p.add_argument("--force", action="store_true", help="redo takes that are complete")
@@ -61,7 +66,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     )
     p.add_argument(
         "--workers",
-        type=int,
+        type=number(int, at_least=1),
         default=None,
         metavar="N",
         help="workers of the local cluster (default: one per core)",
@@ -81,8 +86,6 @@ def run(args: argparse.Namespace) -> int:
 
     if args.scheduler and (args.workers is not None or args.in_process):
         raise ConfigError("batch: --workers and --in-process size a local cluster, not --scheduler")
-    if args.workers is not None and args.workers < 1:
-        raise ConfigError(f"batch: --workers: expected a count >= 1, found {args.workers}")
     result = batch(
         args.study,
         args.out,
@@ -92,7 +95,7 @@ def run(args: argparse.Namespace) -> int:
         joints=args.joints,
         force=args.force,
         scheduler=args.scheduler,
-        n_workers=args.workers,
+        n_workers=None if args.workers is None else int(args.workers),
         processes=not args.in_process,
         say=lambda line: print(line, file=sys.stderr),
     )
