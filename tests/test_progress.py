@@ -72,3 +72,34 @@ def test_eta_unknown_before_any_frame() -> None:
     prog = Progress(10, "wait", stream=FakeTty())
     assert prog.line().endswith("ETA   ?")
     assert "0/10 frames" in prog.line()
+
+
+def test_units_status_and_rate_scale() -> None:
+    prog = Progress(
+        12, "batch", stream=FakeTty(), unit="takes", rate_unit="takes/min", rate_scale=60.0
+    )
+    prog.status = "1 failed, 10 remaining"
+    prog.update(2)
+    line = prog.line()
+    assert line.startswith("batch 2/12 takes, 1 failed, 10 remaining, ")
+    assert re.search(r"\d+\.\d takes/min, ETA", line), line
+
+
+def test_silenced_meters_stay_quiet_on_a_tty_in_this_context_only() -> None:
+    import threading
+
+    from mocapkit.progress import silenced
+
+    stream = FakeTty()
+    seen: list[bool] = []
+    with silenced():
+        prog = Progress(2, "inner", stream=stream, min_interval_s=0.0)
+        prog.update(2)
+        prog.close()
+        # a thread started here begins with a fresh context: not silenced
+        t = threading.Thread(target=lambda: seen.append(Progress(1, stream=stream).enabled))
+        t.start()
+        t.join()
+    assert not prog.enabled and stream.getvalue() == ""
+    assert seen == [True]
+    assert Progress(1, stream=stream).enabled

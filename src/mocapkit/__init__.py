@@ -14,6 +14,7 @@ from mocapkit.errors import (
     ShapeError,
     UnknownNameError,
 )
+from mocapkit.pipelines.batch import batch
 
 __version__ = "0.1.0"
 
@@ -26,4 +27,5 @@ __all__ = [
     "ShapeError",
     "UnknownNameError",
     "__version__",
+    "batch",
 ]
