@@ -84,3 +84,25 @@ def test_squat_keeps_markers_and_improves_balance(setup, mode):
 def test_bad_config():
     with pytest.raises(ShapeError, match="BalanceConfig.mode"):
         BalanceConfig(mode="tilt")
+
+
+def test_spine_flexion_found_through_canonical_names():
+    from mocapkit.tracking.balance import spine_dof_indices
+
+    plain = load_preset("zhang21")
+    twist = load_preset("zhang21", ("spine_rotation", "neck_rotation"))
+    names = ("spine1_flexion", "spine2_flexion", "spine3_flexion")
+    assert spine_dof_indices(plain) == tuple(plain.dof_index(n) for n in names)
+    # the twist is a spine DoF too, but not a flexion: the bow leaves it alone
+    assert spine_dof_indices(twist) == tuple(twist.dof_index(n) for n in names)
+    with pytest.raises(ShapeError, match="has no spine flexion DoF"):
+        spine_dof_indices(load_preset("azad14"))
+
+
+def test_support_needs_legs():
+    sk = load_preset("upper_stick")
+    with pytest.raises(ShapeError, match="has no legs"):
+        support_points(sk, sk.zero_pose())
+    z = load_preset("zhang21")
+    pts = support_points(z, z.zero_pose())
+    assert pts.shape == (4, 3) and np.all(np.abs(pts[:, 2] - pts[:, 2].min()) < 200.0)

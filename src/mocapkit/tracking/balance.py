@@ -27,7 +27,6 @@ Modes
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,12 +35,11 @@ from numpy.typing import ArrayLike, NDArray
 from mocapkit.errors import ShapeError
 from mocapkit.ik.sdls import SDLSSolver
 from mocapkit.skeleton.kinematics import center_of_mass, forward_kinematics
+from mocapkit.skeleton.limbs import SIDES, foot_joints, has_limb, spine_dofs
 from mocapkit.skeleton.model import Skeleton
 
 FloatArray = NDArray[np.float64]
 
-SPINE_DOFS: tuple[str, ...] = ("spine1_flexion", "spine2_flexion", "spine3_flexion")
-FOOT_JOINTS: tuple[str, ...] = ("l_foot", "l_foot_end", "r_foot", "r_foot_end")
 _BALANCE_MODES = ("proportional", "solve", "off")
 
 
@@ -90,15 +88,18 @@ def forward_direction(skeleton: Skeleton, q: ArrayLike) -> FloatArray:
 def support_points(skeleton: Skeleton, q: ArrayLike) -> FloatArray:
     """Ankle and toe-end positions (n, 3) of both feet at pose ``q`` (mm).
 
-    The feet are planted at their initial positions during tracking, and the model
-    has no ankle DoF (a bent knee would tip the foot), so the support is taken from
-    the initial (standing) pose and kept.
+    The feet are the canonical ankles and the joints below them
+    (`mocapkit.skeleton.limbs.foot_joints`). They are planted at their initial
+    positions during tracking, and the model has no ankle DoF (a bent knee would tip
+    the foot), so the support is taken from the initial (standing) pose and kept.
     """
-    idx = [skeleton.joint_index(n) for n in FOOT_JOINTS if n in skeleton.joint_names]
-    if not idx:
+    sides = [s for s in SIDES if has_limb(skeleton, f"{s}_leg")]
+    if not sides:
         raise ShapeError(
-            f"skeleton {skeleton.name!r} has no foot joints {FOOT_JOINTS}; no base of support"
+            f"skeleton {skeleton.name!r} has no legs (canonical hips, knees, ankles); "
+            "no base of support"
         )
+    idx = np.concatenate([foot_joints(skeleton, s) for s in sides])
     return forward_kinematics(skeleton, q)[idx, :3, 3]
 
 
@@ -147,9 +148,19 @@ class BalanceModel:
         return self.p_rad_per_mm * float(dh_mm)
 
 
-def spine_dof_indices(skeleton: Skeleton, names: Sequence[str] = SPINE_DOFS) -> tuple[int, ...]:
-    """Indices of the spine flexion DoFs."""
-    return tuple(skeleton.dof_index(n) for n in names)
+def spine_dof_indices(skeleton: Skeleton) -> tuple[int, ...]:
+    """Indices of the spine flexion DoFs: the spine's rotations
+    (`mocapkit.skeleton.limbs.spine_dofs`) about the mediolateral (x) axis, the axis of
+    the paper's bow (§5.3); twists and side bends are left alone."""
+    dofs = spine_dofs(skeleton)
+    flexion = np.abs(skeleton.dof_axis[dofs, 0]) > 1.0 - 1e-9
+    out = tuple(int(d) for d in dofs[flexion])
+    if not out:
+        raise ShapeError(
+            f"skeleton {skeleton.name!r} has no spine flexion DoF (a rotation about x between "
+            "the canonical pelvis and neck); the balance step needs one"
+        )
+    return out
 
 
 def _spine_split(skeleton: Skeleton, spine: tuple[int, ...]) -> FloatArray:
