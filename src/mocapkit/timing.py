@@ -10,16 +10,18 @@ against a frame of several milliseconds.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from types import TracebackType
 
 
 class _Stage:
     """Context manager of one stage; re-used, so entering it allocates nothing."""
 
-    __slots__ = ("_start", "calls", "count", "name", "total_s")
+    __slots__ = ("_clock", "_start", "calls", "count", "name", "total_s")
 
-    def __init__(self, name: str) -> None:
+    def __init__(self, name: str, clock: Callable[[], float] = time.perf_counter) -> None:
         self.name = name
+        self._clock = clock
         self.total_s = 0.0
         self.calls = 0
         #: Items the stage counted (e.g. IK iterations), see `StageTimer.count`.
@@ -27,7 +29,7 @@ class _Stage:
         self._start = 0.0
 
     def __enter__(self) -> _Stage:
-        self._start = time.perf_counter()
+        self._start = self._clock()
         return self
 
     def __exit__(
@@ -36,7 +38,7 @@ class _Stage:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        self.total_s += time.perf_counter() - self._start
+        self.total_s += self._clock() - self._start
         self.calls += 1
 
 
@@ -59,29 +61,36 @@ _NULL_STAGE = _NullStage()
 
 
 class StageTimer:
-    """Accumulates wall time (s), calls and counts per stage name.
+    """Accumulates time (s), calls and counts per stage name.
 
     A stage must not be nested in itself (one start time per name); different stages
     may nest (``"io"`` around a decode inside ``"track"``).
+
+    Parameters
+    ----------
+    clock : callable
+        ``time.perf_counter`` (wall time, default) or ``time.process_time`` (CPU time
+        of the process: on a shared machine, the time the work itself took).
     """
 
     enabled = True
 
-    def __init__(self) -> None:
+    def __init__(self, clock: Callable[[], float] = time.perf_counter) -> None:
+        self.clock = clock
         self._stages: dict[str, _Stage] = {}
 
     def stage(self, name: str) -> _Stage | _NullStage:
         """The context manager timing stage ``name``."""
         s = self._stages.get(name)
         if s is None:
-            s = self._stages[name] = _Stage(name)
+            s = self._stages[name] = _Stage(name, self.clock)
         return s
 
     def count(self, name: str, n: int) -> None:
         """Add ``n`` items (iterations, solves) to stage ``name``'s count."""
         s = self._stages.get(name)
         if s is None:
-            s = self._stages[name] = _Stage(name)
+            s = self._stages[name] = _Stage(name, self.clock)
         s.count += int(n)
 
     def totals_s(self) -> dict[str, float]:

@@ -19,8 +19,17 @@ Modes
     is found by bisection; ``p`` is the least-squares slope through 0 and is split
     over the spine bones in proportion to their lengths.
 ``"solve"``
-    Solve each frame: when the centre of gravity leaves the support box, bisect the
+    Solve each frame: when the centre of gravity leaves the support box, find the
     lean that brings it back inside (a margin from the edge); ``tau = 0`` otherwise.
+    Each trial lean costs a restore solve, so the search is a secant search on the
+    centre of gravity's offset, which is close to linear in the lean over the spine's
+    range: it starts from the previous frame's slope (or a small probe) and stops
+    within ``cog_tol_mm``, typically after two or three solves, where bisection
+    (``search="bisect"``, as before) takes 14. The pose of the last trial is kept
+    rather than solved again. Where the restore leaves head or hands off their markers
+    (by more than twice the IK tolerance) without any lean, no lean is tried: the
+    markers-first rule would halve it to nothing (with noisy member markers that is
+    most frames, each of which bisection spent 20 solves on).
 ``"off"``
     No balance step.
 """
@@ -54,12 +63,22 @@ class BalanceConfig:
         ``"solve"`` mode: keep the centre of gravity this fraction of the box depth
         inside the front and back edges.
     bisection_steps : int
-        Bisection iterations on the lean angle.
+        Bisection iterations on the lean angle (``search="bisect"`` and the
+        calibration of the proportional rule).
+    search : {"secant", "bisect"}
+        ``"solve"`` mode: how the lean is found (see the module docstring).
+    cog_tol_mm : float
+        ``search="secant"``: stop when the centre of gravity is this close to its goal.
+    max_evaluations : int
+        ``search="secant"``: most trial leans (restore solves) per frame.
     """
 
     mode: str = "proportional"
     margin_fraction: float = 0.15
     bisection_steps: int = 12
+    search: str = "secant"
+    cog_tol_mm: float = 0.5
+    max_evaluations: int = 5
 
     def __post_init__(self) -> None:
         if self.mode not in _BALANCE_MODES:
@@ -73,6 +92,15 @@ class BalanceConfig:
         if self.bisection_steps < 1:
             raise ShapeError(
                 f"BalanceConfig.bisection_steps: expected >= 1, found {self.bisection_steps}"
+            )
+        if self.search not in ("secant", "bisect"):
+            raise ShapeError(
+                f"BalanceConfig.search: expected 'secant' or 'bisect', found {self.search!r}"
+            )
+        if not self.cog_tol_mm > 0 or self.max_evaluations < 2:
+            raise ShapeError(
+                "BalanceConfig: expected cog_tol_mm > 0 and max_evaluations >= 2, found "
+                f"{self.cog_tol_mm}, {self.max_evaluations}"
             )
 
 
@@ -241,6 +269,77 @@ def _bisect_lean(
     return 0.5 * (a + b)
 
 
+#: First trial lean (rad) of the secant search when no slope is known yet.
+_PROBE_RAD = 0.1
+
+
+def _secant_lean(
+    solver: SDLSSolver,
+    q: FloatArray,
+    targets: FloatArray,
+    active: NDArray[np.bool_] | None,
+    goal_mm: float,
+    support: FloatArray,
+    config: BalanceConfig,
+    slope_mm_per_rad: float | None,
+) -> tuple[float, tuple[FloatArray, FloatArray], float | None]:
+    """Total lean (rad) whose restored pose puts the CoG at ``goal_mm`` (secant search).
+
+    Returns the lean, the restored pose and residuals at that lean (already solved),
+    and the slope of the CoG offset per radian of lean seen on the way (None if none).
+    Where the spine's range cannot reach the goal, the end nearest to it is returned,
+    as `_bisect_lean` does.
+    """
+    sk = solver.skeleton
+    spine = spine_dof_indices(sk)
+    split = _spine_split(sk, spine)
+    base = q[list(spine)]
+    lo = float(np.max((sk.lower[list(spine)] - base) / split))
+    hi = float(np.min((sk.upper[list(spine)] - base) / split))
+    tried: dict[float, tuple[float, FloatArray, FloatArray]] = {}
+
+    def f(total: float) -> float:
+        qq, resid = apply_lean(solver, q, total * split, targets, active)
+        value = cog_offset_mm(sk, qq, support)[0] - goal_mm
+        tried[total] = (value, qq, resid)
+        return value
+
+    x0, f0 = 0.0, f(0.0)
+    slope = slope_mm_per_rad
+    limit = 2.0 * solver.config.tol_mm
+    if np.nanmax(tried[0.0][2], initial=0.0) > limit:
+        # head and hands are off their markers even without a lean: no lean (the
+        # markers-first rule of `balance_pose` would halve any lean down to nothing)
+        return 0.0, (tried[0.0][1], tried[0.0][2]), slope
+    if abs(f0) >= config.cog_tol_mm:
+        if slope is not None and slope < 0:
+            x1 = -f0 / slope
+        else:
+            # with the head pinned, a forward bow moves the CoG backwards (slope < 0)
+            x1 = _PROBE_RAD if f0 > 0 else -_PROBE_RAD
+        x1 = min(max(x1, lo), hi)
+        for _ in range(config.max_evaluations - 1):
+            if x1 in tried:
+                break
+            f1 = f(x1)
+            if np.nanmax(tried[x1][2], initial=0.0) > limit:
+                # the restore fails under this lean (the CoG there is meaningless):
+                # step back halfway towards the last lean that kept the markers
+                x1 = 0.5 * (x0 + x1)
+                continue
+            if abs(f1) < config.cog_tol_mm or f1 == f0:
+                break
+            slope = (f1 - f0) / (x1 - x0)
+            x_next = min(max(x1 - f1 / slope, lo), hi)
+            x0, f0, x1 = x1, f1, x_next
+    # markers first (Z12): the trial nearest the goal among those that keep head and
+    # hands on their markers (zero lean does)
+    ok = [x for x in tried if np.nanmax(tried[x][2], initial=0.0) <= limit]
+    best = min(ok, key=lambda x: abs(tried[x][0]))
+    _value, q_best, resid_best = tried[best]
+    return best, (q_best, resid_best), slope
+
+
 def calibrate_balance(
     solver: SDLSSolver,
     q_rest: ArrayLike | None = None,
@@ -287,11 +386,13 @@ def calibrate_balance(
 
 @dataclass
 class BalanceResult:
-    """Outcome of the balance step: pose, spine increments and restore residuals."""
+    """Outcome of the balance step: pose, spine increments and restore residuals, and
+    (secant search) the CoG's slope per radian of lean, a hint for the next frame."""
 
     q: FloatArray
     taus: FloatArray
     residual_mm: FloatArray
+    slope_mm_per_rad: float | None = None
 
 
 def balance_pose(
@@ -303,6 +404,7 @@ def balance_pose(
     model: BalanceModel | None,
     config: BalanceConfig | None = None,
     active: ArrayLike | None = None,
+    slope_mm_per_rad: float | None = None,
 ) -> BalanceResult:
     """Apply the balance heuristic to an IK pose and restore head and hands (Z12).
 
@@ -320,6 +422,9 @@ def balance_pose(
         Calibrated factors (needed by ``"proportional"``).
     config : BalanceConfig
     active : array_like of bool, shape (E,), optional
+    slope_mm_per_rad : float, optional
+        The secant search's first slope (the previous frame's
+        ``BalanceResult.slope_mm_per_rad``); a small probe lean when None.
     """
     cfg = config or BalanceConfig()
     sk = solver.skeleton
@@ -332,6 +437,8 @@ def balance_pose(
     dh = float(qa[sk.dof_index("root_tz")] - root_height0_mm)
     t = np.asarray(targets_mm, dtype=float)
     act = None if active is None else np.asarray(active, dtype=bool)
+    solved: tuple[FloatArray, FloatArray] | None = None
+    slope = slope_mm_per_rad
     if cfg.mode == "proportional":
         if model is None:
             raise ShapeError("balance_pose: mode 'proportional' needs a calibrated BalanceModel")
@@ -346,22 +453,34 @@ def balance_pose(
         else:
             goal = lo if cog < lo else hi
             split = _spine_split(sk, spine)
-            taus = _bisect_lean(solver, qa, t, act, goal, cfg.bisection_steps, support) * split
+            if cfg.search == "secant":
+                total, solved, slope = _secant_lean(
+                    solver, qa, t, act, goal, support, cfg, slope_mm_per_rad
+                )
+            else:
+                total = _bisect_lean(solver, qa, t, act, goal, cfg.bisection_steps, support)
+            taus = total * split
     if not np.any(taus):
+        if solved is not None:  # the search's own restore at zero lean
+            return BalanceResult(solved[0], taus, solved[1], slope)
         res = solver.solve(qa, t, active=act, frozen=_spine_mask(sk, spine))
-        return BalanceResult(res.q, taus, res.residual_mm)
+        return BalanceResult(res.q, taus, res.residual_mm, slope)
     # markers first (Z12): if head and hands cannot be restored under this lean,
     # halve the lean until they can
     tol = 2.0 * solver.config.tol_mm
     for _ in range(4):
-        qn, resid = apply_lean(solver, qa, taus, t, act)
+        if solved is not None:  # the search already restored this lean
+            qn, resid = solved
+            solved = None
+        else:
+            qn, resid = apply_lean(solver, qa, taus, t, act)
         if not np.nanmax(resid, initial=0.0) > tol:
             break
         taus = 0.5 * taus
     else:
         qn, resid = apply_lean(solver, qa, np.zeros_like(taus), t, act)
         taus = np.zeros_like(taus)
-    return BalanceResult(qn, taus, resid)
+    return BalanceResult(qn, taus, resid, slope)
 
 
 def _spine_mask(sk: Skeleton, spine: tuple[int, ...]) -> NDArray[np.bool_]:
