@@ -147,6 +147,12 @@ class HybridConfig:
         After smoothing, effectors further than this from their markers are put back
         by IK. A tolerance near the marker noise keeps the smoothing (a tight one would
         re-inject the noise into the redundant DoFs, e.g. the elbow swivel).
+    smoothing_polish_stall_iterations : int
+        The polish also stops when the largest error has not dropped by 1 % in this
+        many iterations (0: never): with member markers the error settles near the
+        tolerance and half the polishes ran their 100 iterations for nothing. Measured
+        (accuracy clips lambada and 01_09, oriented sets, IK only): elbow 20.4 and
+        15.8 mm without the stop, 20.5 and 16.3 mm with it; 25 % less time per frame.
     member_offsets_mm : mapping of str to mapping of str to (3,) array_like
         Per marker set, its member markers' offsets (mm) in the effector joint's frame,
         from the default effector point (as ``marker_offsets_mm``). Each member then
@@ -186,6 +192,7 @@ class HybridConfig:
     init_iterations: int = 3
     plant_feet: bool = True
     smoothing_polish_tol_mm: float = 5.0
+    smoothing_polish_stall_iterations: int = 4
     replant_mm: float = 8.0
     member_offsets_mm: Mapping[str, Mapping[str, Sequence[float]]] = field(default_factory=dict)
     start_upright: bool = True
@@ -423,6 +430,8 @@ class HybridTracker:
             secondary_gain=0.0,
             min_iterations=0,
             tol_mm=self.config.smoothing_polish_tol_mm,
+            stall_iterations=self.config.smoothing_polish_stall_iterations,
+            stall_fraction=0.01,
         )
         self._polish = _CountedSolver(skeleton, effectors, polish_cfg)
         # After the video refinement, the balance step's restore of head and hands must
