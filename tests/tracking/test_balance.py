@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocapkit.errors import ShapeError
+from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.ik.sdls import SDLSSolver
 from mocapkit.skeleton import load_preset
 from mocapkit.tracking.balance import (
@@ -82,7 +82,7 @@ def test_squat_keeps_markers_and_improves_balance(setup, mode):
 
 
 def test_bad_config():
-    with pytest.raises(ShapeError, match="BalanceConfig.mode"):
+    with pytest.raises(ConfigError, match="BalanceConfig.mode"):
         BalanceConfig(mode="tilt")
 
 
@@ -162,7 +162,7 @@ def test_no_lean_tried_when_markers_are_off_without_one(setup):
 
 
 def test_bad_search_config():
-    with pytest.raises(ShapeError, match="BalanceConfig.search"):
+    with pytest.raises(ConfigError, match="BalanceConfig.search"):
         BalanceConfig(search="golden")
-    with pytest.raises(ShapeError, match="max_evaluations >= 2"):
+    with pytest.raises(ConfigError, match="max_evaluations >= 2"):
         BalanceConfig(max_evaluations=1)

@@ -5,8 +5,13 @@ from __future__ import annotations
 import argparse
 
 from mocapkit.camera.calibration import parse_board
+from mocapkit.cli.args import checked_by, number
 from mocapkit.io.cameras import write_cameras
-from mocapkit.pipelines.calibrate import DEFAULT_MIN_BOARDS, calibrate_from_images
+from mocapkit.pipelines.calibrate import (
+    DEFAULT_MAX_RMS_PX,
+    DEFAULT_MIN_BOARDS,
+    calibrate_from_images,
+)
 
 _EPILOG = """\
 One image set (a folder or a quoted glob such as 'shots/left*.jpg') calibrates one
@@ -31,8 +36,13 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("images", nargs="+", metavar="IMAGES", help="image folder or glob (1 or 2)")
-    p.add_argument("--board", required=True, help="inner corners as COLUMNSxROWS, e.g. 9x6")
-    p.add_argument("--square-mm", type=float, required=True, help="square side in mm")
+    p.add_argument(
+        "--board",
+        required=True,
+        type=checked_by(lambda spec: parse_board(spec, 1.0), "board"),
+        help="inner corners as COLUMNSxROWS, e.g. 9x6",
+    )
+    p.add_argument("--square-mm", type=number(above=0.0), required=True, help="square side in mm")
     p.add_argument("--out", required=True, help="output cameras.json")
     p.add_argument("--board-pose", default=None, help="JSON file with the board's world pose")
     p.add_argument(
@@ -42,9 +52,16 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     )
     p.add_argument(
         "--min-boards",
-        type=int,
+        type=number(int, at_least=3),
         default=DEFAULT_MIN_BOARDS,
         help=f"fewest images (pairs) with a detected board (default {DEFAULT_MIN_BOARDS})",
+    )
+    p.add_argument(
+        "--max-rms-px",
+        type=number(above=0.0),
+        default=DEFAULT_MAX_RMS_PX,
+        help="refuse a camera or stereo fit whose RMS reprojection error is above this "
+        f"(default {DEFAULT_MAX_RMS_PX:g} px)",
     )
     p.add_argument(
         "--refine-intrinsics",
@@ -63,6 +80,7 @@ def run(args: argparse.Namespace) -> int:
         board_pose=args.board_pose,
         min_boards=args.min_boards,
         refine_stereo_intrinsics=args.refine_intrinsics,
+        max_rms_px=args.max_rms_px,
     )
     for line in report.lines():
         print(line)

@@ -24,7 +24,13 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import ShapeError
-from mocapkit.skeleton.kinematics import fk_pose_nb, kinematic_arrays, subtree_mass
+from mocapkit.skeleton import limbs
+from mocapkit.skeleton.kinematics import (
+    KinematicArrays,
+    fk_pose_nb,
+    kinematic_arrays,
+    subtree_mass,
+)
 from mocapkit.skeleton.model import Skeleton
 
 FloatArray = NDArray[np.float64]
@@ -37,15 +43,26 @@ RELAXED_ELBOW_FLEXION_RAD = float(np.radians(15.0))
 def relaxed_pose(skeleton: Skeleton) -> FloatArray:
     """The relaxed configuration ``omega`` (D,): arms down, elbows flexed 15 deg, all else 0.
 
-    DoFs whose name contains ``elbow_flexion`` get 15 deg; every other DoF is 0
-    (for ``zhang21`` that is arms hanging, spine and neck straight, legs straight),
-    clipped into the joint limits.
+    The elbows are the flexion hinges of the arms the skeleton has
+    (`mocapkit.skeleton.limbs.flexion_dofs`), each flexed 15 deg in its own model's
+    sign: ``+15 deg`` for ``zhang21`` (range ``[0, 150] deg``), ``-15 deg`` for
+    ``azad14`` (``theta_4 <= 0`` about ``-x``), the same forward bend. Every other DoF
+    is 0 (for ``zhang21`` that is arms hanging, spine and neck straight, legs straight);
+    the result is clipped into the joint limits.
     """
     omega = np.zeros(skeleton.n_dofs)
-    for d, name in enumerate(skeleton.dof_names):
-        if "elbow_flexion" in name:
-            omega[d] = RELAXED_ELBOW_FLEXION_RAD
+    for arm in limbs.limbs_present(skeleton, "arm"):
+        dofs, signs = limbs.flexion_dofs(skeleton, arm)
+        omega[dofs] = signs * RELAXED_ELBOW_FLEXION_RAD
     return np.clip(omega, skeleton.lower, skeleton.upper)
+
+
+def planted_feet(skeleton: Skeleton) -> tuple[str, ...]:
+    """Default planted joints: the canonical ankles of the legs the skeleton has.
+
+    ``("l_foot", "r_foot")`` for ``zhang21``; none for an upper-body model (``azad14``).
+    """
+    return tuple(skeleton.joint_names[j] for j in limbs.ankle_joints(skeleton))
 
 
 def secondary_mask(skeleton: Skeleton) -> BoolArray:
@@ -94,11 +111,10 @@ def clamp_max_abs_nb(w: FloatArray, d: float) -> None:
 
 @numba.njit(cache=True)
 def lever_weights_nb(
+    kin: KinematicArrays,
     world: FloatArray,
     axis_world: FloatArray,
     pivot_world: FloatArray,
-    parents: NDArray[np.int64],
-    dof_joint: NDArray[np.int64],
     mass: FloatArray,
     com_local: FloatArray,
     planted: BoolArray,
@@ -111,6 +127,8 @@ def lever_weights_nb(
     ``planted`` flags DoFs that carry the complement of their subtree; DoFs
     outside ``mask`` get 0. Gravity is ``-Z`` (world frame is Z up).
     """
+    parents = kin.parents
+    dof_joint = kin.dof_joint
     n_joints = parents.shape[0]
     wsum = np.zeros((n_joints, 3))
     msum = np.zeros(n_joints)
@@ -183,8 +201,9 @@ class SecondaryTask:
     Parameters
     ----------
     skeleton : Skeleton
-    planted_joints : sequence of str
-        Joints held on the ground (their leg DoFs carry the complement mass).
+    planted_joints : sequence of str, optional
+        Joints held on the ground (their leg DoFs carry the complement mass);
+        `planted_feet` (both ankles, none without legs) when omitted.
     omega : array_like, shape (D,), optional
         Relaxed pose; `relaxed_pose` when omitted.
     """
@@ -192,10 +211,12 @@ class SecondaryTask:
     def __init__(
         self,
         skeleton: Skeleton,
-        planted_joints: Sequence[str] = ("l_foot", "r_foot"),
+        planted_joints: Sequence[str] | None = None,
         omega: ArrayLike | None = None,
     ) -> None:
         self.skeleton = skeleton
+        if planted_joints is None:
+            planted_joints = planted_feet(skeleton)
         self.omega = relaxed_pose(skeleton) if omega is None else np.asarray(omega, float).copy()
         if self.omega.shape != (skeleton.n_dofs,):
             raise ShapeError(
@@ -211,30 +232,18 @@ class SecondaryTask:
         """Unnormalised weights ``m_i h_i`` (D,) in kg mm at pose ``q`` (D,)."""
         qa = np.ascontiguousarray(q, dtype=float)
         self.skeleton.check_q(qa)
-        ka = kinematic_arrays(self.skeleton)
+        kin = kinematic_arrays(self.skeleton)
         d, j = self.skeleton.n_dofs, self.skeleton.n_joints
         world = np.empty((j, 4, 4))
         axis_world = np.empty((d, 3))
         pivot_world = np.empty((d, 3))
-        fk_pose_nb(
-            qa,
-            ka.parents,
-            ka.offsets,
-            ka.dof_start,
-            ka.dof_count,
-            ka.dof_kind,
-            ka.dof_axis,
-            world,
-            axis_world,
-            pivot_world,
-        )
+        fk_pose_nb(qa, kin, world, axis_world, pivot_world)
         out = np.empty(d)
         lever_weights_nb(
+            kin,
             world,
             axis_world,
             pivot_world,
-            ka.parents,
-            np.ascontiguousarray(self.skeleton.dof_joint),
             self.mass,
             self.com_local,
             self.planted,

@@ -18,7 +18,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from mocapkit.errors import ShapeError, unknown_name
+from mocapkit.errors import ConfigError, unknown_name
 from mocapkit.io.atomic import atomic_write
 from mocapkit.skeleton import forward_kinematics, load_preset
 from mocapkit.skeleton.kinematics import points_and_jacobian
@@ -53,7 +53,7 @@ def bench_kinematics(
         ``fk_poses_per_s``, ``jacobians_per_s`` (medians), their minima, sizes.
     """
     if repeats < 1 or n_poses < 1 or n_jacobians < 1:
-        raise ShapeError(
+        raise ConfigError(
             f"bench_kinematics: expected repeats, n_poses, n_jacobians >= 1, found {repeats}, "
             f"{n_poses}, {n_jacobians}"
         )
@@ -190,7 +190,7 @@ def bench_hybrid(
         ``elbow_jump_penalty`` (on in the tracked configuration); sessions and sizes.
     """
     if repeats < 1:
-        raise ShapeError(f"bench_hybrid: expected repeats >= 1, found {repeats}")
+        raise ConfigError(f"bench_hybrid: expected repeats >= 1, found {repeats}")
     import tempfile
 
     from mocapkit.pipelines.hybrid import bench_ik, track_hybrid_session_run
@@ -278,7 +278,7 @@ def run_benchmarks(
     if name != "all" and name not in BENCHMARKS:
         raise unknown_name("benchmark", name, [*BENCHMARKS, "all"], "mocapkit bench")
     if repeats < 1:
-        raise ShapeError(f"--repeats: expected at least 1, found {repeats}")
+        raise ConfigError(f"--repeats: expected at least 1, found {repeats}")
     names = list(BENCHMARKS) if name == "all" else [name]
     return {
         n: BENCHMARKS[n](repeats=repeats, work_dir=work_dir)

@@ -2,7 +2,8 @@
 
 `run_tracker` feeds any `mocapkit.tracking.base.Tracker` sample by sample (the same
 calls a live feed would make), collects its `FrameResult` objects and writes the result
-folder: ``motion.npz``, ``joints.csv``, ``motion.bvh`` (`Motion.write_result_folder`) and
+folder: ``motion.npz``, ``joints.csv``, ``motion.bvh``
+(`mocapkit.io.motion_files.write_result_folder`) and
 ``fit.csv`` (per frame: status of each effector or limb and the fit-quality figures),
 each atomically. Method pipelines (`mocapkit.pipelines.hybrid`) only build the tracker and
 its sample stream.
@@ -24,6 +25,7 @@ import numpy as np
 from mocapkit.errors import ShapeError
 from mocapkit.io.atomic import atomic_write
 from mocapkit.io.motion import Motion
+from mocapkit.io.motion_files import write_result_folder
 from mocapkit.progress import Progress
 from mocapkit.skeleton.model import Skeleton
 from mocapkit.timing import NULL_TIMER, StageTimer
@@ -111,7 +113,7 @@ def run_tracker(
     out = None
     if out_dir is not None:
         with timer.stage("write"):
-            out = motion.write_result_folder(out_dir)
+            out = write_result_folder(out_dir, motion)
             write_fit_csv(out / FIT_FILE, results)
     return RunResult(motion, results, out)
 

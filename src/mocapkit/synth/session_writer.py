@@ -22,7 +22,6 @@ Pipeline of `synthesize_session`:
 from __future__ import annotations
 
 import json
-import shutil
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -32,9 +31,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
-from mocapkit.errors import MocapError, SessionError, ShapeError
+from mocapkit.errors import ConfigError, MocapError, SessionError, ShapeError
+from mocapkit.io.atomic import atomic_folder, remove_stale_temporaries
 from mocapkit.io.motion import Motion
-from mocapkit.io.session import Truth, write_keypoints_csv, write_session_json, write_timestamps_csv
+from mocapkit.io.session import write_session_json
+from mocapkit.io.session_csv import write_keypoints_csv, write_timestamps_csv
+from mocapkit.io.truth import Truth
 from mocapkit.progress import Progress
 from mocapkit.skeleton.model import PRISMATIC, TRUNK_SEGMENTS
 from mocapkit.skeleton.scaling import (
@@ -70,6 +72,10 @@ FLOOR_CLEARANCE_MM = 30.0
 TRACKER_SETS = ("head", "left_hand", "right_hand")
 REFERENCE_MARKERS = ("left_elbow_ref", "right_elbow_ref")
 VIDEO_FORMATS = ("mp4", "png")
+#: Accepted video rates (frames per second), marker rates (Hz) and image sides (px).
+FPS_RANGE: tuple[float, float] = (1.0, 1000.0)
+MARKER_RATE_RANGE_HZ: tuple[float, float] = (1.0, 2000.0)
+IMAGE_SIDE_RANGE_PX: tuple[int, int] = (32, 8192)
 
 
 @dataclass(frozen=True)
@@ -93,18 +99,19 @@ class SynthOptions:
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.start_s) and self.start_s >= 0):
-            raise ShapeError(f"--start-s: expected a time >= 0 s, found {self.start_s}")
+            raise ConfigError(f"--start-s: expected a time >= 0 s, found {self.start_s}")
         if self.seconds is not None and not (np.isfinite(self.seconds) and self.seconds > 0):
-            raise ShapeError(f"--seconds: expected a positive duration, found {self.seconds}")
-        if not (1.0 <= self.fps <= 1000.0):
-            raise ShapeError(f"--fps: expected 1-1000 frames per second, found {self.fps}")
-        if not (1.0 <= self.marker_rate_hz <= 2000.0):
-            raise ShapeError(f"--marker-rate: expected 1-2000 Hz, found {self.marker_rate_hz}")
+            raise ConfigError(f"--seconds: expected a positive duration, found {self.seconds}")
+        if not (FPS_RANGE[0] <= self.fps <= FPS_RANGE[1]):
+            raise ConfigError(f"--fps: expected 1-1000 frames per second, found {self.fps}")
+        if not (MARKER_RATE_RANGE_HZ[0] <= self.marker_rate_hz <= MARKER_RATE_RANGE_HZ[1]):
+            raise ConfigError(f"--marker-rate: expected 1-2000 Hz, found {self.marker_rate_hz}")
         w, h = self.image_size
-        if not (32 <= w <= 8192 and 32 <= h <= 8192):
-            raise ShapeError(f"--size: expected WxH between 32 and 8192 px, found {w}x{h}")
+        lo, hi = IMAGE_SIDE_RANGE_PX
+        if not (lo <= w <= hi and lo <= h <= hi):
+            raise ConfigError(f"--size: expected WxH between 32 and 8192 px, found {w}x{h}")
         if self.video_format not in VIDEO_FORMATS:
-            raise ShapeError(
+            raise ConfigError(
                 f"video format: expected one of {', '.join(VIDEO_FORMATS)}, "
                 f"found {self.video_format!r}"
             )
@@ -180,12 +187,17 @@ def keep_cameras_away(
     return out, moved
 
 
-def load_motion_source(spec: str, asf: str | None = None) -> Motion:
-    """A motion from a file path (BVH, AMC) or ``builtin:NAME``."""
-    if spec.startswith(BUILTIN_PREFIX):
-        from mocapkit.synth.builtin_motions import builtin_motion
+def load_motion_source(spec: str, asf: str | None = None, duration_s: float = 0.0) -> Motion:
+    """A motion from a file path (BVH, AMC) or ``builtin:NAME``.
 
-        return builtin_motion(spec[len(BUILTIN_PREFIX) :])
+    A built-in motion lasts 20 s, or ``duration_s`` where that is longer (a file's
+    motion lasts as long as the file).
+    """
+    if spec.startswith(BUILTIN_PREFIX):
+        from mocapkit.synth.builtin_motions import DEFAULT_DURATION_S, builtin_motion
+
+        length = max(DEFAULT_DURATION_S, float(duration_s))
+        return builtin_motion(spec[len(BUILTIN_PREFIX) :], duration_s=length)
     from mocapkit.io.motion_files import read_motion
 
     return read_motion(spec, asf=asf)
@@ -200,7 +212,8 @@ def scale_motion(motion: Motion, height_mm: float) -> Motion:
     return Motion.from_q(skel, motion.time_s, q, f"{motion.source} scaled to {height_mm:.0f} mm")
 
 
-def _prepare_out(out: Path, overwrite: bool) -> None:
+def _check_out(out: Path, overwrite: bool) -> None:
+    """Refuse an output that is a file, or a non-empty folder unless it is a session to replace."""
     if out.exists() and not out.is_dir():
         raise SessionError(f"{out}: output exists and is not a folder")
     if out.is_dir() and any(out.iterdir()):
@@ -210,12 +223,6 @@ def _prepare_out(out: Path, overwrite: bool) -> None:
             )
         if not (out / "session.json").is_file():
             raise SessionError(f"{out}: refusing to overwrite a folder that holds no session.json")
-        for sub in ("video", "keypoints"):
-            if (out / sub).is_dir():
-                shutil.rmtree(out / sub)
-        for f in ("truth.npz", "markers.csv", "markers.c3d", "cameras.json"):
-            (out / f).unlink(missing_ok=True)
-    out.mkdir(parents=True, exist_ok=True)
 
 
 class _VideoOut:
@@ -280,6 +287,11 @@ def synthesize_session(
 ) -> SynthSummary:
     """Render a synthetic session folder from a motion file or a built-in motion.
 
+    The session is rendered into a temporary folder beside ``out_dir`` and swapped in
+    when complete (`mocapkit.io.atomic.atomic_folder`): an interrupted run leaves no
+    session that looks complete, and with ``overwrite`` the old session stays whole
+    until the new one is.
+
     Parameters
     ----------
     motion_spec : str
@@ -292,15 +304,25 @@ def synthesize_session(
     -------
     SynthSummary
     """
+    final = Path(out_dir)
+    _check_out(final, options.overwrite)
+    remove_stale_temporaries(final.parent, final.name)
+    with atomic_folder(final) as tmp:
+        summary = _render_session(motion_spec, tmp, final.name, options)
+    return replace(summary, out_dir=final)
+
+
+def _render_session(motion_spec: str, out: Path, label: str, options: SynthOptions) -> SynthSummary:
+    """`synthesize_session` into the (temporary) folder ``out``; ``label`` names it."""
     t_start = time.perf_counter()
     opts = options
-    out = Path(out_dir)
     root_rng = np.random.SeedSequence(int(opts.seed))
     seeds = root_rng.spawn(6)
     rng_look, rng_room, rng_light, rng_time, rng_markers, rng_noise = (
         np.random.default_rng(s) for s in seeds
     )
-    motion = load_motion_source(motion_spec, opts.asf)
+    needed_s = opts.start_s + (opts.seconds if opts.seconds is not None else 0.0)
+    motion = load_motion_source(motion_spec, opts.asf, duration_s=needed_s)
     notes: list[str] = []
     if opts.height_mm is not None:
         motion = scale_motion(motion, opts.height_mm)
@@ -313,7 +335,7 @@ def synthesize_session(
         raise ShapeError(f"{motion.source}: expected at least 2 frames, found {t_m.shape[0]}")
     clip_end = float(t_m[-1])
     if opts.start_s >= clip_end:
-        raise ShapeError(
+        raise ConfigError(
             f"--start-s {opts.start_s}: the clip {motion.source} lasts {clip_end:.3f} s"
         )
     end = clip_end if opts.seconds is None else opts.start_s + opts.seconds
@@ -358,7 +380,7 @@ def synthesize_session(
     )
     t_video = np.maximum.accumulate(t_video)
     if np.any(np.diff(t_video) <= 0):
-        raise ShapeError("video time stamps collapsed; increase --seconds or lower the jitter")
+        raise ConfigError("video time stamps collapsed; increase --seconds or lower the jitter")
     dt_m = 1.0 / opts.marker_rate_hz
     # the marker system runs independently of the camera and is already streaming when
     # the first video frame is taken: its first sample lies before t = 0 (by 0.05-0.75 of
@@ -375,9 +397,8 @@ def synthesize_session(
     )
 
     # -------------------------------------------------------- static data
-    _prepare_out(out, opts.overwrite)
     from mocapkit.io.cameras import write_cameras
-    from mocapkit.io.markers import write_markers_csv
+    from mocapkit.io.marker_csv import write_markers_csv
 
     write_cameras(out / "cameras.json", cameras)
     joints_local = joints_all[i0:i1] + shift
@@ -458,7 +479,7 @@ def synthesize_session(
         _VideoOut(vdir, c.name, opts.video_format, opts.fps, opts.image_size) for c in cameras
     ]
     try:
-        with Progress(n_video, f"synth {out.name}") as progress:
+        with Progress(n_video, f"synth {label}") as progress:
             for k in range(n_video):
                 for r, bg, light, w in zip(renderers, backgrounds, lights, writers):
                     canvas = bg.copy()

@@ -41,7 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mocapkit.errors import ShapeError
+from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.ik.sdls import SDLSSolver
 from mocapkit.skeleton.kinematics import center_of_mass, forward_kinematics
 from mocapkit.skeleton.limbs import SIDES, foot_joints, has_limb, spine_dofs
@@ -82,23 +82,23 @@ class BalanceConfig:
 
     def __post_init__(self) -> None:
         if self.mode not in _BALANCE_MODES:
-            raise ShapeError(
+            raise ConfigError(
                 f"BalanceConfig.mode: expected one of {_BALANCE_MODES}, found {self.mode!r}"
             )
         if not 0.0 <= self.margin_fraction < 0.5:
-            raise ShapeError(
+            raise ConfigError(
                 f"BalanceConfig.margin_fraction: expected [0, 0.5), found {self.margin_fraction}"
             )
         if self.bisection_steps < 1:
-            raise ShapeError(
+            raise ConfigError(
                 f"BalanceConfig.bisection_steps: expected >= 1, found {self.bisection_steps}"
             )
         if self.search not in ("secant", "bisect"):
-            raise ShapeError(
+            raise ConfigError(
                 f"BalanceConfig.search: expected 'secant' or 'bisect', found {self.search!r}"
             )
         if not self.cog_tol_mm > 0 or self.max_evaluations < 2:
-            raise ShapeError(
+            raise ConfigError(
                 "BalanceConfig: expected cog_tol_mm > 0 and max_evaluations >= 2, found "
                 f"{self.cog_tol_mm}, {self.max_evaluations}"
             )
@@ -441,7 +441,7 @@ def balance_pose(
     slope = slope_mm_per_rad
     if cfg.mode == "proportional":
         if model is None:
-            raise ShapeError("balance_pose: mode 'proportional' needs a calibrated BalanceModel")
+            raise ConfigError("balance_pose: mode 'proportional' needs a calibrated BalanceModel")
         taus = model.taus(dh)
     else:
         support = np.asarray(support_mm, dtype=float)
