@@ -121,7 +121,7 @@ def test_secant_search_as_close_as_bisection_with_fewer_solves(setup):
     solver = _Counting(sk)
     q0 = solver.secondary.omega
     support = support_points(sk, q0)
-    secant, bisect = BalanceConfig(mode="solve"), BalanceConfig(mode="solve", search="bisect")
+    secant, bisect = BalanceConfig(mode="solve", search="secant"), BalanceConfig(mode="solve")
     slope = None
     for q, t in squat(solver, np.linspace(-100.0, -300.0, 5)):
         cog, back, front = cog_offset_mm(sk, q, support)

@@ -192,7 +192,7 @@ class HybridConfig:
     init_iterations: int = 3
     plant_feet: bool = True
     smoothing_polish_tol_mm: float = 5.0
-    smoothing_polish_stall_iterations: int = 4
+    smoothing_polish_stall_iterations: int = 0
     replant_mm: float = 8.0
     member_offsets_mm: Mapping[str, Mapping[str, Sequence[float]]] = field(default_factory=dict)
     start_upright: bool = True
