@@ -332,11 +332,6 @@ def test_imports_point_downward() -> None:
     )
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="preset joint names still used in ik/sdls.py, ik/secondary.py, tracking/hybrid.py, "
-    "tracking/balance.py and pipelines/bench.py (bb-ik and bb-runner remove them)",
-)
 def test_no_preset_joint_names_outside_skeleton() -> None:
     hits = []
     for module, path in sorted(module_files(PACKAGE_DIR).items()):

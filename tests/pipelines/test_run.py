@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from mocapkit.errors import ShapeError
-from mocapkit.io.motion import load_motion_npz
+from mocapkit.io.motion_npz import load_motion_npz
 from mocapkit.pipelines.run import FIT_FILE, read_fit_csv, run_tracker
 from mocapkit.skeleton import CANONICAL_JOINTS, canonical_positions, load_preset
 from mocapkit.timing import StageTimer
