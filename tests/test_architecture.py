@@ -13,7 +13,6 @@ import re
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 
-
 import mocapkit
 
 PACKAGE_DIR = Path(mocapkit.__file__).resolve().parent
