@@ -43,6 +43,9 @@ def register(subparsers: Any) -> None:
         "left_hand, right_hand) or 'none' (default: all)",
     )
     h.set_defaults(func=run)
+    from mocapkit.cli.accuracy_mono import add_mono_accuracy_parser
+
+    add_mono_accuracy_parser(methods)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -67,6 +67,9 @@ def register(subparsers: Any) -> None:
         help="with --markers: do not hold the feet at their first positions",
     )
     hyb.set_defaults(func=_run_hybrid)
+    from mocapkit.cli.track_mono import add_mono_parser
+
+    add_mono_parser(methods)
 
 
 def _run_hybrid(args: argparse.Namespace) -> int:

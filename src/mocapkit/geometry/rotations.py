@@ -209,3 +209,36 @@ def left_jacobian_so3_nb(r: FloatArray, out: FloatArray) -> None:
     out[2, 0] = -c1 * k02 + c2 * x * z
     out[1, 2] = c1 * k12 + c2 * y * z
     out[2, 1] = -c1 * k12 + c2 * y * z
+
+
+@numba.njit(cache=True, fastmath=False)
+def matrix_rotvec_nb(m: FloatArray, out: FloatArray) -> None:
+    """Write the rotation vector (angle in [0, pi]) of a rotation matrix ``m`` (3, 3) into ``out``.
+
+    Through the unit quaternion by Shepperd's choice of the largest diagonal term, so it
+    is well conditioned near pi as well as near 0 (the inverse of `rotvec_matrix_nb`).
+    """
+    tr = m[0, 0] + m[1, 1] + m[2, 2]
+    if tr >= m[0, 0] and tr >= m[1, 1] and tr >= m[2, 2]:
+        w = 0.5 * np.sqrt(1.0 + tr)
+        f = 0.25 / w
+        x, y, z = (m[2, 1] - m[1, 2]) * f, (m[0, 2] - m[2, 0]) * f, (m[1, 0] - m[0, 1]) * f
+    elif m[0, 0] >= m[1, 1] and m[0, 0] >= m[2, 2]:
+        x = 0.5 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
+        f = 0.25 / x
+        w, y, z = (m[2, 1] - m[1, 2]) * f, (m[0, 1] + m[1, 0]) * f, (m[0, 2] + m[2, 0]) * f
+    elif m[1, 1] >= m[2, 2]:
+        y = 0.5 * np.sqrt(1.0 - m[0, 0] + m[1, 1] - m[2, 2])
+        f = 0.25 / y
+        w, x, z = (m[0, 2] - m[2, 0]) * f, (m[0, 1] + m[1, 0]) * f, (m[1, 2] + m[2, 1]) * f
+    else:
+        z = 0.5 * np.sqrt(1.0 - m[0, 0] - m[1, 1] + m[2, 2])
+        f = 0.25 / z
+        w, x, y = (m[1, 0] - m[0, 1]) * f, (m[0, 2] + m[2, 0]) * f, (m[1, 2] + m[2, 1]) * f
+    if w < 0.0:
+        w, x, y, z = -w, -x, -y, -z
+    s = np.sqrt(x * x + y * y + z * z)
+    scale = 2.0 * np.arctan2(s, w) / s if s > 1e-12 else 2.0 / w
+    out[0] = x * scale
+    out[1] = y * scale
+    out[2] = z * scale

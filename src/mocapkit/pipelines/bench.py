@@ -20,6 +20,7 @@ import numpy as np
 
 from mocapkit.errors import ConfigError, unknown_name
 from mocapkit.io.atomic import atomic_write
+from mocapkit.pipelines.mono_bench import bench_mono
 from mocapkit.skeleton import forward_kinematics, load_preset
 from mocapkit.skeleton.kinematics import points_and_jacobian
 from mocapkit.skeleton.limbs import arm, head_joint, leg
@@ -258,6 +259,7 @@ def bench_hybrid(
 BENCHMARKS: dict[str, Callable[..., dict[str, Any]]] = {
     "kinematics": bench_kinematics,
     "hybrid": bench_hybrid,
+    "mono": bench_mono,
 }
 
 

@@ -1,0 +1,71 @@
+"""``mocapkit accuracy mono``: the monocular tracker on synthetic mono sessions.
+
+Registered by `mocapkit.cli.accuracy` (no ``register`` here: not a top-level command).
+"""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+import numpy as np
+
+
+def add_mono_accuracy_parser(methods: Any) -> None:
+    """Add ``accuracy mono`` to the ``accuracy`` methods."""
+    m = methods.add_parser(
+        "mono",
+        help="upper-body error (Procrustes), flip share and pruning of the mono tracker",
+        description="Render a mono session from each clip, add noise to its true 2-D "
+        "keypoints, track (from the keypoints or from OpenPose JSON with a bystander) "
+        "and report the upper-body error after similarity alignment, the share of "
+        "link-frames with the right flip and the poses pruned per frame.",
+    )
+    m.add_argument("--mocap", help="folder of motion clips (default: ../shared/data/mocap)")
+    m.add_argument("--clips", nargs="*", help="clip file names (default: the standard set)")
+    m.add_argument("--work", default="accuracy-output/mono", help="sessions and results")
+    m.add_argument("--seed", type=int, default=0)
+    m.add_argument("--noise-px", type=float, default=2.0, help="2-D noise sigma (px)")
+    m.add_argument("--openpose", action="store_true", help="track from OpenPose JSON")
+    m.add_argument("--lag", type=int, default=None, help="online fixed lag (frames)")
+    m.add_argument(
+        "--cost", choices=("acceleration", "joint_acceleration", "rotation"),
+        default="acceleration",
+    )  # fmt: skip
+    m.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    m.set_defaults(func=_run)
+
+
+def _run(args: argparse.Namespace) -> int:
+    from mocapkit.errors import SessionError
+    from mocapkit.pipelines.demo import find_shared_data
+    from mocapkit.pipelines.mono_accuracy import format_rows, mono_accuracy, to_json
+    from mocapkit.tracking.mono.tracker import MonoConfig
+
+    mocap = args.mocap
+    if mocap is None:
+        data = find_shared_data()
+        if data is None:
+            raise SessionError("no --mocap folder given and ../shared/data/mocap not found")
+        mocap = data / "mocap"
+    if not args.json:
+        print(format_rows([]))
+    rows = mono_accuracy(
+        mocap,
+        args.work,
+        args.clips,
+        seed=args.seed,
+        noise_px=args.noise_px,
+        openpose=args.openpose,
+        config=MonoConfig(lag=args.lag, cost=args.cost),
+        say=(lambda _line: None) if args.json else print,
+    )
+    if args.json:
+        print(to_json(rows))
+    else:
+        print(
+            f"mean: Procrustes upper-body error {np.mean([r.pa_mpjpe_mm for r in rows]):.1f} mm, "
+            f"flips right {100 * np.mean([r.flips_right for r in rows]):.1f} %, pruned "
+            f"{100 * np.mean([r.pruned_share_mean for r in rows]):.1f} % of the poses per frame"
+        )
+    return 0

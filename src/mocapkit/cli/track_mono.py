@@ -1,0 +1,89 @@
+"""``mocapkit track mono``: the monocular markerless tracker (Mamania et al. 2004).
+
+Registered by `mocapkit.cli.track` (this module adds a method to ``track``; it has no
+``register`` of its own, so it is no top-level command).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from typing import Any
+
+
+def add_mono_parser(methods: Any) -> None:
+    """Add ``track mono`` to the ``track`` methods."""
+    p = methods.add_parser(
+        "mono",
+        help="one video's 2-D keypoints, no markers (Mamania et al. 2004)",
+        description="Track a session from one camera's 2-D keypoints (keypoints/<camera>.csv, "
+        "or --keypoints: a CSV file or a folder of OpenPose JSON, BODY_25 or COCO-18): "
+        "flips of every link, pruned by joint limits and collisions, chosen by Viterbi. "
+        "Writes motion.npz, joints.csv, motion.bvh and fit.csv to --out.",
+    )
+    p.add_argument("session", help="session folder")
+    p.add_argument("--out", required=True, help="result folder")
+    p.add_argument("--camera", help="camera name (default: the first with keypoints)")
+    p.add_argument("--keypoints", help="keypoints CSV file or OpenPose JSON folder")
+    p.add_argument(
+        "--camera-model",
+        choices=("perspective", "weak", "orthographic"),
+        default="perspective",
+        help="perspective (default), weak perspective, or the paper's orthography",
+    )
+    p.add_argument(
+        "--cost",
+        choices=("acceleration", "joint_acceleration", "rotation"),
+        default="acceleration",
+        help="edge weight: angular acceleration over pair states (eq. 3, corrected; "
+        "default), joint acceleration (eq. 4-5, corrected), or first-order rotation",
+    )
+    p.add_argument(
+        "--lag",
+        type=int,
+        default=None,
+        metavar="FRAMES",
+        help="online fixed-lag Viterbi with this lag (latency: lag + 5 smoother frames); "
+        "default: exact offline",
+    )
+    p.add_argument(
+        "--skin",
+        action="store_true",
+        help="read the 2-D joints off the video by skin blobs (paper §3.3; needs a waist "
+        "cue such as the paper's golden belt for the trunk)",
+    )
+    p.add_argument("--legs", action="store_true", help="track the legs too")
+    p.add_argument(
+        "--session-lengths",
+        action="store_true",
+        help="take link lengths from session.json instead of the video",
+    )
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    p.set_defaults(func=_run_mono)
+
+
+def _run_mono(args: argparse.Namespace) -> int:
+    from mocapkit.pipelines.mono import track_mono
+    from mocapkit.tracking.mono.tracker import MonoConfig
+
+    cfg = MonoConfig(legs=args.legs, camera_model=args.camera_model, cost=args.cost, lag=args.lag)
+    run = track_mono(
+        args.session,
+        args.out,
+        camera=args.camera,
+        keypoints=args.keypoints,
+        config=cfg,
+        use_session_lengths=args.session_lengths,
+        skin=args.skin,
+    )
+    summary = run.summary()
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        print(
+            f"tracked {run.motion.n_frames} frames -> {args.out}: "
+            f"{summary['survivors_mean']:.1f} of {summary['candidates_mean']:.1f} poses survive "
+            f"pruning on average ({100 * summary['pruned_share_mean']:.0f} % pruned), "
+            f"2-D residual {summary['residual_px_mean']:.2f} px"
+        )
+    return 0

@@ -1,0 +1,369 @@
+"""OpenPose JSON keypoint folders (BODY_25, COCO-18) read as canonical 2-D keypoints.
+
+OpenPose (``--write_json``), Pose2Sim, Sports2D and EasyMocap write one JSON file per
+frame::
+
+    {"version": 1.3, "people": [{"person_id": [-1],
+                                 "pose_keypoints_2d": [x0, y0, c0, x1, y1, c1, ...]}, ...]}
+
+with 25 (BODY_25) or 18 (COCO-18) keypoints per person, pixel positions and a confidence
+in [0, 1]. Files are taken in name order (OpenPose pads the frame number with zeros).
+A point whose confidence is below ``min_confidence`` (or written as 0, 0, 0) is missing.
+
+Mapping onto canonical joints (`CANONICAL_JOINTS`):
+
+- shoulders, elbows, wrists, hips, knees, ankles: the detector's points of the same name;
+- head: our head point is the centre of the head, not the nose: the midpoint of the two
+  ears; with one ear or none, the mean of the ears and eyes seen (biased towards the face);
+  missing when neither ears nor eyes are seen;
+- neck and pelvis: the detector's "Neck" is the midpoint of the shoulders and "MidHip" that
+  of the hips; ours are the neck base and the pelvis centre, which lie on the line from the
+  hip midpoint M_h to the shoulder midpoint M_s: neck = M_h + 0.81 (M_s - M_h),
+  pelvis = M_h + 0.25 (M_s - M_h) (medians over the CMU clips the library reads: 0.80-0.85
+  and 0.17-0.27); missing unless both shoulders and both hips are seen.
+
+Several people: one person is followed through the video (`follow_person`). In the first
+frame with anyone seen, the person with the largest bounding box of confident points
+(nearest the camera, usually the subject) is chosen, or the one nearest a given image
+point. In each later frame, the person whose points lie closest (mean distance over the
+joints seen in both) to the followed person's last seen points is taken, if that distance
+is within ``max_jump`` times the followed person's size (bounding-box diagonal) times the
+frames since they were last seen; otherwise the frame has no one (NaN) and the last seen
+points are kept for the next frame.
+Everyone else is ignored.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import warnings
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mocapkit.errors import FormatError, SessionError, ShapeError
+from mocapkit.io.session_csv import Keypoints
+
+FloatArray = NDArray[np.float64]
+
+BODY_25: tuple[str, ...] = (
+    "Nose", "Neck", "RShoulder", "RElbow", "RWrist", "LShoulder", "LElbow", "LWrist",
+    "MidHip", "RHip", "RKnee", "RAnkle", "LHip", "LKnee", "LAnkle", "REye", "LEye", "REar",
+    "LEar", "LBigToe", "LSmallToe", "LHeel", "RBigToe", "RSmallToe", "RHeel",
+)  # fmt: skip
+COCO_18: tuple[str, ...] = (
+    "Nose", "Neck", "RShoulder", "RElbow", "RWrist", "LShoulder", "LElbow", "LWrist",
+    "RHip", "RKnee", "RAnkle", "LHip", "LKnee", "LAnkle", "REye", "LEye", "REar", "LEar",
+)  # fmt: skip
+LAYOUTS: dict[int, tuple[str, tuple[str, ...]]] = {
+    25: ("BODY_25", BODY_25),
+    18: ("COCO-18", COCO_18),
+}
+
+#: Canonical joints taken directly from a detector point of the same body part.
+DIRECT: dict[str, str] = {
+    "left_shoulder": "LShoulder",
+    "left_elbow": "LElbow",
+    "left_wrist": "LWrist",
+    "right_shoulder": "RShoulder",
+    "right_elbow": "RElbow",
+    "right_wrist": "RWrist",
+    "left_hip": "LHip",
+    "left_knee": "LKnee",
+    "left_ankle": "LAnkle",
+    "right_hip": "RHip",
+    "right_knee": "RKnee",
+    "right_ankle": "RAnkle",
+}
+#: Where the canonical neck and pelvis sit on the line from the hip to the shoulder midpoint.
+NECK_FRACTION = 0.81
+PELVIS_FRACTION = 0.25
+
+#: Canonical joints the mapping provides, in canonical order.
+MAPPED_JOINTS: tuple[str, ...] = (
+    "head", "neck", "pelvis", "left_shoulder", "left_elbow", "left_wrist", "right_shoulder",
+    "right_elbow", "right_wrist", "left_hip", "left_knee", "left_ankle", "right_hip",
+    "right_knee", "right_ankle",
+)  # fmt: skip
+
+
+def openpose_files(folder: str | os.PathLike[str]) -> list[Path]:
+    """The JSON files of a keypoint folder, in name (= frame) order."""
+    p = Path(folder)
+    if not p.is_dir():
+        raise SessionError(f"{p}: OpenPose keypoint folder not found")
+    files = sorted(f for f in p.iterdir() if f.suffix.lower() == ".json")
+    if not files:
+        raise SessionError(f"{p}: expected OpenPose JSON files (one per frame), found none")
+    return files
+
+
+def read_openpose_frame(path: str | os.PathLike[str]) -> tuple[str, FloatArray]:
+    """The people of one OpenPose JSON file.
+
+    Returns
+    -------
+    layout : str
+        ``"BODY_25"`` or ``"COCO-18"`` (``""`` when the frame holds nobody).
+    people : (P, J, 3) float
+        x_px, y_px, confidence per keypoint.
+    """
+    p = Path(path)
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise FormatError(f"{p}: cannot read ({exc})") from None
+    except json.JSONDecodeError as exc:
+        raise FormatError(f"{p}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("people"), list):
+        raise FormatError(f"{p}: expected an object with a 'people' list, found {type(doc)}")
+    rows: list[FloatArray] = []
+    layout = ""
+    for i, person in enumerate(doc["people"]):
+        flat = person.get("pose_keypoints_2d") if isinstance(person, dict) else None
+        if not isinstance(flat, list) or not all(isinstance(v, int | float) for v in flat):
+            raise FormatError(
+                f"{p}: people[{i}].pose_keypoints_2d: expected a list of numbers, found "
+                f"{type(flat).__name__}"
+            )
+        n = len(flat) // 3
+        if len(flat) % 3 or n not in LAYOUTS:
+            raise FormatError(
+                f"{p}: people[{i}].pose_keypoints_2d: expected 75 (BODY_25) or 54 (COCO-18) "
+                f"numbers, found {len(flat)}"
+            )
+        name = LAYOUTS[n][0]
+        if layout and name != layout:
+            raise FormatError(f"{p}: people[{i}]: {name} keypoints after {layout} ones")
+        layout = name
+        rows.append(np.asarray(flat, dtype=float).reshape(n, 3))
+    n_kp = len(LAYOUTS_BY_NAME[layout]) if layout else 0
+    return layout, np.stack(rows) if rows else np.zeros((0, n_kp, 3))
+
+
+LAYOUTS_BY_NAME: dict[str, tuple[str, ...]] = {name: kps for name, kps in LAYOUTS.values()}
+
+
+def to_canonical(people: ArrayLike, layout: str, min_confidence: float = 0.3) -> FloatArray:
+    """Map detector keypoints (P, J, 3) onto canonical joints (P, len(MAPPED_JOINTS), 2).
+
+    See the module docstring for the mapping; NaN where a joint is missing.
+    """
+    if layout not in LAYOUTS_BY_NAME:
+        raise FormatError(
+            f"OpenPose layout: expected one of {sorted(LAYOUTS_BY_NAME)}, found {layout!r}"
+        )
+    names = LAYOUTS_BY_NAME[layout]
+    pp = np.asarray(people, dtype=float)
+    if pp.ndim != 3 or pp.shape[1:] != (len(names), 3):
+        raise ShapeError(f"to_canonical: expected ({len(names)}, 3) per person, found {pp.shape}")
+    xy = pp[..., :2].copy()
+    bad = (pp[..., 2] < min_confidence) | np.all(pp == 0.0, axis=-1)
+    xy[bad] = np.nan
+
+    def kp(name: str) -> FloatArray:
+        return xy[:, names.index(name)]
+
+    out = np.full((pp.shape[0], len(MAPPED_JOINTS), 2), np.nan)
+    col = {n: i for i, n in enumerate(MAPPED_JOINTS)}
+    for joint, det in DIRECT.items():
+        out[:, col[joint]] = kp(det)
+    ears = np.stack([kp("LEar"), kp("REar")], axis=1)
+    face = np.stack([kp("LEar"), kp("REar"), kp("LEye"), kp("REye")], axis=1)
+    both_ears: NDArray[np.bool_] = np.asarray(np.isfinite(ears).all(axis=(1, 2)), dtype=bool)
+    with np.errstate(invalid="ignore"), _quiet_nanmean():
+        head = np.where(both_ears[:, None], ears.mean(axis=1), np.nanmean(face, axis=1))
+    out[:, col["head"]] = head
+    m_s = 0.5 * (kp("LShoulder") + kp("RShoulder"))
+    m_h = 0.5 * (kp("LHip") + kp("RHip"))
+    out[:, col["neck"]] = m_h + NECK_FRACTION * (m_s - m_h)
+    out[:, col["pelvis"]] = m_h + PELVIS_FRACTION * (m_s - m_h)
+    return out
+
+
+@contextmanager
+def _quiet_nanmean() -> Iterator[None]:
+    """Silence numpy's all-NaN slice warning (an unseen face is a normal case)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", category=RuntimeWarning)
+        yield
+
+
+def _size(points: FloatArray) -> float:
+    ok = np.isfinite(points).all(axis=-1)
+    if ok.sum() < 2:
+        return 0.0
+    span = points[ok].max(axis=0) - points[ok].min(axis=0)
+    return float(np.hypot(span[0], span[1]))
+
+
+def follow_person(
+    frames: Sequence[FloatArray],
+    max_jump: float = 0.2,
+    start_px: ArrayLike | None = None,
+) -> FloatArray:
+    """Follow one person through per-frame candidates; see the module docstring.
+
+    Parameters
+    ----------
+    frames : sequence of (P_t, K, 2) float
+        Canonical keypoints of every person in each frame (NaN where missing).
+    max_jump : float
+        Largest accepted mean displacement per frame, in units of the person's size.
+    start_px : (2,) float, optional
+        Choose at the start the person whose points' mean is nearest this image point
+        instead of the largest one.
+
+    Returns
+    -------
+    (T, K, 2) float
+        The followed person's keypoints; NaN in frames where they are not found.
+    """
+    if not frames:
+        return np.zeros((0, 0, 2))
+    k = max(f.shape[1] for f in frames if f.ndim == 3) if frames else 0
+    out = np.full((len(frames), k, 2), np.nan)
+    last: FloatArray | None = None
+    last_size = 0.0
+    last_t = 0
+    for t, cands in enumerate(frames):
+        if cands.shape[0] == 0:
+            continue
+        if last is None:
+            if start_px is not None:
+                centre = np.asarray(start_px, dtype=float)
+                with _quiet_nanmean():
+                    d = [np.linalg.norm(np.nanmean(c, axis=0) - centre) for c in cands]
+                pick = int(np.nanargmin(np.where(np.isfinite(d), d, np.inf)))
+            else:
+                pick = int(np.argmax([_size(c) for c in cands]))
+            if _size(cands[pick]) == 0.0:
+                continue
+        else:
+            seen_last: NDArray[np.bool_] = np.asarray(np.isfinite(last).all(axis=-1), dtype=bool)
+            both = np.isfinite(cands).all(axis=-1) & seen_last[None, :]
+            dist = np.full(cands.shape[0], np.inf)
+            for i in range(cands.shape[0]):
+                if both[i].any():
+                    dist[i] = np.linalg.norm(cands[i][both[i]] - last[both[i]], axis=-1).mean()
+            pick = int(np.argmin(dist))
+            if not dist[pick] <= max_jump * last_size * (t - last_t):
+                continue
+        out[t] = cands[pick]
+        seen = np.isfinite(cands[pick]).all(axis=-1)
+        last = out[t].copy() if last is None else np.where(seen[:, None], out[t], last)
+        last_size = max(_size(cands[pick]), 1e-9)
+        last_t = t
+    return out
+
+
+def read_openpose_folder(
+    folder: str | os.PathLike[str],
+    time_s: ArrayLike,
+    min_confidence: float = 0.3,
+    max_jump: float = 0.2,
+    start_px: ArrayLike | None = None,
+) -> Keypoints:
+    """Canonical keypoints of the followed person in an OpenPose JSON folder.
+
+    Parameters
+    ----------
+    folder : path-like
+        One JSON file per frame.
+    time_s : (T,) float
+        Frame times (the video's); T must equal the number of files.
+    min_confidence : float
+        Points below this confidence are missing.
+    max_jump, start_px
+        See `follow_person`.
+    """
+    files = openpose_files(folder)
+    t = np.asarray(time_s, dtype=float)
+    if t.shape != (len(files),):
+        raise SessionError(
+            f"{folder}: expected one JSON file per video frame ({t.shape[0]} frames), found "
+            f"{len(files)} files"
+        )
+    frames: list[FloatArray] = []
+    layout_seen = ""
+    for f in files:
+        layout, people = read_openpose_frame(f)
+        if layout and layout_seen and layout != layout_seen:
+            raise FormatError(f"{f}: {layout} keypoints in a folder of {layout_seen} files")
+        layout_seen = layout_seen or layout
+        frames.append(
+            to_canonical(people, layout, min_confidence)
+            if layout
+            else np.zeros((0, len(MAPPED_JOINTS), 2))
+        )
+    px = follow_person(frames, max_jump=max_jump, start_px=start_px)
+    return Keypoints(t, MAPPED_JOINTS, px, f"{folder} (OpenPose {layout_seen or 'empty'})")
+
+
+def write_openpose_frame(
+    path: str | os.PathLike[str], people: Sequence[ArrayLike], layout: str = "BODY_25"
+) -> None:
+    """Write one frame's people (each (J, 3): x, y, confidence) as OpenPose JSON (atomic)."""
+    from mocapkit.io.atomic import atomic_write
+
+    if layout not in LAYOUTS_BY_NAME:
+        raise FormatError(f"OpenPose layout: expected BODY_25 or COCO-18, found {layout!r}")
+    n = len(LAYOUTS_BY_NAME[layout])
+    doc_people = []
+    for i, person in enumerate(people):
+        a = np.asarray(person, dtype=float)
+        if a.shape != (n, 3):
+            raise ShapeError(
+                f"write_openpose_frame: person {i}: expected ({n}, 3), found {a.shape}"
+            )
+        a = np.where(np.isfinite(a), a, 0.0)
+        doc_people.append({"person_id": [-1], "pose_keypoints_2d": [float(v) for v in a.ravel()]})
+    with atomic_write(path, "w") as fh:
+        json.dump({"version": 1.3, "people": doc_people}, fh)
+
+
+def openpose_from_canonical(
+    pixels: ArrayLike,
+    joint_names: Sequence[str],
+    layout: str = "BODY_25",
+    ear_offset_px: float = 8.0,
+) -> FloatArray:
+    """Detector-style keypoints (T, J, 3) made from canonical ones (T, K, 2), for tests.
+
+    The inverse of `to_canonical` where it can be: shoulders, elbows, wrists, hips, knees,
+    ankles copied; "Neck" and "MidHip" the shoulder and hip midpoints; the ears
+    ``ear_offset_px`` either side of the head point (so their midpoint is the head), eyes
+    and nose in front of it. The canonical neck and pelvis are not used (a detector has
+    none). Confidence 0.9 where seen, 0 where missing.
+    """
+    if layout not in LAYOUTS_BY_NAME:
+        raise FormatError(f"OpenPose layout: expected BODY_25 or COCO-18, found {layout!r}")
+    names = LAYOUTS_BY_NAME[layout]
+    px = np.asarray(pixels, dtype=float)
+    jn = list(joint_names)
+    if px.ndim != 3 or px.shape[1:] != (len(jn), 2):
+        raise ShapeError(f"openpose_from_canonical: expected (T, {len(jn)}, 2), found {px.shape}")
+
+    def can(name: str) -> FloatArray:
+        return px[:, jn.index(name)] if name in jn else np.full((px.shape[0], 2), np.nan)
+
+    out = np.full((px.shape[0], len(names), 2), np.nan)
+    for joint, det in DIRECT.items():
+        out[:, names.index(det)] = can(joint)
+    head = can("head")
+    off = np.array([ear_offset_px, 0.0])
+    out[:, names.index("LEar")] = head + off
+    out[:, names.index("REar")] = head - off
+    down = np.array([0.0, ear_offset_px])
+    out[:, names.index("LEye")] = head + 0.5 * off + 0.3 * down
+    out[:, names.index("REye")] = head - 0.5 * off + 0.3 * down
+    out[:, names.index("Nose")] = head + 0.6 * down
+    out[:, names.index("Neck")] = 0.5 * (can("left_shoulder") + can("right_shoulder"))
+    if "MidHip" in names:
+        out[:, names.index("MidHip")] = 0.5 * (can("left_hip") + can("right_hip"))
+    conf = np.where(np.isfinite(out).all(axis=-1), 0.9, 0.0)
+    return np.concatenate([np.where(np.isfinite(out), out, 0.0), conf[..., None]], axis=-1)

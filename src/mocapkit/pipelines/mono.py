@@ -1,0 +1,402 @@
+"""File runner of the monocular tracker: a session's 2-D keypoints (or OpenPose JSON) in,
+a result folder out (``motion.npz``, ``joints.csv``, ``motion.bvh``, ``fit.csv``).
+
+The runner reads the keypoints of one camera, estimates the link lengths from the whole
+2-D sequence (§4.1; or takes the session's measured lengths with ``session_lengths``),
+feeds `mocapkit.tracking.mono.tracker.MonoTracker` frame by frame, places the poses in
+the camera's world frame and writes the result. ``fit.csv`` holds per frame the 2-D
+residual (px), the candidates before pruning, the survivors, whether all were pruned and
+the neck's depth.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mocapkit.camera.pinhole import Camera
+from mocapkit.errors import ConfigError, SessionError
+from mocapkit.io.atomic import atomic_write
+from mocapkit.io.motion import Motion
+from mocapkit.io.motion_files import write_result_folder
+from mocapkit.io.session import Session, load_session
+from mocapkit.io.session_csv import Keypoints, read_keypoints_csv
+from mocapkit.progress import Progress
+from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
+from mocapkit.skeleton.presets import load_preset
+from mocapkit.skeleton.scaling import fit_segments
+from mocapkit.tracking.mono.lengths import estimate_link_lengths, pixels_per_mm
+from mocapkit.tracking.mono.pose_fit import fit_stick_pose
+from mocapkit.tracking.mono.smoother import smooth_keypoints
+from mocapkit.tracking.mono.stick import StickModel, stick_model
+from mocapkit.tracking.mono.tracker import MonoConfig, MonoFrame, MonoTracker
+
+FloatArray = NDArray[np.float64]
+
+FIT_FILE = "fit.csv"
+
+
+@dataclass
+class MonoRun:
+    """What `track_mono` produced.
+
+    Attributes
+    ----------
+    motion : Motion
+    frames : list of MonoFrame
+    lengths : (L,) float
+        Link lengths used (mm; px for the orthographic model).
+    model : StickModel
+    px_per_mm : float
+        Image scale used to turn orthographic px into mm (NaN for the other models).
+    """
+
+    motion: Motion
+    frames: list[MonoFrame]
+    lengths: FloatArray
+    model: StickModel
+    px_per_mm: float
+
+    def summary(self) -> dict[str, float]:
+        """Mean survivors, candidates, share pruned, residual (px) and frames with a pose."""
+        posed = [f for f in self.frames if f.code >= 0]
+        cand = np.array([f.n_candidates for f in posed], dtype=float)
+        surv = np.array([f.n_survivors for f in posed], dtype=float)
+        share = 1.0 - surv / np.maximum(cand, 1.0)
+        return {
+            "frames": float(len(self.frames)),
+            "posed_frames": float(len(posed)),
+            "candidates_mean": float(cand.mean()) if posed else float("nan"),
+            "survivors_mean": float(surv.mean()) if posed else float("nan"),
+            "pruned_share_mean": float(share.mean()) if posed else float("nan"),
+            "all_pruned_frames": float(sum(f.pruned_all for f in posed)),
+            "residual_px_mean": float(np.nanmean([f.residual_px for f in posed]))
+            if posed
+            else float("nan"),
+        }
+
+
+def load_keypoints(
+    session: Session, camera: str, keypoints: str | os.PathLike[str] | None
+) -> Keypoints:
+    """The 2-D keypoints of one camera: the session's, a CSV file, or an OpenPose folder.
+
+    An OpenPose folder takes the frame times of the camera's video (one JSON per frame).
+    """
+    if keypoints is None:
+        session.require(keypoints=True, cameras=[camera])
+        return session.keypoints[camera]
+    p = Path(keypoints)
+    if p.is_dir():
+        from mocapkit.io.openpose import read_openpose_folder
+
+        if camera in session.video_cameras:
+            times = session.video(camera).time_s
+        elif camera in session.keypoints:
+            times = session.keypoints[camera].time_s
+        else:
+            raise SessionError(
+                f"{session.path}: no frame times for camera {camera!r} (no video, no keypoints "
+                "CSV) to stamp the OpenPose frames with"
+            )
+        return read_openpose_folder(p, times)
+    return read_keypoints_csv(p)
+
+
+def skin_keypoints(session: Session, camera: str) -> Keypoints:
+    """2-D joints of the stick from the camera's video by skin blobs (paper §3.3).
+
+    `mocapkit.tracking.mono.skin_tracking.SkinTracker` on every frame; joints it cannot
+    read (no waist blob: no pelvis, no shoulders) are NaN.
+    """
+    from mocapkit.tracking.mono.skin_tracking import SKIN_JOINTS, SkinTracker
+
+    video = session.video(camera)
+    tracker = SkinTracker()
+    px = np.full((video.n_frames, len(SKIN_JOINTS), 2), np.nan)
+    stream = video.open()
+    try:
+        with Progress(video.n_frames, "skin blobs") as prog:
+            for k in range(video.n_frames):
+                stream.advance_to(k)
+                px[k] = tracker.update(stream.retrieve(k)).joints_px
+                prog.update()
+    finally:
+        stream.close()
+    return Keypoints(video.time_s, SKIN_JOINTS, px, f"{video.path} (skin blobs)")
+
+
+def stick_pixels(keypoints: Keypoints, model: StickModel) -> FloatArray:
+    """The stick's joints (T, K, 2) out of a keypoints table (refused when one is absent)."""
+    missing = [n for n in model.joint_names if n not in keypoints.joint_names]
+    if missing:
+        raise SessionError(
+            f"{keypoints.source}: keypoints lack joints {missing} that the mono tracker needs "
+            f"(found {list(keypoints.joint_names)})"
+        )
+    idx = [keypoints.joint_names.index(n) for n in model.joint_names]
+    return np.asarray(keypoints.pixels[:, idx], dtype=float)
+
+
+def _image_coordinates(pixels: FloatArray, camera: Camera | None, orthographic: bool) -> FloatArray:
+    if orthographic or camera is None:
+        return pixels
+    out = np.full_like(pixels, np.nan)
+    ok = np.isfinite(pixels).all(axis=-1)
+    out[ok] = camera.undistort_pixels(pixels[ok])
+    return out
+
+
+def video_lengths(
+    pixels: FloatArray,
+    model: StickModel,
+    camera: Camera | None,
+    config: MonoConfig,
+    dt_s: float,
+    height_mm: float | None,
+) -> tuple[FloatArray, float]:
+    """Link lengths from the video (§4.1) and the image scale.
+
+    Returns lengths in mm (px for the orthographic model) and, for the orthographic
+    model, px per mm (else NaN). The 2-D points are smoothed first, as the tracker sees
+    them. Calibrated models measure in undistorted normalised coordinates and reach mm
+    through the stature (``height_mm``, else `DEFAULT_HEIGHT_MM`).
+    """
+    ortho = config.camera_model == "orthographic" or camera is None
+    sm = smooth_keypoints(
+        pixels, dt_s, config.smooth_lag, config.noise_px, config.accel_px_s2, config.max_gap
+    )
+    xy = _image_coordinates(sm, camera, ortho)
+    proj = np.linalg.norm(xy[:, model.child] - xy[:, model.parent], axis=-1)
+    lengths, stature = estimate_link_lengths(proj, model.segments)
+    scale = pixels_per_mm(stature, height_mm)  # image units per mm
+    if ortho:
+        return lengths, scale
+    return lengths / scale, float("nan")
+
+
+def session_lengths(session: Session, model: StickModel) -> FloatArray:
+    """The session's measured link lengths (mm), refused when one is missing."""
+    missing = [s for s in model.segments if s not in session.bone_lengths_mm]
+    if missing:
+        raise SessionError(
+            f"{session.path}: session.json subject.bone_lengths_mm lacks {missing} "
+            f"(the mono tracker's links: {list(model.segments)})"
+        )
+    return np.array([session.bone_lengths_mm[s] for s in model.segments])
+
+
+def output_skeleton(model: StickModel, lengths_mm: FloatArray) -> Skeleton:
+    """``upper_stick`` fitted to the tracked link lengths (mm)."""
+    sk = load_preset("upper_stick")
+    fitted = {s: float(v) for s, v in zip(model.segments, lengths_mm) if s in _UPPER_SEGMENTS}
+    return fit_segments(sk, fitted)
+
+
+_UPPER_SEGMENTS = (
+    "trunk", "head", "left_clavicle", "right_clavicle", "left_upper_arm", "right_upper_arm",
+    "left_forearm", "right_forearm",
+)  # fmt: skip
+
+
+def to_world(
+    frames: list[MonoFrame],
+    model: StickModel,
+    camera: Camera | None,
+    config: MonoConfig,
+    px_per_mm: float,
+) -> FloatArray:
+    """Tracked joints (T, K, 3) in the world frame (mm).
+
+    Calibrated models are already in the camera frame (mm). The orthographic model's px
+    are scaled to mm and, with a camera, placed at the depth where the scale holds
+    (``f / px_per_mm``) on the camera's axis; without one, in a frame with x right, y the
+    depth and z up.
+    """
+    cam_pts = np.stack([f.joints_in_camera for f in frames])
+    if config.camera_model != "orthographic" and camera is not None:
+        return _apply(camera, cam_pts)
+    mm = cam_pts / px_per_mm
+    if camera is None:
+        return np.stack([mm[..., 0], mm[..., 2], -mm[..., 1]], axis=-1)
+    k = camera.K
+    depth = k[0, 0] / px_per_mm
+    pts = np.stack(
+        [
+            (cam_pts[..., 0] - k[0, 2]) / px_per_mm,
+            (cam_pts[..., 1] - k[1, 2]) / px_per_mm,
+            depth + mm[..., 2],
+        ],
+        axis=-1,
+    )
+    return _apply(camera, pts)
+
+
+def _apply(camera: Camera, points_in_camera: FloatArray) -> FloatArray:
+    from mocapkit.geometry.transforms import transform_points
+
+    flat = points_in_camera.reshape(-1, 3)
+    return transform_points(camera.world_from_camera, flat).reshape(points_in_camera.shape)
+
+
+def write_fit_csv(path: str | os.PathLike[str], frames: list[MonoFrame]) -> None:
+    """Per-frame fit quality (atomic): residual, candidates, survivors, all pruned, depth."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(
+        ["frame", "time_s", "residual_px", "candidates", "survivors", "all_pruned", "depth_mm",
+         "flips"]
+    )  # fmt: skip
+    for f in frames:
+        w.writerow(
+            [
+                f.index, f"{f.time_s:.9f}", f"{f.residual_px:.3f}", f.n_candidates,
+                f.n_survivors, int(f.pruned_all), f"{f.depth_mm:.1f}", f.code,
+            ]
+        )  # fmt: skip
+    with atomic_write(path, "w", newline="") as fh:
+        fh.write(buf.getvalue())
+
+
+def _run(
+    lengths: FloatArray,
+    cam: Camera,
+    dt: float,
+    cfg: MonoConfig,
+    model: StickModel,
+    t: FloatArray,
+    px: FloatArray,
+) -> list[MonoFrame]:
+    tracker = MonoTracker(lengths, cam, dt, cfg, model)
+    frames: list[MonoFrame] = []
+    with Progress(len(t), "track mono") as prog:
+        for ti, p in zip(t, px):
+            frames += tracker.push(float(ti), p)
+            prog.update()
+    frames += tracker.finish()
+    frames.sort(key=lambda f: f.index)
+    return frames
+
+
+def refined_lengths(frames: list[MonoFrame], model: StickModel, lengths: FloatArray) -> FloatArray:
+    """Link lengths measured again at each link's own depth from tracked poses (mm).
+
+    The first estimate (`video_lengths`) reads every link in normalised image units and
+    scales them by one stature, as if all links lay at one depth; a forearm reaching
+    towards the camera then looks long. Here each link's extent across its own viewing
+    direction (the link vector minus its component along the ray through its midpoint) is
+    taken from the tracked poses, in mm, and the same statistic as `video_lengths` (90th
+    percentile, left and right sharing the longer, fallback for links never near
+    parallel) gives new lengths, rescaled so that their sum equals the old one (the
+    absolute scale stays tied to the stature).
+    """
+    pos = np.stack([f.joints_in_camera for f in frames])
+    vec = pos[:, model.child] - pos[:, model.parent]
+    mid = 0.5 * (pos[:, model.child] + pos[:, model.parent])
+    ray = mid / np.linalg.norm(mid, axis=-1, keepdims=True)
+    lateral = vec - (vec * ray).sum(axis=-1, keepdims=True) * ray
+    new, _ = estimate_link_lengths(np.linalg.norm(lateral, axis=-1), model.segments)
+    return np.asarray(new * (lengths.sum() / new.sum()), dtype=float)
+
+
+def track_mono(
+    session_path: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str] | None,
+    camera: str | None = None,
+    keypoints: str | os.PathLike[str] | None = None,
+    config: MonoConfig | None = None,
+    use_session_lengths: bool = False,
+    pixels: FloatArray | None = None,
+    length_passes: int = 2,
+    skin: bool = False,
+) -> MonoRun:
+    """Track a session with the monocular tracker and write the result folder.
+
+    Parameters
+    ----------
+    session_path : path-like
+    out_dir : path-like or None
+        Result folder; nothing written when None.
+    camera : str, optional
+        Default: the first camera with keypoints (or the first camera, with ``keypoints``).
+    keypoints : path-like, optional
+        A keypoints CSV file or an OpenPose JSON folder instead of the session's keypoints.
+    config : MonoConfig, optional
+        Default: perspective with a camera, exact offline pair-state Viterbi.
+    use_session_lengths : bool
+        Take link lengths from session.json instead of the video.
+    pixels : (T, K, 2) float, optional
+        Replace the keypoints' pixels of the stick's joints (e.g. with noise added).
+    skin : bool
+        Read the 2-D joints off the camera's video by skin blobs (`skin_keypoints`)
+        instead of keypoints.
+    length_passes : int
+        With video lengths and the perspective model: track this many times, each pass
+        measuring the lengths again from the previous pass's poses (`refined_lengths`).
+    """
+    session = load_session(session_path)
+    cam_name = (
+        camera
+        or next(iter(session.keypoints), None)
+        or (session.camera_names[0] if session.camera_names else None)
+    )
+    if cam_name is None:
+        raise SessionError(f"{session.path}: no camera to track (cameras.json lists none)")
+    cam = session.camera(cam_name)
+    cfg = config or MonoConfig()
+    model = stick_model(cfg.legs, cfg.limits)
+    if skin and keypoints is not None:
+        raise ConfigError("track mono: give either --skin or --keypoints, not both")
+    if skin:
+        session.require(video=True, cameras=[cam_name])
+    kp = skin_keypoints(session, cam_name) if skin else load_keypoints(session, cam_name, keypoints)
+    px = stick_pixels(kp, model) if pixels is None else np.asarray(pixels, dtype=float)
+    t = np.asarray(kp.time_s, dtype=float)
+    dt = float(np.median(np.diff(t))) if t.shape[0] > 1 else 1.0 / 30.0
+    ortho = cfg.camera_model == "orthographic"
+    if use_session_lengths:
+        lengths = session_lengths(session, model)
+        scale = float("nan")
+        if ortho:
+            _, stature = estimate_link_lengths(
+                np.linalg.norm(px[:, model.child] - px[:, model.parent], axis=-1), model.segments
+            )
+            scale = pixels_per_mm(stature, session.height_mm)
+            lengths = lengths * scale
+    else:
+        lengths, scale = video_lengths(px, model, cam, cfg, dt, session.height_mm)
+    seen = np.isfinite(px[:, [0, model.child[model.link_index("trunk")]]]).all(axis=(1, 2))
+    if not seen.any():
+        raise SessionError(
+            f"{kp.source}: neck and pelvis are seen together in no frame, so no pose can be "
+            "built (with --skin: the waist cue, the paper's golden belt, was never found)"
+        )
+    frames = _run(lengths, cam, dt, cfg, model, t, px)
+    refine = length_passes > 1 and not use_session_lengths and cfg.camera_model == "perspective"
+    for _ in range(length_passes - 1 if refine else 0):
+        lengths = refined_lengths(frames, model, lengths)
+        seen = np.isfinite(px[:, [0, model.child[model.link_index("trunk")]]]).all(axis=(1, 2))
+    if not seen.any():
+        raise SessionError(
+            f"{kp.source}: neck and pelvis are seen together in no frame, so no pose can be "
+            "built (with --skin: the waist cue, the paper's golden belt, was never found)"
+        )
+    frames = _run(lengths, cam, dt, cfg, model, t, px)
+    world = to_world(frames, model, cam, cfg, scale)
+    lengths_mm = lengths / scale if ortho else lengths
+    skeleton = output_skeleton(model, lengths_mm)
+    names = [n for n in CANONICAL_JOINTS if n in model.joint_names]
+    order = [model.joint_names.index(n) for n in names]
+    joints = world[:, order]
+    q = fit_stick_pose(skeleton, names, joints)
+    motion = Motion(skeleton, t, q, tuple(names), joints, f"mono tracker on {session.path}")
+    if out_dir is not None:
+        out = write_result_folder(out_dir, motion)
+        write_fit_csv(out / FIT_FILE, frames)
+    return MonoRun(motion, frames, lengths, model, scale)

@@ -1,0 +1,1 @@
+"""Monocular markerless tracking (Mamania, Shaji, Chandran 2004): flips, pruning, Viterbi."""

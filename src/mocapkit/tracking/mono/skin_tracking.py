@@ -1,0 +1,199 @@
+"""2-D joints from skin blobs, as Mamania et al. (2004, §3.2-3.3) track a dancer.
+
+Per frame: the skin mask (`mocapkit.cues.skin.skin_mask`), blobs and their ellipses
+(`mocapkit.cues.blobs.mask_blobs`), blobs labelled head, left and right forearm/hand and
+waist (the paper's golden belt, which its skin model also accepts), joints read off the
+ellipses, then the fixed-lag smoother of the tracker (errata M6).
+
+Labels. First frame (the subject faces the camera, as the paper's initial pose is known):
+the head is the topmost of the four largest blobs; the waist is a blob below the head
+whose major axis lies within 30 deg of the horizontal; the other two are the forearms, the
+subject's left one on the image's right. Later frames: each label takes the blob nearest
+its previous centre (minimum total distance, `scipy.optimize.linear_sum_assignment`)
+within ``max_jump_px``. Two labels whose blobs merged (a hand in front of the face) both
+point at one blob: the label that matched it keeps it, the other keeps its previous
+ellipse moved with the merged blob's centroid (the paper separates merged blobs by
+following the merging ellipses through the previous frame). A label with no blob near
+it is unseen (NaN) for that frame.
+
+Joints from the ellipses (§3.3): head = the head ellipse's centre; neck = the lower end of
+its major axis; elbow and wrist = the ends of a forearm ellipse's major axis, the one
+nearer the neck being the elbow (short sleeves leave the forearm bare); pelvis = the
+waist ellipse's centre; shoulders by the paper's heuristic: "exactly above the waist
+region endpoints and in horizontal line with the lower end of the neck". Without a waist
+blob (no belt), pelvis and shoulders are unseen, and the 3-D tracker has no trunk.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import linear_sum_assignment
+
+from mocapkit.cues.blobs import Blob, mask_blobs
+from mocapkit.cues.skin import ColourModel, skin_mask
+from mocapkit.errors import ConfigError
+
+FloatArray = NDArray[np.float64]
+
+LABELS: tuple[str, ...] = ("head", "left_hand", "right_hand", "waist")
+#: Joints this tracker reads off the blobs, in `stick_model` order.
+SKIN_JOINTS: tuple[str, ...] = (
+    "neck", "pelvis", "left_shoulder", "right_shoulder", "head", "left_elbow", "left_wrist",
+    "right_elbow", "right_wrist",
+)  # fmt: skip
+
+
+@dataclass
+class SkinFrame:
+    """Labelled blobs of one frame and the joints read off them.
+
+    Attributes
+    ----------
+    blobs : dict of str to Blob
+        Per label, its ellipse this frame (absent: unseen).
+    merged : set of str
+        Labels whose ellipse was carried through a merge.
+    joints_px : (9, 2) float
+        `SKIN_JOINTS` in pixels, NaN where unseen.
+    """
+
+    blobs: dict[str, Blob]
+    merged: set[str] = field(default_factory=set)
+    joints_px: FloatArray = field(default_factory=lambda: np.full((len(SKIN_JOINTS), 2), np.nan))
+
+
+def _moved(blob: Blob, shift: FloatArray) -> Blob:
+    return Blob(
+        blob.centre + shift, blob.area, blob.major, blob.minor, blob.direction, blob.ends + shift
+    )
+
+
+class SkinTracker:
+    """Labels skin blobs frame to frame and reads the stick's joints off them.
+
+    Parameters
+    ----------
+    model : ColourModel, optional
+        Skin colour model (default `mocapkit.cues.skin.DEFAULT_SKIN`).
+    min_area_px : int
+        Smallest blob.
+    close_px : int
+        Closing radius that reunites broken blobs.
+    max_jump_px : float
+        Largest centre motion between frames of one label.
+    """
+
+    def __init__(
+        self,
+        model: ColourModel | None = None,
+        min_area_px: int = 30,
+        close_px: int = 2,
+        max_jump_px: float = 60.0,
+    ) -> None:
+        if min_area_px < 1 or close_px < 0 or max_jump_px <= 0:
+            raise ConfigError(
+                f"SkinTracker: expected min_area_px >= 1, close_px >= 0, max_jump_px > 0; "
+                f"found {min_area_px}, {close_px}, {max_jump_px}"
+            )
+        self.model = model
+        self.min_area_px = min_area_px
+        self.close_px = close_px
+        self.max_jump_px = max_jump_px
+        self.previous: SkinFrame | None = None
+
+    def update(self, image_bgr: ArrayLike) -> SkinFrame:
+        """Track one frame (H, W, 3) BGR."""
+        mask = skin_mask(image_bgr, self.model)
+        return self.update_blobs(mask_blobs(mask, self.min_area_px, self.close_px))
+
+    def update_blobs(self, blobs: list[Blob]) -> SkinFrame:
+        """Track one frame from its blobs (largest first)."""
+        frame = self._first(blobs) if self.previous is None else self._follow(blobs)
+        frame.joints_px = joints_from_blobs(frame.blobs)
+        if frame.blobs:
+            self.previous = frame
+        return frame
+
+    def _first(self, blobs: list[Blob]) -> SkinFrame:
+        cands = blobs[:4]
+        if not cands:
+            return SkinFrame({})
+        head = min(cands, key=lambda b: b.centre[1])
+        rest = [b for b in cands if b is not head]
+        labelled: dict[str, Blob] = {"head": head}
+        waist = [
+            b for b in rest
+            if b.centre[1] > head.centre[1] + head.major and abs(b.direction[1]) < 0.5
+        ]  # fmt: skip
+        if len(rest) >= 3 and waist:
+            w = max(waist, key=lambda b: b.centre[1])
+            labelled["waist"] = w
+            rest = [b for b in rest if b is not w]
+        hands = sorted(rest[:2], key=lambda b: b.centre[0])
+        if len(hands) == 2:
+            labelled["right_hand"], labelled["left_hand"] = hands
+        elif len(hands) == 1:
+            side = "left_hand" if hands[0].centre[0] > head.centre[0] else "right_hand"
+            labelled[side] = hands[0]
+        return SkinFrame(labelled)
+
+    def _follow(self, blobs: list[Blob]) -> SkinFrame:
+        prev = self.previous
+        assert prev is not None
+        names = [n for n in LABELS if n in prev.blobs]
+        labelled: dict[str, Blob] = {}
+        merged: set[str] = set()
+        if blobs and names:
+            cost = np.array(
+                [[np.linalg.norm(b.centre - prev.blobs[n].centre) for b in blobs] for n in names]
+            )
+            rows, cols = linear_sum_assignment(cost)
+            taken = {}
+            for r, c in zip(rows, cols):
+                if cost[r, c] <= self.max_jump_px:
+                    labelled[names[r]] = blobs[c]
+                    taken[c] = names[r]
+            for r, n in enumerate(names):
+                if n in labelled:
+                    continue
+                # merged: the nearest blob already belongs to another label and covers
+                # this label's previous centre
+                c = int(np.argmin(cost[r]))
+                b = blobs[c]
+                if c in taken and cost[r, c] <= b.major + self.max_jump_px:
+                    owner = taken[c]
+                    shift = b.centre - prev.blobs[owner].centre
+                    labelled[n] = _moved(prev.blobs[n], shift)
+                    merged.add(n)
+        return SkinFrame(labelled, merged)
+
+
+def joints_from_blobs(blobs: dict[str, Blob]) -> FloatArray:
+    """`SKIN_JOINTS` (9, 2) px read off labelled ellipses; see the module docstring."""
+    out = np.full((len(SKIN_JOINTS), 2), np.nan)
+    col = {n: i for i, n in enumerate(SKIN_JOINTS)}
+    head = blobs.get("head")
+    if head is not None:
+        out[col["head"]] = head.centre
+        out[col["neck"]] = head.ends[1]  # the lower end
+    neck = out[col["neck"]]
+    for side in ("left", "right"):
+        b = blobs.get(f"{side}_hand")
+        if b is None:
+            continue
+        ref = neck if np.isfinite(neck).all() else b.centre
+        d = np.linalg.norm(b.ends - ref, axis=1)
+        near, far = (0, 1) if d[0] <= d[1] else (1, 0)
+        out[col[f"{side}_elbow"]] = b.ends[near]
+        out[col[f"{side}_wrist"]] = b.ends[far]
+    waist = blobs.get("waist")
+    if waist is not None:
+        out[col["pelvis"]] = waist.centre
+        if np.isfinite(neck).all():
+            xs = sorted(waist.ends[:, 0])
+            out[col["right_shoulder"]] = (xs[0], neck[1])  # the subject's right: image left
+            out[col["left_shoulder"]] = (xs[1], neck[1])
+    return out

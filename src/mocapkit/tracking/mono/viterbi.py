@@ -1,0 +1,206 @@
+"""Minimum-weight paths through the layered pose graph: plain and pair-state Viterbi.
+
+Mamania et al. (2004, §4.3, Fig. 5): one layer per frame, one node per surviving pose,
+edges weighted by the motion between poses; the answer is the minimum-weight path from
+the first layer to the last. Eq. 3 couples three frames (errata M3), so the exact method
+runs Viterbi over pair states (phi_k, phi_{k+1}), O(T N^3); a first-order weight runs on
+plain states, O(T N^2).
+
+`Decoder` runs either form frame by frame. Offline (``lag=None``) it backtracks once at
+the end (exact). Online with ``lag=D`` it fixes frame k - D when frame k arrives, by
+backtracking from the best state at k: a latency of D frames, and a path that may differ
+from the offline one where later frames would have changed an earlier choice.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mocapkit.errors import ConfigError, ShapeError
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+
+class Decoder:
+    """Frame-by-frame Viterbi over plain (``order=1``) or pair states (``order=2``).
+
+    Call `push` once per frame, then `flush`. Costs are non-negative or any real
+    numbers; a state that no path reaches has cost ``inf``.
+
+    Parameters
+    ----------
+    order : {1, 2}
+        1: weights on pairs of consecutive frames. 2: also on triples (pair states).
+    lag : int or None
+        Frames of delay before a frame's state is fixed (online); None: offline.
+    """
+
+    def __init__(self, order: int = 1, lag: int | None = None) -> None:
+        if order not in (1, 2):
+            raise ConfigError(f"Decoder order: expected 1 or 2, found {order}")
+        if lag is not None and lag < 0:
+            raise ConfigError(f"Decoder lag: expected >= 0 frames or None, found {lag}")
+        self.order = order
+        self.lag = lag
+        self._cost: FloatArray | None = None  # (N_k,) or (N_{k-1}, N_k)
+        self._back: list[IntArray] = []  # per frame k >= 1 (order 1) / k >= 2 (order 2)
+        self._sizes: list[int] = []
+        self._decided: dict[int, int] = {}
+
+    @property
+    def n_frames(self) -> int:
+        """Frames pushed so far."""
+        return len(self._sizes)
+
+    def push(
+        self,
+        unary: ArrayLike,
+        pairwise: ArrayLike | None = None,
+        triple: ArrayLike | None = None,
+    ) -> list[tuple[int, int]]:
+        """Add frame k; returns the (frame, state) decisions this makes final (online).
+
+        Parameters
+        ----------
+        unary : (N_k,) float
+        pairwise : (N_{k-1}, N_k) float
+            Weight of each edge from frame k - 1 (omit for the first frame).
+        triple : (N_{k-2}, N_{k-1}, N_k) float
+            Order 2 only, from the third frame on: the weight of each triple.
+        """
+        u = np.asarray(unary, dtype=float)
+        if u.ndim != 1 or u.shape[0] == 0:
+            raise ShapeError(f"Decoder.push: expected unary (N,) with N >= 1, found {u.shape}")
+        k = self.n_frames
+        if k == 0:
+            if pairwise is not None or triple is not None:
+                raise ShapeError("Decoder.push: the first frame takes no pairwise/triple weights")
+            self._cost = u.copy()
+        else:
+            if pairwise is None:
+                raise ShapeError(f"Decoder.push: frame {k} needs pairwise weights")
+            p = np.asarray(pairwise, dtype=float)
+            if p.shape != (self._sizes[-1], u.shape[0]):
+                raise ShapeError(
+                    f"Decoder.push: frame {k}: expected pairwise {(self._sizes[-1], u.shape[0])}, "
+                    f"found {p.shape}"
+                )
+            assert self._cost is not None
+            if self.order == 1:
+                tot = self._cost[:, None] + p
+                back = np.argmin(tot, axis=0)
+                self._cost = tot[back, np.arange(u.shape[0])] + u
+                self._back.append(back.astype(np.int64))
+            elif k == 1:
+                self._cost = self._cost[:, None] + p + u[None, :]
+            else:
+                if triple is None:
+                    raise ShapeError(f"Decoder.push: order 2, frame {k} needs triple weights")
+                t = np.asarray(triple, dtype=float)
+                want = (self._sizes[-2], self._sizes[-1], u.shape[0])
+                if t.shape != want:
+                    raise ShapeError(
+                        f"Decoder.push: frame {k}: expected triple {want}, found {t.shape}"
+                    )
+                tot = self._cost[:, :, None] + t  # (i, j, m)
+                back = np.argmin(tot, axis=0)  # (j, m)
+                jj, mm = np.meshgrid(np.arange(t.shape[1]), np.arange(t.shape[2]), indexing="ij")
+                self._cost = tot[back, jj, mm] + p + u[None, :]
+                self._back.append(back.astype(np.int64))
+        self._sizes.append(int(u.shape[0]))
+        if self.lag is None:
+            return []
+        target = k - self.lag
+        if target < 0 or target in self._decided:
+            return []
+        path = self._backtrack()
+        self._decided[target] = int(path[target])
+        return [(target, int(path[target]))]
+
+    def _backtrack(self) -> IntArray:
+        """Best path over all frames pushed so far (ending in the best current state)."""
+        n = self.n_frames
+        path = np.zeros(n, dtype=np.int64)
+        assert self._cost is not None
+        if self.order == 1 or n == 1:
+            path[-1] = int(np.argmin(self._cost))
+            for k in range(n - 1, 0, -1):
+                path[k - 1] = self._back[k - 1][path[k]]
+            return path
+        j, m = np.unravel_index(int(np.argmin(self._cost)), self._cost.shape)
+        path[-1], path[-2] = int(m), int(j)
+        for k in range(n - 1, 1, -1):
+            # back[k - 2][j, m] is the best state of frame k - 2 given (k - 1, k)
+            path[k - 2] = self._back[k - 2][path[k - 1], path[k]]
+        return path
+
+    def forward_costs(self) -> FloatArray:
+        """Best cost of a path ending in each state of the newest frame (N_k,)."""
+        if self._cost is None:
+            raise ShapeError("Decoder.forward_costs: no frame pushed yet")
+        c = self._cost
+        return np.asarray(c if c.ndim == 1 else c.min(axis=0), dtype=float)
+
+    def best_cost(self) -> float:
+        """Total weight of the best path so far."""
+        assert self._cost is not None
+        return float(np.min(self._cost))
+
+    def flush(self) -> IntArray:
+        """The states of all frames: fixed decisions (online) and the best path for the rest."""
+        if self.n_frames == 0:
+            return np.zeros(0, dtype=np.int64)
+        path = self._backtrack()
+        for k, s in self._decided.items():
+            path[k] = s
+        return path
+
+
+def viterbi(unary: Sequence[ArrayLike], pairwise: Sequence[ArrayLike]) -> tuple[IntArray, float]:
+    """Exact minimum of ``sum_k unary[k][s_k] + sum_k pairwise[k][s_k, s_{k+1}]``.
+
+    Parameters
+    ----------
+    unary : T arrays (N_k,)
+    pairwise : T - 1 arrays (N_k, N_{k+1})
+
+    Returns
+    -------
+    path : (T,) int
+    cost : float
+    """
+    if len(pairwise) != max(len(unary) - 1, 0):
+        raise ShapeError(
+            f"viterbi: expected {len(unary) - 1} pairwise arrays, found {len(pairwise)}"
+        )
+    dec = Decoder(1)
+    for k, u in enumerate(unary):
+        dec.push(u, pairwise[k - 1] if k else None)
+    return dec.flush(), dec.best_cost()
+
+
+def pair_viterbi(
+    unary: Sequence[ArrayLike], pairwise: Sequence[ArrayLike], triple: Sequence[ArrayLike]
+) -> tuple[IntArray, float]:
+    """Exact minimum of unary + pairwise + ``sum_k triple[k][s_k, s_{k+1}, s_{k+2}]``.
+
+    Parameters
+    ----------
+    unary : T arrays (N_k,)
+    pairwise : T - 1 arrays (N_k, N_{k+1})
+    triple : T - 2 arrays (N_k, N_{k+1}, N_{k+2})
+    """
+    t = len(unary)
+    if len(pairwise) != max(t - 1, 0) or len(triple) != max(t - 2, 0):
+        raise ShapeError(
+            f"pair_viterbi: expected {t - 1} pairwise and {t - 2} triple arrays, found "
+            f"{len(pairwise)} and {len(triple)}"
+        )
+    dec = Decoder(2)
+    for k, u in enumerate(unary):
+        dec.push(u, pairwise[k - 1] if k else None, triple[k - 2] if k >= 2 else None)
+    return dec.flush(), dec.best_cost()

@@ -1,0 +1,148 @@
+"""The mono runner and CLI on a small session written in the test."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mocapkit.cli.main import main
+from mocapkit.errors import ConfigError, SessionError
+from mocapkit.eval.metrics import evaluate_result
+from mocapkit.io.cameras import write_cameras
+from mocapkit.io.session import write_session_json
+from mocapkit.io.session_csv import write_keypoints_csv
+from mocapkit.io.truth import Truth
+from mocapkit.pipelines.mono import FIT_FILE, track_mono
+from mocapkit.pipelines.mono_accuracy import write_openpose_with_bystander
+from mocapkit.skeleton.model import UPPER_BODY_JOINTS
+from tests.tracking.mono.test_tracker import FPS, camera, stick_motion
+
+N = 30
+
+
+def _session(folder: Path, lengths: bool = False) -> Path:
+    joints, names, _ = stick_motion(N)
+    cam = camera()
+    folder.mkdir()
+    t = np.arange(N) / FPS
+    px = cam.project(joints)
+    write_cameras(folder / "cameras.json", [cam])
+    (folder / "keypoints").mkdir()
+    write_keypoints_csv(folder / "keypoints" / "mono.csv", t, names, px)
+    Truth(t, names, joints).save(folder / "truth.npz")
+    subject: dict[str, object] = {"height_mm": 1700.0}
+    if lengths:
+        subject["bone_lengths_mm"] = {
+            "trunk": 480.0, "head": 110.0, "left_clavicle": 184.4, "right_clavicle": 184.4,
+            "left_upper_arm": 300.0, "right_upper_arm": 300.0, "left_forearm": 270.0,
+            "right_forearm": 270.0,
+        }  # fmt: skip
+    write_session_json(folder / "session.json", {"subject": subject, "rates": {"video_hz": FPS}})
+    return folder
+
+
+def test_track_mono_writes_the_result_folder_and_fit(tmp_path: Path) -> None:
+    session = _session(tmp_path / "s", lengths=True)
+    run = track_mono(session, tmp_path / "r", use_session_lengths=True)
+    for f in ("motion.npz", "joints.csv", "motion.bvh", FIT_FILE):
+        assert (tmp_path / "r" / f).is_file()
+    with open(tmp_path / "r" / FIT_FILE, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == N and {"residual_px", "survivors", "candidates"} <= set(rows[0])
+    summary = run.summary()
+    assert summary["posed_frames"] == N
+    assert 0.0 <= summary["pruned_share_mean"] <= 1.0
+    rep = evaluate_result(tmp_path / "r", session, joints=UPPER_BODY_JOINTS)
+    assert rep.coverage == 1.0
+    assert rep.pa_mpjpe_mm < 40.0
+    # measured lengths put the subject at its true depth: MPJPE close to PA-MPJPE
+    assert rep.mpjpe_mm < 80.0
+
+
+def test_cli_video_lengths_and_openpose_input(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    session = _session(tmp_path / "s")
+    assert main(["track", "mono", str(session), "--out", str(tmp_path / "r"), "--json"]) == 0
+    assert '"survivors_mean"' in capsys.readouterr().out
+    names = UPPER_BODY_JOINTS
+    joints, jn, _ = stick_motion(N)
+    px = camera().project(joints)
+    full = np.full((N, 15, 2), np.nan)
+    from mocapkit.io.openpose import MAPPED_JOINTS
+
+    for i, n in enumerate(jn):
+        full[:, MAPPED_JOINTS.index(n)] = px[:, i]
+    # the detector also sees hips a little below the pelvis (the stick has none)
+    pelvis = px[:, jn.index("pelvis")]
+    full[:, MAPPED_JOINTS.index("left_hip")] = pelvis + np.array([20.0, 8.0])
+    full[:, MAPPED_JOINTS.index("right_hip")] = pelvis + np.array([-20.0, 8.0])
+    write_openpose_with_bystander(tmp_path / "op", MAPPED_JOINTS, full, seed=1)
+    code = main(
+        ["track", "mono", str(session), "--out", str(tmp_path / "r2"), "--keypoints",
+         str(tmp_path / "op"), "--lag", "4", "--cost", "rotation"]
+    )  # fmt: skip
+    assert code == 0
+    rep = evaluate_result(tmp_path / "r2", session, joints=names)
+    assert rep.coverage == 1.0
+
+
+def test_session_lengths_must_be_complete(tmp_path: Path) -> None:
+    session = _session(tmp_path / "s")
+    with pytest.raises(SessionError, match="bone_lengths_mm lacks"):
+        track_mono(session, None, use_session_lengths=True)
+
+
+def test_bench_mono_reports_its_figures() -> None:
+    from mocapkit.pipelines.bench import BENCHMARKS
+
+    out = BENCHMARKS["mono"](repeats=1, n_frames=12)
+    assert out["fps"] > 0 and out["first_order_fps"] > 0 and out["offline_fps"] > 0
+    assert 0.0 <= float(out["pruned_share"]) <= 1.0
+    assert float(out["survivors_mean"]) <= float(out["candidates_mean"])
+
+
+def test_refined_lengths_read_each_link_at_its_own_depth() -> None:
+    from mocapkit.pipelines.mono import refined_lengths
+    from mocapkit.tracking.mono.stick import stick_model
+    from mocapkit.tracking.mono.tracker import MonoFrame
+    from tests.tracking.mono.conftest import random_pose
+
+    rng = np.random.default_rng(70)
+    model = stick_model()
+    frames = []
+    true = None
+    for k in range(40):
+        pos, true = random_pose(rng, model, 0.0 if k % 4 == 0 else 40.0)
+        if k % 4 == 0:
+            # every link in the plane z = 3000 mm, parallel to the image
+            pos[:, 2] = 3000.0
+            for i in range(model.n_links):
+                d = pos[model.child[i]] - pos[model.parent[i]]
+                d[2] = 0.0
+                pos[model.child[i]] = pos[model.parent[i]] + true[i] * d / np.linalg.norm(d)
+        frames.append(MonoFrame(k, k / 30, pos, 0, 1, 1, False, 0.0, 3000.0))
+    assert true is not None
+    got = refined_lengths(frames, model, true)
+    np.testing.assert_allclose(
+        np.linalg.norm(model.link_vectors(frames[0].joints_in_camera), axis=1), true
+    )
+    # off the optical axis a parallel link is not quite normal to its ray: within 2 %
+    np.testing.assert_allclose(got, true, rtol=0.02)
+
+
+def test_no_trunk_in_any_frame_is_refused(tmp_path: Path) -> None:
+    session = _session(tmp_path / "s")
+    joints, names, _ = stick_motion(N)
+    from mocapkit.tracking.mono.stick import stick_model
+
+    model = stick_model()
+    px = camera().project(joints[:, [names.index(n) for n in model.joint_names]])
+    px[:, model.joint_names.index("pelvis")] = np.nan
+    with pytest.raises(SessionError, match="neck and pelvis are seen together in no frame"):
+        track_mono(session, None, pixels=px)
+    with pytest.raises(ConfigError, match="either --skin or --keypoints"):
+        track_mono(session, None, keypoints=tmp_path, skin=True)

@@ -1,0 +1,167 @@
+"""Flip enumeration and pruning (Mamania et al. 2004 §4.2; errata M5; tests M)."""
+
+import numpy as np
+import pytest
+
+from mocapkit.errors import ShapeError
+from mocapkit.tracking.mono.flips import count_candidates, enumerate_poses, violates
+from mocapkit.tracking.mono.stick import LimitConfig, stick_model
+from tests.tracking.mono.conftest import random_pose
+
+
+def _orthographic(pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Image-plane positions and the root with z measured from the neck."""
+    root = pos[0].copy()
+    root[2] = 0.0
+    return pos[:, :2], root
+
+
+def _relative(pos: np.ndarray) -> np.ndarray:
+    out = pos.copy()
+    out[..., 2] -= pos[..., :1, 2]
+    return out
+
+
+@pytest.mark.parametrize("legs", [False, True])
+def test_exactly_two_to_the_links_poses_with_equal_projections(legs: bool) -> None:
+    rng = np.random.default_rng(10)
+    model = stick_model(legs=legs)
+    pos, lengths = random_pose(rng, model, 40.0)
+    obs, root = _orthographic(pos)
+    fp = enumerate_poses(model, lengths, obs, root, prune=False)
+    n = 1 << model.n_links
+    assert fp.codes.shape == (n,) and len(set(fp.codes.tolist())) == n
+    assert fp.n_candidates == n
+    flat = fp.positions.reshape(n, -1)
+    assert len({tuple(np.round(r, 6)) for r in flat}) == n  # distinct poses
+    np.testing.assert_allclose(fp.positions[:, :, :2], np.broadcast_to(obs, (n, *obs.shape)))
+    np.testing.assert_allclose(
+        np.linalg.norm(model.link_vectors(fp.positions), axis=-1),
+        np.broadcast_to(lengths, (n, model.n_links)),
+    )
+    err = np.abs(fp.positions - _relative(pos)).max(axis=(1, 2))
+    assert err.min() < 1e-9
+
+
+def test_a_link_parallel_to_the_image_halves_the_count() -> None:
+    """Errata M5: one link with dz = 0 gives 2^(L-1) distinct poses, not duplicates."""
+    rng = np.random.default_rng(11)
+    model = stick_model()
+    pos, lengths = random_pose(rng, model, 40.0)
+    i = model.link_index("left_upper_arm")
+    p, c = model.parent[i], model.child[i]
+    shift = pos[p, 2] - pos[c, 2]
+    below = [c] + [int(model.child[j]) for j in range(model.n_links) if model.parent[j] == c]
+    pos[below, 2] += shift  # the upper arm now lies in a plane parallel to the image
+    lengths = lengths.copy()
+    lengths[i] = np.linalg.norm(pos[c, :2] - pos[p, :2])
+    obs, root = _orthographic(pos)
+    fp = enumerate_poses(model, lengths, obs, root, prune=False)
+    half = 1 << (model.n_links - 1)
+    assert fp.codes.shape == (half,) and fp.n_candidates == half
+    assert not np.any(fp.codes & (1 << i))
+    assert len({tuple(np.round(r, 6)) for r in fp.positions.reshape(half, -1)}) == half
+    assert np.abs(fp.positions - _relative(pos)).max(axis=(1, 2)).min() < 1e-6
+
+
+def test_perspective_candidates_share_the_rays_and_include_the_truth() -> None:
+    rng = np.random.default_rng(12)
+    model = stick_model()
+    pos, lengths = random_pose(rng, model, 40.0)
+    rays = pos[:, :2] / pos[:, 2:]
+    fp = enumerate_poses(model, lengths, rays, pos[0], perspective=True, prune=False)
+    assert 1 <= fp.codes.shape[0] <= 1 << model.n_links
+    two = np.abs(fp.positions - pos).max(axis=(1, 2))
+    assert two.min() < 1e-6
+    np.testing.assert_allclose(
+        np.linalg.norm(model.link_vectors(fp.positions), axis=-1),
+        np.broadcast_to(lengths, (fp.codes.shape[0], model.n_links)),
+    )
+    # every joint whose link has two solutions lies on its own viewing ray
+    truth_like = fp.positions[np.argmin(two)]
+    np.testing.assert_allclose(truth_like[:, :2] / truth_like[:, 2:], rays, atol=1e-9)
+
+
+@pytest.mark.parametrize("legs", [False, True])
+@pytest.mark.parametrize("perspective", [False, True])
+def test_pruning_during_the_search_equals_pruning_after_it(legs: bool, perspective: bool) -> None:
+    rng = np.random.default_rng(13)
+    model = stick_model(legs=legs)
+    kept_some = pruned_some = 0
+    for _ in range(30):
+        pos, lengths = random_pose(rng, model, 35.0)
+        if perspective:
+            obs, root = pos[:, :2] / pos[:, 2:], pos[0]
+        else:
+            obs, root = _orthographic(pos)
+        full = enumerate_poses(model, lengths, obs, root, perspective=perspective, prune=False)
+        during = enumerate_poses(model, lengths, obs, root, perspective=perspective, prune=True)
+        ok = ~violates(model, lengths, full.positions)
+        if not ok.any():
+            assert during.pruned_all
+            continue
+        assert not during.pruned_all
+        assert sorted(during.codes.tolist()) == sorted(full.codes[ok].tolist())
+        order = np.argsort(during.codes)
+        np.testing.assert_array_equal(
+            during.positions[order], full.positions[ok][np.argsort(full.codes[ok])]
+        )
+        kept_some += 1
+        pruned_some += int((~ok).sum() > 0)
+    assert kept_some >= 10 and pruned_some >= 5
+
+
+def test_joint_limits_known_values() -> None:
+    """An elbow folded to 20 deg is pruned; at 40 deg it is kept (limit 30 deg)."""
+    model = stick_model(limits=LimitConfig(collisions=False))
+    rng = np.random.default_rng(14)
+    pos, lengths = random_pose(rng, model, 0.0)
+    i_up, i_fo = model.link_index("left_upper_arm"), model.link_index("left_forearm")
+    elbow, wrist = model.child[i_up], model.child[i_fo]
+    up = pos[elbow] - pos[model.parent[i_up]]
+    up /= np.linalg.norm(up)
+    side = np.cross(up, [0.0, 0.0, 1.0])
+    side /= np.linalg.norm(side)
+    for included_deg, bad in ((20.0, True), (40.0, False)):
+        a = np.radians(180.0 - included_deg)  # angle between upper arm and forearm
+        fore = np.cos(a) * up + np.sin(a) * side
+        p = pos.copy()
+        p[wrist] = p[elbow] + lengths[i_fo] * fore
+        assert violates(model, lengths, p[None])[0] == bad
+
+
+def test_capsules_prune_a_forearm_through_the_trunk() -> None:
+    model = stick_model()
+    rng = np.random.default_rng(15)
+    pos, lengths = random_pose(rng, model, 0.0)
+    assert not violates(model, lengths, pos[None])[0]
+    i_fo = model.link_index("left_forearm")
+    p = pos.copy()
+    mid = 0.5 * (pos[0] + pos[model.child[model.link_index("trunk")]])
+    d = mid - p[model.parent[i_fo]]
+    p[model.child[i_fo]] = p[model.parent[i_fo]] + lengths[i_fo] * d / np.linalg.norm(d)
+    if np.linalg.norm(d) <= lengths[i_fo]:
+        assert violates(model, lengths, p[None])[0]
+
+
+def test_a_missing_joint_drops_its_subtree() -> None:
+    rng = np.random.default_rng(16)
+    model = stick_model()
+    pos, lengths = random_pose(rng, model, 30.0)
+    obs, root = _orthographic(pos)
+    obs = obs.copy()
+    elbow = model.joint_names.index("right_elbow")
+    obs[elbow] = np.nan
+    fp = enumerate_poses(model, lengths, obs, root, prune=False)
+    assert fp.codes.shape == (1 << (model.n_links - 2),)
+    wrist = model.joint_names.index("right_wrist")
+    assert np.isnan(fp.positions[:, [elbow, wrist]]).all()
+    assert count_candidates(model, lengths, obs, root) == fp.codes.shape[0]
+
+
+def test_bad_inputs_are_refused() -> None:
+    model = stick_model()
+    with pytest.raises(ShapeError, match="positive lengths"):
+        enumerate_poses(model, np.ones(3), np.zeros((model.n_joints, 2)), np.zeros(3))
+    with pytest.raises(ShapeError, match="observed"):
+        enumerate_poses(model, np.ones(model.n_links), np.zeros((4, 2)), np.zeros(3))

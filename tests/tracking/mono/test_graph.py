@@ -1,0 +1,157 @@
+"""Pose-graph weights (errata M1-M4) and Viterbi against brute force (errata M3)."""
+
+import itertools
+
+import numpy as np
+import pytest
+
+from mocapkit.errors import ConfigError, ShapeError
+from mocapkit.tracking.mono.motion_cost import (
+    acceleration_cost,
+    angular_velocity,
+    angular_velocity_literal,
+    joint_acceleration_cost,
+    pair_omegas,
+    rotation_cost,
+)
+from mocapkit.tracking.mono.viterbi import Decoder, pair_viterbi, viterbi
+
+
+def test_corrected_omega_is_angle_over_dt_times_the_axis() -> None:
+    rng = np.random.default_rng(20)
+    dt = 1 / 30
+    for _ in range(50):
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        r0 = np.cross(axis, rng.normal(size=3))
+        r0 *= rng.uniform(50, 500) / np.linalg.norm(r0)  # perpendicular to the axis
+        delta = rng.uniform(0.0, 3.0)
+        c, s = np.cos(delta), np.sin(delta)
+        r1 = r0 * c + np.cross(axis, r0) * s
+        np.testing.assert_allclose(angular_velocity(r0, r1, dt), delta / dt * axis, atol=1e-9)
+
+
+def test_literal_omega_scales_with_the_squared_length() -> None:
+    rng = np.random.default_rng(21)
+    r0, r1 = rng.normal(size=(2, 3))
+    r1 = r1 / np.linalg.norm(r1) * np.linalg.norm(r0)
+    for scale in (2.0, 10.0):
+        np.testing.assert_allclose(
+            angular_velocity_literal(scale * r0, scale * r1, 0.1),
+            scale**2 * angular_velocity_literal(r0, r1, 0.1),
+        )
+        np.testing.assert_allclose(
+            angular_velocity(scale * r0, scale * r1, 0.1), angular_velocity(r0, r1, 0.1)
+        )
+    # for unit vectors the printed formula is sin(delta)/dt along the axis
+    lit = np.linalg.norm(
+        angular_velocity_literal(r0 / np.linalg.norm(r0), r1 / np.linalg.norm(r1), 0.1)
+    )
+    delta = np.arccos(np.clip(r0 @ r1 / (r0 @ r0), -1, 1))
+    assert lit == pytest.approx(np.sin(delta) / 0.1)
+
+
+def test_omega_of_parallel_and_opposite_vectors() -> None:
+    r = np.array([0.0, 0.0, 300.0])
+    np.testing.assert_array_equal(angular_velocity(r, 2 * r, 0.5), np.zeros(3))
+    w = angular_velocity(r, -r, 0.5)
+    assert np.linalg.norm(w) == pytest.approx(np.pi / 0.5)
+    assert abs(w @ r) < 1e-9
+
+
+def test_acceleration_cost_matches_its_definition() -> None:
+    rng = np.random.default_rng(22)
+    va, vb, vc = (rng.normal(size=(n, 4, 3)) for n in (2, 3, 2))
+    dt = 0.04
+    wa, wb = pair_omegas(va, vb, dt), pair_omegas(vb, vc, dt)
+    acc = acceleration_cost(wa, wb, dt)
+    for i, j, m in itertools.product(range(2), range(3), range(2)):
+        ref = sum(
+            np.linalg.norm(
+                (
+                    angular_velocity(vb[j, k], vc[m, k], dt)
+                    - angular_velocity(va[i, k], vb[j, k], dt)
+                )
+                / dt
+            )
+            for k in range(4)
+        )
+        assert acc[i, j, m] == pytest.approx(ref)
+    rot = rotation_cost(wa)
+    assert rot[1, 2] == pytest.approx(
+        sum(np.linalg.norm(angular_velocity(va[1, k], vb[2, k], dt)) for k in range(4))
+    )
+    pa, pb, pc = (rng.normal(size=(n, 5, 3)) for n in (2, 3, 2))
+    jac = joint_acceleration_cost(pa, pb, pc, dt)
+    assert jac[1, 0, 1] == pytest.approx(
+        np.linalg.norm(pc[1] - 2 * pb[0] + pa[1], axis=-1).sum() / dt**2
+    )
+
+
+def _random_graph(rng: np.random.Generator, t: int) -> tuple[list, list, list]:
+    sizes = rng.integers(1, 4, size=t)
+    unary = [rng.uniform(0, 1, size=n) for n in sizes]
+    pair = [rng.uniform(0, 1, size=(sizes[k], sizes[k + 1])) for k in range(t - 1)]
+    triple = [rng.uniform(0, 1, size=(sizes[k], sizes[k + 1], sizes[k + 2])) for k in range(t - 2)]
+    return unary, pair, triple
+
+
+def _brute(unary: list, pair: list, triple: list | None) -> float:
+    best = np.inf
+    for path in itertools.product(*(range(len(u)) for u in unary)):
+        c = sum(u[s] for u, s in zip(unary, path))
+        c += sum(pair[k][path[k], path[k + 1]] for k in range(len(pair)))
+        if triple is not None:
+            c += sum(triple[k][path[k], path[k + 1], path[k + 2]] for k in range(len(triple)))
+        best = min(best, c)
+    return float(best)
+
+
+def _cost(path: np.ndarray, unary: list, pair: list, triple: list | None) -> float:
+    c = sum(u[s] for u, s in zip(unary, path))
+    c += sum(pair[k][path[k], path[k + 1]] for k in range(len(pair)))
+    if triple is not None:
+        c += sum(triple[k][path[k], path[k + 1], path[k + 2]] for k in range(len(triple)))
+    return float(c)
+
+
+@pytest.mark.parametrize("t", [1, 2, 3, 4, 5])
+def test_viterbi_and_pair_viterbi_equal_brute_force(t: int) -> None:
+    rng = np.random.default_rng(30 + t)
+    for _ in range(40):
+        unary, pair, triple = _random_graph(rng, t)
+        path, cost = viterbi(unary, pair)
+        assert cost == pytest.approx(_brute(unary, pair, None))
+        assert _cost(path, unary, pair, None) == pytest.approx(cost)
+        path2, cost2 = pair_viterbi(unary, pair, triple)
+        assert cost2 == pytest.approx(_brute(unary, pair, triple))
+        assert _cost(path2, unary, pair, triple) == pytest.approx(cost2)
+
+
+def test_online_decoder_with_a_long_lag_equals_offline() -> None:
+    rng = np.random.default_rng(40)
+    unary, pair, triple = _random_graph(rng, 12)
+    for order in (1, 2):
+        off = Decoder(order)
+        on = Decoder(order, lag=20)
+        short = Decoder(order, lag=2)
+        decided = []
+        for k, u in enumerate(unary):
+            tri = triple[k - 2] if (k >= 2 and order == 2) else None
+            args = (u, pair[k - 1] if k else None, tri)
+            off.push(*args)
+            assert on.push(*args) == []
+            decided += short.push(*args)
+        assert [f for f, _ in decided] == list(range(10))  # frame k - 2 fixed at frame k
+        np.testing.assert_array_equal(off.flush(), on.flush())
+        path = short.flush()
+        assert [int(path[f]) for f, _ in decided] == [s for _, s in decided]
+
+
+def test_decoder_refuses_bad_input() -> None:
+    with pytest.raises(ConfigError, match="order"):
+        Decoder(3)
+    dec = Decoder(1)
+    dec.push(np.zeros(2))
+    with pytest.raises(ShapeError, match="pairwise"):
+        dec.push(np.zeros(3), np.zeros((3, 3)))

@@ -1,0 +1,90 @@
+"""Skin blobs labelled and read as joints (Mamania et al. 2004 §3.3) on drawn images."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from mocapkit.cues.blobs import ellipse_of, mask_blobs
+from mocapkit.errors import ConfigError
+from mocapkit.tracking.mono.skin_tracking import SKIN_JOINTS, SkinTracker
+
+SKIN_BGR = tuple(
+    int(v)
+    for v in cv2.cvtColor(np.array([[[150, 154, 104]]], dtype=np.uint8), cv2.COLOR_YCrCb2BGR)[0, 0]
+)
+
+
+def _figure(head=(320, 100), left=((400, 200), (430, 290)), right=((240, 200), (210, 290)),
+            belt=True, gap=False) -> np.ndarray:  # fmt: skip
+    img = np.full((480, 640, 3), (90, 110, 60), dtype=np.uint8)  # a green-grey backdrop
+    cv2.ellipse(img, head, (28, 38), 0, 0, 360, SKIN_BGR, -1)
+    for (x0, y0), (x1, y1) in (left, right):  # forearms as ellipses between their ends
+        half = round(float(np.hypot(x1 - x0, y1 - y0)) / 2)
+        angle = float(np.degrees(np.arctan2(y1 - y0, x1 - x0)))
+        centre = (round((x0 + x1) / 2), round((y0 + y1) / 2))
+        cv2.ellipse(img, centre, (half, 10), angle, 0, 360, SKIN_BGR, -1)
+    if gap:  # a dark band breaks the left forearm in two
+        cv2.line(img, (400, 245), (440, 245), (90, 110, 60), 2)
+    if belt:
+        cv2.ellipse(img, (320, 330), (90, 14), 0, 0, 360, SKIN_BGR, -1)
+    return img
+
+
+def test_moment_ellipse_of_a_drawn_ellipse() -> None:
+    mask = np.zeros((200, 200), dtype=np.uint8)
+    cv2.ellipse(mask, (100, 90), (60, 20), 30, 0, 360, 255, -1)
+    ys, xs = np.nonzero(mask)
+    e = ellipse_of(np.stack([xs, ys], axis=1))
+    np.testing.assert_allclose(e.centre, (100, 90), atol=0.5)
+    assert e.major == pytest.approx(60, rel=0.03) and e.minor == pytest.approx(20, rel=0.06)
+    assert abs(abs(e.direction @ [np.cos(np.radians(30)), np.sin(np.radians(30))]) - 1) < 1e-3
+
+
+def test_labels_and_joints_of_the_first_frame() -> None:
+    tr = SkinTracker()
+    f = tr.update(_figure())
+    assert set(f.blobs) == {"head", "left_hand", "right_hand", "waist"}
+    j = dict(zip(SKIN_JOINTS, f.joints_px))
+    np.testing.assert_allclose(j["head"], (320, 100), atol=1.5)
+    assert j["neck"][1] == pytest.approx(100 + 38, abs=3)
+    np.testing.assert_allclose(j["left_elbow"], (400, 200), atol=4)
+    np.testing.assert_allclose(j["left_wrist"], (430, 290), atol=4)
+    np.testing.assert_allclose(j["right_wrist"], (210, 290), atol=4)
+    np.testing.assert_allclose(j["pelvis"], (320, 330), atol=1.5)
+    # shoulders: above the belt's ends, level with the neck
+    assert j["left_shoulder"][0] == pytest.approx(410, abs=4)
+    assert j["right_shoulder"][0] == pytest.approx(230, abs=4)
+    assert j["left_shoulder"][1] == pytest.approx(j["neck"][1])
+
+
+def test_a_broken_blob_is_reunited_and_labels_follow_the_motion() -> None:
+    assert len(mask_blobs(_skin(_figure(gap=True)), close_px=0)) == 5
+    assert len(mask_blobs(_skin(_figure(gap=True)), close_px=2)) == 4
+    tr = SkinTracker()
+    tr.update(_figure())
+    f = tr.update(_figure(left=((410, 205), (445, 285)), right=((230, 205), (200, 280))))
+    j = dict(zip(SKIN_JOINTS, f.joints_px))
+    np.testing.assert_allclose(j["left_wrist"], (445, 285), atol=4)
+    np.testing.assert_allclose(j["right_wrist"], (200, 280), atol=4)
+
+
+def test_a_hand_merged_with_the_head_keeps_its_label() -> None:
+    tr = SkinTracker()
+    tr.update(_figure())
+    tr.update(_figure(left=((370, 170), (345, 125))))  # the left hand comes near the face
+    f = tr.update(_figure(left=((360, 160), (335, 112))))  # and touches it: one blob
+    assert "left_hand" in f.blobs
+    assert np.isfinite(f.joints_px[SKIN_JOINTS.index("left_wrist")]).all()
+
+
+def test_bad_settings_are_refused() -> None:
+    with pytest.raises(ConfigError, match="max_jump_px"):
+        SkinTracker(max_jump_px=0)
+
+
+def _skin(img: np.ndarray) -> np.ndarray:
+    from mocapkit.cues.skin import skin_mask
+
+    return skin_mask(img)

@@ -1,0 +1,113 @@
+"""The monocular tracker on a smooth synthetic stick motion seen by a calibrated camera."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
+from mocapkit.errors import ConfigError, ShapeError
+from mocapkit.eval.metrics import similarity_align
+from mocapkit.skeleton.kinematics import canonical_positions
+from mocapkit.skeleton.presets import load_preset
+from mocapkit.tracking.mono.pose_fit import fit_stick_pose
+from mocapkit.tracking.mono.stick import stick_model
+from mocapkit.tracking.mono.tracker import MonoConfig, MonoTracker
+
+FPS = 30.0
+
+
+def stick_motion(n_frames: int = 60) -> tuple[np.ndarray, tuple[str, ...], np.ndarray]:
+    """World joints (T, 9, 3) of ``upper_stick`` waving both arms, its canonical names, q."""
+    sk = load_preset("upper_stick")
+    t = np.arange(n_frames) / FPS
+    q = np.zeros((n_frames, sk.n_dofs))
+    q[:, 2] = 0.0
+    q[:, 5] = 0.5 * np.sin(0.8 * t)  # the body turns +-29 deg about the vertical
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        from mocapkit.skeleton.limbs import arm
+
+        limb = arm(sk, side)
+        ball, hinge = limb.dofs[:3], limb.dofs[3]
+        q[:, ball[0]] = 0.9 + 0.6 * np.sin(2.0 * t + (0.0 if sign > 0 else 1.0))  # swing forward
+        q[:, ball[1]] = sign * 0.5
+        q[:, hinge] = 1.2 + 0.6 * np.sin(3.0 * t)
+    names = sk.canonical_names
+    return canonical_positions(sk, q, names), names, q
+
+
+def camera() -> Camera:
+    k = intrinsics_from_fov((640, 480), 62.0)
+    return Camera("mono", (640, 480), k, np.zeros(5), look_at((0, -3000, 1250), (0, 0, 1250)))
+
+
+def _track(config: MonoConfig, n_frames: int = 60):
+    joints, names, _ = stick_motion(n_frames)
+    model = stick_model(limits=config.limits)
+    order = [names.index(n) for n in model.joint_names]
+    world = joints[:, order]
+    cam = camera()
+    px = cam.project(world)
+    truth_cam = cam.to_camera(world)
+    lengths = np.linalg.norm(model.link_vectors(truth_cam[0]), axis=-1)
+    tracker = MonoTracker(lengths, cam, 1 / FPS, config, model)
+    frames = []
+    for k in range(n_frames):
+        frames += tracker.push(k / FPS, px[k])
+    frames += tracker.finish()
+    return frames, truth_cam, model
+
+
+def test_offline_tracking_recovers_the_motion_and_the_flips() -> None:
+    frames, truth, model = _track(MonoConfig())
+    assert [f.index for f in frames] == list(range(60))
+    est = np.stack([f.joints_in_camera for f in frames])
+    err = np.array([np.linalg.norm(similarity_align(e, g) - g, axis=1).mean()
+                    for e, g in zip(est, truth)])  # fmt: skip
+    assert np.median(err) < 20.0
+    dz_t = truth[:, model.child, 2] - truth[:, model.parent, 2]
+    dz_e = est[:, model.child, 2] - est[:, model.parent, 2]
+    counted = np.abs(dz_t) > 0.2 * np.linalg.norm(model.link_vectors(truth), axis=-1)
+    right = (np.sign(dz_t) == np.sign(dz_e)) & counted
+    assert right.sum() / counted.sum() >= 0.9
+    assert all(f.n_survivors <= f.n_candidates for f in frames)
+    assert np.nanmean([f.residual_px for f in frames]) < 1.0
+
+
+def test_online_with_a_long_lag_equals_offline_and_a_short_lag_answers_in_time() -> None:
+    off, _, _ = _track(MonoConfig(cost="rotation"), 30)
+    on, _, _ = _track(MonoConfig(cost="rotation", lag=40), 30)
+    assert [f.code for f in off] == [f.code for f in on]
+    cfg = MonoConfig(cost="acceleration", lag=3, smooth_lag=2)
+    joints, names, _ = stick_motion(20)
+    model = stick_model()
+    cam = camera()
+    px = cam.project(joints[:, [names.index(n) for n in model.joint_names]])
+    lengths = np.linalg.norm(
+        model.link_vectors(cam.to_camera(joints[0, [names.index(n) for n in model.joint_names]])),
+        axis=-1,
+    )
+    tracker = MonoTracker(lengths, cam, 1 / FPS, cfg, model)
+    for k in range(20):
+        out = tracker.push(k / FPS, px[k])
+        # frame k - smooth_lag - lag becomes final at frame k
+        expect = [k - 5] if k >= 5 else []
+        assert [f.index for f in out] == expect
+    assert [f.index for f in tracker.finish()] == list(range(15, 20))
+
+
+def test_pose_fit_reproduces_skeleton_poses() -> None:
+    joints, names, _ = stick_motion(10)
+    sk = load_preset("upper_stick")
+    q2 = fit_stick_pose(sk, names, joints)
+    np.testing.assert_allclose(canonical_positions(sk, q2, names), joints, atol=1e-6)
+
+
+def test_bad_configuration_is_refused() -> None:
+    with pytest.raises(ConfigError, match="camera_model"):
+        MonoConfig(camera_model="fisheye")
+    with pytest.raises(ConfigError, match="needs a calibrated camera"):
+        MonoTracker(np.ones(8), None, 1 / FPS, MonoConfig())
+    tr = MonoTracker(np.ones(8), None, 1 / FPS, MonoConfig(camera_model="orthographic"))
+    with pytest.raises(ShapeError, match="expected \\(9, 2\\)"):
+        tr.push(0.0, np.zeros((3, 2)))
