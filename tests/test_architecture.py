@@ -13,8 +13,6 @@ import re
 from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 
-import pytest
-
 import mocapkit
 
 PACKAGE_DIR = Path(mocapkit.__file__).resolve().parent
@@ -336,11 +334,6 @@ def test_imports_point_downward() -> None:
     )
 
 
-@pytest.mark.xfail(
-    strict=False,
-    reason="preset joint names still used in ik/sdls.py, ik/secondary.py, tracking/hybrid.py, "
-    "tracking/balance.py and pipelines/bench.py (bb-ik and bb-runner remove them)",
-)
 def test_no_preset_joint_names_outside_skeleton() -> None:
     hits = []
     for module, path in sorted(module_files(PACKAGE_DIR).items()):

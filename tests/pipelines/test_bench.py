@@ -39,3 +39,20 @@ def test_bad_arguments_raise():
         run_benchmarks("kinematics", repeats=0)
     with pytest.raises(ConfigError, match="bench_kinematics: expected repeats"):
         bench_kinematics(repeats=0)
+
+
+def test_table_shows_stage_figures():
+    from mocapkit.pipelines.bench import format_table
+
+    text = format_table({"hybrid": {"fps": 120.5, "stages_ms": {"ik": 1.25, "io": 2.0}}})
+    lines = text.splitlines()
+    assert lines[0] == "hybrid" and "fps" in lines[1] and "120.500" in lines[1]
+    assert lines[2].strip() == "stages_ms"
+    assert lines[3].split() == ["ik", "1.250"] and lines[4].split() == ["io", "2.000"]
+
+
+def test_hybrid_bench_refuses_zero_repeats():
+    from mocapkit.pipelines.bench import bench_hybrid
+
+    with pytest.raises(ConfigError, match="bench_hybrid: expected repeats >= 1, found 0"):
+        bench_hybrid(repeats=0)

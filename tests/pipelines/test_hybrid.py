@@ -177,7 +177,12 @@ def test_session_writes_result_folder_on_video_time_line(wave_session, wave_resu
     from mocapkit.io.session import load_session
 
     motion, out = wave_result
-    assert sorted(p.name for p in out.iterdir()) == ["joints.csv", "motion.bvh", "motion.npz"]
+    assert sorted(p.name for p in out.iterdir()) == [
+        "fit.csv",
+        "joints.csv",
+        "motion.bvh",
+        "motion.npz",
+    ]
     video_t = load_session(wave_session).video("mono").time_s
     assert video_t.shape == (16,)
     # one pose per video frame, stamped with the frame's (jittered) time, not the markers'

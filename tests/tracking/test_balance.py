@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocapkit.errors import ConfigError
+from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.ik.sdls import SDLSSolver
 from mocapkit.skeleton import load_preset
 from mocapkit.tracking.balance import (
@@ -84,3 +84,85 @@ def test_squat_keeps_markers_and_improves_balance(setup, mode):
 def test_bad_config():
     with pytest.raises(ConfigError, match="BalanceConfig.mode"):
         BalanceConfig(mode="tilt")
+
+
+def test_spine_flexion_found_through_canonical_names():
+    from mocapkit.tracking.balance import spine_dof_indices
+
+    plain = load_preset("zhang21")
+    twist = load_preset("zhang21", ("spine_rotation", "neck_rotation"))
+    names = ("spine1_flexion", "spine2_flexion", "spine3_flexion")
+    assert spine_dof_indices(plain) == tuple(plain.dof_index(n) for n in names)
+    # the twist is a spine DoF too, but not a flexion: the bow leaves it alone
+    assert spine_dof_indices(twist) == tuple(twist.dof_index(n) for n in names)
+    with pytest.raises(ShapeError, match="has no spine flexion DoF"):
+        spine_dof_indices(load_preset("azad14"))
+
+
+def test_support_needs_legs():
+    sk = load_preset("upper_stick")
+    with pytest.raises(ShapeError, match="has no legs"):
+        support_points(sk, sk.zero_pose())
+    z = load_preset("zhang21")
+    pts = support_points(z, z.zero_pose())
+    assert pts.shape == (4, 3) and np.all(np.abs(pts[:, 2] - pts[:, 2].min()) < 200.0)
+
+
+class _Counting(SDLSSolver):
+    solves = 0
+
+    def solve(self, *args, **kwargs):
+        type(self).solves += 1
+        return super().solve(*args, **kwargs)
+
+
+def test_secant_search_as_close_as_bisection_with_fewer_solves(setup):
+    sk, _solver, _model = setup
+    solver = _Counting(sk)
+    q0 = solver.secondary.omega
+    support = support_points(sk, q0)
+    secant, bisect = BalanceConfig(mode="solve", search="secant"), BalanceConfig(mode="solve")
+    slope = None
+    for q, t in squat(solver, np.linspace(-100.0, -300.0, 5)):
+        cog, back, front = cog_offset_mm(sk, q, support)
+        assert cog > front  # the squat leans forward out of the box: a bow is needed
+        goal = front - secant.margin_fraction * (front - back)
+        _Counting.solves = 0
+        a = balance_pose(solver, q, t, q0[2], support, None, secant, slope_mm_per_rad=slope)
+        n_secant = _Counting.solves
+        slope = a.slope_mm_per_rad
+        _Counting.solves = 0
+        b = balance_pose(solver, q, t, q0[2], support, None, bisect)
+        n_bisect = _Counting.solves
+        # as close to the goal as bisection (which the markers-first halving may pull
+        # away from it), each within the restore's tolerance
+        off_a = abs(cog_offset_mm(sk, a.q, support)[0] - goal)
+        off_b = abs(cog_offset_mm(sk, b.q, support)[0] - goal)
+        assert off_a <= off_b + 1.0
+        assert np.nanmax(a.residual_mm) <= 2.0 * solver.config.tol_mm
+        assert np.all(a.taus > 0)  # a forward bow
+        assert n_secant <= secant.max_evaluations < n_bisect
+        assert slope is not None and slope < 0  # a forward bow moves the CoG backwards
+
+
+def test_no_lean_tried_when_markers_are_off_without_one(setup):
+    sk, _solver, _model = setup
+    solver = _Counting(sk)
+    q0 = solver.secondary.omega
+    support = support_points(sk, q0)
+    (q, t), *_ = squat(solver, [-300.0])
+    t = t.copy()
+    t[1] += (0.0, 0.0, 400.0)  # the left hand's marker far out of reach
+    _Counting.solves = 0
+    res = balance_pose(solver, q, t, q0[2], support, None, BalanceConfig(mode="solve"))
+    cog, back, front = cog_offset_mm(sk, q, support)
+    assert not back <= cog <= front  # the balance step had work to do
+    np.testing.assert_array_equal(res.taus, 0.0)
+    assert _Counting.solves == 1  # the restore at zero lean, nothing else
+
+
+def test_bad_search_config():
+    with pytest.raises(ConfigError, match="BalanceConfig.search"):
+        BalanceConfig(search="golden")
+    with pytest.raises(ConfigError, match="max_evaluations >= 2"):
+        BalanceConfig(max_evaluations=1)

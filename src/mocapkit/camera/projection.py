@@ -74,9 +74,7 @@ def camera_arrays(K: ArrayLike, dist: ArrayLike, camera_from_world: ArrayLike) -
         )
     d8 = np.zeros(8)
     d8[: min(8, dd.shape[0])] = dd[:8]
-    return CameraArrays(
-        np.ascontiguousarray(m[:3, :3]), np.ascontiguousarray(m[:3, 3]), k, d8
-    )
+    return CameraArrays(np.ascontiguousarray(m[:3, :3]), np.ascontiguousarray(m[:3, 3]), k, d8)
 
 
 @numba.njit(cache=True, inline="always")

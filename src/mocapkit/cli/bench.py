@@ -20,6 +20,13 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--repeats", type=int, default=3, help="timed repeats (default 3)")
     p.add_argument(
+        "--work",
+        default=None,
+        metavar="FOLDER",
+        help="hybrid: folder where the benchmark sessions are rendered once and re-used "
+        "(default: mocapkit-bench-hybrid in the temporary folder)",
+    )
+    p.add_argument(
         "--save",
         nargs="?",
         const="bench/results",
@@ -32,7 +39,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark(s), print, optionally save."""
-    results = run_benchmarks(args.name, repeats=args.repeats)
+    results = run_benchmarks(args.name, repeats=args.repeats, work_dir=args.work)
     if args.save is not None:
         save_results(results, args.save)
     print(json.dumps(results, indent=2) if args.json else format_table(results))

@@ -80,7 +80,12 @@ def bilinear_lookup_nb(
 
 @numba.njit(cache=True)
 def lookup_points_nb(
-    dmap: Float32Array, points_px: FloatArray, x0: float, y0: float, step: float, cap: float,
+    dmap: Float32Array,
+    points_px: FloatArray,
+    x0: float,
+    y0: float,
+    step: float,
+    cap: float,
     out: FloatArray,
 ) -> None:
     """`bilinear_lookup_nb` at each image point (N, 2) into ``out`` (N,)."""

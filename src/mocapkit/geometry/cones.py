@@ -85,9 +85,7 @@ def cone_contour_generators_nb(
         out[side, 1, 2] = b[2] + rb * ez
 
 
-def cone_contour_generators(
-    a: FloatArray, b: FloatArray, ra: float, rb: float
-) -> FloatArray:
+def cone_contour_generators(a: FloatArray, b: FloatArray, ra: float, rb: float) -> FloatArray:
     """`cone_contour_generators_nb` returning a new (2, 2, 3) array (side, start/end, xyz) mm."""
     out = np.empty((2, 2, 3))
     cone_contour_generators_nb(

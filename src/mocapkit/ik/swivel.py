@@ -175,9 +175,7 @@ def swivel_angle(
         np.ascontiguousarray(p, dtype=np.float64) for p in (shoulder, elbow, wrist, reference_elbow)
     ]
     if any(p.shape != (3,) for p in pts):
-        raise ShapeError(
-            f"swivel_angle: expected four points (3,), found {[p.shape for p in pts]}"
-        )
+        raise ShapeError(f"swivel_angle: expected four points (3,), found {[p.shape for p in pts]}")
     if np.linalg.norm(pts[2] - pts[0]) < 1e-9:
         raise ShapeError("swivel_angle: the wrist coincides with the shoulder")
     return float(swivel_angle_nb(pts[0], pts[1], pts[2], pts[3]))

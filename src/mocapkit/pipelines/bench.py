@@ -8,7 +8,6 @@ asserted by tests.
 
 from __future__ import annotations
 
-import math
 import os
 import platform
 import time
@@ -19,12 +18,12 @@ from typing import Any
 import cv2
 import numpy as np
 
-from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
 from mocapkit.errors import ConfigError, unknown_name
 from mocapkit.io.atomic import atomic_write
 from mocapkit.pipelines.mono_bench import bench_mono
-from mocapkit.skeleton import canonical_positions, forward_kinematics, load_preset
+from mocapkit.skeleton import forward_kinematics, load_preset
 from mocapkit.skeleton.kinematics import points_and_jacobian
+from mocapkit.skeleton.limbs import arm, head_joint, leg
 
 #: Image size of the hybrid benchmark (the issue's 640x480).
 HYBRID_IMAGE_SIZE = (640, 480)
@@ -64,10 +63,12 @@ def bench_kinematics(
     lo = np.where(np.isfinite(sk.lower), sk.lower, -500.0)
     hi = np.where(np.isfinite(sk.upper), sk.upper, 500.0)
     q = rng.uniform(lo, hi, (n_poses, sk.n_dofs))
-    head_joint, head_point = sk.canonical["head"]
-    joints = [head_joint, "l_hand", "r_hand", "l_foot", "r_foot"]
+    # head centre, wrists and ankles, found through the canonical names
+    joints = [head_joint(sk)] + [
+        part(sk, side).end for part in (arm, leg) for side in ("left", "right")
+    ]
     points = np.zeros((5, 3))
-    points[0] = head_point
+    points[0] = sk.canonical["head"][1]
     qj = q[:n_jacobians]
     fk_rate, fk_min = _median_rate(lambda: forward_kinematics(sk, q), n_poses, repeats)
     jac_rate, jac_min = _median_rate(
@@ -85,163 +86,172 @@ def bench_kinematics(
     }
 
 
-def _hybrid_sequence(n_frames: int, rate_hz: float) -> tuple[Any, Camera, np.ndarray]:
-    """A zhang21 arm-waving motion (both arms, changing swivel) and a front camera."""
-    sk = load_preset("zhang21")
-    t = np.arange(n_frames) / rate_hz
-    q = np.tile(sk.zero_pose(), (n_frames, 1))
-
-    def put(name: str, deg: np.ndarray) -> None:
-        q[:, sk.dof_index(name)] = np.radians(deg)
-
-    w = 2 * np.pi * 0.4 * t
-    put("l_shoulder_abduction", 40 + 15 * np.sin(w))
-    put("l_shoulder_flexion", 25 + 20 * np.sin(0.7 * w + 1))
-    put("l_shoulder_rotation", 20 + 15 * np.sin(0.5 * w))
-    put("l_elbow_flexion", 70 + 25 * np.sin(0.9 * w + 2))
-    put("r_shoulder_abduction", 45 + 15 * np.sin(w + 1))
-    put("r_shoulder_flexion", 15 + 20 * np.sin(0.6 * w))
-    put("r_shoulder_rotation", -15 + 15 * np.sin(0.8 * w + 0.5))
-    put("r_elbow_flexion", 60 + 25 * np.sin(1.1 * w + 1))
-    put("spine2_flexion", 5 * np.sin(0.3 * w))
-    q = np.clip(q, sk.lower, sk.upper)
-    size = HYBRID_IMAGE_SIZE
-    cam = Camera(
-        "bench",
-        size,
-        intrinsics_from_fov(size, 60),
-        np.zeros(5),
-        look_at((300, 3200, 1300), (0, 0, 1250)),
-    )
-    return sk, cam, q
+#: Clips of ``shared/data/mocap`` the hybrid benchmark renders as sessions, with the
+#: excerpt (start s, length s): three of the accuracy study's clips
+#: (`mocapkit.pipelines.accuracy.HYBRID_CLIPS`), 4 s each.
+BENCH_CLIPS: dict[str, tuple[float, float]] = {
+    "13_26.bvh": (11.5, 4.0),
+    "01_09.amc": (27.0, 4.0),
+    "lambada.amc": (11.0, 4.0),
+}
+#: Built-in motions rendered instead when the shared clips are absent.
+BUILTIN_BENCH_CLIPS: dict[str, tuple[float, float]] = {
+    "builtin:table-tennis": (0.0, 4.0),
+    "builtin:wave": (0.0, 4.0),
+}
+#: Stages of the per-frame pipeline, in order (see `bench_hybrid`).
+HYBRID_STAGES: tuple[str, ...] = (
+    "load",
+    "input",
+    "ik",
+    "edges",
+    "refinement",
+    "balance",
+    "smoothing",
+    "write",
+)
 
 
-def _render_frames(sk: Any, cam: Camera, q: np.ndarray, seed: int) -> list[np.ndarray]:
-    from mocapkit.viz.overlay import draw_body
+def bench_sessions(
+    work_dir: str | os.PathLike[str], mocap_dir: str | os.PathLike[str] | None = None
+) -> list[Path]:
+    """The benchmark's sessions (640x480 mono, default realism, seed 0), rendered once.
 
-    rng = np.random.default_rng(seed)
-    w, h = cam.image_size
-    bg = (rng.normal(0, 1, (h, w, 3)) * 12 + 170).clip(0, 255).astype(np.uint8)
-    bg = np.asarray(cv2.GaussianBlur(bg, (0, 0), 2), dtype=np.uint8)
-    colours = {n: (40, 60, 200) for n in ("l_humerus", "l_radius", "l_hand")}
-    colours.update({n: (200, 80, 40) for n in ("r_humerus", "r_radius", "r_hand")})
-    return [draw_body(bg.copy(), sk, cam, qq, colours, (90, 120, 90)) for qq in q]
+    Parameters
+    ----------
+    work_dir : path-like
+        Cache folder: a session already there (``session.json`` present) is re-used.
+    mocap_dir : path-like, optional
+        Folder of `BENCH_CLIPS` (default ``shared/data/mocap`` when found); without it
+        the `BUILTIN_BENCH_CLIPS` are rendered.
+    """
+    from mocapkit.pipelines.demo import find_shared_data
+    from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+
+    if mocap_dir is None:
+        data = find_shared_data()
+        mocap_dir = data / "mocap" if data is not None else None
+    if mocap_dir is not None and all((Path(mocap_dir) / c).is_file() for c in BENCH_CLIPS):
+        clips = {str(Path(mocap_dir) / c): v for c, v in BENCH_CLIPS.items()}
+    else:
+        clips = dict(BUILTIN_BENCH_CLIPS)
+    out = []
+    for spec, (start, seconds) in clips.items():
+        name = f"{Path(spec.split(':')[-1]).stem}_{start:g}+{seconds:g}s_640x480"
+        folder = Path(work_dir) / name
+        if not (folder / "session.json").is_file():
+            synthesize_session(
+                spec,
+                folder,
+                SynthOptions(
+                    rig="mono",
+                    start_s=start,
+                    seconds=seconds,
+                    seed=0,
+                    image_size=HYBRID_IMAGE_SIZE,
+                    overwrite=True,
+                ),
+            )
+        out.append(folder)
+    return out
 
 
 def bench_hybrid(
-    repeats: int = 3, n_frames: int = 120, rate_hz: float = 30.0, seed: int = 0
-) -> dict[str, float | str]:
-    """Frames per second of the whole per-frame hybrid pipeline at 640x480, both arms refined.
+    repeats: int = 3,
+    work_dir: str | os.PathLike[str] | None = None,
+    mocap_dir: str | os.PathLike[str] | None = None,
+) -> dict[str, Any]:
+    """Frames per second of ``mocapkit track hybrid`` as shipped, end to end, one core.
 
-    A synthetic sequence (zhang21 waving both arms, rendered as filled cones over a
-    lightly textured background) is fed to `mocapkit.tracking.hybrid.HybridTracker`
-    (IK, edge distance transform in the arm RoIs, both arm refinements, balance,
-    smoothing). Frames are rendered before timing. Also reported: the refinement
-    alone per arm (distance map plus search), its evaluations, the compiled cost's
-    time per evaluation, and warm-started IK solves per second
-    (`mocapkit.pipelines.hybrid.bench_ik`).
+    Sessions rendered from real motion (`bench_sessions`: three CMU clips, 4 s each,
+    640x480, markers at 120 Hz with noise and drop-outs) are tracked with the default
+    configuration of ``mocapkit track hybrid SESSION --out DIR``
+    (`mocapkit.pipelines.hybrid.track_hybrid_session`: oriented marker sets, video
+    refinement with the elbow-jump penalty, balance, smoothing) through the runner,
+    from loading the session to the written result folder. One untimed run compiles
+    and warms the caches first; each repeat tracks every session, and the figures are
+    the medians over repeats. OpenCV runs on one thread. Times are the process's CPU
+    time (``time.process_time``, all its threads): on a dedicated core that is the wall
+    time, and on a shared machine it is what the work itself took (the wall time is
+    reported too).
 
     Returns
     -------
     dict
-        ``fps`` (median), ``fps_min``, ``ms_per_frame``, ``refine_ms_per_arm``,
-        ``evaluations_per_arm``, ``cost_eval_us``, ``edge_ms_per_arm`` (Canny and
-        distance transform of one arm RoI),
-        ``ik_solves_per_s``, ``mean_elbow_error_mm``, ``pipeline`` and sizes.
+        ``fps`` (frames of all sessions per CPU second, median), ``fps_min``,
+        ``fps_wall`` (per wall-clock second), ``ms_per_frame`` (CPU);
+        ``stages_ms``: CPU milliseconds per frame of each stage
+        (`HYBRID_STAGES`: ``load`` the session, ``input`` the marker samples and video
+        decoding, ``ik`` the solves and foot re-planting, ``edges`` the whole-frame
+        edge preparation, ``refinement`` both arms' RoI edge maps and searches,
+        ``balance``, ``smoothing`` with its IK polish, ``write`` the result folder),
+        ``other`` (the rest of ``update``) and ``io`` (load + input + write);
+        ``ik_solves_per_frame``, ``ik_iterations_per_solve``; ``ik_micro_solves_per_s``
+        (the warm-started IK micro-benchmark, `mocapkit.pipelines.hybrid.bench_ik`);
+        ``elbow_jump_penalty`` (on in the tracked configuration); sessions and sizes.
     """
-    if repeats < 1 or n_frames < 2:
-        raise ConfigError(
-            f"bench_hybrid: expected repeats >= 1 and n_frames >= 2, found {repeats}, {n_frames}"
-        )
-    from mocapkit.cues.edges import prepare_frame, roi_distance_map
-    from mocapkit.pipelines.hybrid import bench_ik
-    from mocapkit.tracking.arm_refinement import (
-        ArmDiagnostics,
-        RefineConfig,
-        arm_cost_many_nb,
-        arm_problem,
-        refine_arms,
+    if repeats < 1:
+        raise ConfigError(f"bench_hybrid: expected repeats >= 1, found {repeats}")
+    import tempfile
+
+    from mocapkit.pipelines.hybrid import bench_ik, track_hybrid_session_run
+    from mocapkit.timing import StageTimer
+    from mocapkit.tracking.arm_refinement import RefineConfig
+
+    cache = (
+        Path(work_dir)
+        if work_dir is not None
+        else Path(tempfile.gettempdir()) / "mocapkit-bench-hybrid"
     )
-    from mocapkit.tracking.hybrid import HybridSample, HybridTracker
-
-    sk, cam, q_true = _hybrid_sequence(n_frames, rate_hz)
-    frames = _render_frames(sk, cam, q_true, seed)
-    canon = canonical_positions(sk, q_true, ["head", "left_wrist", "right_wrist"])
-    samples = [
-        HybridSample(
-            time_s=i / rate_hz,
-            markers_mm={"head": canon[i, 0], "left_hand": canon[i, 1], "right_hand": canon[i, 2]},
-            image=frames[i],
-        )
-        for i in range(n_frames)
-    ]
-    diags: list[ArmDiagnostics] = []
-
-    def recording_refiner(
-        skel: Any, camera: Any, q: Any, image: Any, hands: Any, config: Any
-    ) -> Any:
-        d: dict[str, ArmDiagnostics] = {}
-        out = refine_arms(skel, camera, q, image, hands, config, diagnostics=d)
-        diags.extend(x for x in d.values() if x.refined)
-        return out
-
+    sessions = bench_sessions(cache / "sessions", mocap_dir)
     threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
+    fps_list: list[float] = []
+    wall_fps: list[float] = []
+    per_stage: dict[str, list[float]] = {}
+    solves, iters, frames = [], [], 0
     try:
-        # warm-up: compile every kernel along the path
-        warm = HybridTracker(sk, cam, refiner=recording_refiner)
-        for s in samples[:5]:
-            warm.update(s)
-        fps_list, elbow_err = [], math.nan
-        for _ in range(repeats):
-            diags.clear()
-            tracker = HybridTracker(sk, cam, refiner=recording_refiner)
-            t0 = time.perf_counter()
-            poses = [tracker.update(s) for s in samples]
-            fps_list.append(n_frames / (time.perf_counter() - t0))
-            est = np.stack([p.q for p in poses])
-        names = ["left_elbow", "right_elbow"]
-        elbow_err = float(
-            np.mean(
-                np.linalg.norm(
-                    canonical_positions(sk, est, names) - canonical_positions(sk, q_true, names),
-                    axis=-1,
-                )
-            )
-        )
-        refine_ms = float(np.median([d.elapsed_ms for d in diags]))
-        evals = float(np.median([d.n_evaluations for d in diags]))
-        # the compiled cost and the edge map alone, on the middle frame
-        mid = n_frames // 2
-        cfg = RefineConfig()
-        frame = prepare_frame(frames[mid], cfg.edges)
-        prob = arm_problem(sk, cam, q_true[mid], "left", frame, canon[mid, 1], cfg)
-        xs = prob.x0 + np.random.default_rng(seed).normal(0, 0.05, (20_000, 4))
-        dmap = prob.maps
-        model = prob.model
-        eval_rate, _ = _median_rate(lambda: arm_cost_many_nb(xs, model, dmap), len(xs), repeats)
-        roi = prob.distance.roi
-        edge_rate, _ = _median_rate(
-            lambda: roi_distance_map(frame, roi, cfg.edges), 1, max(repeats, 20)
-        )
+        with tempfile.TemporaryDirectory(prefix="mocapkit-bench-") as tmp:
+            track_hybrid_session_run(sessions[0], Path(tmp) / "warm")  # compile, warm up
+            for r in range(repeats):
+                timer = StageTimer(clock=time.process_time)
+                frames = 0
+                t0, c0 = time.perf_counter(), time.process_time()
+                for s in sessions:
+                    run = track_hybrid_session_run(s, Path(tmp) / f"{r}_{s.name}", timer=timer)
+                    frames += run.motion.n_frames
+                cpu = time.process_time() - c0
+                wall_fps.append(frames / (time.perf_counter() - t0))
+                fps_list.append(frames / cpu)
+                totals = timer.totals_s()
+                for name in (*HYBRID_STAGES, "track"):
+                    per_stage.setdefault(name, []).append(1e3 * totals.get(name, 0.0) / frames)
+                counts = timer.counts()
+                solves.append(counts.get("ik_solves", 0) / frames)
+                iters.append(counts.get("ik_iterations", 0) / max(counts.get("ik_solves", 0), 1))
     finally:
         cv2.setNumThreads(threads)
+    stages = {n: float(np.median(v)) for n, v in per_stage.items()}
+    inner = ("ik", "edges", "refinement", "balance", "smoothing")
+    stages["other"] = max(stages.pop("track") - sum(stages[n] for n in inner), 0.0)
+    stages["io"] = stages["load"] + stages["input"] + stages["write"]
     ik = bench_ik(n_frames=500, repeats=repeats)
     fps = float(np.median(fps_list))
     return {
         "fps": fps,
         "fps_min": float(np.min(fps_list)),
+        "fps_wall": float(np.median(wall_fps)),
         "ms_per_frame": 1e3 / fps,
-        "refine_ms_per_arm": refine_ms,
-        "evaluations_per_arm": evals,
-        "cost_eval_us": 1e6 / eval_rate,
-        "edge_ms_per_arm": 1e3 / edge_rate,
-        "ik_solves_per_s": float(ik["solves_per_s"]),
-        "mean_elbow_error_mm": elbow_err,
+        "stages_ms": stages,
+        "ik_solves_per_frame": float(np.median(solves)),
+        "ik_iterations_per_solve": float(np.median(iters)),
+        "ik_micro_solves_per_s": float(ik["solves_per_s"]),
+        "elbow_jump_penalty": RefineConfig().elbow_jump_weight_per_mm > 0,
+        "sessions": ", ".join(s.name for s in sessions),
         "image_size": f"{HYBRID_IMAGE_SIZE[0]}x{HYBRID_IMAGE_SIZE[1]}",
-        "pipeline": "HybridTracker.update: IK + edge DT in arm RoIs + both arm refinements "
-        "+ balance + smoothing",
-        "n_frames": float(n_frames),
+        "pipeline": "mocapkit track hybrid SESSION --out DIR (default configuration): load, "
+        "decode, IK, edges, both arm refinements, balance, smoothing, write",
+        "n_frames": float(frames),
         "repeats": float(repeats),
     }
 
@@ -253,7 +263,9 @@ BENCHMARKS: dict[str, Callable[..., dict[str, Any]]] = {
 }
 
 
-def run_benchmarks(name: str, repeats: int = 3) -> dict[str, dict[str, Any]]:
+def run_benchmarks(
+    name: str, repeats: int = 3, work_dir: str | os.PathLike[str] | None = None
+) -> dict[str, dict[str, Any]]:
     """Run one benchmark by name, or ``"all"``; returns ``{name: figures}``.
 
     Parameters
@@ -262,13 +274,20 @@ def run_benchmarks(name: str, repeats: int = 3) -> dict[str, dict[str, Any]]:
         A key of `BENCHMARKS` or ``"all"``.
     repeats : int
         Timed repeats per figure (medians are reported).
+    work_dir : path-like, optional
+        Cache folder of the hybrid benchmark's sessions (`bench_hybrid`).
     """
     if name != "all" and name not in BENCHMARKS:
         raise unknown_name("benchmark", name, [*BENCHMARKS, "all"], "mocapkit bench")
     if repeats < 1:
         raise ConfigError(f"--repeats: expected at least 1, found {repeats}")
     names = list(BENCHMARKS) if name == "all" else [name]
-    return {n: BENCHMARKS[n](repeats=repeats) for n in names}
+    return {
+        n: BENCHMARKS[n](repeats=repeats, work_dir=work_dir)
+        if n == "hybrid"
+        else BENCHMARKS[n](repeats=repeats)
+        for n in names
+    }
 
 
 def machine_info() -> dict[str, str]:
@@ -304,6 +323,11 @@ def format_table(results: dict[str, dict[str, Any]]) -> str:
         lines.append(name)
         width = max(len(k) for k in figures)
         for key, value in figures.items():
+            if isinstance(value, dict):
+                lines.append(f"  {key}")
+                for k, v in value.items():
+                    lines.append(f"    {k:<{width - 2}}  {v:,.3f}")
+                continue
             shown = f"{value:,.3f}" if isinstance(value, float) else str(value)
             lines.append(f"  {key:<{width}}  {shown}")
     return "\n".join(lines)
@@ -313,6 +337,7 @@ __all__ = [
     "BENCHMARKS",
     "bench_hybrid",
     "bench_kinematics",
+    "bench_sessions",
     "format_table",
     "machine_info",
     "run_benchmarks",

@@ -1,14 +1,15 @@
-"""File runners of the hybrid tracker (sessions, raw marker files) and its IK benchmark.
+"""The hybrid tracker on files (sessions, raw marker files) and its IK micro-benchmark.
 
-Both runners feed `mocapkit.tracking.hybrid.HybridTracker.update` sample by sample,
-the same code a live feed would call.
+Both build a `mocapkit.tracking.hybrid.HybridTracker` and its sample stream and hand them
+to the one runner, `mocapkit.pipelines.run.run_tracker`, which calls ``update`` sample by
+sample (the same code a live feed would call) and writes the result folder.
 """
 
 from __future__ import annotations
 
 import os
 import time
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -17,11 +18,12 @@ from numpy.typing import ArrayLike, NDArray
 from mocapkit.errors import ConfigError, SessionError, ShapeError, unknown_name
 from mocapkit.ik.sdls import IKConfig, SDLSSolver
 from mocapkit.io.motion import Motion
-from mocapkit.io.motion_files import write_result_folder
-from mocapkit.progress import Progress
-from mocapkit.skeleton.model import Skeleton
+from mocapkit.pipelines.run import RunResult, run_tracker
+from mocapkit.skeleton.limbs import arm, head_joint, spine_dofs
+from mocapkit.skeleton.model import PRISMATIC, Skeleton
 from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments, scale_skeleton
+from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.arm_refinement import RefineConfig
 from mocapkit.tracking.hybrid import (
     MARKER_SETS,
@@ -76,19 +78,6 @@ def hybrid_skeleton(
             lower[sk.dof_index(name)] = upper[sk.dof_index(name)] = 0.0
         sk = sk.replace(lower=lower, upper=upper)
     return sk
-
-
-def _run(
-    tracker: HybridTracker, samples: Iterable[HybridSample], n: int, label: str
-) -> tuple[FloatArray, FloatArray, list[HybridPose]]:
-    poses: list[HybridPose] = []
-    with Progress(n, label) as prog:
-        for s in samples:
-            poses.append(tracker.update(s))
-            prog.update()
-    if not poses:
-        raise ShapeError(f"{label}: no samples to track")
-    return (np.array([p.time_s for p in poses]), np.stack([p.q for p in poses]), poses)
 
 
 #: The canonical joint each hybrid effector sits on (its default point, see
@@ -167,6 +156,7 @@ def track_hybrid_session(
     clavicle: bool | None = None,
     twist: bool | None = None,
     max_elbow_speed_mm_per_s: float | None = None,
+    timer: StageTimer = NULL_TIMER,
 ) -> Motion:
     """Track a recording session with head and hand marker sets plus one camera.
 
@@ -202,10 +192,42 @@ def track_hybrid_session(
         Elbow speed the video refinement's elbow-jump penalty leaves free
         (`RefineConfig.elbow_speed_mm_per_s`, default 3000 mm/s); 0 turns the penalty
         off. Raise it for sports with fast arms. Not with ``paper`` (no penalty there).
+    timer : StageTimer, optional
+        Receives the stage times: ``"load"`` (session), the runner's ``"input"`` (marker
+        samples and video decoding), ``"track"`` and ``"write"``, and the tracker's own.
     """
+    return track_hybrid_session_run(
+        session_dir,
+        out_dir,
+        use_video,
+        paper,
+        config,
+        oriented_sets,
+        clavicle,
+        twist,
+        max_elbow_speed_mm_per_s,
+        timer,
+    ).motion
+
+
+def track_hybrid_session_run(
+    session_dir: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str] | None,
+    use_video: bool = True,
+    paper: bool = False,
+    config: HybridConfig | None = None,
+    oriented_sets: Sequence[str] | None = None,
+    clavicle: bool | None = None,
+    twist: bool | None = None,
+    max_elbow_speed_mm_per_s: float | None = None,
+    timer: StageTimer = NULL_TIMER,
+) -> RunResult:
+    """`track_hybrid_session`, returning the runner's whole result (motion and the
+    per-frame `HybridPose` results)."""
     from mocapkit.io.session import load_session
 
-    session = load_session(session_dir)
+    with timer.stage("load"):
+        session = load_session(session_dir)
     missing = [n for n in MARKER_SETS if n not in session.marker_sets]
     if missing or session.markers is None:
         raise SessionError(
@@ -255,7 +277,7 @@ def track_hybrid_session(
         )
     camera = session.camera(cams[0])
     # the camera also sets the initial facing, so it is passed even without video
-    tracker = HybridTracker(sk, camera, cfg)
+    tracker = HybridTracker(sk, camera, cfg, timer=timer)
     n = session.video(cams[0]).n_frames
 
     def stream() -> Iterator[HybridSample]:
@@ -275,18 +297,17 @@ def track_hybrid_session(
                 members,
             )
 
-    t, q, _ = _run(tracker, stream(), n, "track hybrid")
     mode = "paper" if cfg.paper else "default"
-    motion = Motion.from_q(
-        sk,
-        t,
-        q,
+    return run_tracker(
+        tracker,
+        stream(),
+        n,
+        out_dir,
+        "track hybrid",
         source=f"hybrid tracker ({mode}, video="
         f"{'on' if cfg.use_video else 'off'}) on {session.path}",
+        timer=timer,
     )
-    if out_dir is not None:
-        write_result_folder(out_dir, motion)
-    return motion
 
 
 #: Re-plant trigger (mm) for raw marker files. Their sets are centres of skin markers
@@ -303,6 +324,9 @@ def track_hybrid_marker_arrays(
     height_mm: float,
     config: HybridConfig | None = None,
     label: str = "track hybrid",
+    out_dir: str | os.PathLike[str] | None = None,
+    source: str = "",
+    timer: StageTimer = NULL_TIMER,
 ) -> tuple[Skeleton, FloatArray, list[HybridPose]]:
     """Run the hybrid tracker (IK only) on marker-set trajectories.
 
@@ -318,6 +342,11 @@ def track_hybrid_marker_arrays(
         replant_mm=RAW_MARKERS_REPLANT_MM)``: a lab's marker frame has its floor at
         z = 0, and where a raw head set sits on the head is not known, so the model
         stands on that floor rather than hanging from the set.
+    out_dir : path, optional
+        Result folder written by the runner (`mocapkit.pipelines.run.run_tracker`).
+    source : str
+        Stored in the written motion.
+    timer : StageTimer, optional
 
     Returns
     -------
@@ -338,12 +367,13 @@ def track_hybrid_marker_arrays(
         use_video=False, start_upright=False, replant_mm=RAW_MARKERS_REPLANT_MM
     )
     sk = hybrid_skeleton(height_mm)
-    tracker = HybridTracker(sk, None, cfg)
+    tracker = HybridTracker(sk, None, cfg, timer=timer)
     samples = (
         HybridSample(float(t[i]), {k: v[i] for k, v in arrays.items()}) for i in range(t.size)
     )
-    _, q, poses = _run(tracker, samples, t.size, label)
-    return sk, q, poses
+    run = run_tracker(tracker, samples, t.size, out_dir, label, source=source, timer=timer)
+    poses = [p for p in run.results if isinstance(p, HybridPose)]
+    return sk, np.asarray(run.motion.q), poses
 
 
 def track_hybrid_markers(
@@ -353,6 +383,7 @@ def track_hybrid_markers(
     out_dir: str | os.PathLike[str] | None = None,
     config: HybridConfig | None = None,
     plant_feet: bool = True,
+    timer: StageTimer = NULL_TIMER,
 ) -> Motion:
     """Run the hybrid tracker's IK on a raw marker file (C3D, TRC, CSV) without a session.
 
@@ -373,6 +404,8 @@ def track_hybrid_markers(
     plant_feet : bool
         Hold the feet where the first frame puts them (the paper); False for takes
         where the subject walks (ignored when ``config`` is given).
+    timer : StageTimer, optional
+        Stage times (``"load"``: reading the file, then the runner's and tracker's).
 
     Notes
     -----
@@ -383,7 +416,8 @@ def track_hybrid_markers(
     from mocapkit.io.marker_files import read_markers
     from mocapkit.io.marker_sets import estimate_height_mm, evaluate_marker_sets, parse_marker_sets
 
-    markers = read_markers(markers_path)
+    with timer.stage("load"):
+        markers = read_markers(markers_path)
     sets = parse_marker_sets(list(marker_sets))
     names = [s.name for s in sets]
     missing = [n for n in MARKER_SETS if n not in names]
@@ -401,15 +435,17 @@ def track_hybrid_markers(
         start_upright=False,
         replant_mm=RAW_MARKERS_REPLANT_MM,
     )
+    source = f"hybrid tracker IK on {Path(markers_path).name}"
     sk, q, _ = track_hybrid_marker_arrays(
-        markers.time_s, {n: pos[:, i] for i, n in enumerate(names)}, height_mm, cfg
+        markers.time_s,
+        {n: pos[:, i] for i, n in enumerate(names)},
+        height_mm,
+        cfg,
+        out_dir=out_dir,
+        source=source,
+        timer=timer,
     )
-    motion = Motion.from_q(
-        sk, markers.time_s, q, source=f"hybrid tracker IK on {Path(markers_path).name}"
-    )
-    if out_dir is not None:
-        write_result_folder(out_dir, motion)
-    return motion
+    return Motion.from_q(sk, markers.time_s, q, source=source)
 
 
 def bench_ik(n_frames: int = 2000, repeats: int = 5, rate_hz: float = 50.0) -> dict[str, float]:
@@ -433,13 +469,19 @@ def bench_ik(n_frames: int = 2000, repeats: int = 5, rate_hz: float = 50.0) -> d
     solver = SDLSSolver(sk, config=IKConfig())
     t = np.arange(n_frames) / rate_hz
     q = np.tile(solver.secondary.omega, (n_frames, 1))
-    for d, name in enumerate(sk.dof_names):
-        if "shoulder" in name or "elbow" in name:
-            q[:, d] += 0.5 * np.sin(2 * np.pi * 0.5 * t + d) + 0.4
-        elif "spine" in name:
-            q[:, d] += 0.1 * np.sin(2 * np.pi * 0.3 * t + d)
-        elif "neck" in name:
-            q[:, d] += 0.2 * np.sin(2 * np.pi * 0.4 * t + d)
+    arms = np.concatenate([arm(sk, side).dofs for side in ("left", "right")])
+    # the neck: rotations of the joints from the canonical neck down to the head joint
+    neck_joint = sk.joint_index(sk.canonical["neck"][0])
+    neck_chain = [head_joint(sk)]
+    while neck_chain[-1] != neck_joint and neck_chain[-1] >= 0:
+        neck_chain.append(int(sk.parents[neck_chain[-1]]))
+    neck = np.flatnonzero(np.isin(sk.dof_joint, neck_chain) & (sk.dof_kind != PRISMATIC))
+    for d in arms:
+        q[:, d] += 0.5 * np.sin(2 * np.pi * 0.5 * t + d) + 0.4
+    for d in spine_dofs(sk):
+        q[:, d] += 0.1 * np.sin(2 * np.pi * 0.3 * t + d)
+    for d in neck:
+        q[:, d] += 0.2 * np.sin(2 * np.pi * 0.4 * t + d)
     q = np.clip(q, sk.lower, sk.upper)
     targets = np.stack([solver.effector_positions(qq) for qq in q])
     solver.solve(q[0], targets[0])  # compile

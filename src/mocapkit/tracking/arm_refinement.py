@@ -298,9 +298,7 @@ def nelder_mead_arm_nb(
     ``initial_simplex`` (5, 4), ``lb``, ``ub`` (4,) in rad; returns ``x, fx, nfev, nit,
     converged``.
     """
-    return nelder_mead_core(
-        arm_cost_nb, model, maps, initial_simplex, lb, ub, xatol, fatol, maxfev
-    )
+    return nelder_mead_core(arm_cost_nb, model, maps, initial_simplex, lb, ub, xatol, fatol, maxfev)
 
 
 # ------------------------------------------------------------------ Python side

@@ -1,0 +1,178 @@
+"""The one runner of every tracker: stream samples through ``update`` and write the result.
+
+`run_tracker` feeds any `mocapkit.tracking.base.Tracker` sample by sample (the same
+calls a live feed would make), collects its `FrameResult` objects and writes the result
+folder: ``motion.npz``, ``joints.csv``, ``motion.bvh``
+(`mocapkit.io.motion_files.write_result_folder`) and
+``fit.csv`` (per frame: status of each effector or limb and the fit-quality figures),
+each atomically. Method pipelines (`mocapkit.pipelines.hybrid`) only build the tracker and
+its sample stream.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mocapkit.errors import ShapeError
+from mocapkit.io.atomic import atomic_write
+from mocapkit.io.motion import Motion
+from mocapkit.io.motion_files import write_result_folder
+from mocapkit.progress import Progress
+from mocapkit.skeleton.model import Skeleton
+from mocapkit.timing import NULL_TIMER, StageTimer
+from mocapkit.tracking.base import FrameResult, Tracker
+
+#: Name of the per-frame fit and status file in a result folder.
+FIT_FILE = "fit.csv"
+
+
+@dataclass
+class RunResult:
+    """What `run_tracker` produced.
+
+    Attributes
+    ----------
+    motion : Motion
+        The tracked motion (poses and canonical joints).
+    results : list of FrameResult
+        One per sample, in order.
+    out_dir : Path or None
+        The result folder written, if any.
+    """
+
+    motion: Motion
+    results: list[FrameResult]
+    out_dir: Path | None
+
+
+def run_tracker(
+    tracker: Tracker,
+    samples: Iterable[Any],
+    n_samples: int,
+    out_dir: str | os.PathLike[str] | None = None,
+    label: str = "track",
+    source: str = "",
+    timer: StageTimer = NULL_TIMER,
+    skeleton: Skeleton | None = None,
+) -> RunResult:
+    """Stream ``samples`` through ``tracker.update`` and write the result folder.
+
+    Parameters
+    ----------
+    tracker : Tracker
+    samples : iterable
+        The tracker's samples, in time order. Drawing one (reading markers, decoding the
+        video frame) is timed as stage ``"input"``.
+    n_samples : int
+        Expected count (for the progress meter only).
+    out_dir : path, optional
+        Result folder (``motion.npz``, ``joints.csv``, ``motion.bvh``, ``fit.csv``);
+        nothing is written when None. Writing is timed as stage ``"write"``.
+    label : str
+        Progress label and error context.
+    source : str
+        Stored in the motion (where it came from).
+    timer : StageTimer
+        Receives ``"input"``, ``"track"`` (the whole ``update``) and ``"write"``; the
+        tracker may time its own stages on the same timer.
+    skeleton : Skeleton, optional
+        Default ``tracker.skeleton``.
+
+    Raises
+    ------
+    ShapeError
+        When ``samples`` is empty.
+    """
+    sk = tracker.skeleton if skeleton is None else skeleton
+    results: list[FrameResult] = []
+    it = iter(samples)
+    stage_in, stage_track = timer.stage("input"), timer.stage("track")
+    with Progress(n_samples, label) as prog:
+        while True:
+            with stage_in:
+                sample = next(it, None)
+            if sample is None:
+                break
+            with stage_track:
+                results.append(tracker.update(sample))
+            prog.update()
+    if not results:
+        raise ShapeError(f"{label}: no samples to track")
+    t = np.array([r.time_s for r in results])
+    q = np.stack([r.q for r in results])
+    motion = Motion.from_q(sk, t, q, source=source)
+    out = None
+    if out_dir is not None:
+        with timer.stage("write"):
+            out = write_result_folder(out_dir, motion)
+            write_fit_csv(out / FIT_FILE, results)
+    return RunResult(motion, results, out)
+
+
+def _columns(results: Sequence[FrameResult]) -> tuple[list[str], list[str]]:
+    status: dict[str, None] = {}
+    fit: dict[str, None] = {}
+    for r in results:
+        status.update(dict.fromkeys(r.status))
+        fit.update(dict.fromkeys(r.fit))
+    return list(status), list(fit)
+
+
+def write_fit_csv(path: str | os.PathLike[str], results: Sequence[FrameResult]) -> None:
+    """Write per-frame statuses and fit figures as CSV, atomically.
+
+    Columns: ``time_s``, ``<name>_status`` per effector or limb (``seen``, ``bridged``,
+    ``released``, ``missing``; empty where a frame did not report it), then the fit
+    figures by name (``nan`` where missing) and ``worst``.
+    """
+    status_cols, fit_cols = _columns(results)
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["time_s", *(f"{n}_status" for n in status_cols), *fit_cols, "worst"])
+    for r in results:
+        w.writerow(
+            [
+                f"{r.time_s:.9f}",
+                *(r.status.get(n, "") for n in status_cols),
+                *(f"{r.fit.get(n, math.nan):.6f}" for n in fit_cols),
+                r.worst,
+            ]
+        )
+    with atomic_write(path, "w", newline="") as fh:
+        fh.write(buf.getvalue())
+
+
+def read_fit_csv(path: str | os.PathLike[str]) -> tuple[list[dict[str, str]], dict[str, Any]]:
+    """Read ``fit.csv`` back: per-frame rows as dicts of strings, and the fit columns as
+    float arrays (``{"time_s": (T,), "<figure>": (T,), ...}``)."""
+    from mocapkit.errors import FormatError
+
+    p = Path(path)
+    try:
+        with p.open(newline="", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(fh))
+    except OSError as exc:
+        raise FormatError(f"{p}: cannot read ({exc})") from None
+    if not rows or "time_s" not in rows[0] or "worst" not in rows[0]:
+        raise FormatError(f"{p}: expected a fit.csv with time_s and worst columns")
+    numeric: dict[str, Any] = {}
+    for name in rows[0]:
+        if name == "worst" or name.endswith("_status"):
+            continue
+        try:
+            numeric[name] = np.array([float(r[name]) for r in rows])
+        except ValueError:
+            raise FormatError(f"{p}: column {name!r}: expected numbers") from None
+    return rows, numeric
+
+
+__all__ = ["FIT_FILE", "RunResult", "read_fit_csv", "run_tracker", "write_fit_csv"]

@@ -1,0 +1,115 @@
+"""The tracker interface shared by every capture method: ``update(sample) -> FrameResult``.
+
+A tracker is fed one sample at a time (as a live feed would) and answers with a
+`FrameResult`: the pose ``q``, the canonical joints in the world, a status per tracked
+effector or limb and named fit-quality figures. The runner
+(`mocapkit.pipelines.run.run_tracker`) streams any tracker over a recording and writes
+the result folder plus ``fit.csv`` from these results alone.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+from numpy.typing import NDArray
+
+from mocapkit.errors import ShapeError
+from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
+
+FloatArray = NDArray[np.float64]
+
+#: Per-frame status of an effector or limb: observed this frame; extrapolated over a
+#: short gap; dropped from the task after a long gap; never observed yet.
+STATUSES: tuple[str, ...] = ("seen", "bridged", "released", "missing")
+
+
+@dataclass
+class FrameResult:
+    """What a tracker reports for one sample.
+
+    Attributes
+    ----------
+    time_s : float
+        Time of the sample (s).
+    q : ndarray, shape (D,)
+        Joint parameters (rad, mm); NaN when the frame has no pose.
+    joints_mm : ndarray, shape (K, 3)
+        Canonical joints in the world frame (mm). Trackers fill the
+        `CANONICAL_JOINTS` order (K = 15), NaN where not estimated
+        (`canonical_joints_mm` builds it).
+    status : dict of str to str
+        Per effector or limb (``"head"``, ``"left_hand"``, ...), one of `STATUSES`.
+    fit : dict of str to float
+        Named fit-quality figures of this frame, each with its unit in the name
+        (``"head_mm"``: distance of an effector to its marker; ``"rms_mm"``,
+        ``"max_mm"``; a video tracker's ``"edge_px"``).
+    worst : str
+        Name of the effector or term that gives ``fit["max_mm"]`` (empty if none).
+    """
+
+    time_s: float
+    q: FloatArray
+    joints_mm: FloatArray
+    status: dict[str, str]
+    fit: dict[str, float]
+    worst: str
+
+
+@runtime_checkable
+class Tracker(Protocol):
+    """A streaming tracker on one skeleton."""
+
+    skeleton: Skeleton
+
+    def update(self, sample: Any) -> FrameResult:
+        """Track one sample."""
+        ...
+
+
+def canonical_joints_mm(skeleton: Skeleton, joints_mm: FloatArray) -> FloatArray:
+    """Spread a skeleton's canonical joints (``skeleton.canonical_names`` order) over the
+    full `CANONICAL_JOINTS` order, NaN for the joints the skeleton lacks; shape (15, 3)."""
+    j = np.asarray(joints_mm, dtype=float)
+    names = skeleton.canonical_names
+    if j.shape != (len(names), 3):
+        raise ShapeError(
+            f"canonical_joints_mm: expected ({len(names)}, 3) joints of {skeleton.name!r}, "
+            f"found {j.shape}"
+        )
+    if names == CANONICAL_JOINTS:
+        return j.copy()
+    out = np.full((len(CANONICAL_JOINTS), 3), np.nan)
+    for k, n in enumerate(names):
+        out[CANONICAL_JOINTS.index(n)] = j[k]
+    return out
+
+
+def fit_summary(distances_mm: Mapping[str, float]) -> tuple[dict[str, float], str]:
+    """Per-effector distances (mm, NaN when not in the task) plus their RMS and maximum.
+
+    Returns
+    -------
+    fit : dict
+        ``"<name>_mm"`` per effector, ``"rms_mm"`` and ``"max_mm"`` over the finite ones
+        (NaN when none).
+    worst : str
+        The effector at the maximum (empty when none).
+    """
+    fit = {f"{n}_mm": float(d) for n, d in distances_mm.items()}
+    finite = {n: float(d) for n, d in distances_mm.items() if math.isfinite(d)}
+    if finite:
+        worst = max(finite, key=lambda n: finite[n])
+        values = np.fromiter(finite.values(), dtype=float)
+        fit["rms_mm"] = float(np.sqrt(np.mean(values * values)))
+        fit["max_mm"] = finite[worst]
+    else:
+        worst = ""
+        fit["rms_mm"] = fit["max_mm"] = math.nan
+    return fit, worst
+
+
+__all__ = ["STATUSES", "FrameResult", "Tracker", "canonical_joints_mm", "fit_summary"]

@@ -1,0 +1,98 @@
+"""The one runner: any tracker streamed into a result folder with fit.csv."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mocapkit.errors import ShapeError
+from mocapkit.io.motion_npz import load_motion_npz
+from mocapkit.pipelines.run import FIT_FILE, read_fit_csv, run_tracker
+from mocapkit.skeleton import CANONICAL_JOINTS, canonical_positions, load_preset
+from mocapkit.timing import StageTimer
+from mocapkit.tracking.base import FrameResult, canonical_joints_mm
+from mocapkit.tracking.hybrid import HybridConfig, HybridSample, HybridTracker
+
+
+class ReplayTracker:
+    """A minimal tracker: returns the pose it is given, with a made-up fit figure."""
+
+    def __init__(self, skeleton):
+        self.skeleton = skeleton
+
+    def update(self, sample):
+        t, q = sample
+        joints = canonical_joints_mm(self.skeleton, canonical_positions(self.skeleton, q))
+        status = {"left_arm": "seen" if t < 0.05 else "missing"}
+        return FrameResult(t, q, joints, status, {"edge_px": 10.0 * t}, "edge_px")
+
+
+def test_run_tracker_writes_the_result_folder_and_fit(tmp_path) -> None:
+    sk = load_preset("upper_stick")
+    rng = np.random.default_rng(3)
+    q = np.clip(rng.normal(0.0, 0.2, (6, sk.n_dofs)), sk.lower, sk.upper)
+    t = np.arange(6) * 0.02
+    timer = StageTimer()
+    run = run_tracker(
+        ReplayTracker(sk), zip(t, q), 6, tmp_path / "res", source="replay", timer=timer
+    )
+    assert {p.name for p in (tmp_path / "res").iterdir()} == {
+        "motion.npz",
+        "joints.csv",
+        "motion.bvh",
+        FIT_FILE,
+    }
+    motion = load_motion_npz(tmp_path / "res" / "motion.npz")
+    np.testing.assert_allclose(motion.q, q)
+    np.testing.assert_allclose(motion.time_s, t)
+    assert motion.source == "replay" and len(run.results) == 6
+    rows, numeric = read_fit_csv(tmp_path / "res" / FIT_FILE)
+    assert [r["left_arm_status"] for r in rows] == ["seen"] * 3 + ["missing"] * 3
+    np.testing.assert_allclose(numeric["edge_px"], 10.0 * t, atol=1e-6)
+    np.testing.assert_allclose(numeric["time_s"], t, atol=1e-9)
+    assert {r["worst"] for r in rows} == {"edge_px"}
+    assert timer.calls()["track"] == 6 and timer.calls()["write"] == 1
+    assert timer.calls()["input"] == 7  # the last draw finds the stream's end
+
+
+def test_run_tracker_refuses_an_empty_stream() -> None:
+    sk = load_preset("upper_stick")
+    with pytest.raises(ShapeError, match="replay: no samples to track"):
+        run_tracker(ReplayTracker(sk), [], 0, label="replay")
+
+
+def test_hybrid_through_the_runner_reports_status_and_fit(tmp_path) -> None:
+    sk = load_preset("zhang21")
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False))
+    q0 = tracker.solver.secondary.omega.copy()
+    pos = tracker.solver.effector_positions(q0)[:3]
+    samples = [
+        HybridSample(
+            0.02 * i,
+            {"head": pos[0], "left_hand": pos[1] + [0.0, 0.0, 2.0 * i]}
+            | ({} if 3 <= i <= 5 else {"right_hand": pos[2]}),
+        )
+        for i in range(10)
+    ]
+    timer = StageTimer()
+    tracker.timer = timer
+    run = run_tracker(tracker, samples, len(samples), tmp_path / "res", timer=timer)
+    rows, numeric = read_fit_csv(tmp_path / "res" / FIT_FILE)
+    assert [r["right_hand_status"] for r in rows[2:7]] == [
+        "seen",
+        "bridged",
+        "bridged",
+        "bridged",
+        "seen",
+    ]
+    assert rows[0]["head_status"] == "seen"
+    for key in ("head_mm", "left_hand_mm", "right_hand_mm", "left_foot_mm", "rms_mm", "max_mm"):
+        assert key in numeric and numeric[key].shape == (10,)
+    assert np.all(numeric["max_mm"] >= numeric["rms_mm"] - 1e-6)
+    assert run.results[0].joints_mm.shape == (len(CANONICAL_JOINTS), 3)
+    counts = timer.counts()
+    assert counts["ik_solves"] >= 10 and counts["ik_iterations"] >= counts["ik_solves"]
+    assert {"ik", "balance", "smoothing"} <= set(timer.totals_s())
+    assert math.isfinite(numeric["max_mm"][-1])

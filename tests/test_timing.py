@@ -1,0 +1,41 @@
+"""Stage timer: totals, calls and counts per stage; the null timer records nothing."""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+
+from mocapkit.timing import NULL_TIMER, StageTimer
+
+
+def test_stage_timer_accumulates_time_calls_and_counts() -> None:
+    timer = StageTimer()
+    for _ in range(3):
+        with timer.stage("ik"):
+            time.sleep(0.002)
+    with timer.stage("balance"):
+        pass
+    timer.count("ik_iterations", 7)
+    timer.count("ik_iterations", 5)
+    assert timer.calls() == {"ik": 3, "balance": 1, "ik_iterations": 0}
+    assert timer.totals_s()["ik"] >= 3 * 0.002
+    assert timer.totals_s()["balance"] < timer.totals_s()["ik"]
+    assert timer.counts()["ik_iterations"] == 12
+    timer.reset()
+    assert timer.totals_s() == {}
+
+
+def test_stage_is_timed_when_its_body_raises() -> None:
+    timer = StageTimer()
+    with pytest.raises(ValueError, match="boom"), timer.stage("io"):
+        raise ValueError("boom")
+    assert timer.calls() == {"io": 1}
+
+
+def test_null_timer_records_nothing() -> None:
+    with NULL_TIMER.stage("ik"):
+        pass
+    NULL_TIMER.count("ik_solves", 3)
+    assert not NULL_TIMER.enabled
+    assert NULL_TIMER.totals_s() == {} and NULL_TIMER.counts() == {}
