@@ -34,7 +34,7 @@ from mocapkit.cues.edges import EdgeConfig, prepare_frame
 from mocapkit.errors import ConfigError, ShapeError, unknown_name
 from mocapkit.ik.sdls import Effector, IKConfig, IKResult, SDLSSolver
 from mocapkit.skeleton.kinematics import canonical_positions, forward_kinematics
-from mocapkit.skeleton.limbs import SIDES, arm, head_joint, leg
+from mocapkit.skeleton.limbs import SIDES, arm, head_joint, leg, limbs_present
 from mocapkit.skeleton.model import PRISMATIC, Skeleton
 from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.arm_refinement import ArmDiagnostics, RefineConfig, refine_arms
@@ -685,7 +685,31 @@ class HybridTracker:
         targets[n : n + 2] = feet
         res = self.solver.solve(res_free.q, targets)
         self.events.append((sample.time_s, "feet", "replanted"))
-        return res.q, res_free.iterations + res.iterations
+        q, extra = self._hold_feet(res.q, targets)
+        return q, res_free.iterations + res.iterations + extra
+
+    def _hold_feet(self, q: FloatArray, targets: FloatArray) -> tuple[FloatArray, int]:
+        """Put feet that the whole-body solve pulled off their plants back with the legs alone.
+
+        When head or hands are out of reach (markers lower than the legs can crouch),
+        SDLS spreads the remaining error over every effector, planted feet included, and
+        how far it drags them depends on round-off (BLAS kernels differed by 40 mm). The
+        feet are planted (§3: they stay frozen), so where one ends more than
+        ``replant_mm`` off its plant the legs are solved again with everything above
+        them frozen: the upper body keeps its pose and the feet their plants.
+        """
+        n = len(self.marker_sets)
+        feet_now = self.solver.effector_positions(q)[n : n + 2]
+        off = np.linalg.norm(feet_now - targets[n : n + 2], axis=1)
+        if not np.nanmax(off) > self.config.replant_mm:
+            return q, 0
+        legs = np.concatenate([lmb.dofs for lmb in limbs_present(self.skeleton, "leg")])
+        frozen = np.ones(self.skeleton.n_dofs, dtype=bool)
+        frozen[legs] = False
+        active = np.zeros(len(targets), dtype=bool)
+        active[n : n + 2] = True
+        res = self.solver.solve(q, targets, active=active, frozen=frozen)
+        return res.q, res.iterations
 
     # ------------------------------------------------------------------ update
 
