@@ -55,8 +55,10 @@ def test_mask_equals_accepts_per_pixel():
     # level of the acceptance border may differ, so compare with OpenCV's own values
     ycc = cv2.cvtColor(img, cv2.COLOR_BGR2YCrCb).astype(int)
     lo, hi = DEFAULT_SKIN.luma_range
-    expect = (DEFAULT_SKIN.table[ycc[..., 1], ycc[..., 2]] > 0) & (ycc[..., 0] >= lo) & (
-        ycc[..., 0] <= hi
+    expect = (
+        (DEFAULT_SKIN.table[ycc[..., 1], ycc[..., 2]] > 0)
+        & (ycc[..., 0] >= lo)
+        & (ycc[..., 0] <= hi)
     )
     np.testing.assert_array_equal(m > 0, expect)
     assert np.all(m[10:20, 10:20] == 255)
