@@ -1,0 +1,533 @@
+"""Per-arm particle filter of Azad et al. 2008 (§III-VII): 7-DoF arm, edge + distance cues.
+
+State of one particle (7,): the shoulder's rotation vector ``(theta1, theta2,
+theta3)`` in the torso frame, the elbow angle ``theta4`` in [-pi, 0] (the ``azad14``
+preset's conventions, see `mocapkit.ik.arm_analytic`) and the adaptive shoulder offset
+``d`` (mm, torso frame, within a cuboid; §VI).
+
+Forward kinematics: ``s = s_0 + R_b d``, ``elbow = s + R_b R (0, 0, -a)``,
+``wrist = elbow + b f`` with ``f = R_b R (0, -sin theta4, -cos theta4)``, and the
+measured hand point ``p_h = wrist + o f`` (``o``: the hand-centre offset beyond the
+wrist: the centroid of a skin blob lies in the hand, not on the wrist; 0 with
+keypoints, whose wrist is the point).
+
+One compiled call (`arm_weights_nb`) weighs a whole particle batch over every view:
+per particle and view, the two contour generators of each cone (upper arm, forearm)
+are projected at their ends and sampled every ``step_px`` pixels between them (the
+mild lens distortion of the rigs bends one limb outline by well under a pixel),
+eq. (1) averages the gradient map along them (bilinear; points off the image or
+behind the camera read 0), the views' errors are averaged (Algorithm 1, step 1,
+generalised to any number of views), and Algorithm 1 fuses them with the hand distance (`mocapkit.tracking.stereo.fusion`).
+
+Per frame (recipe A): run 1 resamples, perturbs the particles with noise
+proportional to the arm's edge error (§V; floored), and replaces 60 % of them by
+samples of the analytic IK (§VII) with alpha uniform in the side's range and the
+previous shoulder offset; runs 2-4 resample and perturb; the estimate is the weighted
+mean of the last run (rotations by their chordal mean, the paper leaves this open).
+
+Contour generators: the silhouette lines of a cone ``P0 (r0) -> P1 (r1)`` seen from
+the camera centre ``C`` are approximated by ``P0 +- r0 n`` to ``P1 +- r1 n`` with ``n``
+perpendicular to the axis and to the line of sight to the axis' midpoint. This is a
+local stand-in with a small interface (`ViewStack`, `ArmModel`) until the shared
+projection and cone-contour kernels land in ``camera/`` and ``geometry/``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+from mocapkit.camera.pinhole import Camera
+from mocapkit.errors import ConfigError, ShapeError
+from mocapkit.geometry.rotations import matrix_rotvec_nb, rotvec_matrix_nb
+from mocapkit.ik.arm_analytic import ALPHA_RANGE_RAD, arm_ik, make_problem
+from mocapkit.tracking.stereo.fusion import FusionParams, default_fusion, fused_weight_nb
+
+FloatArray = NDArray[np.float64]
+Float32Array = NDArray[np.float32]
+
+#: Particle layout.
+N_STATE = 7
+_MIN_Z_MM = 1.0
+
+
+class ViewStack(NamedTuple):
+    """Cameras and gradient maps of one frame, stacked over V views.
+
+    Attributes
+    ----------
+    rotation : (V, 3, 3)
+        Camera-from-world rotations.
+    translation : (V, 3)
+        Camera-from-world translations (mm).
+    intrinsics : (V, 5)
+        ``fx, fy, cx, cy, skew`` (px).
+    dist : (V, 8)
+        OpenCV ``k1, k2, p1, p2, k3, k4, k5, k6`` (zeros where absent).
+    centre : (V, 3)
+        Optical centres, world (mm).
+    gradient : (V, H, W) float32
+        Gradient maps in [0, 1] (`mocapkit.cues.skin.gradient_map`); 0 where not computed.
+    """
+
+    rotation: FloatArray
+    translation: FloatArray
+    intrinsics: FloatArray
+    dist: FloatArray
+    centre: FloatArray
+    gradient: Float32Array
+
+
+class ArmModel(NamedTuple):
+    """Everything about one arm that is fixed for a frame.
+
+    Attributes
+    ----------
+    base_rotation : (3, 3)
+        ``R_b``, world from torso.
+    shoulder_base_mm : (3,)
+        Shoulder position for a zero offset ``d``, world.
+    lengths_mm : (3,)
+        Upper arm ``a``, forearm ``b``, hand-centre offset ``o``.
+    radii_mm : (4,)
+        Upper-arm cone radii (proximal, distal), forearm cone radii.
+    hand_mm : (3,)
+        Measured hand point, world; NaN when not measured (distance cue off).
+    sampling : (2,)
+        Contour sample spacing (px) and the most samples per contour line.
+    """
+
+    base_rotation: FloatArray
+    shoulder_base_mm: FloatArray
+    lengths_mm: FloatArray
+    radii_mm: FloatArray
+    hand_mm: FloatArray
+    sampling: FloatArray
+
+
+def view_stack(cameras: list[Camera], gradients: list[Float32Array]) -> ViewStack:
+    """Pack cameras and their gradient maps (all the same image size) into a `ViewStack`."""
+    if len(cameras) != len(gradients) or not cameras:
+        raise ShapeError(
+            f"view_stack: expected one gradient map per camera, found {len(cameras)} cameras "
+            f"and {len(gradients)} maps"
+        )
+    shapes = {g.shape for g in gradients}
+    if len(shapes) != 1:
+        raise ShapeError(f"view_stack: gradient maps differ in size: {sorted(shapes)}")
+    v = len(cameras)
+    rot = np.empty((v, 3, 3))
+    tr = np.empty((v, 3))
+    intr = np.empty((v, 5))
+    dist = np.zeros((v, 8))
+    centre = np.empty((v, 3))
+    for i, c in enumerate(cameras):
+        m = np.asarray(c.camera_from_world)
+        rot[i], tr[i] = m[:3, :3], m[:3, 3]
+        k = np.asarray(c.K)
+        intr[i] = (k[0, 0], k[1, 1], k[0, 2], k[1, 2], k[0, 1])
+        d = np.asarray(c.dist).ravel()[:8]
+        dist[i, : d.shape[0]] = d
+        centre[i] = c.center_in_world
+    grad = np.ascontiguousarray(np.stack(gradients), dtype=np.float32)
+    return ViewStack(rot, tr, intr, dist, centre, grad)
+
+
+# ------------------------------------------------------------------ compiled kernels
+
+
+@numba.njit(cache=True, inline="always")
+def _project_nb(views: ViewStack, v: int, x: float, y: float, z: float) -> tuple[float, float]:
+    """Pixel of a world point in view ``v`` (OpenCV's model); NaN behind the camera."""
+    r = views.rotation[v]
+    t = views.translation[v]
+    xc = r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + t[0]
+    yc = r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + t[1]
+    zc = r[2, 0] * x + r[2, 1] * y + r[2, 2] * z + t[2]
+    if zc < _MIN_Z_MM:
+        return math.nan, math.nan
+    xn = xc / zc
+    yn = yc / zc
+    d = views.dist[v]
+    r2 = xn * xn + yn * yn
+    radial = (1.0 + r2 * (d[0] + r2 * (d[1] + r2 * d[4]))) / (
+        1.0 + r2 * (d[5] + r2 * (d[6] + r2 * d[7]))
+    )
+    xd = xn * radial + 2.0 * d[2] * xn * yn + d[3] * (r2 + 2.0 * xn * xn)
+    yd = yn * radial + d[2] * (r2 + 2.0 * yn * yn) + 2.0 * d[3] * xn * yn
+    k = views.intrinsics[v]
+    return k[0] * xd + k[4] * yd + k[2], k[1] * yd + k[3]
+
+
+@numba.njit(cache=True, inline="always")
+def _read_nb(g: Float32Array, u: float, v: float) -> float:
+    """Bilinear gradient at pixel (u, v); 0 off the image (recipe A)."""
+    if not (u >= 0.0 and v >= 0.0 and u < g.shape[1] - 1 and v < g.shape[0] - 1):
+        return 0.0
+    c0 = int(u)
+    r0 = int(v)
+    fx = u - c0
+    fy = v - r0
+    top = (1.0 - fx) * g[r0, c0] + fx * g[r0, c0 + 1]
+    bot = (1.0 - fx) * g[r0 + 1, c0] + fx * g[r0 + 1, c0 + 1]
+    return (1.0 - fy) * top + fy * bot
+
+
+@numba.njit(cache=True)
+def arm_points_nb(x: FloatArray, model: ArmModel, out: FloatArray) -> None:
+    """Forward kinematics of one particle ``x`` (7,): writes shoulder, elbow, wrist and the
+    hand point (4, 3), world (module notes)."""
+    rb = model.base_rotation
+    r_local = np.empty((3, 3))
+    rotvec_matrix_nb(x[:3], r_local)
+    r = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            r[i, j] = rb[i, 0] * r_local[0, j] + rb[i, 1] * r_local[1, j] + rb[i, 2] * r_local[2, j]
+    a = model.lengths_mm[0]
+    b = model.lengths_mm[1]
+    o = model.lengths_mm[2]
+    st = math.sin(x[3])
+    ct = math.cos(x[3])
+    for i in range(3):
+        s = model.shoulder_base_mm[i] + rb[i, 0] * x[4] + rb[i, 1] * x[5] + rb[i, 2] * x[6]
+        e = s - a * r[i, 2]
+        f = -st * r[i, 1] - ct * r[i, 2]
+        out[0, i] = s
+        out[1, i] = e
+        out[2, i] = e + b * f
+        out[3, i] = e + (b + o) * f
+
+
+@numba.njit(cache=True)
+def _edge_error_nb(pts: FloatArray, model: ArmModel, views: ViewStack) -> float:
+    """Eq. (1) averaged over the views for the arm points ``pts`` (4, 3)."""
+    n_views = views.rotation.shape[0]
+    step = model.sampling[0]
+    max_n = int(model.sampling[1])
+    total = 0.0
+    for v in range(n_views):
+        acc = 0.0
+        count = 0
+        cx, cy, cz = views.centre[v, 0], views.centre[v, 1], views.centre[v, 2]
+        for seg in range(2):
+            p0 = pts[seg]
+            p1 = pts[seg + 1]
+            r0 = model.radii_mm[2 * seg]
+            r1 = model.radii_mm[2 * seg + 1]
+            ux, uy, uz = p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]
+            wx = 0.5 * (p0[0] + p1[0]) - cx
+            wy = 0.5 * (p0[1] + p1[1]) - cy
+            wz = 0.5 * (p0[2] + p1[2]) - cz
+            nx, ny, nz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
+            nn = math.sqrt(nx * nx + ny * ny + nz * nz)
+            if nn < 1e-9:  # seen end-on: no outline to read
+                continue
+            nx, ny, nz = nx / nn, ny / nn, nz / nn
+            for side in range(2):
+                sg = 1.0 if side == 0 else -1.0
+                ax = p0[0] + sg * r0 * nx
+                ay = p0[1] + sg * r0 * ny
+                az = p0[2] + sg * r0 * nz
+                bx = p1[0] + sg * r1 * nx
+                by = p1[1] + sg * r1 * ny
+                bz = p1[2] + sg * r1 * nz
+                ua, va = _project_nb(views, v, ax, ay, az)
+                ub, vb = _project_nb(views, v, bx, by, bz)
+                length = math.sqrt((ub - ua) ** 2 + (vb - va) ** 2)
+                if not (length == length):  # behind a camera: counts as off the image
+                    count += 2
+                    continue
+                n = min(max(math.ceil(length / step) + 1, 2), max_n)
+                # sampled linearly between the projected ends: the lens bends one limb
+                # outline by well under a pixel
+                du = (ub - ua) / (n - 1)
+                dv = (vb - va) / (n - 1)
+                for k in range(n):
+                    acc += _read_nb(views.gradient[v], ua + k * du, va + k * dv)
+                count += n
+        total += 1.0 - (acc / count if count > 0 else 0.0)
+    return total / n_views
+
+
+@numba.njit(cache=True)
+def arm_weights_nb(
+    particles: FloatArray,
+    model: ArmModel,
+    views: ViewStack,
+    fusion: FusionParams,
+    prev_dist_sq_mm2: float,
+    out_weight: FloatArray,
+    out_edge: FloatArray,
+    out_dist_sq: FloatArray,
+) -> None:
+    """Weigh a particle batch (N, 7) over every view in one call (module notes).
+
+    Writes the fused weights (Algorithm 1), the raw edge errors (view-averaged eq. (1))
+    and the raw squared hand distances (mm^2; NaN without a measured hand), all (N,).
+    """
+    pts = np.empty((4, 3))
+    h = model.hand_mm
+    for i in range(particles.shape[0]):
+        arm_points_nb(particles[i], model, pts)
+        eg = _edge_error_nb(pts, model, views)
+        d2 = (pts[3, 0] - h[0]) ** 2 + (pts[3, 1] - h[1]) ** 2 + (pts[3, 2] - h[2]) ** 2
+        out_edge[i] = eg
+        out_dist_sq[i] = d2
+        out_weight[i] = fused_weight_nb(eg, d2, prev_dist_sq_mm2, fusion)
+
+
+@numba.njit(cache=True)
+def _chordal_mean_rotvec_nb(rotvecs: FloatArray, weights: FloatArray, out: FloatArray) -> None:
+    """Weighted sum of the rotation matrices of ``rotvecs`` (N, 3) into ``out`` (3, 3)."""
+    m = np.empty((3, 3))
+    out[:, :] = 0.0
+    for i in range(rotvecs.shape[0]):
+        rotvec_matrix_nb(rotvecs[i], m)
+        for j in range(3):
+            for k in range(3):
+                out[j, k] += weights[i] * m[j, k]
+
+
+# ------------------------------------------------------------------ the filter
+
+
+@dataclass(frozen=True)
+class ArmFilterConfig:
+    """Settings of one arm's particle filter (paper values by default; recipe A).
+
+    Parameters
+    ----------
+    n_particles : int
+        Particles per run (paper: 150).
+    n_runs : int
+        Runs per frame (paper: 4; the first mixes in the IK samples).
+    ik_fraction : float
+        Share of the first run's particles drawn from the analytic IK (paper: 0.6).
+    use_ik : bool
+        IK sampling on (§VII). Off: conventional sampling only (ablation).
+    adaptive_noise : bool
+        Noise proportional to the edge error (§V); off: the constant noise below.
+    adaptive_shoulder : bool
+        7 DoF with the shoulder offset (§VI); off: 4 DoF, offset fixed at 0.
+    noise_rad_per_error, noise_mm_per_error : float
+        Adaptive noise std per unit edge error (recipe A: 0.05 rad and 10 mm at 0.5).
+    min_noise_rad, min_noise_mm : float
+        Floors of the adaptive noise (recipe A: 0.01 rad, 2 mm).
+    constant_noise_rad, constant_noise_mm : float
+        Noise without adaptive noise.
+    shoulder_box_mm : float
+        Half-size of the shoulder offset cuboid (recipe A: 50 mm).
+    step_px : float
+        Contour sample spacing (recipe A: about 5 px).
+    max_samples_per_line : int
+    fusion : FusionParams
+    """
+
+    n_particles: int = 150
+    n_runs: int = 4
+    ik_fraction: float = 0.6
+    use_ik: bool = True
+    adaptive_noise: bool = True
+    adaptive_shoulder: bool = True
+    noise_rad_per_error: float = 0.1
+    noise_mm_per_error: float = 20.0
+    min_noise_rad: float = 0.01
+    min_noise_mm: float = 2.0
+    constant_noise_rad: float = 0.08
+    constant_noise_mm: float = 15.0
+    shoulder_box_mm: float = 50.0
+    step_px: float = 5.0
+    max_samples_per_line: int = 48
+    fusion: FusionParams = field(default_factory=default_fusion)
+
+    def __post_init__(self) -> None:
+        if self.n_particles < 2:
+            raise ConfigError(f"n_particles: expected at least 2, found {self.n_particles}")
+        if self.n_runs < 1:
+            raise ConfigError(f"n_runs: expected at least 1, found {self.n_runs}")
+        if not 0.0 <= self.ik_fraction <= 1.0:
+            raise ConfigError(f"ik_fraction: expected a share in [0, 1], found {self.ik_fraction}")
+        if not (self.step_px > 0 and self.max_samples_per_line >= 2):
+            raise ConfigError(
+                f"step_px/max_samples_per_line: expected > 0 and >= 2, found {self.step_px} "
+                f"and {self.max_samples_per_line}"
+            )
+
+
+def systematic_resample(weights: FloatArray, rng: np.random.Generator) -> NDArray[np.int64]:
+    """Indices (N,) of systematic resampling of normalised-or-not weights (N,)."""
+    w = np.asarray(weights, dtype=float)
+    n = w.shape[0]
+    total = w.sum()
+    if not (total > 0 and np.isfinite(total)):
+        return np.arange(n)
+    c = np.cumsum(w / total)
+    c[-1] = 1.0
+    pos = (rng.random() + np.arange(n)) / n
+    return np.minimum(np.searchsorted(c, pos, side="right"), n - 1).astype(np.int64)
+
+
+@dataclass
+class ArmEstimate:
+    """One arm's result for a frame."""
+
+    state: FloatArray  # (7,)
+    points_mm: FloatArray  # (4, 3): shoulder, elbow, wrist, hand point
+    edge_error: float
+    dist_mm: float
+    n_ik: int
+
+
+class ArmParticleFilter:
+    """Particle filter for one arm (module notes).
+
+    Parameters
+    ----------
+    side : {"left", "right"}
+    config : ArmFilterConfig
+    rng : numpy Generator
+    """
+
+    def __init__(self, side: str, config: ArmFilterConfig, rng: np.random.Generator) -> None:
+        if side not in ALPHA_RANGE_RAD:
+            raise ConfigError(f"side: expected 'left' or 'right', found {side!r}")
+        self.side = side
+        self.config = config
+        self.rng = rng
+        n = config.n_particles
+        self.particles = np.zeros((n, N_STATE))
+        self.particles[:, 3] = -0.3  # a slightly bent arm hanging down
+        self.weights = np.full(n, 1.0 / n)
+        self.prev_dist_sq = math.inf
+        self.edge_error = 1.0
+        self.last_n_ik = 0
+        self._w = np.empty(n)
+        self._eg = np.empty(n)
+        self._d2 = np.empty(n)
+
+    def _noise_scale(self) -> tuple[float, float]:
+        c = self.config
+        if not c.adaptive_noise:
+            return c.constant_noise_rad, c.constant_noise_mm
+        e = self.edge_error
+        return max(c.noise_rad_per_error * e, c.min_noise_rad), max(
+            c.noise_mm_per_error * e, c.min_noise_mm
+        )
+
+    def _perturb(self, p: FloatArray) -> None:
+        c = self.config
+        s_rad, s_mm = self._noise_scale()
+        n = p.shape[0]
+        p[:, :4] += self.rng.normal(0.0, s_rad, size=(n, 4))
+        np.clip(p[:, 3], -math.pi, 0.0, out=p[:, 3])
+        if c.adaptive_shoulder:
+            p[:, 4:] += self.rng.normal(0.0, s_mm, size=(n, 3))
+            np.clip(p[:, 4:], -c.shoulder_box_mm, c.shoulder_box_mm, out=p[:, 4:])
+        else:
+            p[:, 4:] = 0.0
+
+    def _weigh(self, p: FloatArray, model: ArmModel, views: ViewStack) -> None:
+        arm_weights_nb(
+            p, model, views, self.config.fusion, self.prev_dist_sq, self._w, self._eg, self._d2
+        )
+
+    def _fused_edge(self) -> float:
+        """Weighted mean of the fused edge error (1 outside the minimum radius)."""
+        t2 = self.config.fusion.t_d_mm**2
+        eg = np.where(np.isfinite(self._d2) & (self._d2 >= t2), 1.0, self._eg)
+        w = self._w
+        s = w.sum()
+        return float((eg * w).sum() / s) if s > 0 else 1.0
+
+    def step(self, model: ArmModel, views: ViewStack) -> ArmEstimate:
+        """One frame: ``n_runs`` runs, the first with IK samples; returns the estimate."""
+        c = self.config
+        n = c.n_particles
+        have_hand = bool(np.all(np.isfinite(model.hand_mm)))
+        d_prev = self.estimate_offset()
+        self.last_n_ik = 0
+        for run in range(c.n_runs):
+            idx = systematic_resample(self.weights, self.rng)
+            p = self.particles[idx]
+            self._perturb(p)
+            if run == 0 and c.use_ik and have_hand:
+                n_ik = round(c.ik_fraction * n)
+                if n_ik > 0:
+                    p[:n_ik] = self._ik_samples(model, d_prev, n_ik)
+                    self.last_n_ik = n_ik
+            self._weigh(p, model, views)
+            self.particles = p
+            self.weights = self._w.copy()
+            self.edge_error = self._fused_edge()
+        return self._estimate(model, views)
+
+    def estimate_offset(self) -> FloatArray:
+        """Weighted mean shoulder offset of the current particles (mm, torso frame)."""
+        w = self.weights / max(self.weights.sum(), 1e-300)
+        return np.asarray(w @ self.particles[:, 4:], dtype=float)
+
+    def _ik_samples(self, model: ArmModel, d_prev: FloatArray, n_ik: int) -> FloatArray:
+        lo, hi = ALPHA_RANGE_RAD[self.side]
+        alphas = self.rng.uniform(lo, hi, n_ik)
+        rb = model.base_rotation
+        s = model.shoulder_base_mm + rb @ d_prev
+        a, b, o = model.lengths_mm
+        # the measured point lies on the forearm's extension: solve for a forearm of b + o
+        prob = make_problem(rb, s, model.hand_mm, float(a), float(b + o))
+        q, _elbow = arm_ik(prob, alphas)
+        out = np.empty((n_ik, N_STATE))
+        out[:, :4] = q
+        out[:, 4:] = d_prev
+        return out
+
+    def _estimate(self, model: ArmModel, views: ViewStack) -> ArmEstimate:
+        w = self.weights / max(self.weights.sum(), 1e-300)
+        p = self.particles
+        # chordal mean of the shoulder rotations: robust where rotation vectors wrap at pi
+        m = np.empty((3, 3))
+        _chordal_mean_rotvec_nb(np.ascontiguousarray(p[:, :3]), w, m)
+        u, _s, vt = np.linalg.svd(m)
+        r = u @ vt
+        if np.linalg.det(r) < 0:
+            u[:, -1] *= -1
+            r = u @ vt
+        state = np.empty(N_STATE)
+        rv = np.empty(3)
+        matrix_rotvec_nb(np.ascontiguousarray(r), rv)
+        state[:3] = rv
+        state[3] = float(w @ p[:, 3])
+        state[4:] = w @ p[:, 4:]
+        one = state[None, :].copy()
+        wt, eg, d2 = np.empty(1), np.empty(1), np.empty(1)
+        arm_weights_nb(one, model, views, self.config.fusion, self.prev_dist_sq, wt, eg, d2)
+        if np.isfinite(d2[0]):
+            self.prev_dist_sq = float(d2[0])  # errata A10: the raw error of the estimate
+        pts = np.empty((4, 3))
+        arm_points_nb(state, model, pts)
+        return ArmEstimate(
+            state,
+            pts,
+            float(eg[0]),
+            float(math.sqrt(d2[0])) if np.isfinite(d2[0]) else math.nan,
+            self.last_n_ik,
+        )
+
+
+__all__ = [
+    "N_STATE",
+    "ArmEstimate",
+    "ArmFilterConfig",
+    "ArmModel",
+    "ArmParticleFilter",
+    "ViewStack",
+    "arm_points_nb",
+    "arm_weights_nb",
+    "systematic_resample",
+    "view_stack",
+]
