@@ -17,7 +17,8 @@ are projected at their ends and sampled every ``step_px`` pixels between them (t
 mild lens distortion of the rigs bends one limb outline by well under a pixel),
 eq. (1) averages the gradient map along them (bilinear; points off the image or
 behind the camera read 0), the views' errors are averaged (Algorithm 1, step 1,
-generalised to any number of views), and Algorithm 1 fuses them with the hand distance (`mocapkit.tracking.stereo.fusion`).
+generalised to any number of views), and Algorithm 1 fuses them with the hand
+distance (`mocapkit.tracking.stereo.fusion`).
 
 Per frame (recipe A): run 1 resamples, perturbs the particles with noise
 proportional to the arm's edge error (§V; floored), and replaces 60 % of them by
