@@ -27,6 +27,18 @@ def _size(text: str) -> tuple[int, int]:
     return (w, h)
 
 
+def _blackout(text: str) -> tuple[float, float]:
+    parts = text.split(",")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        return (float(parts[0]), float(parts[1]))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected START,DURATION in seconds (e.g. 2.0,0.5), found {text!r}"
+        ) from None
+
+
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``synth`` subcommand."""
     p = subparsers.add_parser(
@@ -94,6 +106,13 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument(
         "--shirt-colour", default=None, help="shirt colour name or #RRGGBB (default: seeded)"
     )
+    p.add_argument(
+        "--blackout-s",
+        type=_blackout,
+        default=None,
+        metavar="START,DURATION",
+        help="blank every view (black frames, no keypoints) from START for DURATION s",
+    )
     p.add_argument("--png", action="store_true", help="write PNG image folders instead of mp4")
     p.add_argument("--overwrite", action="store_true", help="replace an existing session folder")
     p.set_defaults(func=run)
@@ -125,6 +144,7 @@ def run(args: argparse.Namespace) -> int:
         video_format="png" if args.png else "mp4",
         overwrite=args.overwrite,
         realism=realism,
+        blackout_s=args.blackout_s,
     )
     summary = synthesize_session(args.motion, args.out, options)
     print(summary.text())

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from mocapkit.cli.track_stereo import register_method as register_stereo
+
 
 def register(subparsers: Any) -> None:
     """Add ``track`` with its ``hybrid`` sub-subcommand."""
@@ -67,6 +69,7 @@ def register(subparsers: Any) -> None:
         help="with --markers: do not hold the feet at their first positions",
     )
     hyb.set_defaults(func=_run_hybrid)
+    register_stereo(methods)
 
 
 def _run_hybrid(args: argparse.Namespace) -> int:

@@ -18,6 +18,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import cv2
 import numpy as np
 from numpy.typing import NDArray
 
@@ -234,14 +235,19 @@ def bench_stereo(
         cams = [session.camera(c) for c in names]
     cfg = StereoConfig(arm=ArmFilterConfig(n_particles=n_particles))
     rates = []
-    for r in range(repeats + 1):
-        tracker = StereoTracker(sk, cams, cfg)
-        t0 = time.perf_counter()
-        for f in frames:
-            tracker.update(f)
-        dt = time.perf_counter() - t0
-        if r > 0:  # the first pass compiles and warms up
-            rates.append(len(frames) / dt)
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)  # figures for one core, as the other benchmarks
+    try:
+        for r in range(repeats + 1):
+            tracker = StereoTracker(sk, cams, cfg)
+            t0 = time.perf_counter()
+            for f in frames:
+                tracker.update(f)
+            dt = time.perf_counter() - t0
+            if r > 0:  # the first pass compiles and warms up
+                rates.append(len(frames) / dt)
+    finally:
+        cv2.setNumThreads(threads)
     return {
         "frames_per_s": float(np.median(rates)),
         "frames_per_s_runs": [round(x, 1) for x in rates],
