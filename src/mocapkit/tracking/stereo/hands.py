@@ -14,9 +14,9 @@ explicit blob matching, which is deterministic and cheap:
    minimum total distance to their constant-velocity predictions (Hungarian
    assignment, gated at ``gate_mm``), so that the hands keep their identity through
    crossings; a target without a candidate coasts on its prediction for up to
-   ``coast_frames`` frames and is then reported lost (NaN), and two hands may share one
-   candidate when their blobs merge (a crossing), if both predictions lie within the
-   gate;
+   ``coast_frames`` frames and is then reported lost (NaN); when the two hands' blobs
+   merge (a crossing: one candidate is the nearest to both predictions) both coast
+   through it, since the merged centroid is neither hand;
 4. initialisation (and re-initialisation of a lost target): the head is the highest
    candidate, the hands the others, left/right by their side of the head in the
    torso frame (x to the subject's right).
@@ -188,6 +188,7 @@ class HeadHandTracker:
         live = np.all(np.isfinite(self.pos), axis=1)
         pred = np.where(live[:, None], self.pos + self.vel * dt, np.nan)
         measured = np.zeros(3, dtype=bool)
+        match: dict[int, int] = {}
         if cands.shape[0] and live.any():
             rows = np.flatnonzero(live)
             cost = np.linalg.norm(pred[rows, None, :] - cands[None, :, :], axis=-1)
@@ -196,17 +197,19 @@ class HeadHandTracker:
             ri, ci = linear_sum_assignment(gated)
             for r, j in zip(ri, ci):
                 if gated[r, j] < big:
-                    self._measure(int(rows[r]), cands[j], dt)
-                    measured[rows[r]] = True
-            # merged blobs (crossing hands): an unmatched hand may share its nearest
-            # candidate with the other hand
-            for k in (1, 2):
-                if live[k] and not measured[k]:
+                    match[int(rows[r])] = int(j)
+            # merged blobs (crossing hands): when an unmatched hand's nearest candidate is
+            # the other hand's, neither is measured; both coast on their predictions so
+            # that they keep their identity when the blobs part again
+            for k, other in ((1, 2), (2, 1)):
+                if live[k] and k not in match and other in match:
                     d = np.linalg.norm(cands - pred[k], axis=1)
                     j = int(np.argmin(d))
-                    if d[j] < 0.5 * c.gate_mm:
-                        self._measure(k, cands[j], dt)
-                        measured[k] = True
+                    if j == match[other] and d[j] < 0.5 * c.gate_mm:
+                        del match[other]
+            for k, j in match.items():
+                self._measure(k, cands[j], dt)
+                measured[k] = True
         for k in range(3):
             if not measured[k] and live[k]:
                 self.missed[k] += 1
