@@ -152,3 +152,57 @@ def test_empty_image_set_and_bad_board_pose(tmp_path: Path) -> None:
     pose.write_text(json.dumps({"origin_mm": [0, 0], "x_axis": [1, 0, 0], "y_axis": [0, 1, 0]}))
     with pytest.raises(FormatError, match=r"origin_mm: expected 3 finite numbers, found \[0, 0\]"):
         read_board_pose(pose)
+
+
+# ---------------------------------------------------------------- slips that show in the numbers
+
+
+def _pairs(folder: Path, tmp: Path, shift: int) -> tuple[Path, Path]:
+    """Copy the stereo set so that right image i pairs with left image i + shift."""
+    lefts = sorted(folder.glob("left*.jpg"))
+    rights = sorted(folder.glob("right*.jpg"))
+    a, b = tmp / "L", tmp / "R"
+    a.mkdir()
+    b.mkdir()
+    for i, f in enumerate(lefts):
+        shutil.copy(f, a / f"{i:02d}.jpg")
+        shutil.copy(rights[(i + shift) % len(rights)], b / f"{i:02d}.jpg")
+    return a, b
+
+
+def test_mispaired_stereo_is_refused_and_nothing_written(
+    shared_data: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    a, b = _pairs(shared_data / "calib" / "stereo_chessboard", tmp_path, shift=1)
+    out = tmp_path / "cameras.json"
+    args = ["calibrate", "--board", "9x6", "--square-mm", "25", "--out", str(out)]
+    assert main([*args, str(a), str(b)]) == 2
+    err = capsys.readouterr().err
+    assert "stereo pair left+right: RMS reprojection error 5" in err
+    assert "expected at most 2 px (--max-rms-px)" in err
+    assert not out.exists()
+    # the threshold is an option: a user who knows better can raise it
+    report = calibrate_from_images([a, b], parse_board("9x6", 25.0), max_rms_px=200.0)
+    assert report.stereo_rms_px is not None and report.stereo_rms_px > 10.0
+
+
+def test_square_size_in_metres_is_refused() -> None:
+    with pytest.raises(CalibrationError, match=r"given in metres \(0.025 m = 25 mm\)"):
+        calibrate_from_images(["unused"], parse_board("9x6", 0.025))
+
+
+def test_same_images_for_both_cameras_is_refused(shared_data: Path) -> None:
+    left = shared_data / "calib" / "stereo_chessboard" / "left*.jpg"
+    with pytest.raises(CalibrationError, match="found the same 13 images in both"):
+        calibrate_from_images([left, left], parse_board("9x6", 25.0))
+
+
+def test_board_smaller_than_the_one_in_the_images_is_refused(shared_data: Path) -> None:
+    left = shared_data / "calib" / "stereo_chessboard" / "left*.jpg"
+    with pytest.raises(CalibrationError, match=r"8x6 inner corners given, .* at least 9x6"):
+        calibrate_from_images([left], parse_board("8x6", 25.0))
+
+
+def test_max_rms_must_be_positive() -> None:
+    with pytest.raises(CalibrationError, match="max_rms_px: expected a positive number"):
+        calibrate_from_images(["unused"], parse_board("9x6", 25.0), max_rms_px=0.0)

@@ -138,3 +138,12 @@ def test_track_hybrid_refuses_options_that_do_not_apply(tmp_path, capsys) -> Non
         assert "elbow-jump penalty, which --paper and --no-video do not run" in (
             capsys.readouterr().err
         )
+
+
+def test_os_errors_are_reported_by_path_not_as_none(tmp_path, capsys):
+    """A reader's FileNotFoundError(message) used to print "None: None"."""
+    missing = tmp_path / "nope.c3d"
+    code = main(["track", "hybrid", "--markers", str(missing), "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "None" not in err and "nope.c3d" in err

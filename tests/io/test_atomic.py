@@ -76,3 +76,32 @@ def test_bad_mode_refused(tmp_path: Path) -> None:
         with atomic_write(tmp_path / "x", "a"):
             pass
     assert list(tmp_path.iterdir()) == []
+
+
+def test_atomic_file_gets_the_umask_mode(tmp_path: Path) -> None:
+    import os
+
+    old = os.umask(0o022)
+    try:
+        with atomic_write(tmp_path / "a.txt") as fh:
+            fh.write("x")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "a.txt").stat().st_mode & 0o777 == 0o644
+
+
+def test_atomic_folder_swaps_whole_or_not_at_all(tmp_path: Path) -> None:
+    from mocapkit.io.atomic import atomic_folder
+
+    target = tmp_path / "result"
+    with atomic_folder(target) as tmp:
+        (tmp / "a.csv").write_text("1")
+        (tmp / "b.csv").write_text("1")
+    with pytest.raises(WriterCrash), atomic_folder(target) as tmp:
+        (tmp / "a.csv").write_text("2")
+        raise WriterCrash
+    assert {p.name: p.read_text() for p in target.iterdir()} == {"a.csv": "1", "b.csv": "1"}
+    with atomic_folder(target) as tmp:
+        (tmp / "c.csv").write_text("3")
+    assert [p.name for p in target.iterdir()] == ["c.csv"]  # no old file mixed in
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["result"]

@@ -137,3 +137,25 @@ def test_kernel_layout_cache_does_not_keep_skeletons_alive() -> None:
     del sk
     gc.collect()
     assert alive() is None  # the cache alone does not keep the skeleton
+
+
+@pytest.mark.parametrize("name", ["zhang21", "azad14", "upper_stick"])
+def test_kinematic_arrays_is_one_read_only_kernel_argument(name: str) -> None:
+    from mocapkit.skeleton.kinematics import fk_pose_nb, kinematic_arrays
+
+    sk = load_preset(name)
+    kin = kinematic_arrays(sk)
+    assert kinematic_arrays(sk) is kin  # cached per skeleton
+    assert isinstance(kin, tuple) and kin._fields[0] == "parents"
+    j, d = sk.n_joints, sk.n_dofs
+    assert kin.offsets.shape == (j, 3) and kin.ancestors.shape == (j, j)
+    assert kin.dof_axis.shape == (d, 3) and kin.dof_joint.shape == (d,)
+    np.testing.assert_array_equal(np.repeat(np.arange(j), kin.dof_count), kin.dof_joint)
+    np.testing.assert_array_equal(kin.dof_start + kin.dof_count, np.cumsum(kin.dof_count))
+    for field in kin:
+        assert field.flags.c_contiguous and not field.flags.writeable
+    # the compiled kernel takes the whole layout as one argument
+    q = sk.zero_pose() + 0.1
+    world = np.empty((j, 4, 4))
+    fk_pose_nb(q, kin, world, np.empty((d, 3)), np.empty((d, 3)))
+    np.testing.assert_array_equal(world, forward_kinematics(sk, q))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -165,12 +166,6 @@ def test_refusals(tmp_path):
         synthesize_session("builtin:wave", tmp_path / "s", opts)
     with pytest.raises(UnknownNameError, match="unknown built-in motion 'dance'"):
         synthesize_session("builtin:dance", tmp_path / "t", opts)
-    with pytest.raises(ShapeError, match="--start-s 30"):
-        synthesize_session(
-            "builtin:wave",
-            tmp_path / "t",
-            SynthOptions(start_s=30.0, seconds=0.1, image_size=(96, 72)),
-        )
     with pytest.raises(ShapeError, match="--fps"):
         SynthOptions(fps=0.0)
     with pytest.raises(ShapeError, match="--blur"):
@@ -297,3 +292,57 @@ def test_walking_clip_never_reaches_the_lens(shared_data, tmp_path):
     depth = s.truth.joints_mm @ cam.camera_from_world[2, :3] + cam.camera_from_world[2, 3]
     assert np.nanmin(depth) >= MIN_CAMERA_DEPTH_MM - 1e-6
     check_consistent(s)
+
+
+def test_start_beyond_a_clip_is_refused(shared_data, tmp_path):
+    with pytest.raises(ShapeError, match="--start-s 900"):
+        synthesize_session(
+            str(shared_data / "mocap" / "13_26.bvh"),
+            tmp_path / "t",
+            SynthOptions(start_s=900.0, seconds=0.1, image_size=(96, 72)),
+        )
+    assert not (tmp_path / "t").exists()
+
+
+def test_builtin_motion_lasts_as_long_as_asked(tmp_path):
+    """A built-in motion is procedural: --seconds 30 gives 30 s, not the default 20 s."""
+    opts = SynthOptions(seconds=30.0, fps=2.0, marker_rate_hz=10.0, image_size=(96, 72))
+    summary = synthesize_session("builtin:wave", tmp_path / "s", opts)
+    assert summary.duration_s == pytest.approx(30.0)
+    assert not summary.notes
+    truth = load_session(tmp_path / "s").truth
+    assert truth is not None and truth.time_s[-1] > 29.0
+
+
+def _snapshot(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+
+
+def test_interrupted_synth_leaves_old_session_whole(tmp_path, monkeypatch):
+    """Ctrl-C mid-render: no new session appears, and --overwrite keeps the old one intact."""
+    from mocapkit.synth import session_writer
+
+    opts = SynthOptions(seconds=0.3, image_size=(96, 72))
+    synthesize_session("builtin:wave", tmp_path / "s", opts)
+    before = _snapshot(tmp_path / "s")
+    original = session_writer._VideoOut.write
+    calls = {"n": 0}
+
+    def interrupted(self, image):
+        calls["n"] += 1
+        if calls["n"] > 3:
+            raise KeyboardInterrupt
+        original(self, image)
+
+    monkeypatch.setattr(session_writer._VideoOut, "write", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        synthesize_session("builtin:squat", tmp_path / "s", replace(opts, overwrite=True))
+    assert _snapshot(tmp_path / "s") == before
+    calls["n"] = 0
+    with pytest.raises(KeyboardInterrupt):
+        synthesize_session("builtin:squat", tmp_path / "new", opts)
+    assert not (tmp_path / "new").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s"]  # no temporaries left
+    monkeypatch.undo()
+    synthesize_session("builtin:squat", tmp_path / "s", replace(opts, overwrite=True))
+    assert _snapshot(tmp_path / "s") != before

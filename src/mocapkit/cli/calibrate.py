@@ -6,7 +6,11 @@ import argparse
 
 from mocapkit.camera.calibration import parse_board
 from mocapkit.io.cameras import write_cameras
-from mocapkit.pipelines.calibrate import DEFAULT_MIN_BOARDS, calibrate_from_images
+from mocapkit.pipelines.calibrate import (
+    DEFAULT_MAX_RMS_PX,
+    DEFAULT_MIN_BOARDS,
+    calibrate_from_images,
+)
 
 _EPILOG = """\
 One image set (a folder or a quoted glob such as 'shots/left*.jpg') calibrates one
@@ -47,6 +51,13 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         help=f"fewest images (pairs) with a detected board (default {DEFAULT_MIN_BOARDS})",
     )
     p.add_argument(
+        "--max-rms-px",
+        type=float,
+        default=DEFAULT_MAX_RMS_PX,
+        help="refuse a camera or stereo fit whose RMS reprojection error is above this "
+        f"(default {DEFAULT_MAX_RMS_PX:g} px)",
+    )
+    p.add_argument(
         "--refine-intrinsics",
         action="store_true",
         help="stereo: refine intrinsics jointly instead of keeping the per-camera ones",
@@ -63,6 +74,7 @@ def run(args: argparse.Namespace) -> int:
         board_pose=args.board_pose,
         min_boards=args.min_boards,
         refine_stereo_intrinsics=args.refine_intrinsics,
+        max_rms_px=args.max_rms_px,
     )
     for line in report.lines():
         print(line)

@@ -50,13 +50,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     except MocapError as exc:
         print(f"mocapkit {args.command}: error: {exc}", file=sys.stderr)
         return 2
-    except (FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError) as exc:
-        # a missing or unreadable input: say which path, without a traceback
-        print(f"mocapkit {args.command}: error: {exc.strerror}: {exc.filename}", file=sys.stderr)
+    except OSError as exc:
+        # a missing, unreadable or unwritable path: say which, without a traceback; an
+        # OSError raised with a message only has no strerror/filename to show
+        print(f"mocapkit {args.command}: error: {_os_error_text(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"mocapkit {args.command}: interrupted", file=sys.stderr)
         return 130
+
+
+def _os_error_text(exc: OSError) -> str:
+    if exc.strerror is None:
+        return str(exc)
+    return f"{exc.strerror}: {exc.filename}" if exc.filename is not None else exc.strerror
 
 
 if __name__ == "__main__":

@@ -55,6 +55,7 @@ from mocapkit.ik.secondary import (
     secondary_task_nb,
 )
 from mocapkit.skeleton.kinematics import (
+    KinematicArrays,
     fk_points_jacobian_pose_nb,
     kinematic_arrays,
     points_and_jacobian,
@@ -326,14 +327,7 @@ def residuals_nb(targets: FloatArray, pts: FloatArray, residual: FloatArray) -> 
 @numba.njit(cache=True)
 def solve_ik_nb(
     q: FloatArray,
-    parents: NDArray[np.int64],
-    offsets: FloatArray,
-    dof_start: NDArray[np.int64],
-    dof_count: NDArray[np.int64],
-    dof_kind: NDArray[np.int64],
-    dof_axis: FloatArray,
-    dof_joint: NDArray[np.int64],
-    ancestors: BoolArray,
+    kin: KinematicArrays,
     eff_joint: NDArray[np.int64],
     eff_point: FloatArray,
     targets: FloatArray,
@@ -368,7 +362,8 @@ def solve_ik_nb(
     ``stall_fraction`` in ``stall_iter`` steps (an unreachable target has settled;
     more steps only cost time). Returns the number of steps taken.
     """
-    n_joints = parents.shape[0]
+    n_joints = kin.parents.shape[0]
+    dof_kind = kin.dof_kind
     n_dofs = q.shape[0]
     k_eff = eff_joint.shape[0]
     world = np.empty((n_joints, 4, 4))
@@ -391,22 +386,7 @@ def solve_ik_nb(
     use_secondary = gain > 0.0
 
     fk_points_jacobian_pose_nb(
-        q,
-        parents,
-        offsets,
-        dof_start,
-        dof_count,
-        dof_kind,
-        dof_axis,
-        dof_joint,
-        ancestors,
-        eff_joint,
-        eff_point,
-        world,
-        axis_world,
-        pivot_world,
-        pts,
-        jac,
+        q, kin, eff_joint, eff_point, world, axis_world, pivot_world, pts, jac
     )
     err = residuals_nb(targets, pts, residual)
     it = 0
@@ -427,16 +407,7 @@ def solve_ik_nb(
         rank = sdls_nb(jw, e, gamma, soft, dpsi, vr, n_buf, m_buf)
         if use_secondary:
             lever_weights_nb(
-                world,
-                axis_world,
-                pivot_world,
-                parents,
-                dof_joint,
-                mass,
-                com_local,
-                planted,
-                sec_mask,
-                mh,
+                kin, world, axis_world, pivot_world, mass, com_local, planted, sec_mask, mh
             )
             secondary_task_nb(q, omega, mh, gain, sec_max, dphi)
             for d in range(n_dofs):
@@ -483,22 +454,7 @@ def solve_ik_nb(
             trace[it, 2] = max_psi
             trace[it, 3] = max_pris
         fk_points_jacobian_pose_nb(
-            q,
-            parents,
-            offsets,
-            dof_start,
-            dof_count,
-            dof_kind,
-            dof_axis,
-            dof_joint,
-            ancestors,
-            eff_joint,
-            eff_point,
-            world,
-            axis_world,
-            pivot_world,
-            pts,
-            jac,
+            q, kin, eff_joint, eff_point, world, axis_world, pivot_world, pts, jac
         )
         err = residuals_nb(targets, pts, residual)
         if err < best_err * (1.0 - stall_fraction):
@@ -689,8 +645,7 @@ class SDLSSolver:
             if self.config.dmax_mm is not None
             else 0.1 * arm_length_mm(skeleton)
         )
-        self._ka = kinematic_arrays(skeleton)
-        self._dof_joint = np.ascontiguousarray(skeleton.dof_joint)
+        self._kin = kinematic_arrays(skeleton)
         self._eff_joint = np.array(
             [skeleton.joint_index(e.joint) for e in self.effectors], dtype=np.int64
         )
@@ -793,18 +748,10 @@ class SDLSSolver:
         cfg = self.config
         residual = np.full(len(idx), np.nan)
         trace = np.zeros((cfg.max_iterations if record_trace else 0, 4))
-        ka = self._ka
         sec = self.secondary
         n_it = solve_ik_nb(
             q,
-            ka.parents,
-            ka.offsets,
-            ka.dof_start,
-            ka.dof_count,
-            ka.dof_kind,
-            ka.dof_axis,
-            self._dof_joint,
-            ka.ancestors,
+            self._kin,
             np.ascontiguousarray(self._eff_joint[idx]),
             np.ascontiguousarray(self._eff_point[idx]),
             np.ascontiguousarray(t[idx]),

@@ -24,7 +24,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import ShapeError
-from mocapkit.skeleton.kinematics import fk_pose_nb, kinematic_arrays, subtree_mass
+from mocapkit.skeleton.kinematics import (
+    KinematicArrays,
+    fk_pose_nb,
+    kinematic_arrays,
+    subtree_mass,
+)
 from mocapkit.skeleton.model import Skeleton
 
 FloatArray = NDArray[np.float64]
@@ -94,11 +99,10 @@ def clamp_max_abs_nb(w: FloatArray, d: float) -> None:
 
 @numba.njit(cache=True)
 def lever_weights_nb(
+    kin: KinematicArrays,
     world: FloatArray,
     axis_world: FloatArray,
     pivot_world: FloatArray,
-    parents: NDArray[np.int64],
-    dof_joint: NDArray[np.int64],
     mass: FloatArray,
     com_local: FloatArray,
     planted: BoolArray,
@@ -111,6 +115,8 @@ def lever_weights_nb(
     ``planted`` flags DoFs that carry the complement of their subtree; DoFs
     outside ``mask`` get 0. Gravity is ``-Z`` (world frame is Z up).
     """
+    parents = kin.parents
+    dof_joint = kin.dof_joint
     n_joints = parents.shape[0]
     wsum = np.zeros((n_joints, 3))
     msum = np.zeros(n_joints)
@@ -211,30 +217,18 @@ class SecondaryTask:
         """Unnormalised weights ``m_i h_i`` (D,) in kg mm at pose ``q`` (D,)."""
         qa = np.ascontiguousarray(q, dtype=float)
         self.skeleton.check_q(qa)
-        ka = kinematic_arrays(self.skeleton)
+        kin = kinematic_arrays(self.skeleton)
         d, j = self.skeleton.n_dofs, self.skeleton.n_joints
         world = np.empty((j, 4, 4))
         axis_world = np.empty((d, 3))
         pivot_world = np.empty((d, 3))
-        fk_pose_nb(
-            qa,
-            ka.parents,
-            ka.offsets,
-            ka.dof_start,
-            ka.dof_count,
-            ka.dof_kind,
-            ka.dof_axis,
-            world,
-            axis_world,
-            pivot_world,
-        )
+        fk_pose_nb(qa, kin, world, axis_world, pivot_world)
         out = np.empty(d)
         lever_weights_nb(
+            kin,
             world,
             axis_world,
             pivot_world,
-            ka.parents,
-            np.ascontiguousarray(self.skeleton.dof_joint),
             self.mass,
             self.com_local,
             self.planted,

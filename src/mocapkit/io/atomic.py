@@ -1,12 +1,14 @@
-"""Atomic file output: write to a temporary file beside the target, then rename over it.
+"""Atomic output: write a file or a whole folder beside the target, then rename it into place.
 
-A crash mid-write leaves the previous file intact, never a truncated one.
+A crash, a kill or Ctrl-C mid-write leaves the previous file or folder intact, never a
+truncated file or a folder that mixes old and new files.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -40,6 +42,8 @@ def atomic_write(
             yield fh
             fh.flush()
             os.fsync(fh.fileno())
+        # mkstemp creates the file private (0600); give it the mode a plain open() would
+        os.chmod(tmp_name, 0o666 & ~_umask())
         os.replace(tmp_name, target)
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
@@ -53,3 +57,51 @@ def atomic_save_npz(path: str | os.PathLike[str], **arrays: Any) -> None:
 
     with atomic_write(path, "wb") as fh:
         np.savez(fh, **arrays)
+
+
+def _umask() -> int:
+    """The process's umask (reading it means setting it; set it straight back)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
+@contextlib.contextmanager
+def atomic_folder(path: str | os.PathLike[str]) -> Iterator[Path]:
+    """Build a folder under a temporary name beside ``path``; on success swap it in.
+
+    Yields the temporary folder to write into. When the block ends without an
+    exception, an existing ``path`` is renamed aside, the new folder renamed to
+    ``path`` and the old one deleted; on any exception (Ctrl-C included) the temporary
+    folder is deleted and ``path`` is left as it was. The swap is two renames on one
+    file system: a kill between them leaves the old folder whole under its aside name
+    (``.NAME.old-*``) and no half-written ``path``. Callers decide beforehand whether
+    ``path`` may be replaced.
+    """
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{target.name}.new-", dir=target.parent))
+    try:
+        os.chmod(tmp, 0o777 & ~_umask())
+        yield tmp
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    old: Path | None = None
+    if target.exists():
+        old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
+        os.replace(target, old / target.name)
+    os.replace(tmp, target)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def remove_stale_temporaries(folder: str | os.PathLike[str], name: str) -> None:
+    """Delete what interrupted `atomic_write` / `atomic_folder` calls left beside ``name``."""
+    base = Path(folder)
+    for pattern in (f".{name}.*.tmp", f".{name}.new-*", f".{name}.old-*"):
+        for p in base.glob(pattern):
+            if p.is_dir():
+                shutil.rmtree(p, ignore_errors=True)
+            else:
+                p.unlink(missing_ok=True)

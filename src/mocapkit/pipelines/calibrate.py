@@ -42,6 +42,17 @@ from mocapkit.errors import CalibrationError, FormatError
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff")
 DEFAULT_MIN_BOARDS = 5
+#: Largest accepted RMS reprojection error (px), per camera and for the stereo fit. Good
+#: chessboard calibrations give well under 1 px (OpenCV's own stereo set: 0.45 px); a pair
+#: whose right images are shifted by one gives about 50 px.
+DEFAULT_MAX_RMS_PX = 2.0
+#: Smallest plausible board square (mm). Smaller values are nearly always metres typed
+#: where millimetres are expected (0.025 for 25 mm).
+MIN_SQUARE_MM = 2.0
+#: Smallest plausible stereo baseline (mm); below it the two sets are the same view.
+MIN_BASELINE_MM = 1.0
+#: Found images checked for a larger board than the one given (each check is a detection).
+_BOARD_SIZE_CHECKS = 3
 
 PathLike = str | os.PathLike[str]
 
@@ -272,6 +283,77 @@ def _too_few(
     )
 
 
+def _check_square(board: Board) -> None:
+    if board.square_mm < MIN_SQUARE_MM:
+        raise CalibrationError(
+            f"--square-mm: expected the square side in millimetres (at least {MIN_SQUARE_MM:g}), "
+            f"found {board.square_mm:g}; a board square is typically 10-100 mm. Was it given in "
+            f"metres ({board.square_mm:g} m = {board.square_mm * 1000:g} mm)?"
+        )
+
+
+def _check_same_images(files: Sequence[Sequence[Path]], sources: Sequence[str]) -> None:
+    """Refuse a stereo pair whose two image sets hold the same pictures."""
+    if len(files) != 2 or not files[0]:
+        return
+    same = sum(
+        a.resolve() == b.resolve() or a.read_bytes() == b.read_bytes()
+        for a, b in zip(files[0], files[1])
+    )
+    if same == len(files[0]):
+        raise CalibrationError(
+            f"stereo image sets {sources[0]!r} and {sources[1]!r}: expected two cameras' "
+            f"views, found the same {same} images in both"
+        )
+
+
+def _check_board_size(
+    files: Sequence[Path], corners: Sequence[NDArray[np.float64] | None], board: Board, source: str
+) -> None:
+    """Refuse a board size smaller than the board in the images (OpenCV finds a sub-board).
+
+    A 9x6 board detected as 8x6 calibrates with a low RMS, but its corners may be the left
+    or the right eight columns, so the board frame jumps by a square between views. The
+    first few images with a detected board are searched for one more column or row.
+    """
+    checked = 0
+    for f, c in zip(files, corners):
+        if c is None:
+            continue
+        grey = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE)
+        if grey is None:  # read once already by `_detect`; gone since
+            continue
+        for cols, rows in ((board.columns + 1, board.rows), (board.columns, board.rows + 1)):
+            bigger = Board(cols, rows, board.square_mm)
+            if find_board_corners(grey, bigger) is not None:
+                raise CalibrationError(
+                    f"--board: {board.columns}x{board.rows} inner corners given, but {f.name} "
+                    f"({source}) shows a board of at least {cols}x{rows}; give the board's full "
+                    f"inner-corner count (OpenCV would otherwise pick a different part of the "
+                    f"board in different views)"
+                )
+        checked += 1
+        if checked >= _BOARD_SIZE_CHECKS:
+            return
+
+
+def _check_rms(what: str, rms_px: float, max_rms_px: float, worst: str = "") -> None:
+    if rms_px > max_rms_px:
+        raise CalibrationError(
+            f"{what}: RMS reprojection error {rms_px:.2f} px, expected at most "
+            f"{max_rms_px:g} px (--max-rms-px){worst}. Typical causes: image pairs that do not "
+            f"match up by sorted name (a missing or extra image shifts every pair), a wrong "
+            f"--board, a board that moved or bent; nothing was written"
+        )
+
+
+def _worst_views(files: Sequence[Path], errors: dict[int, float], n: int = 3) -> str:
+    if not errors:
+        return ""
+    worst = sorted(errors.items(), key=lambda kv: -kv[1])[:n]
+    return "; worst: " + ", ".join(f"{files[i].name} {e:.1f} px" for i, e in worst)
+
+
 def calibrate_from_images(
     image_sets: Sequence[PathLike],
     board: Board,
@@ -279,6 +361,7 @@ def calibrate_from_images(
     board_pose: BoardPose | PathLike | None = None,
     min_boards: int = DEFAULT_MIN_BOARDS,
     refine_stereo_intrinsics: bool = False,
+    max_rms_px: float = DEFAULT_MAX_RMS_PX,
 ) -> CalibrationReport:
     """Calibrate one camera (one image set) or a stereo pair (two sets matched by sorted name).
 
@@ -296,12 +379,18 @@ def calibrate_from_images(
         Fewest images (pairs for stereo) with a detected board.
     refine_stereo_intrinsics : bool
         Let `cv2.stereoCalibrate` refine intrinsics instead of fixing them.
+    max_rms_px : float
+        Largest accepted RMS reprojection error (px) of each camera and of the stereo fit.
 
     Raises
     ------
     CalibrationError
         Too few boards (says how many were found, needed, and which images failed),
-        mismatched pair counts or image sizes, empty image sets.
+        mismatched pair counts or image sizes, empty image sets; and the slips that show
+        only in the numbers: an RMS above ``max_rms_px`` (mis-paired stereo images), a
+        square size below `MIN_SQUARE_MM` (metres given), the same images for both
+        cameras or a baseline below `MIN_BASELINE_MM`, a board smaller than the one in
+        the images.
     """
     if len(image_sets) not in (1, 2):
         raise CalibrationError(
@@ -311,6 +400,9 @@ def calibrate_from_images(
         raise CalibrationError(
             f"min_boards: expected at least 3 (OpenCV's minimum), found {min_boards}"
         )
+    if not (np.isfinite(max_rms_px) and max_rms_px > 0):
+        raise CalibrationError(f"max_rms_px: expected a positive number, found {max_rms_px}")
+    _check_square(board)
     n_cams = len(image_sets)
     cam_names = (
         list(names) if names is not None else (["cam0"] if n_cams == 1 else ["left", "right"])
@@ -327,7 +419,10 @@ def calibrate_from_images(
             f"{len(files[0])} images, "
             f"{sources[1]!r} has {len(files[1])}"
         )
+    _check_same_images(files, sources)
     detections = [_detect(f, board, s) for f, s in zip(files, sources)]
+    for f, d, s in zip(files, detections, sources):
+        _check_board_size(f, d[0], board, s)
 
     intrinsics = []
     for (corners, size, _), f, s, name in zip(detections, files, sources, cam_names):
@@ -335,7 +430,11 @@ def calibrate_from_images(
         if len(found) < min_boards:
             failed = [fi for fi, c in zip(f, corners) if c is None]
             raise _too_few(s, name, len(found), min_boards, failed, board)
-        intrinsics.append(calibrate_intrinsics(found, board, size, name=name))
+        intr = calibrate_intrinsics(found, board, size, name=name)
+        found_idx = [i for i, c in enumerate(corners) if c is not None]
+        view_errors = {i: float(e) for i, e in zip(found_idx, intr.per_view_rms_px)}
+        _check_rms(f"camera {name!r} ({s})", intr.rms_px, max_rms_px, _worst_views(f, view_errors))
+        intrinsics.append(intr)
 
     # Per-image results from the intrinsic fit.
     stereo_err: list[dict[int, float]] = [{} for _ in range(n_cams)]
@@ -364,6 +463,19 @@ def calibrate_from_images(
         stereo = calibrate_stereo(ca, cb, board, cameras[0], cameras[1], refine_stereo_intrinsics)
         cameras = list(stereo.cameras)
         stereo_rms, baseline = stereo.rms_px, stereo.baseline_mm
+        pair_errors = {i: float(stereo.per_view_rms_px[j].max()) for j, i in enumerate(used_pairs)}
+        _check_rms(
+            f"stereo pair {cam_names[0]}+{cam_names[1]}",
+            stereo_rms,
+            max_rms_px,
+            _worst_views(files[0], pair_errors),
+        )
+        if baseline < MIN_BASELINE_MM:
+            raise CalibrationError(
+                f"stereo pair {cam_names[0]}+{cam_names[1]}: baseline {baseline:.3g} mm, expected "
+                f"at least {MIN_BASELINE_MM:g} mm between the optical centres; are both image "
+                f"sets from the same camera?"
+            )
         for j, i in enumerate(used_pairs):
             stereo_err[0][i] = float(stereo.per_view_rms_px[j, 0])
             stereo_err[1][i] = float(stereo.per_view_rms_px[j, 1])

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import weakref
 from collections.abc import Sequence
+from typing import Any, NamedTuple
 
 import numba
 import numpy as np
@@ -33,29 +34,62 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 
-class KinematicArrays:
-    """Flat arrays of a skeleton in the layout the compiled kernels take."""
+class KinematicArrays(NamedTuple):
+    """Flat, contiguous arrays of a skeleton in the layout the compiled kernels take.
 
-    __slots__ = (
-        "ancestors",
-        "dof_axis",
-        "dof_count",
-        "dof_kind",
-        "dof_start",
-        "offsets",
-        "parents",
-    )
+    A `typing.NamedTuple`, so a Numba kernel takes the whole skeleton as one argument
+    (``kin``) and reads ``kin.parents``, ``kin.dof_axis``, ... Build it with
+    `kinematic_arrays` (cached per skeleton) or `KinematicArrays.from_skeleton`.
 
-    def __init__(self, skeleton: Skeleton) -> None:
-        j = skeleton.n_joints
-        self.parents = np.ascontiguousarray(skeleton.parents, dtype=np.int64)
-        self.offsets = np.ascontiguousarray(skeleton.offsets_mm, dtype=np.float64)
-        counts = np.bincount(skeleton.dof_joint, minlength=j).astype(np.int64)
-        self.dof_count = counts
-        self.dof_start = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
-        self.dof_kind = np.ascontiguousarray(skeleton.dof_kind, dtype=np.int64)
-        self.dof_axis = np.ascontiguousarray(skeleton.dof_axis, dtype=np.float64)
-        self.ancestors = np.ascontiguousarray(skeleton.ancestors_mask())
+    Attributes
+    ----------
+    parents : ndarray of int64, shape (J,)
+        Parent joint of each joint (-1 for the root); parents precede children.
+    offsets : ndarray of float64, shape (J, 3)
+        Joint origin in the parent's frame at zero pose (mm).
+    dof_start, dof_count : ndarray of int64, shape (J,)
+        The DoFs of joint ``j`` are ``dof_start[j] : dof_start[j] + dof_count[j]``.
+    dof_kind : ndarray of int64, shape (D,)
+        ``REVOLUTE`` (0), ``PRISMATIC`` (1) or ``BALL`` (2, three consecutive DoFs).
+    dof_axis : ndarray of float64, shape (D, 3)
+        Unit axis of each DoF in its joint's frame.
+    dof_joint : ndarray of int64, shape (D,)
+        Joint each DoF belongs to.
+    ancestors : ndarray of bool, shape (J, J)
+        ``ancestors[a, j]``: joint ``a`` is ``j`` or one of its ancestors.
+    """
+
+    parents: IntArray
+    offsets: FloatArray
+    dof_start: IntArray
+    dof_count: IntArray
+    dof_kind: IntArray
+    dof_axis: FloatArray
+    dof_joint: IntArray
+    ancestors: NDArray[np.bool_]
+
+    @classmethod
+    def from_skeleton(cls, skeleton: Skeleton) -> KinematicArrays:
+        """Build the arrays of ``skeleton`` (uncached; prefer `kinematic_arrays`)."""
+        counts = np.bincount(skeleton.dof_joint, minlength=skeleton.n_joints)
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        return cls(
+            parents=_readonly(skeleton.parents, np.int64),
+            offsets=_readonly(skeleton.offsets_mm, np.float64),
+            dof_start=_readonly(starts, np.int64),
+            dof_count=_readonly(counts, np.int64),
+            dof_kind=_readonly(skeleton.dof_kind, np.int64),
+            dof_axis=_readonly(skeleton.dof_axis, np.float64),
+            dof_joint=_readonly(skeleton.dof_joint, np.int64),
+            ancestors=_readonly(skeleton.ancestors_mask(), np.bool_),
+        )
+
+
+def _readonly(a: ArrayLike, dtype: type) -> NDArray[Any]:
+    """A C-contiguous read-only copy (the cached layout is shared by every caller)."""
+    out: NDArray[Any] = np.array(a, dtype=dtype, order="C", copy=True)
+    out.setflags(write=False)
+    return out
 
 
 _KINEMATIC_ARRAYS: weakref.WeakKeyDictionary[Skeleton, KinematicArrays] = (
@@ -71,7 +105,7 @@ def kinematic_arrays(skeleton: Skeleton) -> KinematicArrays:
     """
     arrays = _KINEMATIC_ARRAYS.get(skeleton)
     if arrays is None:
-        arrays = KinematicArrays(skeleton)
+        arrays = KinematicArrays.from_skeleton(skeleton)
         _KINEMATIC_ARRAYS[skeleton] = arrays
     return arrays
 
@@ -91,22 +125,23 @@ def _matmul3_nb(a: FloatArray, b: FloatArray, out: FloatArray) -> None:
 @numba.njit(cache=True)
 def fk_pose_nb(
     q: FloatArray,
-    parents: IntArray,
-    offsets: FloatArray,
-    dof_start: IntArray,
-    dof_count: IntArray,
-    dof_kind: IntArray,
-    dof_axis: FloatArray,
+    kin: KinematicArrays,
     world: FloatArray,
     axis_world: FloatArray,
     pivot_world: FloatArray,
 ) -> None:
-    """Forward kinematics of one pose ``q`` (D,).
+    """Forward kinematics of one pose ``q`` (D,) of the skeleton ``kin``.
 
     Writes ``world`` (J, 4, 4) world_from_joint transforms, and for every DoF its
     world axis ``axis_world`` (D, 3) and pivot ``pivot_world`` (D, 3). Allocation
     per call is a few 3x3 scratch matrices; nothing is allocated per joint.
     """
+    parents = kin.parents
+    offsets = kin.offsets
+    dof_start = kin.dof_start
+    dof_count = kin.dof_count
+    dof_kind = kin.dof_kind
+    dof_axis = kin.dof_axis
     n_joints = parents.shape[0]
     rot_acc = np.empty((3, 3))
     rot_step = np.empty((3, 3))
@@ -184,49 +219,34 @@ def fk_pose_nb(
 
 
 @numba.njit(cache=True)
-def fk_batch_nb(
-    q: FloatArray,
-    parents: IntArray,
-    offsets: FloatArray,
-    dof_start: IntArray,
-    dof_count: IntArray,
-    dof_kind: IntArray,
-    dof_axis: FloatArray,
-    world: FloatArray,
-) -> None:
+def fk_batch_nb(q: FloatArray, kin: KinematicArrays, world: FloatArray) -> None:
     """Forward kinematics of N poses ``q`` (N, D) into ``world`` (N, J, 4, 4)."""
     n_dofs = q.shape[1]
     axis_world = np.empty((n_dofs, 3))
     pivot_world = np.empty((n_dofs, 3))
     for n in range(q.shape[0]):
-        fk_pose_nb(
-            q[n],
-            parents,
-            offsets,
-            dof_start,
-            dof_count,
-            dof_kind,
-            dof_axis,
-            world[n],
-            axis_world,
-            pivot_world,
-        )
+        fk_pose_nb(q[n], kin, world[n], axis_world, pivot_world)
 
 
 @numba.njit(cache=True)
 def points_jacobian_pose_nb(
+    kin: KinematicArrays,
     world: FloatArray,
     axis_world: FloatArray,
     pivot_world: FloatArray,
-    dof_kind: IntArray,
-    dof_joint: IntArray,
-    ancestors: NDArray[np.bool_],
     target_joint: IntArray,
     target_point: FloatArray,
     points_out: FloatArray,
     jac_out: FloatArray,
 ) -> None:
-    """Points (K, 3) and their Jacobian (3K, D) from one pose's FK results."""
+    """Points (K, 3) and their Jacobian (3K, D) from one pose's FK results.
+
+    ``target_joint`` (K,) and ``target_point`` (K, 3) give each point's joint and its
+    position in that joint's frame (mm).
+    """
+    dof_kind = kin.dof_kind
+    dof_joint = kin.dof_joint
+    ancestors = kin.ancestors
     n_dofs = axis_world.shape[0]
     for k in range(target_joint.shape[0]):
         jk = target_joint[k]
@@ -258,14 +278,7 @@ def points_jacobian_pose_nb(
 @numba.njit(cache=True)
 def fk_points_jacobian_pose_nb(
     q: FloatArray,
-    parents: IntArray,
-    offsets: FloatArray,
-    dof_start: IntArray,
-    dof_count: IntArray,
-    dof_kind: IntArray,
-    dof_axis: FloatArray,
-    dof_joint: IntArray,
-    ancestors: NDArray[np.bool_],
+    kin: KinematicArrays,
     target_joint: IntArray,
     target_point: FloatArray,
     world: FloatArray,
@@ -276,50 +289,23 @@ def fk_points_jacobian_pose_nb(
 ) -> None:
     """FK of one pose ``q`` (D,) into the scratch arrays, then its points (K, 3) and
     Jacobian (3K, D): `fk_pose_nb` followed by `points_jacobian_pose_nb`."""
-    fk_pose_nb(
-        q,
-        parents,
-        offsets,
-        dof_start,
-        dof_count,
-        dof_kind,
-        dof_axis,
-        world,
-        axis_world,
-        pivot_world,
-    )
+    fk_pose_nb(q, kin, world, axis_world, pivot_world)
     points_jacobian_pose_nb(
-        world,
-        axis_world,
-        pivot_world,
-        dof_kind,
-        dof_joint,
-        ancestors,
-        target_joint,
-        target_point,
-        points_out,
-        jac_out,
+        kin, world, axis_world, pivot_world, target_joint, target_point, points_out, jac_out
     )
 
 
 @numba.njit(cache=True)
 def points_jacobian_batch_nb(
     q: FloatArray,
-    parents: IntArray,
-    offsets: FloatArray,
-    dof_start: IntArray,
-    dof_count: IntArray,
-    dof_kind: IntArray,
-    dof_axis: FloatArray,
-    dof_joint: IntArray,
-    ancestors: NDArray[np.bool_],
+    kin: KinematicArrays,
     target_joint: IntArray,
     target_point: FloatArray,
     points_out: FloatArray,
     jac_out: FloatArray,
 ) -> None:
     """Points (N, K, 3) and Jacobians (N, 3K, D) of N poses ``q`` (N, D)."""
-    n_joints = parents.shape[0]
+    n_joints = kin.parents.shape[0]
     n_dofs = q.shape[1]
     world = np.empty((n_joints, 4, 4))
     axis_world = np.empty((n_dofs, 3))
@@ -327,14 +313,7 @@ def points_jacobian_batch_nb(
     for n in range(q.shape[0]):
         fk_points_jacobian_pose_nb(
             q[n],
-            parents,
-            offsets,
-            dof_start,
-            dof_count,
-            dof_kind,
-            dof_axis,
-            dof_joint,
-            ancestors,
+            kin,
             target_joint,
             target_point,
             world,
@@ -370,18 +349,9 @@ def forward_kinematics(skeleton: Skeleton, q: ArrayLike) -> FloatArray:
         ``world_from_joint`` for each joint (mm).
     """
     flat, batch = _flat_q(skeleton, q)
-    ka = kinematic_arrays(skeleton)
+    kin = kinematic_arrays(skeleton)
     world = np.empty((flat.shape[0], skeleton.n_joints, 4, 4))
-    fk_batch_nb(
-        flat,
-        ka.parents,
-        ka.offsets,
-        ka.dof_start,
-        ka.dof_count,
-        ka.dof_kind,
-        ka.dof_axis,
-        world,
-    )
+    fk_batch_nb(flat, kin, world)
     return world.reshape(*batch, skeleton.n_joints, 4, 4)
 
 
@@ -437,25 +407,11 @@ def points_and_jacobian(
     """
     flat, batch = _flat_q(skeleton, q)
     idx, pts = _targets(skeleton, joints, points_in_joint)
-    ka = kinematic_arrays(skeleton)
+    kin = kinematic_arrays(skeleton)
     n, k, d = flat.shape[0], len(idx), skeleton.n_dofs
     points_out = np.empty((n, k, 3))
     jac_out = np.empty((n, 3 * k, d))
-    points_jacobian_batch_nb(
-        flat,
-        ka.parents,
-        ka.offsets,
-        ka.dof_start,
-        ka.dof_count,
-        ka.dof_kind,
-        ka.dof_axis,
-        np.ascontiguousarray(skeleton.dof_joint),
-        ka.ancestors,
-        idx,
-        pts,
-        points_out,
-        jac_out,
-    )
+    points_jacobian_batch_nb(flat, kin, idx, pts, points_out, jac_out)
     return points_out.reshape(*batch, k, 3), jac_out.reshape(*batch, 3 * k, d)
 
 
@@ -548,6 +504,7 @@ __all__ = [
     "joint_positions",
     "kinematic_arrays",
     "points_and_jacobian",
+    "points_jacobian_batch_nb",
     "points_jacobian_pose_nb",
     "points_on_joints",
     "segment_com",

@@ -230,7 +230,11 @@ def _wave(duration_s: float) -> list[Key]:
     return keys
 
 
-def builtin_motion(name: str, duration_s: float = 20.0) -> Motion:
+#: Length of a built-in motion unless a longer one is asked for (s).
+DEFAULT_DURATION_S = 20.0
+
+
+def builtin_motion(name: str, duration_s: float = DEFAULT_DURATION_S) -> Motion:
     """A procedural motion on the ``zhang21`` preset, sampled at 120 Hz.
 
     Parameters

@@ -22,7 +22,6 @@ Pipeline of `synthesize_session`:
 from __future__ import annotations
 
 import json
-import shutil
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -33,6 +32,7 @@ from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import MocapError, SessionError, ShapeError
+from mocapkit.io.atomic import atomic_folder, remove_stale_temporaries
 from mocapkit.io.motion import Motion
 from mocapkit.io.session import Truth, write_keypoints_csv, write_session_json, write_timestamps_csv
 from mocapkit.progress import Progress
@@ -190,12 +190,17 @@ def keep_cameras_away(
     return out, moved
 
 
-def load_motion_source(spec: str, asf: str | None = None) -> Motion:
-    """A motion from a file path (BVH, AMC) or ``builtin:NAME``."""
-    if spec.startswith(BUILTIN_PREFIX):
-        from mocapkit.synth.builtin_motions import builtin_motion
+def load_motion_source(spec: str, asf: str | None = None, duration_s: float = 0.0) -> Motion:
+    """A motion from a file path (BVH, AMC) or ``builtin:NAME``.
 
-        return builtin_motion(spec[len(BUILTIN_PREFIX) :])
+    A built-in motion lasts 20 s, or ``duration_s`` where that is longer (a file's
+    motion lasts as long as the file).
+    """
+    if spec.startswith(BUILTIN_PREFIX):
+        from mocapkit.synth.builtin_motions import DEFAULT_DURATION_S, builtin_motion
+
+        length = max(DEFAULT_DURATION_S, float(duration_s))
+        return builtin_motion(spec[len(BUILTIN_PREFIX) :], duration_s=length)
     from mocapkit.io.motion_files import read_motion
 
     return read_motion(spec, asf=asf)
@@ -210,7 +215,8 @@ def scale_motion(motion: Motion, height_mm: float) -> Motion:
     return Motion.from_q(skel, motion.time_s, q, f"{motion.source} scaled to {height_mm:.0f} mm")
 
 
-def _prepare_out(out: Path, overwrite: bool) -> None:
+def _check_out(out: Path, overwrite: bool) -> None:
+    """Refuse an output that is a file, or a non-empty folder unless it is a session to replace."""
     if out.exists() and not out.is_dir():
         raise SessionError(f"{out}: output exists and is not a folder")
     if out.is_dir() and any(out.iterdir()):
@@ -220,12 +226,6 @@ def _prepare_out(out: Path, overwrite: bool) -> None:
             )
         if not (out / "session.json").is_file():
             raise SessionError(f"{out}: refusing to overwrite a folder that holds no session.json")
-        for sub in ("video", "keypoints"):
-            if (out / sub).is_dir():
-                shutil.rmtree(out / sub)
-        for f in ("truth.npz", "markers.csv", "markers.c3d", "cameras.json"):
-            (out / f).unlink(missing_ok=True)
-    out.mkdir(parents=True, exist_ok=True)
 
 
 class _VideoOut:
@@ -290,6 +290,11 @@ def synthesize_session(
 ) -> SynthSummary:
     """Render a synthetic session folder from a motion file or a built-in motion.
 
+    The session is rendered into a temporary folder beside ``out_dir`` and swapped in
+    when complete (`mocapkit.io.atomic.atomic_folder`): an interrupted run leaves no
+    session that looks complete, and with ``overwrite`` the old session stays whole
+    until the new one is.
+
     Parameters
     ----------
     motion_spec : str
@@ -302,15 +307,25 @@ def synthesize_session(
     -------
     SynthSummary
     """
+    final = Path(out_dir)
+    _check_out(final, options.overwrite)
+    remove_stale_temporaries(final.parent, final.name)
+    with atomic_folder(final) as tmp:
+        summary = _render_session(motion_spec, tmp, final.name, options)
+    return replace(summary, out_dir=final)
+
+
+def _render_session(motion_spec: str, out: Path, label: str, options: SynthOptions) -> SynthSummary:
+    """`synthesize_session` into the (temporary) folder ``out``; ``label`` names it."""
     t_start = time.perf_counter()
     opts = options
-    out = Path(out_dir)
     root_rng = np.random.SeedSequence(int(opts.seed))
     seeds = root_rng.spawn(6)
     rng_look, rng_room, rng_light, rng_time, rng_markers, rng_noise = (
         np.random.default_rng(s) for s in seeds
     )
-    motion = load_motion_source(motion_spec, opts.asf)
+    needed_s = opts.start_s + (opts.seconds if opts.seconds is not None else 0.0)
+    motion = load_motion_source(motion_spec, opts.asf, duration_s=needed_s)
     notes: list[str] = []
     if opts.height_mm is not None:
         motion = scale_motion(motion, opts.height_mm)
@@ -385,7 +400,6 @@ def synthesize_session(
     )
 
     # -------------------------------------------------------- static data
-    _prepare_out(out, opts.overwrite)
     from mocapkit.io.cameras import write_cameras
     from mocapkit.io.markers import write_markers_csv
 
@@ -474,7 +488,7 @@ def synthesize_session(
         _VideoOut(vdir, c.name, opts.video_format, opts.fps, opts.image_size) for c in cameras
     ]
     try:
-        with Progress(n_video, f"synth {out.name}") as progress:
+        with Progress(n_video, f"synth {label}") as progress:
             for k in range(n_video):
                 for r, bg, light, w in zip(renderers, backgrounds, lights, writers):
                     canvas = bg.copy()
