@@ -174,9 +174,25 @@ class HeadHandTracker:
         self.vel[k] = 0.0
         self.missed[k] = 0
 
-    def update(self, time_s: float, masks: Sequence[NDArray[np.uint8]]) -> FloatArray:
-        """Head and hands (3, 3) world mm for this frame's skin masks; NaN rows: lost."""
-        blobs = [skin_blobs(m, self.config)[0] for m in masks]
+    def update(
+        self,
+        time_s: float,
+        masks: Sequence[NDArray[np.uint8]],
+        rois: Sequence[tuple[int, int, int, int] | None] | None = None,
+    ) -> FloatArray:
+        """Head and hands (3, 3) world mm for this frame's skin masks; NaN rows: lost.
+
+        ``rois`` (per view, optional): only that part of each mask is searched.
+        """
+        blobs = []
+        for i, m in enumerate(masks):
+            r = None if rois is None else rois[i]
+            if r is None:
+                blobs.append(skin_blobs(m, self.config)[0])
+            else:
+                x0, y0, x1, y1 = r
+                cents = skin_blobs(m[y0:y1, x0:x1], self.config)[0]
+                blobs.append(cents + np.array([x0, y0], dtype=float))
         cands = candidates_3d(self.cameras, blobs, self.config)
         return self.update_candidates(time_s, cands)
 

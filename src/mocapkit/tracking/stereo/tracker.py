@@ -278,6 +278,20 @@ class StereoTracker:
         if samples:
             self.shirt = ColourModel.fit(np.concatenate(samples), radius=3.0, luma_margin=40.0)
 
+    def _figure(
+        self, img: NDArray[np.uint8], skin: NDArray[np.uint8], roi: Roi | None
+    ) -> NDArray[np.uint8]:
+        """Figure mask (shirt or skin, dilated), computed inside ``roi`` only."""
+        h, w = skin.shape
+        if self.shirt is None:  # no shirt model yet: everything is figure
+            return np.full((h, w), 255, np.uint8)
+        x0, y0, x1, y1 = (0, 0, w, h) if roi is None else roi
+        out = np.zeros((h, w), np.uint8)
+        crop = np.ascontiguousarray(img[y0:y1, x0:x1])
+        if crop.size:
+            out[y0:y1, x0:x1] = figure_mask(shirt_mask(crop, self.shirt), skin[y0:y1, x0:x1])
+        return out
+
     # ------------------------------------------------------------------ update
     def update(self, sample: StereoSample) -> StereoPose:
         """Track one frame (module notes); returns the pose."""
@@ -310,7 +324,11 @@ class StereoTracker:
             head_pt = meas[0]
         else:
             self.hands.set_right_axis(rb[:, 0])
-            meas = self.hands.update(sample.time_s, skins) if skins else np.full((3, 3), np.nan)
+            meas = (
+                self.hands.update(sample.time_s, skins, rois)
+                if skins
+                else np.full((3, 3), np.nan)
+            )
             head_pt = meas[0] - rb @ np.asarray(cfg.face_offset_mm)
         if np.all(np.isfinite(head_pt)):
             if self.head_mm is None:
@@ -329,7 +347,7 @@ class StereoTracker:
             for i, (img, r) in enumerate(zip(images, rois)):
                 fig = None
                 if cfg.figure_ground and self.shirt is not None:
-                    fig = figure_mask(shirt_mask(img, self.shirt, roi=r), skins[i])
+                    fig = self._figure(img, skins[i], r)
                 grads.append(gradient_map(img, roi=r, figure=fig, config=cfg.gradient))
         else:
             grads = self._zeros
