@@ -263,13 +263,15 @@ def keypoint_targets(
     cameras: Sequence[Camera],
     keypoints: Sequence[FloatArray],
     joint_names: Sequence[str],
+    wanted: Sequence[str] = ("head", "left_wrist", "right_wrist"),
 ) -> FloatArray:
-    """Head and hands (3, 3) triangulated from 2-D keypoints (``head``, ``left_wrist``,
-    ``right_wrist`` rows of each view's (K, 2) keypoints; NaN where unseen)."""
+    """Joints (len(wanted), 3) triangulated from 2-D keypoints: by default head and hands
+    (the ``head``, ``left_wrist``, ``right_wrist`` rows of each view's (K, 2)
+    keypoints); NaN where fewer than two views see one."""
     idx = []
-    for name in ("head", "left_wrist", "right_wrist"):
+    for name in wanted:
         idx.append(list(joint_names).index(name) if name in joint_names else -1)
-    px = np.full((len(cameras), 3, 2), np.nan)
+    px = np.full((len(cameras), len(idx), 2), np.nan)
     for v, kp in enumerate(keypoints):
         for k, j in enumerate(idx):
             if j >= 0:
