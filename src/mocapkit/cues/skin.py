@@ -336,6 +336,57 @@ class GradientConfig:
             )
 
 
+def _gradient_core(
+    image: ArrayLike,
+    roi: Roi | None,
+    figure: ArrayLike | None,
+    config: GradientConfig,
+    oriented: bool,
+) -> tuple[Float32Array, Float32Array | None]:
+    cfg = config
+    grey = to_grey(np.asarray(image))
+    h, w = grey.shape
+    outs = [np.zeros((h, w), dtype=np.float32) for _ in range(2 if oriented else 1)]
+    x0, y0, x1, y1 = (0, 0, w, h) if roi is None else clip_roi(roi, (w, h))
+    if x1 <= x0 or y1 <= y0:
+        return outs[0], (outs[1] if oriented else None)
+    # a margin so that the blurs and Sobel see real neighbours at the RoI's border
+    r_post = math.ceil(3 * cfg.post_blur_sigma_px)
+    m = cfg.pre_blur_ksize // 2 + 1 + r_post
+    cx0, cy0, cx1, cy1 = max(x0 - m, 0), max(y0 - m, 0), min(x1 + m, w), min(y1 + m, h)
+    crop = grey[cy0:cy1, cx0:cx1]
+    if cfg.pre_blur_ksize > 1:
+        k = (cfg.pre_blur_ksize, cfg.pre_blur_ksize)
+        crop = np.asarray(cv2.GaussianBlur(crop, k, 0), dtype=np.uint8)
+    gx = np.asarray(cv2.Sobel(crop, cv2.CV_32F, 1, 0, ksize=3), dtype=np.float32)
+    gy = np.asarray(cv2.Sobel(crop, cv2.CV_32F, 0, 1, ksize=3), dtype=np.float32)
+    g = np.asarray(cv2.magnitude(gx, gy), dtype=np.float32)
+    g *= np.float32(1.0 / cfg.saturation)
+    keep = None
+    if figure is not None:
+        f = np.asarray(figure)
+        if f.shape != (h, w):
+            raise ShapeError(f"figure: expected shape {(h, w)}, found {f.shape}")
+        keep = f[cy0:cy1, cx0:cx1] != 0
+    k_post = (2 * r_post + 1, 2 * r_post + 1)
+    if oriented:
+        # the gradient vector, its length remapped as the magnitude's
+        scale = np.float32(1.0 / cfg.saturation) / np.maximum(g, np.float32(1.0))
+        comps = [(gx * scale).astype(np.float32), (gy * scale).astype(np.float32)]
+    else:
+        np.minimum(g, np.float32(1.0), out=g)
+        comps = [g]
+    for c, target in zip(comps, outs):
+        if keep is not None:
+            c[~keep] = 0.0
+        if cfg.post_blur_sigma_px > 0:
+            c = np.asarray(cv2.GaussianBlur(c, k_post, cfg.post_blur_sigma_px), dtype=np.float32)
+        target[y0:y1, x0:x1] = c[y0 - cy0 : y1 - cy0, x0 - cx0 : x1 - cx0]
+    if not oriented:
+        np.clip(outs[0], 0.0, 1.0, out=outs[0])
+    return outs[0], (outs[1] if oriented else None)
+
+
 def gradient_map(
     image: ArrayLike,
     roi: Roi | None = None,
@@ -359,37 +410,25 @@ def gradient_map(
     -------
     ndarray of float32, shape (H, W), values in [0, 1]
     """
-    cfg = config or GradientConfig()
-    grey = to_grey(np.asarray(image))
-    h, w = grey.shape
-    out = np.zeros((h, w), dtype=np.float32)
-    x0, y0, x1, y1 = (0, 0, w, h) if roi is None else clip_roi(roi, (w, h))
-    if x1 <= x0 or y1 <= y0:
-        return out
-    # a margin so that the blurs and Sobel see real neighbours at the RoI's border
-    r_post = math.ceil(3 * cfg.post_blur_sigma_px)
-    m = cfg.pre_blur_ksize // 2 + 1 + r_post
-    cx0, cy0, cx1, cy1 = max(x0 - m, 0), max(y0 - m, 0), min(x1 + m, w), min(y1 + m, h)
-    crop = grey[cy0:cy1, cx0:cx1]
-    if cfg.pre_blur_ksize > 1:
-        k = (cfg.pre_blur_ksize, cfg.pre_blur_ksize)
-        crop = np.asarray(cv2.GaussianBlur(crop, k, 0), dtype=np.uint8)
-    gx = cv2.Sobel(crop, cv2.CV_32F, 1, 0, ksize=3)
-    gy = cv2.Sobel(crop, cv2.CV_32F, 0, 1, ksize=3)
-    g = np.asarray(cv2.magnitude(gx, gy), dtype=np.float32)
-    g *= np.float32(1.0 / cfg.saturation)
-    np.minimum(g, np.float32(1.0), out=g)
-    if figure is not None:
-        f = np.asarray(figure)
-        if f.shape != (h, w):
-            raise ShapeError(f"figure: expected shape {(h, w)}, found {f.shape}")
-        g[f[cy0:cy1, cx0:cx1] == 0] = 0.0
-    if cfg.post_blur_sigma_px > 0:
-        k_post = (2 * r_post + 1, 2 * r_post + 1)
-        g = np.asarray(cv2.GaussianBlur(g, k_post, cfg.post_blur_sigma_px), dtype=np.float32)
-    out[y0:y1, x0:x1] = g[y0 - cy0 : y1 - cy0, x0 - cx0 : x1 - cx0]
-    np.clip(out, 0.0, 1.0, out=out)
-    return out
+    return _gradient_core(image, roi, figure, config or GradientConfig(), False)[0]
+
+
+def gradient_vector_map(
+    image: ArrayLike,
+    roi: Roi | None = None,
+    figure: ArrayLike | None = None,
+    config: GradientConfig | None = None,
+) -> tuple[Float32Array, Float32Array]:
+    """The gradient as a vector field whose length is remapped like `gradient_map`'s.
+
+    ``(gx, gy)``, each (H, W) float32 with ``|(gx, gy)| <= 1``: the Sobel gradient scaled
+    by ``1 / saturation`` and shortened to length 1 where it is longer, masked and
+    blurred as `gradient_map` (same parameters). Reading ``|g . n|`` with ``n`` the unit
+    normal of a model outline scores only edges that run along it (an extension of
+    eq. (1); `mocapkit.tracking.stereo.arm_filter`).
+    """
+    gx, gy = _gradient_core(image, roi, figure, config or GradientConfig(), True)
+    return gx, (np.zeros_like(gx) if gy is None else gy)
 
 
 __all__ = [
@@ -400,6 +439,7 @@ __all__ = [
     "figure_mask",
     "fit_shirt_model",
     "gradient_map",
+    "gradient_vector_map",
     "shirt_mask",
     "skin_mask",
     "ycrcb_from_bgr",

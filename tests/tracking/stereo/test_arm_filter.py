@@ -43,7 +43,7 @@ def _cameras(n=2):
     return cams
 
 
-def _model(hand, rb=None, sampling=(5.0, 48.0)):
+def _model(hand, rb=None, sampling=(5.0, 48.0, 0.0)):
     rb = np.eye(3) if rb is None else rb
     return ArmModel(
         rb,
@@ -105,7 +105,7 @@ def test_arm_points_match_the_azad14_preset():
     q0[limb.translation_dofs] = 0.0
     base = canonical_positions(sk, q0, names)[0]
     model = ArmModel(
-        rb, base, np.array([300.0, 270.0, 40.0]), RADII, np.zeros(3), np.array([5.0, 48.0])
+        rb, base, np.array([300.0, 270.0, 40.0]), RADII, np.zeros(3), np.array([5.0, 48.0, 0.0])
     )
     got = _points(TRUE_X, model)
     np.testing.assert_allclose(got[:3], want, atol=1e-9)

@@ -73,7 +73,11 @@ class ViewStack(NamedTuple):
     centre : (V, 3)
         Optical centres, world (mm).
     gradient : (V, H, W) float32
-        Gradient maps in [0, 1] (`mocapkit.cues.skin.gradient_map`); 0 where not computed.
+        Gradient maps in [0, 1] (`mocapkit.cues.skin.gradient_map`); 0 where not
+        computed. With oriented edges: the gradient's x component
+        (`mocapkit.cues.skin.gradient_vector_map`).
+    gradient_y : (V, H, W) or (V, 1, 1) float32
+        The gradient's y component with oriented edges; unused (1x1) otherwise.
     """
 
     rotation: FloatArray
@@ -82,6 +86,7 @@ class ViewStack(NamedTuple):
     dist: FloatArray
     centre: FloatArray
     gradient: Float32Array
+    gradient_y: Float32Array
 
 
 class ArmModel(NamedTuple):
@@ -99,8 +104,10 @@ class ArmModel(NamedTuple):
         Upper-arm cone radii (proximal, distal), forearm cone radii.
     hand_mm : (3,)
         Measured hand point, world; NaN when not measured (distance cue off).
-    sampling : (2,)
-        Contour sample spacing (px) and the most samples per contour line.
+    sampling : (3,)
+        Contour sample spacing (px), the most samples per contour line, and 1 for
+        oriented edges (read ``|g . n|`` with ``n`` the outline's image normal from the
+        gradient vector maps) or 0 for eq. (1)'s magnitude.
     """
 
     base_rotation: FloatArray
@@ -111,8 +118,15 @@ class ArmModel(NamedTuple):
     sampling: FloatArray
 
 
-def view_stack(cameras: list[Camera], gradients: list[Float32Array]) -> ViewStack:
-    """Pack cameras and their gradient maps (all the same image size) into a `ViewStack`."""
+def view_stack(
+    cameras: list[Camera],
+    gradients: list[Float32Array],
+    gradients_y: list[Float32Array] | None = None,
+) -> ViewStack:
+    """Pack cameras and their gradient maps (all the same image size) into a `ViewStack`.
+
+    ``gradients_y`` (oriented edges): the y components, ``gradients`` then holding x.
+    """
     if len(cameras) != len(gradients) or not cameras:
         raise ShapeError(
             f"view_stack: expected one gradient map per camera, found {len(cameras)} cameras "
@@ -136,7 +150,15 @@ def view_stack(cameras: list[Camera], gradients: list[Float32Array]) -> ViewStac
         dist[i, : d.shape[0]] = d
         centre[i] = c.center_in_world
     grad = np.ascontiguousarray(np.stack(gradients), dtype=np.float32)
-    return ViewStack(rot, tr, intr, dist, centre, grad)
+    if gradients_y is None:
+        grad_y = np.zeros((v, 1, 1), np.float32)
+    else:
+        grad_y = np.ascontiguousarray(np.stack(gradients_y), dtype=np.float32)
+        if grad_y.shape != grad.shape:
+            raise ShapeError(
+                f"view_stack: y gradients {grad_y.shape} differ from x gradients {grad.shape}"
+            )
+    return ViewStack(rot, tr, intr, dist, centre, grad, grad_y)
 
 
 # ------------------------------------------------------------------ compiled kernels
@@ -211,6 +233,7 @@ def _edge_error_nb(pts: FloatArray, model: ArmModel, views: ViewStack) -> float:
     n_views = views.rotation.shape[0]
     step = model.sampling[0]
     max_n = int(model.sampling[1])
+    oriented = model.sampling[2] > 0.5
     total = 0.0
     for v in range(n_views):
         acc = 0.0
@@ -249,8 +272,16 @@ def _edge_error_nb(pts: FloatArray, model: ArmModel, views: ViewStack) -> float:
                 # outline by well under a pixel
                 du = (ub - ua) / (n - 1)
                 dv = (vb - va) / (n - 1)
-                for k in range(n):
-                    acc += _read_nb(views.gradient[v], ua + k * du, va + k * dv)
+                if oriented and length > 1e-9:
+                    nu = -(vb - va) / length
+                    nv = (ub - ua) / length
+                    for k in range(n):
+                        gx = _read_nb(views.gradient[v], ua + k * du, va + k * dv)
+                        gy = _read_nb(views.gradient_y[v], ua + k * du, va + k * dv)
+                        acc += abs(gx * nu + gy * nv)
+                else:
+                    for k in range(n):
+                        acc += _read_nb(views.gradient[v], ua + k * du, va + k * dv)
                 count += n
         total += 1.0 - (acc / count if count > 0 else 0.0)
     return total / n_views
@@ -295,6 +326,15 @@ def _chordal_mean_rotvec_nb(rotvecs: FloatArray, weights: FloatArray, out: Float
                 out[j, k] += weights[i] * m[j, k]
 
 
+@numba.njit(cache=True)
+def _elbows_nb(particles: FloatArray, model: ArmModel, out: FloatArray) -> None:
+    """Elbow positions (N, 3) of a particle batch (N, 7)."""
+    pts = np.empty((4, 3))
+    for i in range(particles.shape[0]):
+        arm_points_nb(particles[i], model, pts)
+        out[i] = pts[1]
+
+
 # ------------------------------------------------------------------ the filter
 
 
@@ -327,6 +367,16 @@ class ArmFilterConfig:
     step_px : float
         Contour sample spacing (recipe A: about 5 px).
     max_samples_per_line : int
+    oriented_edges : bool
+        Score only the gradient component across each outline (``|g . n|``), so that
+        edges crossing an outline (a torso's, a fold's) do not count as if they ran
+        along it (an extension of eq. (1), which sums the magnitude; off = paper).
+    estimate : {"mode", "mean"}
+        The frame's estimate: the weighted mean of the particles whose elbow lies
+        within ``mode_radius_mm`` of the best particle's (default), or of all particles
+        (the paper leaves it open; a bimodal elbow circle makes the plain mean a pose
+        between the two).
+    mode_radius_mm : float
     fusion : FusionParams
     """
 
@@ -345,6 +395,9 @@ class ArmFilterConfig:
     shoulder_box_mm: float = 50.0
     step_px: float = 5.0
     max_samples_per_line: int = 48
+    oriented_edges: bool = True
+    estimate: str = "mode"
+    mode_radius_mm: float = 60.0
     fusion: FusionParams = field(default_factory=default_fusion)
 
     def __post_init__(self) -> None:
@@ -354,6 +407,8 @@ class ArmFilterConfig:
             raise ConfigError(f"n_runs: expected at least 1, found {self.n_runs}")
         if not 0.0 <= self.ik_fraction <= 1.0:
             raise ConfigError(f"ik_fraction: expected a share in [0, 1], found {self.ik_fraction}")
+        if self.estimate not in ("mode", "mean"):
+            raise ConfigError(f"estimate: expected 'mode' or 'mean', found {self.estimate!r}")
         if not (self.step_px > 0 and self.max_samples_per_line >= 2):
             raise ConfigError(
                 f"step_px/max_samples_per_line: expected > 0 and >= 2, found {self.step_px} "
@@ -490,6 +545,15 @@ class ArmParticleFilter:
     def _estimate(self, model: ArmModel, views: ViewStack) -> ArmEstimate:
         w = self.weights / max(self.weights.sum(), 1e-300)
         p = self.particles
+        if self.config.estimate == "mode":
+            # the weighted mean of the particles whose elbow lies near the best one's: the
+            # elbow circle often leaves two modes, whose mean would be neither
+            elbows = np.empty((p.shape[0], 3))
+            _elbows_nb(p, model, elbows)
+            best = int(np.argmax(w))
+            near = np.linalg.norm(elbows - elbows[best], axis=1) < self.config.mode_radius_mm
+            w = np.where(near, w, 0.0)
+            w /= w.sum()
         # chordal mean of the shoulder rotations: robust where rotation vectors wrap at pi
         m = np.empty((3, 3))
         _chordal_mean_rotvec_nb(np.ascontiguousarray(p[:, :3]), w, m)

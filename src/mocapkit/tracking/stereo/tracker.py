@@ -50,6 +50,7 @@ from mocapkit.cues.skin import (
     GradientConfig,
     figure_mask,
     gradient_map,
+    gradient_vector_map,
     shirt_mask,
     skin_mask,
 )
@@ -363,18 +364,27 @@ class StereoTracker:
                 self._fit_shirt(images, head, rb)
             rois = self._rois(self.head_mm, rb)
             grads = []
+            grads_y: list[NDArray[np.float32]] | None = [] if cfg.arm.oriented_edges else None
             for i, (img, r) in enumerate(zip(images, rois)):
                 fig = None
                 if cfg.figure_ground and self.shirt is not None:
                     fig = self._figure(img, skins[i], r)
-                grads.append(gradient_map(img, roi=r, figure=fig, config=cfg.gradient))
+                if grads_y is not None:
+                    gx, gy = gradient_vector_map(img, roi=r, figure=fig, config=cfg.gradient)
+                    grads.append(gx)
+                    grads_y.append(gy)
+                else:
+                    grads.append(gradient_map(img, roi=r, figure=fig, config=cfg.gradient))
         else:
             grads = self._zeros
-        views = view_stack(self.cameras, grads)
+            grads_y = self._zeros if cfg.arm.oriented_edges else None
+        views = view_stack(self.cameras, grads, grads_y)
         # ---------------------------------------------------------- arms
         hands = {"left": meas[1], "right": meas[2]}
         ests: dict[str, ArmEstimate] = {}
-        sampling = np.array([cfg.arm.step_px, float(cfg.arm.max_samples_per_line)])
+        sampling = np.array(
+            [cfg.arm.step_px, float(cfg.arm.max_samples_per_line), float(cfg.arm.oriented_edges)]
+        )
         for s in SIDES:
             a, b = self.lengths[s]
             model = ArmModel(
