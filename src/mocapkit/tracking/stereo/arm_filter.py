@@ -377,6 +377,9 @@ class ArmFilterConfig:
         (the paper leaves it open; a bimodal elbow circle makes the plain mean a pose
         between the two).
     mode_radius_mm : float
+    alpha_bounds : bool
+        Draw the IK samples' alpha within the side's bounds (§VII, errata A9); off: the
+        whole elbow circle.
     fusion : FusionParams
     """
 
@@ -397,6 +400,7 @@ class ArmFilterConfig:
     max_samples_per_line: int = 48
     oriented_edges: bool = True
     estimate: str = "mode"
+    alpha_bounds: bool = True
     mode_radius_mm: float = 60.0
     fusion: FusionParams = field(default_factory=default_fusion)
 
@@ -529,7 +533,7 @@ class ArmParticleFilter:
         return np.asarray(w @ self.particles[:, 4:], dtype=float)
 
     def _ik_samples(self, model: ArmModel, d_prev: FloatArray, n_ik: int) -> FloatArray:
-        lo, hi = ALPHA_RANGE_RAD[self.side]
+        lo, hi = ALPHA_RANGE_RAD[self.side] if self.config.alpha_bounds else (-math.pi, math.pi)
         alphas = self.rng.uniform(lo, hi, n_ik)
         rb = model.base_rotation
         s = model.shoulder_base_mm + rb @ d_prev
