@@ -113,13 +113,25 @@ def test_arm_points_match_the_azad14_preset():
     np.testing.assert_allclose(got[3], want[2] + 40.0 * forearm, atol=1e-9)
 
 
-def test_batch_weights_equal_a_brute_force_reference():
+def _bilinear(g, u, v):
+    if not (0 <= u < SIZE[0] - 1 and 0 <= v < SIZE[1] - 1):
+        return 0.0
+    c0, r0 = int(u), int(v)
+    fx, fy = u - c0, v - r0
+    return (1 - fy) * ((1 - fx) * g[r0, c0] + fx * g[r0, c0 + 1]) + fy * (
+        (1 - fx) * g[r0 + 1, c0] + fx * g[r0 + 1, c0 + 1]
+    )
+
+
+@pytest.mark.parametrize("oriented", [False, True])
+def test_batch_weights_equal_a_brute_force_reference(oriented):
     rng = np.random.default_rng(0)
     cams = _cameras(3)
     maps = [rng.random((SIZE[1], SIZE[0])).astype(np.float32) for _ in cams]
-    views = view_stack(cams, maps)
+    maps_y = [rng.uniform(-1, 1, (SIZE[1], SIZE[0])).astype(np.float32) for _ in cams]
+    views = view_stack(cams, maps, maps_y if oriented else None)
     hand = np.array([-150.0, 250.0, 1000.0])
-    model = _model(hand)
+    model = _model(hand, sampling=(5.0, 48.0, float(oriented)))
     particles = TRUE_X + rng.normal(0, [0.3, 0.3, 0.3, 0.3, 20, 20, 20], size=(25, 7))
     particles[:, 3] = np.clip(particles[:, 3], -math.pi, 0)
     w, eg, d2 = np.empty(25), np.empty(25), np.empty(25)
@@ -128,22 +140,20 @@ def test_batch_weights_equal_a_brute_force_reference():
     for i, x in enumerate(particles):
         pts = _points(x, model)
         errs = []
-        for cam, g in zip(cams, maps):
+        for cam, g, gy in zip(cams, maps, maps_y):
             vals = []
             for a, b in _outline_lines(pts, cam):
                 pa, pb = cam.project(np.stack([a, b]))
-                n = min(max(math.ceil(np.linalg.norm(pb - pa) / 5.0) + 1, 2), 48)
+                length = np.linalg.norm(pb - pa)
+                normal = np.array([-(pb - pa)[1], (pb - pa)[0]]) / length
+                n = min(max(math.ceil(length / 5.0) + 1, 2), 48)
                 for t in np.linspace(0.0, 1.0, n):
                     u, v = pa + t * (pb - pa)
-                    if 0 <= u < SIZE[0] - 1 and 0 <= v < SIZE[1] - 1:
-                        c0, r0 = int(u), int(v)
-                        fx, fy = u - c0, v - r0
-                        vals.append(
-                            (1 - fy) * ((1 - fx) * g[r0, c0] + fx * g[r0, c0 + 1])
-                            + fy * ((1 - fx) * g[r0 + 1, c0] + fx * g[r0 + 1, c0 + 1])
-                        )
+                    if oriented:
+                        vec = np.array([_bilinear(g, u, v), _bilinear(gy, u, v)])
+                        vals.append(abs(vec @ normal))
                     else:
-                        vals.append(0.0)
+                        vals.append(_bilinear(g, u, v))
             errs.append(1.0 - np.mean(vals))
         assert eg[i] == pytest.approx(np.mean(errs), abs=1e-6)
         assert d2[i] == pytest.approx(np.sum((pts[3] - hand) ** 2), rel=1e-12)
