@@ -19,9 +19,10 @@
    offsets carry what a wrong yaw leaves unexplained); it starts facing the cameras.
    This keeps the paper's 7 DoF per arm and needs no extra cue; its error is reported
    by `mocapkit.pipelines.stereo` (`torso_yaw_error_deg`). With keypoints,
-   ``torso="keypoints"`` takes the yaw of the triangulated shoulder keypoints instead
-   (an option beyond the paper's inputs, for when the torso turns faster than the
-   adaptive shoulders follow).
+   ``torso="keypoints"`` takes the whole torso rotation from the triangulated shoulder,
+   neck and pelvis keypoints and hangs the arms from the neck keypoint instead (an
+   option beyond the paper's inputs, for torsos that turn or lean more than the
+   adaptive shoulders absorb).
 
 Model-to-measurement offsets (gaps in the paper, chosen here): a hand's skin blob
 lies in the hand, beyond the wrist, so the arm's measured point is the wrist plus
@@ -55,6 +56,7 @@ from mocapkit.cues.skin import (
     skin_mask,
 )
 from mocapkit.errors import ConfigError, SessionError, ShapeError
+from mocapkit.geometry.rotations import rotvec_from_matrix
 from mocapkit.skeleton.kinematics import canonical_positions, joint_positions
 from mocapkit.skeleton.limbs import arm
 from mocapkit.skeleton.model import Skeleton
@@ -93,9 +95,11 @@ class StereoConfig:
         Share of the shoulders' yaw taken per frame (0: the yaw stays facing the cameras;
         0.6 measured best of 0.2/0.6/1.0 on CMU 13_26 and 01_01).
     torso : {"shoulders", "keypoints"}
-        Where the torso yaw comes from: the adaptive shoulders (default, the paper's
-        inputs only), or the shoulder keypoints triangulated over the views (with
-        ``use_keypoints``; the yaw of the line between them, taken each frame).
+        Where the torso comes from: an upright torso whose yaw follows the adaptive
+        shoulders, hanging from the head (default, the paper's inputs only); or, with
+        ``use_keypoints``, the torso keypoints triangulated over the views each frame
+        (rotation from the shoulder line and the pelvis-neck line, the arms hanging
+        from the neck keypoint).
     reach_pad_mm : float
         Margin of the arms' reach box.
     seed : int
@@ -292,6 +296,24 @@ class StereoTracker:
         if samples:
             self.shirt = ColourModel.fit(np.concatenate(samples), radius=3.0, luma_margin=40.0)
 
+    def _torso_from_keypoints(self, kps: list[FloatArray]) -> tuple[FloatArray, FloatArray] | None:
+        """Torso rotation (x: left to right shoulder, z: pelvis to neck, orthogonalised) and
+        the neck, triangulated from the keypoints; None without both shoulders and the neck."""
+        names = ("left_shoulder", "right_shoulder", "neck", "pelvis")
+        p = keypoint_targets(self.cameras, kps, self.keypoint_names, names)
+        if not np.all(np.isfinite(p[:3])):
+            return None
+        x = p[1] - p[0]
+        up = p[2] - p[3] if np.all(np.isfinite(p[3])) else np.array([0.0, 0.0, 1.0])
+        x = x / max(float(np.linalg.norm(x)), 1e-9)
+        z = up - (up @ x) * x
+        nz = float(np.linalg.norm(z))
+        if nz < 1e-6:
+            return None
+        z = z / nz
+        rb = np.stack([x, np.cross(z, x), z], axis=1)
+        return rb, p[2]
+
     def _figure(
         self, img: NDArray[np.uint8], skin: NDArray[np.uint8], roi: Roi | None
     ) -> NDArray[np.uint8]:
@@ -311,6 +333,7 @@ class StereoTracker:
         """Track one frame (module notes); returns the pose."""
         cfg = self.config
         rb = yaw_matrix(self.yaw)
+        torso_root: FloatArray | None = None  # the torso joint (neck), when measured
         images: list[NDArray[np.uint8]] = []
         for c in self.cameras:
             if c.name not in sample.images:
@@ -337,13 +360,10 @@ class StereoTracker:
             meas = keypoint_targets(self.cameras, kps, self.keypoint_names)
             head_pt = meas[0]
             if cfg.torso == "keypoints":
-                sh = keypoint_targets(
-                    self.cameras, kps, self.keypoint_names, ("left_shoulder", "right_shoulder")
-                )
-                right = sh[1] - sh[0]
-                if np.all(np.isfinite(right)) and math.hypot(right[0], right[1]) > 1e-6:
-                    self.yaw = math.atan2(right[1], right[0])
-                    rb = yaw_matrix(self.yaw)
+                torso_kp = self._torso_from_keypoints(kps)
+                if torso_kp is not None:
+                    rb, torso_root = torso_kp
+                    self.yaw = math.atan2(rb[1, 0], rb[0, 0])
         else:
             self.hands.set_right_axis(rb[:, 0])
             meas = (
@@ -358,6 +378,8 @@ class StereoTracker:
         head = self.head_mm
         if head is None:
             head = np.array([0.0, 0.0, 1600.0])  # nothing seen yet: a standing adult
+        if torso_root is None:
+            torso_root = head - rb @ self.head_off
         # ---------------------------------------------------------- gradient maps
         if images:
             if cfg.figure_ground and self.shirt is None and self.head_mm is not None:
@@ -389,7 +411,7 @@ class StereoTracker:
             a, b = self.lengths[s]
             model = ArmModel(
                 rb,
-                head + rb @ self.shoulder_off[s],
+                torso_root + rb @ (self.shoulder_off[s] + self.head_off),
                 np.array([a, b, cfg.hand_offset]),
                 self.radii[s],
                 np.asarray(hands[s], dtype=float),
@@ -403,22 +425,21 @@ class StereoTracker:
                 meas_yaw = math.atan2(right[1], right[0])
                 self.yaw = _wrap(self.yaw + cfg.yaw_gain * _wrap(meas_yaw - self.yaw))
         self.n_frames += 1
-        return self._pose(sample.time_s, head, rb, ests, meas)
+        return self._pose(sample.time_s, torso_root, rb, ests, meas)
 
     def _pose(
         self,
         time_s: float,
-        head: FloatArray,
+        torso_root: FloatArray,
         rb: FloatArray,
         ests: dict[str, ArmEstimate],
         meas: FloatArray,
     ) -> StereoPose:
         sk = self.skeleton
         q = sk.zero_pose()
-        torso = head - rb @ self.head_off
-        q[:3] = torso - self.root_rest
+        q[:3] = torso_root - self.root_rest
         yaw = math.atan2(rb[1, 0], rb[0, 0])
-        q[3:6] = (0.0, 0.0, yaw)
+        q[3:6] = rotvec_from_matrix(rb)
         for s in SIDES:
             limb = self.limbs[s]
             q[limb.translation_dofs] = ests[s].state[4:]
