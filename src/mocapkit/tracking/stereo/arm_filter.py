@@ -364,6 +364,11 @@ class ArmFilterConfig:
         Noise without adaptive noise.
     shoulder_box_mm : float
         Half-size of the shoulder offset cuboid (recipe A: 50 mm).
+    shoulder_pull : float
+        Share by which every perturbation pulls the shoulder offsets back towards 0 (not
+        in the paper, which only bounds them; 0 = paper). Measured on the 13_26 and 01_09
+        excerpts with keypoints and a keypoint torso: arm mean 37.3/48.5 mm without,
+        28.8/30.2 mm with 0.1.
     step_px : float
         Contour sample spacing (recipe A: about 5 px).
     max_samples_per_line : int
@@ -396,6 +401,7 @@ class ArmFilterConfig:
     constant_noise_rad: float = 0.08
     constant_noise_mm: float = 15.0
     shoulder_box_mm: float = 50.0
+    shoulder_pull: float = 0.1
     step_px: float = 5.0
     max_samples_per_line: int = 48
     oriented_edges: bool = True
@@ -487,6 +493,8 @@ class ArmParticleFilter:
         p[:, :4] += self.rng.normal(0.0, s_rad, size=(n, 4))
         np.clip(p[:, 3], -math.pi, 0.0, out=p[:, 3])
         if c.adaptive_shoulder:
+            if c.shoulder_pull > 0:  # weakly seen offsets drift: pull them home a little
+                p[:, 4:] *= 1.0 - c.shoulder_pull
             p[:, 4:] += self.rng.normal(0.0, s_mm, size=(n, 3))
             np.clip(p[:, 4:], -c.shoulder_box_mm, c.shoulder_box_mm, out=p[:, 4:])
         else:
