@@ -56,9 +56,13 @@ def test_blackout_blanks_every_view_and_its_keypoints(session):
             assert np.all(np.isnan(kp)) or not blank[k]
 
 
-@pytest.mark.parametrize("cams", ["stereo_left,stereo_right", None])
-def test_keypoint_tracking_over_two_and_three_views(session, cams):
-    run = track_stereo_session(session, None, cameras=cams, use_keypoints=True, config=SMALL)
+@pytest.mark.parametrize(
+    ("cams", "torso"),
+    [("stereo_left,stereo_right", "shoulders"), (None, "shoulders"), (None, "keypoints")],
+)
+def test_keypoint_tracking_over_two_and_three_views(session, cams, torso):
+    cfg = StereoConfig(arm=SMALL.arm, use_keypoints=True, torso=torso)
+    run = track_stereo_session(session, None, cameras=cams, config=cfg)
     m = run.motion
     assert m.n_frames == load_session(session).truth.time_s.shape[0]
     assert np.all(np.isfinite(m.joints_mm))
@@ -72,6 +76,8 @@ def test_keypoint_tracking_over_two_and_three_views(session, cams):
     blank = (t >= 0.2) & (t < 0.3)
     assert np.all(run.n_ik[blank] == 0)
     assert np.all(run.n_ik[~blank] == 24)
+    if torso == "keypoints":  # the torso's yaw is the truth's wherever the views see it
+        assert ev["torso_yaw_error_deg"] < 10.0
 
 
 def test_skin_blob_tracking_runs_and_finds_the_head(session):
@@ -82,6 +88,13 @@ def test_skin_blob_tracking_runs_and_finds_the_head(session):
     seen = np.all(np.isfinite(run.measured_mm[:, 0]), axis=1)
     assert seen.sum() >= 0.5 * seen.shape[0]
     assert np.median(np.linalg.norm(run.measured_mm[seen, 0] - head[seen], axis=1)) < 100.0
+
+
+def test_keypoint_torso_needs_keypoints():
+    with pytest.raises(ConfigError, match="use_keypoints"):
+        StereoConfig(torso="keypoints")
+    with pytest.raises(ConfigError, match="torso"):
+        StereoConfig(torso="pelvis")
 
 
 def test_camera_choice_is_checked():
