@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from mocapkit.cli.accuracy_stereo import register_method as register_stereo
 from mocapkit.errors import SessionError
 from mocapkit.pipelines.accuracy import format_rows, hybrid_accuracy, summary, to_json
 from mocapkit.pipelines.demo import find_shared_data
@@ -40,6 +41,7 @@ def register(subparsers: Any) -> None:
         "left_hand, right_hand) or 'none' (default: all)",
     )
     h.set_defaults(func=run)
+    register_stereo(methods)
 
 
 def run(args: argparse.Namespace) -> int:
