@@ -382,6 +382,10 @@ class ArmFilterConfig:
         (the paper leaves it open; a bimodal elbow circle makes the plain mean a pose
         between the two).
     mode_radius_mm : float
+    mode_prior_mm : float
+        With the mode estimate: the best particle is the one with the largest weight
+        times ``exp(-|elbow - previous elbow|^2 / (2 mode_prior_mm^2))`` (0: the largest
+        weight), so that between near-equal modes the elbow stays where it was.
     alpha_bounds : bool
         Draw the IK samples' alpha within the side's bounds (§VII, errata A9); off: the
         whole elbow circle.
@@ -408,6 +412,7 @@ class ArmFilterConfig:
     estimate: str = "mode"
     alpha_bounds: bool = True
     mode_radius_mm: float = 60.0
+    mode_prior_mm: float = 0.0
     fusion: FusionParams = field(default_factory=default_fusion)
 
     def __post_init__(self) -> None:
@@ -473,6 +478,7 @@ class ArmParticleFilter:
         self.prev_dist_sq = math.inf
         self.edge_error = 1.0
         self.last_n_ik = 0
+        self.prev_elbow: FloatArray | None = None
         self._w = np.empty(n)
         self._eg = np.empty(n)
         self._d2 = np.empty(n)
@@ -562,7 +568,12 @@ class ArmParticleFilter:
             # elbow circle often leaves two modes, whose mean would be neither
             elbows = np.empty((p.shape[0], 3))
             _elbows_nb(p, model, elbows)
-            best = int(np.argmax(w))
+            score = w
+            if self.config.mode_prior_mm > 0 and self.prev_elbow is not None:
+                # between near-equal modes, keep the one the elbow was in
+                d2 = np.sum((elbows - self.prev_elbow) ** 2, axis=1)
+                score = w * np.exp(-0.5 * d2 / self.config.mode_prior_mm**2)
+            best = int(np.argmax(score))
             near = np.linalg.norm(elbows - elbows[best], axis=1) < self.config.mode_radius_mm
             w = np.where(near, w, 0.0)
             w /= w.sum()
@@ -587,6 +598,7 @@ class ArmParticleFilter:
             self.prev_dist_sq = float(d2[0])  # errata A10: the raw error of the estimate
         pts = np.empty((4, 3))
         arm_points_nb(state, model, pts)
+        self.prev_elbow = pts[1].copy()
         return ArmEstimate(
             state,
             pts,
