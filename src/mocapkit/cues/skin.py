@@ -54,6 +54,7 @@ import math
 from dataclasses import dataclass, field
 
 import cv2
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -199,6 +200,20 @@ def _skin_default() -> ColourModel:
 DEFAULT_SKIN = _skin_default()
 
 
+@numba.njit(cache=True)
+def _classify_nb(
+    ycc: UInt8Array, table: UInt8Array, luma_lo: int, luma_hi: int, out: UInt8Array
+) -> None:
+    """``out = table[Cr, Cb]`` where ``luma_lo <= Y <= luma_hi``, else 0 (one pass)."""
+    for r in range(ycc.shape[0]):
+        for c in range(ycc.shape[1]):
+            y = ycc[r, c, 0]
+            if luma_lo <= y <= luma_hi:
+                out[r, c] = table[ycc[r, c, 1], ycc[r, c, 2]]
+            else:
+                out[r, c] = 0
+
+
 def colour_mask(
     image_bgr: ArrayLike,
     model: ColourModel,
@@ -226,11 +241,10 @@ def colour_mask(
     x0, y0, x1, y1 = (0, 0, w, h) if roi is None else clip_roi(roi, (w, h))
     if x1 <= x0 or y1 <= y0:
         return out
-    ycc = cv2.cvtColor(img[y0:y1, x0:x1], cv2.COLOR_BGR2YCrCb)
+    ycc = np.asarray(cv2.cvtColor(img[y0:y1, x0:x1], cv2.COLOR_BGR2YCrCb), dtype=np.uint8)
     lo, hi = model.luma_range
-    luma = ycc[..., 0]
-    m = model.table[ycc[..., 1], ycc[..., 2]]
-    m &= np.asarray(cv2.inRange(luma, math.ceil(lo), math.floor(hi)), dtype=np.uint8)
+    m = np.empty(ycc.shape[:2], dtype=np.uint8)
+    _classify_nb(ycc, model.table, math.ceil(lo), math.floor(hi), m)
     if open_px > 0:
         k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * open_px + 1, 2 * open_px + 1))
         m = np.asarray(cv2.morphologyEx(m, cv2.MORPH_OPEN, k), dtype=np.uint8)
@@ -342,11 +356,23 @@ def _gradient_core(
     figure: ArrayLike | None,
     config: GradientConfig,
     oriented: bool,
+    out: tuple[Float32Array, ...] | None = None,
 ) -> tuple[Float32Array, Float32Array | None]:
     cfg = config
     grey = to_grey(np.asarray(image))
     h, w = grey.shape
-    outs = [np.zeros((h, w), dtype=np.float32) for _ in range(2 if oriented else 1)]
+    n_out = 2 if oriented else 1
+    if out is None:
+        outs = [np.zeros((h, w), dtype=np.float32) for _ in range(n_out)]
+    else:
+        if len(out) != n_out or any(o.shape != (h, w) or o.dtype != np.float32 for o in out):
+            raise ShapeError(
+                f"out: expected {n_out} float32 array(s) of shape {(h, w)}, found "
+                f"{[(o.shape, o.dtype) for o in out]}"
+            )
+        outs = list(out)
+        for o in outs:
+            o.fill(0.0)
     x0, y0, x1, y1 = (0, 0, w, h) if roi is None else clip_roi(roi, (w, h))
     if x1 <= x0 or y1 <= y0:
         return outs[0], (outs[1] if oriented else None)
@@ -392,6 +418,7 @@ def gradient_map(
     roi: Roi | None = None,
     figure: ArrayLike | None = None,
     config: GradientConfig | None = None,
+    out: Float32Array | None = None,
 ) -> Float32Array:
     """Gradient image ``I_g`` remapped to ``[0, 1]`` (Azad §II-B, eq. (1)), shape (H, W).
 
@@ -405,12 +432,15 @@ def gradient_map(
         Figure mask (`figure_mask`): gradients outside it are set to 0 (edges of the
         background do not count).
     config : GradientConfig, optional
+    out : ndarray of float32, shape (H, W), optional
+        Written in place (and returned) instead of a new array.
 
     Returns
     -------
     ndarray of float32, shape (H, W), values in [0, 1]
     """
-    return _gradient_core(image, roi, figure, config or GradientConfig(), False)[0]
+    o = None if out is None else (out,)
+    return _gradient_core(image, roi, figure, config or GradientConfig(), False, o)[0]
 
 
 def gradient_vector_map(
@@ -418,6 +448,7 @@ def gradient_vector_map(
     roi: Roi | None = None,
     figure: ArrayLike | None = None,
     config: GradientConfig | None = None,
+    out: tuple[Float32Array, Float32Array] | None = None,
 ) -> tuple[Float32Array, Float32Array]:
     """The gradient as a vector field whose length is remapped like `gradient_map`'s.
 
@@ -425,9 +456,10 @@ def gradient_vector_map(
     by ``1 / saturation`` and shortened to length 1 where it is longer, masked and
     blurred as `gradient_map` (same parameters). Reading ``|g . n|`` with ``n`` the unit
     normal of a model outline scores only edges that run along it (an extension of
-    eq. (1); `mocapkit.tracking.stereo.arm_filter`).
+    eq. (1); `mocapkit.tracking.stereo.arm_filter`). ``out``: two (H, W) float32
+    arrays written in place instead of new ones.
     """
-    gx, gy = _gradient_core(image, roi, figure, config or GradientConfig(), True)
+    gx, gy = _gradient_core(image, roi, figure, config or GradientConfig(), True, out)
     return gx, (np.zeros_like(gx) if gy is None else gy)
 
 

@@ -120,19 +120,20 @@ class ArmModel(NamedTuple):
 
 def view_stack(
     cameras: list[Camera],
-    gradients: list[Float32Array],
-    gradients_y: list[Float32Array] | None = None,
+    gradients: list[Float32Array] | Float32Array,
+    gradients_y: list[Float32Array] | Float32Array | None = None,
 ) -> ViewStack:
     """Pack cameras and their gradient maps (all the same image size) into a `ViewStack`.
 
     ``gradients_y`` (oriented edges): the y components, ``gradients`` then holding x.
+    Maps already stacked as contiguous float32 (V, H, W) arrays are used without a copy.
     """
     if len(cameras) != len(gradients) or not cameras:
         raise ShapeError(
             f"view_stack: expected one gradient map per camera, found {len(cameras)} cameras "
             f"and {len(gradients)} maps"
         )
-    shapes = {g.shape for g in gradients}
+    shapes = {tuple(g.shape) for g in gradients}
     if len(shapes) != 1:
         raise ShapeError(f"view_stack: gradient maps differ in size: {sorted(shapes)}")
     v = len(cameras)
@@ -149,16 +150,22 @@ def view_stack(
         d = np.asarray(c.dist).ravel()[:8]
         dist[i, : d.shape[0]] = d
         centre[i] = c.center_in_world
-    grad = np.ascontiguousarray(np.stack(gradients), dtype=np.float32)
+    grad = _stacked(gradients)
     if gradients_y is None:
         grad_y = np.zeros((v, 1, 1), np.float32)
     else:
-        grad_y = np.ascontiguousarray(np.stack(gradients_y), dtype=np.float32)
+        grad_y = _stacked(gradients_y)
         if grad_y.shape != grad.shape:
             raise ShapeError(
                 f"view_stack: y gradients {grad_y.shape} differ from x gradients {grad.shape}"
             )
     return ViewStack(rot, tr, intr, dist, centre, grad, grad_y)
+
+
+def _stacked(maps: list[Float32Array] | Float32Array) -> Float32Array:
+    if isinstance(maps, np.ndarray) and maps.ndim == 3:
+        return np.ascontiguousarray(maps, dtype=np.float32)
+    return np.ascontiguousarray(np.stack(list(maps)), dtype=np.float32)
 
 
 # ------------------------------------------------------------------ compiled kernels

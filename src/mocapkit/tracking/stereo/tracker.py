@@ -248,9 +248,10 @@ class StereoTracker:
         self.shirt: ColourModel | None = None
         self.head_mm: FloatArray | None = None
         self.n_frames = 0
-        self._zeros = [
-            np.zeros((c.image_size[1], c.image_size[0]), np.float32) for c in self.cameras
-        ]
+        w, h = self.cameras[0].image_size
+        # gradient maps, written in place every frame (no per-frame stacking copies)
+        self._gx = np.zeros((len(self.cameras), h, w), np.float32)
+        self._gy = np.zeros((len(self.cameras), h, w), np.float32)
 
     # ------------------------------------------------------------------ helpers
     def _facing_yaw(self, at: FloatArray) -> float:
@@ -385,21 +386,25 @@ class StereoTracker:
             if cfg.figure_ground and self.shirt is None and self.head_mm is not None:
                 self._fit_shirt(images, head, rb)
             rois = self._rois(self.head_mm, rb)
-            grads = []
-            grads_y: list[NDArray[np.float32]] | None = [] if cfg.arm.oriented_edges else None
+            grads = self._gx
+            grads_y = self._gy if cfg.arm.oriented_edges else None
             for i, (img, r) in enumerate(zip(images, rois)):
                 fig = None
                 if cfg.figure_ground and self.shirt is not None:
                     fig = self._figure(img, skins[i], r)
-                if grads_y is not None:
-                    gx, gy = gradient_vector_map(img, roi=r, figure=fig, config=cfg.gradient)
-                    grads.append(gx)
-                    grads_y.append(gy)
+                if cfg.arm.oriented_edges:
+                    gradient_vector_map(
+                        img, roi=r, figure=fig, config=cfg.gradient, out=(grads[i], self._gy[i])
+                    )
                 else:
-                    grads.append(gradient_map(img, roi=r, figure=fig, config=cfg.gradient))
+                    gradient_map(img, roi=r, figure=fig, config=cfg.gradient, out=grads[i])
         else:
-            grads = self._zeros
-            grads_y = self._zeros if cfg.arm.oriented_edges else None
+            grads = self._gx
+            grads.fill(0.0)
+            grads_y = None
+            if cfg.arm.oriented_edges:
+                grads_y = self._gy
+                grads_y.fill(0.0)
         views = view_stack(self.cameras, grads, grads_y)
         # ---------------------------------------------------------- arms
         hands = {"left": meas[1], "right": meas[2]}
