@@ -17,8 +17,9 @@ explicit blob matching, which is deterministic and cheap:
    ``coast_frames`` frames and is then reported lost (NaN); when the two hands' blobs
    merge (a crossing: one candidate is the nearest to both predictions) both coast
    through it, since the merged centroid is neither hand;
-4. initialisation (and re-initialisation of a lost target): the head is the highest
-   candidate, the hands the others, left/right by their side of the head in the
+4. initialisation (and re-initialisation of a lost target): the head is the largest
+   candidate (a face is the largest skin blob; the highest candidate can be a ghost
+   from a wrong pair), the hands the others, left/right by their side of the head in the
    torso frame (x to the subject's right).
 """
 
@@ -54,6 +55,7 @@ class BlobConfig:
     coast_frames: int = 10
     max_speed_mm_s: float = 6000.0
     downsample: int = 2
+    max_area_ratio: float = 2.5
 
     def __post_init__(self) -> None:
         if self.min_area_px < 1 or self.max_blobs < 1:
@@ -85,14 +87,33 @@ def skin_blobs(mask: NDArray[np.uint8], config: BlobConfig) -> tuple[FloatArray,
 
 
 def candidates_3d(
-    cameras: Sequence[Camera], blobs: Sequence[FloatArray], config: BlobConfig
+    cameras: Sequence[Camera],
+    blobs: Sequence[FloatArray],
+    config: BlobConfig,
+    areas: Sequence[FloatArray] | None = None,
 ) -> FloatArray:
-    """Candidate 3-D points (M, 3) from per-view blob centroids (module notes, step 2)."""
+    """Candidate 3-D points (M, 3) from per-view blob centroids (module notes, step 2).
+
+    With the blobs' ``areas``, pairs whose areas differ by more than
+    ``config.max_area_ratio`` are not matched (one object has about the same size in
+    nearby views; a face paired with a hand gives a ghost point), and the candidates
+    come largest first (by the smaller area of their pair).
+    """
     views = [i for i, b in enumerate(blobs) if b.shape[0] > 0]
     if len(views) < 2:
         return np.zeros((0, 3))
     v0, v1 = views[0], views[1]
     pairs = [(i, j) for i in range(blobs[v0].shape[0]) for j in range(blobs[v1].shape[0])]
+    size = np.zeros(len(pairs))
+    if areas is not None:
+        a0, a1 = areas[v0], areas[v1]
+        keep = []
+        for i, j in pairs:
+            lo, hi = sorted((float(a0[i]), float(a1[j])))
+            if hi <= config.max_area_ratio * max(lo, 1.0):
+                keep.append((i, j))
+        pairs = keep
+        size = np.array([min(a0[i], a1[j]) for i, j in pairs], dtype=float)
     if not pairs:
         return np.zeros((0, 3))
     n_v = len(cameras)
@@ -118,7 +139,8 @@ def candidates_3d(
         err = np.linalg.norm(proj - px[v], axis=-1)
         seen = np.isfinite(px[v, :, 0])
         good &= ~seen | (err < config.max_reproj_px)
-    return pts[good]
+    order = np.argsort(-size[good], kind="stable")
+    return pts[good][order]
 
 
 class HeadHandTracker:
@@ -159,7 +181,7 @@ class HeadHandTracker:
                 taken.add(int(np.argmin(d)))
         free = [i for i in range(cands.shape[0]) if i not in taken]
         if 0 in which and free:
-            i = max(free, key=lambda c: cands[c, 2])
+            i = free[0]  # candidates come largest first: the face is the largest skin blob
             self._set(0, cands[i])
             free.remove(i)
         head = self.pos[0]
@@ -192,15 +214,18 @@ class HeadHandTracker:
         ``rois`` (per view, optional): only that part of each mask is searched.
         """
         blobs = []
+        areas = []
         for i, m in enumerate(masks):
             r = None if rois is None else rois[i]
             if r is None:
-                blobs.append(skin_blobs(m, self.config)[0])
+                cents, area = skin_blobs(m, self.config)
             else:
                 x0, y0, x1, y1 = r
-                cents = skin_blobs(m[y0:y1, x0:x1], self.config)[0]
-                blobs.append(cents + np.array([x0, y0], dtype=float))
-        cands = candidates_3d(self.cameras, blobs, self.config)
+                cents, area = skin_blobs(m[y0:y1, x0:x1], self.config)
+                cents = cents + np.array([x0, y0], dtype=float)
+            blobs.append(cents)
+            areas.append(area)
+        cands = candidates_3d(self.cameras, blobs, self.config, areas)
         return self.update_candidates(time_s, cands)
 
     def update_candidates(self, time_s: float, cands: FloatArray) -> FloatArray:
