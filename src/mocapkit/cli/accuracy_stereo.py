@@ -21,7 +21,8 @@ def register_method(methods: Any) -> None:
     p.add_argument(
         "--modes",
         default="keypoints+torso",
-        help="comma-separated: keypoints+torso, keypoints, skin (default keypoints+torso)",
+        help="comma-separated: keypoints+torso, keypoints+torso+static, keypoints, skin "
+        "(default keypoints+torso)",
     )
     p.add_argument(
         "--cameras",

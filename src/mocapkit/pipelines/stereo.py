@@ -274,6 +274,12 @@ STEREO_CLIPS: tuple[tuple[str, float], ...] = (
 #: Tracker modes of the accuracy study.
 ACCURACY_MODES: dict[str, StereoConfig] = {
     "keypoints+torso": StereoConfig(use_keypoints=True, torso="keypoints"),
+    # with a measured torso the nominal shoulders are right: 4 DoF per arm
+    "keypoints+torso+static": StereoConfig(
+        use_keypoints=True,
+        torso="keypoints",
+        arm=ArmFilterConfig(adaptive_shoulder=False),
+    ),
     "keypoints": StereoConfig(use_keypoints=True),
     "skin": StereoConfig(),
 }
