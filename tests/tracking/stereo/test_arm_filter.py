@@ -230,3 +230,31 @@ def test_config_refusals():
 
 def test_yaw_matrix_turns_the_right_axis():
     np.testing.assert_allclose(yaw_matrix(math.pi / 2)[:, 0], (0.0, 1.0, 0.0), atol=1e-12)
+
+
+def test_mode_estimate_stays_on_one_of_two_elbow_modes():
+    """Two equally weighted clusters on the elbow circle: the plain mean lies between them,
+    the mode estimate on the better one."""
+    from mocapkit.ik.arm_analytic import arm_ik, make_problem
+
+    cams = _cameras(2)
+    model = _model(np.full(3, np.nan))
+    views = view_stack(cams, _render_outlines(_points(TRUE_X, model), cams))
+    hand = _points(TRUE_X, model)[3]
+    s = model.shoulder_base_mm
+    q, elbows = arm_ik(make_problem(np.eye(3), s, hand, A, B), [-2.5, -0.5])
+    parts = np.zeros((150, 7))
+    parts[:75, :4] = q[0]
+    parts[75:, :4] = q[1]
+    weights = np.ones(150)
+    weights[0] = 1.5  # the best particle sits in the first cluster
+    results = {}
+    for how in ("mode", "mean"):
+        f = ArmParticleFilter("left", ArmFilterConfig(estimate=how), np.random.default_rng(0))
+        f.particles = parts.copy()
+        f.weights = weights.copy()
+        results[how] = f._estimate(model, views).points_mm[1]
+    assert np.linalg.norm(results["mode"] - elbows[0]) < 1e-6
+    gap = np.linalg.norm(elbows[0] - elbows[1])
+    assert np.linalg.norm(results["mean"] - elbows[0]) > 0.2 * gap
+    assert np.linalg.norm(results["mean"] - elbows[1]) > 0.2 * gap
