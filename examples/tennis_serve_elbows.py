@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.ik.sdls import IKConfig
-from mocapkit.io.markers import read_markers
+from mocapkit.io.marker_files import read_markers
 from mocapkit.pipelines.hybrid import RAW_MARKERS_REPLANT_MM, track_hybrid_markers
 from mocapkit.tracking.hybrid import HybridConfig
 

@@ -7,6 +7,7 @@ rest faces +Y with their right side towards +X.
 
 from mocapkit.errors import (
     CalibrationError,
+    ConfigError,
     FormatError,
     MocapError,
     SessionError,
@@ -18,6 +19,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "CalibrationError",
+    "ConfigError",
     "FormatError",
     "MocapError",
     "SessionError",

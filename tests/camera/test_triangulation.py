@@ -12,7 +12,7 @@ from mocapkit.camera.triangulation import (
     triangulate_pair,
     triangulate_views,
 )
-from mocapkit.errors import ShapeError
+from mocapkit.errors import ConfigError, ShapeError
 
 DIST = [-0.12, 0.03, 0.0008, -0.0004, 0.0]
 
@@ -90,7 +90,7 @@ def test_n_view_shape_errors() -> None:
         ShapeError, match=r"expected pixels \(4, \.\.\., 2\) for 4 cameras, found \(3, 5, 2\)"
     ):
         triangulate_views(cams, np.zeros((3, 5, 2)))
-    with pytest.raises(ShapeError, match="min_views must be at least 2, found 1"):
+    with pytest.raises(ConfigError, match="min_views must be at least 2, found 1"):
         triangulate_views(cams, np.zeros((4, 5, 2)), min_views=1)
 
 

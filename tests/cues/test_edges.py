@@ -20,7 +20,7 @@ from mocapkit.cues.edges import (
     roi_distance_map,
     to_grey,
 )
-from mocapkit.errors import ShapeError
+from mocapkit.errors import ConfigError, ShapeError
 
 
 def _brute_force(edges: np.ndarray) -> np.ndarray:
@@ -121,13 +121,13 @@ def test_bad_inputs_raise():
         to_grey(np.zeros((4, 4)))
     with pytest.raises(ShapeError, match=r"found shape \(4, 4, 2\)"):
         to_grey(np.zeros((4, 4, 2), np.uint8))
-    with pytest.raises(ShapeError, match="blur_ksize: expected a positive odd"):
+    with pytest.raises(ConfigError, match="blur_ksize: expected a positive odd"):
         EdgeConfig(blur_ksize=4)
-    with pytest.raises(ShapeError, match="cap_px: expected a positive number"):
+    with pytest.raises(ConfigError, match="cap_px: expected a positive number"):
         EdgeConfig(cap_px=0.0)
-    with pytest.raises(ShapeError, match="canny_low <= canny_high"):
+    with pytest.raises(ConfigError, match="canny_low <= canny_high"):
         EdgeConfig(canny_low=200, canny_high=100)
-    with pytest.raises(ShapeError, match="mask: expected one of"):
+    with pytest.raises(ConfigError, match="mask: expected one of"):
         distance_to_edges(np.zeros((3, 3), np.uint8), mask="7")
 
 
@@ -197,5 +197,5 @@ def test_roi_map_with_orientation_bins_adds_oriented_maps_of_the_padded_crop(rng
     ]
     coarse = plain.distance_px[::2, ::2][: inner.shape[1], : inner.shape[2]]
     assert np.all(inner.min(axis=0) >= coarse - 2.0)
-    with pytest.raises(ShapeError, match="orientation_bins: expected 0"):
+    with pytest.raises(ConfigError, match="orientation_bins: expected 0"):
         EdgeConfig(orientation_bins=1)

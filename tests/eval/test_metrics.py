@@ -17,7 +17,9 @@ from mocapkit.eval.metrics import (
 )
 from mocapkit.geometry.rotations import matrix_from_rotvec
 from mocapkit.io.motion import Motion
-from mocapkit.io.session import Truth, write_session_json
+from mocapkit.io.motion_files import write_result_folder
+from mocapkit.io.session import write_session_json
+from mocapkit.io.truth import Truth
 from mocapkit.skeleton import CANONICAL_JOINTS
 from mocapkit.synth.builtin_motions import builtin_motion
 
@@ -123,7 +125,7 @@ def test_shape_and_vocabulary_errors(truth):
 def test_result_folder_and_cli(tmp_path, truth, capsys):
     m = builtin_motion("squat", duration_s=1.0)
     result = tmp_path / "result"
-    m.write_result_folder(result)
+    write_result_folder(result, m)
     session = tmp_path / "session"
     session.mkdir()
     write_session_json(session / "session.json", {})
@@ -149,7 +151,7 @@ def test_missing_result_and_truth(tmp_path):
     with pytest.raises(SessionError, match="neither motion.npz nor joints.csv"):
         evaluate_result(empty, tmp_path)
     m = builtin_motion("wave", duration_s=0.5)
-    m.write_result_folder(tmp_path / "r")
+    write_result_folder(tmp_path / "r", m)
     session = tmp_path / "s"
     session.mkdir()
     write_session_json(session / "session.json", {})

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from mocapkit.errors import ShapeError, UnknownNameError
+from mocapkit.errors import ConfigError, ShapeError, UnknownNameError
 from mocapkit.ik.sdls import (
     DEFAULT_GAMMA_RAD,
     IKConfig,
@@ -233,9 +233,9 @@ def test_bad_inputs_raise(skel, solver):
         solver.solve(solver.secondary.omega, np.zeros((2, 3)))
     with pytest.raises(ShapeError, match="q0"):
         solver.solve(np.zeros(3), np.zeros((5, 3)))
-    with pytest.raises(ShapeError, match="secondary_gain"):
+    with pytest.raises(ConfigError, match="secondary_gain"):
         IKConfig(secondary_gain=5.0)
-    with pytest.raises(ShapeError, match="clamp"):
+    with pytest.raises(ConfigError, match="clamp"):
         IKConfig(clamp="medium")
     with pytest.raises(UnknownNameError, match="effector"):
         solver.effector_index("tail")

@@ -11,7 +11,8 @@ from scipy.spatial.transform import Rotation
 from mocapkit.errors import FormatError, UnknownNameError
 from mocapkit.io.asf_amc import find_asf, read_amc, read_asf
 from mocapkit.io.bvh import read_bvh
-from mocapkit.io.motion import CMU_UNIT_MM, WORLD_FROM_FILE, Motion
+from mocapkit.io.motion import Motion
+from mocapkit.io.units import CMU_UNIT_MM, WORLD_FROM_FILE
 from mocapkit.skeleton import CANONICAL_JOINTS, joint_positions, points_on_joints
 
 TINY_ASF = """# a comment line

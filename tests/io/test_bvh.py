@@ -11,7 +11,8 @@ from scipy.spatial.transform import Rotation
 
 from mocapkit.errors import FormatError
 from mocapkit.io.bvh import parse_bvh, read_bvh, write_bvh
-from mocapkit.io.motion import CMU_UNIT_MM, WORLD_FROM_FILE, Motion
+from mocapkit.io.motion import Motion
+from mocapkit.io.units import CMU_UNIT_MM, WORLD_FROM_FILE
 from mocapkit.skeleton import CANONICAL_JOINTS, joint_positions, load_preset, points_on_joints
 
 # ---------------------------------------------------------------- synthetic files

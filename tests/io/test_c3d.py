@@ -10,7 +10,7 @@ import pytest
 
 from mocapkit.errors import FormatError
 from mocapkit.io.c3d import read_c3d
-from mocapkit.io.markers import read_markers
+from mocapkit.io.marker_files import read_markers
 
 
 def _c3d_file(shared_data: Path, name: str) -> Path:

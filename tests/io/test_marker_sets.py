@@ -9,6 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from mocapkit.errors import FormatError, UnknownNameError
+from mocapkit.io.marker_files import read_markers
 from mocapkit.io.marker_sets import (
     HEAD_TOP_OFFSET_MM,
     PLUG_IN_GAIT_SETS,
@@ -20,7 +21,7 @@ from mocapkit.io.marker_sets import (
     parse_marker_sets,
     set_centre_mm,
 )
-from mocapkit.io.markers import MarkerData, read_markers
+from mocapkit.io.markers import MarkerData
 
 # A head band: four markers 150-180 mm apart, centred on the origin.
 HEAD_LOCAL_MM = np.array(

@@ -9,15 +9,9 @@ import numpy as np
 import pytest
 
 from mocapkit.errors import FormatError, ShapeError, UnknownNameError
-from mocapkit.io.markers import (
-    MarkerData,
-    bare_marker_name,
-    longest_true_run,
-    read_markers,
-    read_markers_csv,
-    write_markers,
-    write_markers_csv,
-)
+from mocapkit.io.marker_csv import read_markers_csv, write_markers_csv
+from mocapkit.io.marker_files import read_markers, write_markers
+from mocapkit.io.markers import MarkerData, bare_marker_name, longest_true_run
 
 
 def _data(names: tuple[str, ...], n_frames: int = 6, rate_hz: float = 100.0) -> MarkerData:

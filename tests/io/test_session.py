@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from mocapkit.errors import FormatError, SessionError
-from mocapkit.io.session import (
-    load_session,
+from mocapkit.io.session import load_session
+from mocapkit.io.session_csv import (
     read_keypoints_csv,
     read_timestamps_csv,
     write_keypoints_csv,

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mocapkit.errors import FormatError, ShapeError
-from mocapkit.io.markers import read_markers
+from mocapkit.errors import ConfigError, FormatError, ShapeError
+from mocapkit.io.marker_files import read_markers
 from mocapkit.io.trc import read_trc, write_trc
 
 # Printed with 1e-6 mm resolution: half a unit of the last digit, plus the double rounding
@@ -155,7 +155,7 @@ def test_writer_validates_input(tmp_path: Path) -> None:
         write_trc(path, [0.0, 1.0], ["A", "B"], np.zeros((2, 1, 3)))
     with pytest.raises(FormatError, match="marker name 'A\\\\tB'"):
         write_trc(path, [0.0, 1.0], ["A\tB"], np.zeros((2, 1, 3)))
-    with pytest.raises(ShapeError, match="rate_hz: required"):
+    with pytest.raises(ConfigError, match="rate_hz: required"):
         write_trc(path, [0.0], ["A"], np.zeros((1, 1, 3)))
     with pytest.raises(FormatError, match="strictly increasing"):
         write_trc(path, [0.0, 0.0], ["A"], np.zeros((2, 1, 3)))

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from mocapkit.cli.main import main
-from mocapkit.errors import ShapeError, UnknownNameError
+from mocapkit.errors import ConfigError, UnknownNameError
 from mocapkit.pipelines.bench import bench_kinematics, run_benchmarks, save_results
 
 
@@ -35,7 +35,7 @@ def test_cli_prints_json(capsys):
 def test_bad_arguments_raise():
     with pytest.raises(UnknownNameError, match="unknown benchmark 'fast'"):
         run_benchmarks("fast")
-    with pytest.raises(ShapeError, match="--repeats: expected at least 1, found 0"):
+    with pytest.raises(ConfigError, match="--repeats: expected at least 1, found 0"):
         run_benchmarks("kinematics", repeats=0)
-    with pytest.raises(ShapeError, match="bench_kinematics: expected repeats"):
+    with pytest.raises(ConfigError, match="bench_kinematics: expected repeats"):
         bench_kinematics(repeats=0)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mocapkit.cli.main import main
-from mocapkit.errors import SessionError, ShapeError
+from mocapkit.errors import ConfigError, SessionError, ShapeError
 from mocapkit.pipelines.hybrid import (
     bench_ik,
     hybrid_skeleton,
@@ -54,13 +54,13 @@ def test_parse_oriented_sets():
     assert parse_oriented_sets("head, right_hand") == ("head", "right_hand")
     with pytest.raises(KeyError, match="marker set 'tail'.*--oriented-sets"):
         parse_oriented_sets("head,tail")
-    with pytest.raises(ShapeError, match="--oriented-sets: expected 'none'"):
+    with pytest.raises(ConfigError, match="--oriented-sets: expected 'none'"):
         parse_oriented_sets(",")
 
 
 def test_tennis_serve_elbows(shared_data, tmp_path):
     """IK only on real markers; elbows judged against LELB/RELB (lateral epicondyle skin)."""
-    from mocapkit.io.markers import read_markers
+    from mocapkit.io.marker_files import read_markers
 
     path = shared_data / "c3d" / "kinematics_tennis_serve.c3d"
     markers = read_markers(path)
@@ -172,7 +172,8 @@ def _copy_session(src, dst):
 
 
 def test_session_writes_result_folder_on_video_time_line(wave_session, wave_result):
-    from mocapkit.io.motion import load_motion_npz, read_joints_csv
+    from mocapkit.io.joints_csv import read_joints_csv
+    from mocapkit.io.motion_npz import load_motion_npz
     from mocapkit.io.session import load_session
 
     motion, out = wave_result
@@ -260,7 +261,7 @@ def test_session_max_elbow_speed(wave_session):
     free = track_hybrid_session(wave_session, None, oriented_sets=(), max_elbow_speed_mm_per_s=1e9)
     off = track_hybrid_session(wave_session, None, oriented_sets=(), max_elbow_speed_mm_per_s=0.0)
     np.testing.assert_allclose(free.joints_mm, off.joints_mm, atol=1e-9)
-    with pytest.raises(ShapeError, match="paper mode has no elbow-jump penalty"):
+    with pytest.raises(ConfigError, match="paper mode has no elbow-jump penalty"):
         track_hybrid_session(wave_session, None, paper=True, max_elbow_speed_mm_per_s=100.0)
-    with pytest.raises(ShapeError, match=r"expected a speed >= 0 mm/s .*found -1.0"):
+    with pytest.raises(ConfigError, match=r"expected a speed >= 0 mm/s .*found -1.0"):
         track_hybrid_session(wave_session, None, max_elbow_speed_mm_per_s=-1.0)

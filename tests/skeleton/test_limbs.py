@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -58,3 +60,48 @@ def test_missing_limb_is_refused_with_the_canonical_name() -> None:
         pytest.skip("upper_stick provides legs")
     with pytest.raises(UnknownNameError, match="left_hip"):
         limbs.leg(sk, "left")
+
+
+def test_limb_lengths_known_values() -> None:
+    sk = load_preset("zhang21")
+    # Table 1 segments: upper arm 300, forearm 350, hand 80; thigh 386, shank 550 (mm)
+    assert limbs.limb_length_mm(sk, limbs.arm(sk, "left")) == pytest.approx(650.0)
+    assert limbs.limb_length_mm(sk, limbs.arm(sk, "left"), to_tip=True) == pytest.approx(730.0)
+    assert limbs.limb_length_mm(sk, limbs.leg(sk, "right")) == pytest.approx(936.0)
+
+
+def test_limbs_present_and_ankles() -> None:
+    sk = load_preset("zhang21")
+    assert [lb.name for lb in limbs.limbs_present(sk, "leg")] == ["left_leg", "right_leg"]
+    assert [sk.joint_names[j] for j in limbs.ankle_joints(sk)] == ["l_foot", "r_foot"]
+    az = load_preset("azad14")
+    assert [lb.name for lb in limbs.limbs_present(az, "arm")] == ["left_arm", "right_arm"]
+    assert limbs.limbs_present(az, "leg") == ()
+    assert limbs.ankle_joints(az).size == 0
+    with pytest.raises(UnknownNameError, match="expected one of: arm, leg"):
+        limbs.limbs_present(sk, "wing")
+
+
+@pytest.mark.parametrize(
+    ("name", "kind", "sign"),
+    [("zhang21", "arm", 1.0), ("zhang21", "leg", 1.0), ("azad14", "arm", -1.0)],
+)
+def test_flexion_dofs_follow_each_models_sign(name: str, kind: str, sign: float) -> None:
+    sk = load_preset(name)
+    for lb in limbs.limbs_present(sk, kind):
+        dofs, signs = limbs.flexion_dofs(sk, lb)
+        assert dofs.size == 1 and sk.dof_joint[dofs[0]] == lb.middle
+        assert signs.tolist() == [sign]
+        # flexing by a small angle in that sign stays inside the joint's range
+        d = dofs[0]
+        assert sk.lower[d] <= signs[0] * 0.1 <= sk.upper[d]
+
+
+def test_flexion_dofs_skip_two_sided_hinges() -> None:
+    sk = load_preset("zhang21")
+    # the shoulder's hinges have two-sided ranges: none of them is a flexion at the middle
+    # joint, and asking at the shoulder (as if it were the middle joint) finds none
+    arm = limbs.arm(sk, "left")
+    fake = dataclasses.replace(arm, middle=arm.root)
+    dofs, signs = limbs.flexion_dofs(sk, fake)
+    assert dofs.size == 0 and signs.size == 0

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocapkit.errors import ShapeError, UnknownNameError
+from mocapkit.errors import ConfigError, ShapeError, UnknownNameError
 from mocapkit.skeleton import (
     CANONICAL_JOINTS,
     PRISMATIC,
@@ -132,9 +132,9 @@ def test_bad_input_is_rejected() -> None:
         sk.replace(dof_axis=sk.dof_axis * 2)
     with pytest.raises(ShapeError, match=r"expected shape \(27, 3\)"):
         sk.replace(offsets_mm=np.zeros((3, 3)))
-    with pytest.raises(ShapeError, match="stature between 500 and 2800 mm"):
+    with pytest.raises(ConfigError, match="stature between 500 and 2800 mm"):
         scale_skeleton(sk, height_mm=17.5)
-    with pytest.raises(ShapeError, match="owns no segment"):
+    with pytest.raises(ConfigError, match="owns no segment"):
         scale_skeleton(sk, bone_lengths_mm={"head_end": 10.0})
 
 
@@ -186,7 +186,7 @@ def test_fit_segments_rejects_bad_input() -> None:
     sk = load_preset("zhang21")
     with pytest.raises(UnknownNameError, match="unknown body segment 'arm'"):
         fit_segments(sk, {"arm": 300.0})
-    with pytest.raises(ShapeError, match="expected a positive length"):
+    with pytest.raises(ConfigError, match="expected a positive length"):
         fit_segments(sk, {"left_forearm": -1.0})
     with pytest.raises(ShapeError, match="rest vector of 'trunk'"):
         fit_segments(sk, vectors_mm={"trunk": [0.0, 0.0, 0.0]})

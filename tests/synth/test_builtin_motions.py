@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocapkit.errors import ShapeError, UnknownNameError
+from mocapkit.errors import ConfigError, UnknownNameError
 from mocapkit.skeleton import load_preset
 from mocapkit.synth.builtin_motions import BUILTIN_NAMES, builtin_motion
 
@@ -65,5 +65,5 @@ def test_table_tennis_swings_across_the_body_with_the_trunk():
 def test_errors():
     with pytest.raises(UnknownNameError, match="expected one of: squat, table-tennis, wave"):
         builtin_motion("jump")
-    with pytest.raises(ShapeError, match="duration_s"):
+    with pytest.raises(ConfigError, match="duration_s"):
         builtin_motion("wave", duration_s=0.0)

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from mocapkit.cli.main import main
-from mocapkit.errors import SessionError, ShapeError, UnknownNameError
+from mocapkit.errors import ConfigError, SessionError, UnknownNameError
 from mocapkit.io.session import Session, load_session
 from mocapkit.synth.realism import RealismOptions
 from mocapkit.synth.render import parse_colour
@@ -166,11 +166,11 @@ def test_refusals(tmp_path):
         synthesize_session("builtin:wave", tmp_path / "s", opts)
     with pytest.raises(UnknownNameError, match="unknown built-in motion 'dance'"):
         synthesize_session("builtin:dance", tmp_path / "t", opts)
-    with pytest.raises(ShapeError, match="--fps"):
+    with pytest.raises(ConfigError, match="--fps"):
         SynthOptions(fps=0.0)
-    with pytest.raises(ShapeError, match="--blur"):
+    with pytest.raises(ConfigError, match="--blur"):
         RealismOptions(blur=2.0)
-    with pytest.raises(ShapeError, match="#RRGGBB"):
+    with pytest.raises(ConfigError, match="#RRGGBB"):
         parse_colour("mauve-ish")
     with pytest.raises(UnknownNameError, match="unknown rig 'trinocular'"):
         make_rig("trinocular", np.zeros(3), np.array([0, 1.0, 0]), 1300.0)
@@ -218,8 +218,11 @@ def test_cli_synth(tmp_path, capsys):
     assert "session written to" in capsys.readouterr().out
     s = load_session(out)
     assert s.markers is not None and np.isnan(s.markers.positions_mm).any()
-    assert main(["synth", "builtin:wave", "--out", str(tmp_path / "x"), "--size", "big"]) == 2
-    assert "--size: expected WIDTHxHEIGHT" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["synth", "builtin:wave", "--out", str(tmp_path / "x"), "--size", "big"])
+    assert exc.value.code == 2
+    assert "argument --size: expected WIDTHxHEIGHT" in capsys.readouterr().err
+    assert not (tmp_path / "x").exists()
 
 
 def test_mp4_reads_back(tmp_path):
@@ -295,7 +298,7 @@ def test_walking_clip_never_reaches_the_lens(shared_data, tmp_path):
 
 
 def test_start_beyond_a_clip_is_refused(shared_data, tmp_path):
-    with pytest.raises(ShapeError, match="--start-s 900"):
+    with pytest.raises(ConfigError, match="--start-s 900"):
         synthesize_session(
             str(shared_data / "mocap" / "13_26.bvh"),
             tmp_path / "t",

@@ -13,7 +13,7 @@ from scipy.optimize import Bounds, minimize
 
 from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
 from mocapkit.cues.edges import EdgeConfig
-from mocapkit.errors import ShapeError, UnknownNameError
+from mocapkit.errors import ConfigError, ShapeError, UnknownNameError
 from mocapkit.skeleton import forward_kinematics, joint_positions, load_preset
 from mocapkit.tracking.arm_refinement import (
     SIDES,
@@ -291,7 +291,7 @@ def test_bad_inputs_raise(scene):
         refine_arms(SKEL, CAMERA, q, img[:100], targets)
     with pytest.raises(ShapeError, match="expected joint parameters of shape"):
         refine_arms(SKEL, CAMERA, q[:5], img, targets)
-    with pytest.raises(ShapeError, match="RefineConfig.maxfev"):
+    with pytest.raises(ConfigError, match="RefineConfig.maxfev"):
         RefineConfig(maxfev=2)
     stick = load_preset("upper_stick")
     with pytest.raises(UnknownNameError, match="unknown joint 'l_humerus' in skeleton"):
@@ -362,9 +362,9 @@ def test_elbow_jump_penalty_settles_an_ambiguous_swivel_near_the_previous_elbow(
 
 
 def test_elbow_jump_settings_checked():
-    with pytest.raises(ShapeError, match="RefineConfig.elbow_jump_weight_per_mm"):
+    with pytest.raises(ConfigError, match="RefineConfig.elbow_jump_weight_per_mm"):
         RefineConfig(elbow_jump_weight_per_mm=-1.0)
-    with pytest.raises(ShapeError, match="RefineConfig.elbow_speed_mm_per_s"):
+    with pytest.raises(ConfigError, match="RefineConfig.elbow_speed_mm_per_s"):
         RefineConfig(elbow_speed_mm_per_s=-5.0)
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocapkit.errors import ShapeError
+from mocapkit.errors import ConfigError
 from mocapkit.ik.sdls import SDLSSolver
 from mocapkit.skeleton import load_preset
 from mocapkit.tracking.balance import (
@@ -82,5 +82,5 @@ def test_squat_keeps_markers_and_improves_balance(setup, mode):
 
 
 def test_bad_config():
-    with pytest.raises(ShapeError, match="BalanceConfig.mode"):
+    with pytest.raises(ConfigError, match="BalanceConfig.mode"):
         BalanceConfig(mode="tilt")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from mocapkit.errors import ShapeError, UnknownNameError
+from mocapkit.errors import ConfigError, ShapeError, UnknownNameError
 from mocapkit.ik.sdls import IKConfig
 from mocapkit.skeleton import canonical_positions, forward_kinematics, load_preset
 from mocapkit.tracking.balance import BalanceConfig
@@ -168,7 +168,7 @@ def test_bad_inputs(truth):
     sk = truth[0]
     with pytest.raises(UnknownNameError, match="marker set"):
         HybridTracker(sk, config=HybridConfig(marker_offsets_mm={"tail": (0, 0, 0)}))
-    with pytest.raises(ShapeError, match="gap_limit_s"):
+    with pytest.raises(ConfigError, match="gap_limit_s"):
         HybridConfig(gap_limit_s=-1.0)
     tracker = HybridTracker(sk, config=HybridConfig(ik=IKConfig(), use_video=False))
     with pytest.raises(ShapeError, match="markers_mm\\['head'\\]"):
@@ -330,7 +330,7 @@ def test_bad_member_inputs(turned):
     sk, _q, seq = turned
     with pytest.raises(UnknownNameError, match="marker set 'tail'.*member_offsets_mm"):
         HybridTracker(sk, config=HybridConfig(member_offsets_mm={"tail": {"a": (0, 0, 0)}}))
-    with pytest.raises(ShapeError, match=r"member_offsets_mm\['head'\]\['a'\]: expected 3 finite"):
+    with pytest.raises(ConfigError, match=r"member_offsets_mm\['head'\]\['a'\]: expected 3 finite"):
         HybridTracker(sk, config=HybridConfig(member_offsets_mm={"head": {"a": (0, np.nan, 0)}}))
     tracker = HybridTracker(sk, config=HybridConfig(use_video=False, member_offsets_mm=MEMBERS))
     with pytest.raises(ShapeError, match=r"members_mm\['bridge'\]: expected 3 coordinates"):

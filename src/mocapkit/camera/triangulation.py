@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.camera.pinhole import Camera
-from mocapkit.errors import ShapeError
+from mocapkit.errors import ConfigError, ShapeError
 
 FloatArray = NDArray[np.float64]
 
@@ -98,7 +98,7 @@ def triangulate_views(
             f"found {px.shape}"
         )
     if min_views < 2:
-        raise ShapeError(f"triangulate_views: min_views must be at least 2, found {min_views}")
+        raise ConfigError(f"triangulate_views: min_views must be at least 2, found {min_views}")
     lead = px.shape[1:-1]
     norm = np.stack([_normalised(c, px[i]).reshape(-1, 2) for i, c in enumerate(cameras)])
     seen = np.all(np.isfinite(norm), axis=-1)  # (V, M)

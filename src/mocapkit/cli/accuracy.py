@@ -6,6 +6,7 @@ import argparse
 from typing import Any
 
 from mocapkit.cli.accuracy_stereo import register_method as register_stereo
+from mocapkit.cli.args import parsed_by
 from mocapkit.errors import SessionError
 from mocapkit.pipelines.accuracy import format_rows, hybrid_accuracy, summary, to_json
 from mocapkit.pipelines.demo import find_shared_data
@@ -29,14 +30,16 @@ def register(subparsers: Any) -> None:
     h.add_argument("--work", default="accuracy-output", help="folder for sessions and results")
     h.add_argument("--seed", type=int, default=0)
     h.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    h.add_argument(
+    orientation = h.add_mutually_exclusive_group()
+    orientation.add_argument(
         "--positions-only",
         action="store_true",
         help="use the marker sets' positions only, as the paper does (not their orientation)",
     )
-    h.add_argument(
+    orientation.add_argument(
         "--oriented-sets",
         metavar="SETS",
+        type=parsed_by(parse_oriented_sets, "marker sets"),
         help="marker sets whose orientation the tracker sees, comma-separated (head, "
         "left_hand, right_hand) or 'none' (default: all)",
     )
@@ -55,16 +58,13 @@ def run(args: argparse.Namespace) -> int:
     say = (lambda _line: None) if args.json else print
     if not args.json:
         print(format_rows([]))
-    if args.positions_only and args.oriented_sets is not None:
-        raise SessionError("accuracy hybrid: give either --positions-only or --oriented-sets")
-    oriented = None if args.oriented_sets is None else parse_oriented_sets(args.oriented_sets)
     rows = hybrid_accuracy(
         mocap,
         args.work,
         args.clips,
         args.seed,
         say=say,
-        oriented_sets=() if args.positions_only else oriented,
+        oriented_sets=() if args.positions_only else args.oriented_sets,
     )
     if args.json:
         print(to_json(rows))

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from mocapkit.camera.calibration import parse_board
+from mocapkit.cli.args import checked_by, number
 from mocapkit.io.cameras import write_cameras
 from mocapkit.pipelines.calibrate import (
     DEFAULT_MAX_RMS_PX,
@@ -35,8 +36,13 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("images", nargs="+", metavar="IMAGES", help="image folder or glob (1 or 2)")
-    p.add_argument("--board", required=True, help="inner corners as COLUMNSxROWS, e.g. 9x6")
-    p.add_argument("--square-mm", type=float, required=True, help="square side in mm")
+    p.add_argument(
+        "--board",
+        required=True,
+        type=checked_by(lambda spec: parse_board(spec, 1.0), "board"),
+        help="inner corners as COLUMNSxROWS, e.g. 9x6",
+    )
+    p.add_argument("--square-mm", type=number(above=0.0), required=True, help="square side in mm")
     p.add_argument("--out", required=True, help="output cameras.json")
     p.add_argument("--board-pose", default=None, help="JSON file with the board's world pose")
     p.add_argument(
@@ -46,13 +52,13 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     )
     p.add_argument(
         "--min-boards",
-        type=int,
+        type=number(int, at_least=3),
         default=DEFAULT_MIN_BOARDS,
         help=f"fewest images (pairs) with a detected board (default {DEFAULT_MIN_BOARDS})",
     )
     p.add_argument(
         "--max-rms-px",
-        type=float,
+        type=number(above=0.0),
         default=DEFAULT_MAX_RMS_PX,
         help="refuse a camera or stereo fit whose RMS reprojection error is above this "
         f"(default {DEFAULT_MAX_RMS_PX:g} px)",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from mocapkit.cli.args import parsed_by
 from mocapkit.eval.metrics import evaluate_result, joint_subset
 
 
@@ -22,6 +23,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument(
         "--joints",
+        type=parsed_by(joint_subset, "joints"),
         default="all",
         help="joints to compare: 'all', 'upper' (head, neck, pelvis, shoulders, elbows, "
         "wrists) or a comma-separated list of canonical names",
@@ -31,6 +33,6 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 def run(args: argparse.Namespace) -> int:
     """Evaluate and print."""
-    report = evaluate_result(args.result, args.truth, joints=joint_subset(args.joints))
+    report = evaluate_result(args.result, args.truth, joints=args.joints)
     print(report.to_json() if args.json else report.table())
     return 0

@@ -3,12 +3,19 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 
-from mocapkit.errors import ShapeError
-from mocapkit.synth.realism import BACKGROUNDS, RealismOptions
-from mocapkit.synth.render import SLEEVES
+from mocapkit.cli.args import checked_by, number
+from mocapkit.synth.realism import BACKGROUNDS, REALISM_RANGES, RealismOptions
+from mocapkit.synth.render import SLEEVES, parse_colour
 from mocapkit.synth.rigs import RIG_NAMES
-from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+from mocapkit.synth.session_writer import (
+    FPS_RANGE,
+    IMAGE_SIDE_RANGE_PX,
+    MARKER_RATE_RANGE_HZ,
+    SynthOptions,
+    synthesize_session,
+)
 
 _EPILOG = """\
 MOTION is a BVH or AMC file (an AMC takes its skeleton from --asf, else from an .asf
@@ -20,10 +27,18 @@ excerpt and the floor is z = 0; cameras face the subject's initial facing direct
 
 
 def _size(text: str) -> tuple[int, int]:
+    """``--size``: ``WIDTHxHEIGHT`` in pixels, each side within `IMAGE_SIDE_RANGE_PX`."""
     try:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
-        raise ShapeError(f"--size: expected WIDTHxHEIGHT such as 640x480, found {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"expected WIDTHxHEIGHT such as 640x480, found {text!r}"
+        ) from None
+    lo, hi = IMAGE_SIDE_RANGE_PX
+    if not (lo <= w <= hi and lo <= h <= hi):
+        raise argparse.ArgumentTypeError(
+            f"expected WIDTHxHEIGHT with sides between {lo} and {hi} px, found {text!r}"
+        )
     return (w, h)
 
 
@@ -37,6 +52,12 @@ def _blackout(text: str) -> tuple[float, float]:
         raise argparse.ArgumentTypeError(
             f"expected START,DURATION in seconds (e.g. 2.0,0.5), found {text!r}"
         ) from None
+
+
+def _realism(name: str) -> Callable[[str], float]:
+    """The ``type=`` of a realism option: a number in its `REALISM_RANGES` range."""
+    lo, hi = REALISM_RANGES[name]
+    return number(at_least=lo, at_most=hi)
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -53,50 +74,66 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument("motion", metavar="MOTION", help="BVH/AMC file or builtin:NAME")
     p.add_argument("--out", required=True, help="session folder to create")
     p.add_argument("--rig", choices=RIG_NAMES, default="mono", help="cameras (default mono)")
-    p.add_argument("--start-s", type=float, default=0.0, help="excerpt start in the clip (s)")
-    p.add_argument("--seconds", type=float, default=5.0, help="excerpt length (s, default 5)")
+    p.add_argument(
+        "--start-s", type=number(at_least=0.0), default=0.0, help="excerpt start in the clip (s)"
+    )
+    p.add_argument(
+        "--seconds", type=number(above=0.0), default=5.0, help="excerpt length (s, default 5)"
+    )
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument(
         "--height-mm", type=float, default=None, help="scale the skeleton to this stature"
     )
     p.add_argument("--asf", default=None, help="ASF skeleton of an AMC motion")
-    p.add_argument("--fps", type=float, default=30.0, help="video rate (default 30)")
-    p.add_argument("--marker-rate", type=float, default=120.0, help="marker rate Hz (default 120)")
-    p.add_argument("--size", type=str, default="640x480", help="image size WxH (default 640x480)")
+    p.add_argument(
+        "--fps",
+        type=number(at_least=FPS_RANGE[0], at_most=FPS_RANGE[1]),
+        default=30.0,
+        help="video rate (default 30)",
+    )
+    p.add_argument(
+        "--marker-rate",
+        type=number(at_least=MARKER_RATE_RANGE_HZ[0], at_most=MARKER_RATE_RANGE_HZ[1]),
+        default=120.0,
+        help="marker rate Hz (default 120)",
+    )
+    p.add_argument(
+        "--size", type=_size, default=(640, 480), help="image size WxH (default 640x480)"
+    )
     p.add_argument(
         "--noise",
-        type=float,
+        type=_realism("noise"),
         default=d.noise,
         help=f"sensor noise sigma, grey levels (default {d.noise})",
     )
     p.add_argument(
         "--blur",
-        type=float,
+        type=_realism("blur"),
         default=d.blur,
         help=f"motion blur: shutter / frame interval (default {d.blur}; 0 = off)",
     )
     p.add_argument("--background", choices=BACKGROUNDS, default=d.background, help="scene")
     p.add_argument(
         "--marker-noise-mm",
-        type=float,
+        type=_realism("marker_noise_mm"),
         default=d.marker_noise_mm,
         help=f"marker noise sigma per axis, mm (default {d.marker_noise_mm})",
     )
     p.add_argument(
         "--dropout",
-        type=float,
+        type=_realism("dropout"),
         default=d.dropout,
         help=f"probability per marker sample that a drop-out starts (default {d.dropout})",
     )
     p.add_argument(
         "--dropout-s",
-        type=float,
+        type=_realism("dropout_s"),
         default=d.dropout_s,
         help=f"mean drop-out length, s (default {d.dropout_s})",
     )
     p.add_argument(
         "--video-jitter-s",
-        type=float,
+        type=_realism("video_jitter_s"),
         default=d.video_jitter_s,
         help=f"video time stamp jitter sigma, s (default {d.video_jitter_s}; 0 = even)",
     )
@@ -104,7 +141,10 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "--sleeve", choices=SLEEVES, default="short", help="shirt sleeves (default short)"
     )
     p.add_argument(
-        "--shirt-colour", default=None, help="shirt colour name or #RRGGBB (default: seeded)"
+        "--shirt-colour",
+        type=checked_by(parse_colour, "colour"),
+        default=None,
+        help="shirt colour name or #RRGGBB (default: seeded)",
     )
     p.add_argument(
         "--blackout-s",
@@ -138,7 +178,7 @@ def run(args: argparse.Namespace) -> int:
         asf=args.asf,
         fps=args.fps,
         marker_rate_hz=args.marker_rate,
-        image_size=_size(args.size),
+        image_size=args.size,
         sleeve=args.sleeve,
         shirt_colour=args.shirt_colour,
         video_format="png" if args.png else "mp4",

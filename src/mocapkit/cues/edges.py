@@ -39,7 +39,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mocapkit.errors import ShapeError
+from mocapkit.errors import ConfigError, ShapeError
 
 FloatArray = NDArray[np.float64]
 Float32Array = NDArray[np.float32]
@@ -89,27 +89,27 @@ class EdgeConfig:
 
     def __post_init__(self) -> None:
         if self.blur_ksize < 1 or self.blur_ksize % 2 == 0:
-            raise ShapeError(
+            raise ConfigError(
                 "EdgeConfig.blur_ksize: expected a positive odd kernel size, found "
                 f"{self.blur_ksize}"
             )
         if not (0 <= self.canny_low <= self.canny_high):
-            raise ShapeError(
+            raise ConfigError(
                 f"EdgeConfig canny thresholds: expected 0 <= canny_low <= canny_high, found "
                 f"{self.canny_low} and {self.canny_high}"
             )
         if not (self.cap_px > 0 and math.isfinite(self.cap_px)):
-            raise ShapeError(f"EdgeConfig.cap_px: expected a positive number, found {self.cap_px}")
+            raise ConfigError(f"EdgeConfig.cap_px: expected a positive number, found {self.cap_px}")
         if self.equalize not in ("image", "roi", "none"):
-            raise ShapeError(
+            raise ConfigError(
                 f"EdgeConfig.equalize: expected 'image', 'roi' or 'none', found {self.equalize!r}"
             )
         if self.mask not in _MASKS:
-            raise ShapeError(
+            raise ConfigError(
                 f"EdgeConfig.mask: expected one of {sorted(_MASKS)}, found {self.mask!r}"
             )
         if self.orientation_bins not in (0, *range(2, 17)):
-            raise ShapeError(
+            raise ConfigError(
                 "EdgeConfig.orientation_bins: expected 0 (plain chamfer) or 2-16, found "
                 f"{self.orientation_bins!r}"
             )
@@ -227,7 +227,7 @@ def distance_to_edges(
     if e.ndim != 2 or e.dtype != np.uint8:
         raise ShapeError(f"edges: expected a 2-D uint8 image, found shape {e.shape} {e.dtype}")
     if mask not in _MASKS:
-        raise ShapeError(f"mask: expected one of {sorted(_MASKS)}, found {mask!r}")
+        raise ConfigError(f"mask: expected one of {sorted(_MASKS)}, found {mask!r}")
     # distanceTransform measures the distance to the nearest ZERO pixel, hence the inversion
     inverted = cv2.compare(e, 0, cv2.CMP_EQ)  # type: ignore[call-overload]
     dist = cv2.distanceTransform(inverted, cv2.DIST_L2, _MASKS[mask])
@@ -349,9 +349,9 @@ def oriented_distance_maps(
     if g.shape != e.shape:
         raise ShapeError(f"smoothed: expected the edges' shape {e.shape}, found {g.shape}")
     if not 2 <= n_bins <= 16:
-        raise ShapeError(f"n_bins: expected 2-16, found {n_bins}")
+        raise ConfigError(f"n_bins: expected 2-16, found {n_bins}")
     if mask not in _MASKS:
-        raise ShapeError(f"mask: expected one of {sorted(_MASKS)}, found {mask!r}")
+        raise ConfigError(f"mask: expected one of {sorted(_MASKS)}, found {mask!r}")
     ys, xs = np.nonzero(e)
     # 3x3 Sobel of the whole crop in 16-bit integers (cheap), read at the edge pixels
     gx = cv2.Sobel(g, cv2.CV_16S, 1, 0, ksize=3)[ys, xs].astype(np.float32)

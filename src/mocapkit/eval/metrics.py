@@ -285,7 +285,8 @@ def load_result_joints(
     ``result`` is a result folder (``motion.npz`` preferred, else ``joints.csv``) or one of
     those files.
     """
-    from mocapkit.io.motion import load_motion_npz, read_joints_csv
+    from mocapkit.io.joints_csv import read_joints_csv
+    from mocapkit.io.motion_npz import load_motion_npz
 
     p = Path(result)
     if p.is_dir():
@@ -321,7 +322,8 @@ def evaluate_result(
     joints : sequence of str, optional
         Canonical joints to compare (default: all both sides have).
     """
-    from mocapkit.io.session import load_session, load_truth
+    from mocapkit.io.session import load_session
+    from mocapkit.io.truth import load_truth
 
     rt, rn, rj = load_result_joints(result)
     tp = Path(truth_session)

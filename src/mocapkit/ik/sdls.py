@@ -29,7 +29,13 @@ they are made commensurate by a reference length ``L`` (default: the rest leg le
 hip to ankle), ``psi_j = mu_j q_j / L``, i.e. moving the pelvis by ``L delta`` costs as
 much as tilting the whole body by ``delta`` radians about the planted feet, which is
 what moving the pelvis over planted feet amounts to. Their step is bounded by
-``Gamma L / mu_j`` mm.
+``Gamma L / mu_j`` mm. A model without legs (``azad14``) has no planted feet and
+uses its arm length as ``L``.
+
+Effectors, planted feet and the relaxed pose are found through canonical names
+(:mod:`mocapkit.skeleton.limbs`), so the same solver runs on every preset. The kernel
+`solve_ik_nb` takes the skeleton (`KinematicArrays`), the task (`IKTask`), the
+per-DoF weighting (`IKWeighting`) and the settings (`IKSettings`) as named tuples.
 
 Joint limits: a DoF clipped at a limit is locked (its Jacobian column zeroed) until a
 later step moves it back inside, so the remaining DoFs take over the task instead
@@ -41,19 +47,22 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mocapkit.errors import ShapeError, unknown_name
+from mocapkit.errors import ConfigError, ShapeError, unknown_name
 from mocapkit.ik.secondary import (
     SecondaryTask,
     carried_mass_planted,
     clamp_max_abs_nb,
     lever_weights_nb,
+    planted_feet,
     secondary_task_nb,
 )
+from mocapkit.skeleton import limbs
 from mocapkit.skeleton.kinematics import (
     KinematicArrays,
     fk_points_jacobian_pose_nb,
@@ -69,6 +78,14 @@ BoolArray = NDArray[np.bool_]
 DEFAULT_GAMMA_RAD = math.radians(45.0)
 #: Singular values below this fraction of the largest are ignored (errata Z6).
 SIGMA_CUTOFF = 1e-10
+#: Canonical point of each effector name (Zhang et al. 2011 §4: head, hands, feet).
+EFFECTOR_CANONICAL: dict[str, str] = {
+    "head": "head",
+    "left_hand": "left_wrist",
+    "right_hand": "right_wrist",
+    "left_foot": "left_ankle",
+    "right_foot": "right_ankle",
+}
 
 
 @dataclass(frozen=True)
@@ -141,35 +158,37 @@ class IKConfig:
 
     def __post_init__(self) -> None:
         if not (0.0 < self.gamma_rad <= math.pi):
-            raise ShapeError(
+            raise ConfigError(
                 f"IKConfig.gamma_rad: expected a value in (0, pi], found {self.gamma_rad}"
             )
         if self.dmax_mm is not None and not self.dmax_mm > 0:
-            raise ShapeError(f"IKConfig.dmax_mm: expected a positive length, found {self.dmax_mm}")
+            raise ConfigError(f"IKConfig.dmax_mm: expected a positive length, found {self.dmax_mm}")
         if not self.tol_mm > 0:
-            raise ShapeError(f"IKConfig.tol_mm: expected a positive tolerance, found {self.tol_mm}")
+            raise ConfigError(
+                f"IKConfig.tol_mm: expected a positive tolerance, found {self.tol_mm}"
+            )
         if self.stall_iterations < 0 or not 0 <= self.stall_fraction < 1:
-            raise ShapeError(
+            raise ConfigError(
                 "IKConfig: expected stall_iterations >= 0 and 0 <= stall_fraction < 1, found "
                 f"{self.stall_iterations}, {self.stall_fraction}"
             )
         if self.max_iterations < 1 or not 0 <= self.min_iterations <= self.max_iterations:
-            raise ShapeError(
+            raise ConfigError(
                 "IKConfig: expected 1 <= max_iterations and 0 <= min_iterations <= max_iterations, "
                 f"found max_iterations={self.max_iterations}, min_iterations={self.min_iterations}"
             )
         if not 0.0 <= self.secondary_gain <= 1.0:
-            raise ShapeError(
+            raise ConfigError(
                 f"IKConfig.secondary_gain: expected k in [0, 1] (recipe: 0.1-0.5), "
                 f"found {self.secondary_gain}"
             )
         if not self.secondary_max_step_rad > 0:
-            raise ShapeError(
+            raise ConfigError(
                 "IKConfig.secondary_max_step_rad: expected a positive angle, found "
                 f"{self.secondary_max_step_rad}"
             )
         if self.clamp not in ("hard", "soft"):
-            raise ShapeError(f"IKConfig.clamp: expected 'hard' or 'soft', found {self.clamp!r}")
+            raise ConfigError(f"IKConfig.clamp: expected 'hard' or 'soft', found {self.clamp!r}")
 
 
 @dataclass
@@ -194,6 +213,98 @@ class IKResult:
     residual_mm: FloatArray
     converged: bool
     trace: FloatArray | None = field(default=None)
+
+
+# ------------------------------------------------------------------ kernel arguments
+
+
+class IKTask(NamedTuple):
+    """What one solve asks for, in the layout `solve_ik_nb` takes (active effectors only).
+
+    Attributes
+    ----------
+    eff_joint : ndarray of int64, shape (K,)
+        Joint carrying each active effector.
+    eff_point : ndarray of float64, shape (K, 3)
+        Effector point in its joint's frame (mm).
+    targets : ndarray of float64, shape (K, 3)
+        Target of each effector (world, mm).
+    frozen : ndarray of bool, shape (D,)
+        DoFs held fixed.
+    """
+
+    eff_joint: NDArray[np.int64]
+    eff_point: FloatArray
+    targets: FloatArray
+    frozen: BoolArray
+
+
+class IKWeighting(NamedTuple):
+    """Per-DoF weights, joint limits and the secondary task of one solver.
+
+    Attributes
+    ----------
+    mu : ndarray, shape (D,)
+        Cost weights of the weighted Jacobian (`dof_weights`, errata Z3).
+    lower, upper : ndarray, shape (D,)
+        Joint limits (rad, mm).
+    omega : ndarray, shape (D,)
+        Relaxed pose of the secondary task.
+    sec_mask : ndarray of bool, shape (D,)
+        DoFs the secondary task acts on (Z13).
+    planted : ndarray of bool, shape (D,)
+        DoFs that carry the complement of their subtree (Z8b).
+    mass : ndarray, shape (J,)
+        Segment masses (kg).
+    com_local : ndarray, shape (J, 3)
+        Segment centres of mass in their joint frames (mm).
+    """
+
+    mu: FloatArray
+    lower: FloatArray
+    upper: FloatArray
+    omega: FloatArray
+    sec_mask: BoolArray
+    planted: BoolArray
+    mass: FloatArray
+    com_local: FloatArray
+
+
+class IKSettings(NamedTuple):
+    """Scalar settings of `solve_ik_nb`, from `IKConfig` (see there).
+
+    Attributes
+    ----------
+    gain : float
+        Secondary-task gain ``k`` (0 disables it).
+    sec_max : float
+        ClampMaxAbs bound of the secondary task (rad).
+    dmax : float
+        Per-effector target clamp (mm, Z2).
+    gamma : float
+        Global step bound Gamma (rad).
+    soft : bool
+        Buss's soft clamp factors instead of the paper's hard clamps.
+    tol : float
+        Stop when every active effector is this close (mm).
+    max_iter, min_iter : int
+        Iteration bounds.
+    stall_iter : int
+        Stop when the largest error has not dropped by ``stall_fraction`` in this many
+        steps (0: off).
+    stall_fraction : float
+    """
+
+    gain: float
+    sec_max: float
+    dmax: float
+    gamma: float
+    soft: bool
+    tol: float
+    max_iter: int
+    min_iter: int
+    stall_iter: int
+    stall_fraction: float
 
 
 # ------------------------------------------------------------------ compiled pieces
@@ -328,40 +439,32 @@ def residuals_nb(targets: FloatArray, pts: FloatArray, residual: FloatArray) -> 
 def solve_ik_nb(
     q: FloatArray,
     kin: KinematicArrays,
-    eff_joint: NDArray[np.int64],
-    eff_point: FloatArray,
-    targets: FloatArray,
-    frozen: BoolArray,
-    mu: FloatArray,
-    lower: FloatArray,
-    upper: FloatArray,
-    omega: FloatArray,
-    sec_mask: BoolArray,
-    planted: BoolArray,
-    mass: FloatArray,
-    com_local: FloatArray,
-    gain: float,
-    sec_max: float,
-    dmax: float,
-    gamma: float,
-    soft: bool,
-    tol: float,
-    max_iter: int,
-    min_iter: int,
-    stall_iter: int,
-    stall_fraction: float,
+    task: IKTask,
+    weighting: IKWeighting,
+    settings: IKSettings,
     residual: FloatArray,
     trace: FloatArray,
 ) -> int:
     """Algorithm 1 (corrected) for one frame; updates ``q`` (D,) in place.
 
-    ``eff_joint`` (K,), ``eff_point`` (K, 3) and ``targets`` (K, 3) list the active
-    effectors only. ``frozen`` (D,) DoFs do not move. Writes the final distance of
-    each effector to ``residual`` (K,) and per-iteration diagnostics to ``trace``
-    (max_iter, 4). Stops early when the largest error has not dropped by the share
-    ``stall_fraction`` in ``stall_iter`` steps (an unreachable target has settled;
-    more steps only cost time). Returns the number of steps taken.
+    ``task`` lists the active effectors only (``K`` of them) and the ``frozen`` DoFs,
+    which do not move. Writes the final distance of each effector to ``residual`` (K,)
+    and per-iteration diagnostics to ``trace`` (max_iter, 4). Stops early when the
+    largest error has not dropped by the share ``stall_fraction`` in ``stall_iter``
+    steps (an unreachable target has settled; more steps only cost time). Returns the
+    number of steps taken.
     """
+    eff_joint, eff_point, targets, frozen = (
+        task.eff_joint,
+        task.eff_point,
+        task.targets,
+        task.frozen,
+    )
+    mu, lower, upper = weighting.mu, weighting.lower, weighting.upper
+    gain, sec_max, dmax, gamma = settings.gain, settings.sec_max, settings.dmax, settings.gamma
+    soft, tol = settings.soft, settings.tol
+    max_iter, min_iter = settings.max_iter, settings.min_iter
+    stall_iter, stall_fraction = settings.stall_iter, settings.stall_fraction
     n_joints = kin.parents.shape[0]
     dof_kind = kin.dof_kind
     n_dofs = q.shape[0]
@@ -407,9 +510,17 @@ def solve_ik_nb(
         rank = sdls_nb(jw, e, gamma, soft, dpsi, vr, n_buf, m_buf)
         if use_secondary:
             lever_weights_nb(
-                kin, world, axis_world, pivot_world, mass, com_local, planted, sec_mask, mh
+                kin,
+                world,
+                axis_world,
+                pivot_world,
+                weighting.mass,
+                weighting.com_local,
+                weighting.planted,
+                weighting.sec_mask,
+                mh,
             )
-            secondary_task_nb(q, omega, mh, gain, sec_max, dphi)
+            secondary_task_nb(q, weighting.omega, mh, gain, sec_max, dphi)
             for d in range(n_dofs):
                 # psi space (Z8e); a DoF held at a limit has a zeroed column, so the
                 # projector would not compensate its motion: leave it out
@@ -542,40 +653,50 @@ def nullspace_projector(jw: ArrayLike) -> FloatArray:
 
 
 def arm_length_mm(skeleton: Skeleton) -> float:
-    """Length of the left arm (upper arm + forearm + hand segments) in mm (730 for Table 1)."""
-    lengths = skeleton.bone_length_mm
-    total = 0.0
-    for name in ("l_humerus", "l_radius", "l_hand"):
-        if name in skeleton.joint_names:
-            total += float(lengths[skeleton.joint_index(name)])
+    """Rest length of the left arm, shoulder to the end of the hand segment (mm).
+
+    Upper arm + forearm + hand segments of `mocapkit.skeleton.limbs.arm` (730 mm for
+    Table 1); 0.1 of it is the default target clamp ``D_max``.
+    """
+    if not limbs.has_limb(skeleton, "left_arm"):
+        raise ShapeError(
+            f"skeleton {skeleton.name!r} has no canonical left arm "
+            "(left_shoulder, left_elbow, left_wrist); set IKConfig.dmax_mm explicitly"
+        )
+    total = limbs.limb_length_mm(skeleton, limbs.arm(skeleton, "left"), to_tip=True)
     if total <= 0:
         raise ShapeError(
-            f"skeleton {skeleton.name!r} has no l_humerus/l_radius/l_hand segments; "
+            f"skeleton {skeleton.name!r}: the left arm has zero length; "
             "set IKConfig.dmax_mm explicitly"
         )
     return total
 
 
 def leg_length_mm(skeleton: Skeleton) -> float:
-    """Rest length of the left leg, hip joint to ankle (mm); arm length if there are no legs."""
-    if "l_femur" in skeleton.joint_names and "l_foot" in skeleton.joint_names:
-        lengths = skeleton.bone_length_mm
-        return float(
-            lengths[skeleton.joint_index("l_femur")] + lengths[skeleton.joint_index("l_tibia")]
-        )
+    """Rest length of the left leg, hip joint to ankle (mm); arm length if there are no legs.
+
+    The reference length ``L`` of the prismatic root DoFs (module doc). An upper-body
+    model (``azad14``) has no legs; its arm length is the nearest stand-in for the
+    scale of the body's motion.
+    """
+    if limbs.has_limb(skeleton, "left_leg"):
+        return limbs.limb_length_mm(skeleton, limbs.leg(skeleton, "left"))
     return arm_length_mm(skeleton)
 
 
 def dof_weights(
     skeleton: Skeleton,
-    planted_joints: Sequence[str] = ("l_foot", "r_foot"),
+    planted_joints: Sequence[str] | None = None,
     prismatic_length_mm: float | None = None,
 ) -> FloatArray:
     """Cost weights ``mu`` (D,) of the weighted Jacobian (recipe Z, errata Z3; see module doc).
 
     ``mu_j = sqrt(m_j / m_min)`` over revolute and ball DoFs (min 1); prismatic DoFs
     get ``sqrt(m_j / m_min) / L`` (per mm) with ``L = prismatic_length_mm`` or the leg length.
+    ``planted_joints`` defaults to the ankles (`mocapkit.ik.secondary.planted_feet`).
     """
+    if planted_joints is None:
+        planted_joints = planted_feet(skeleton)
     m = carried_mass_planted(skeleton, planted_joints)
     rot = skeleton.dof_kind != PRISMATIC
     positive = m[rot & (m > 0)]
@@ -588,21 +709,42 @@ def dof_weights(
     mu = np.sqrt(np.maximum(m, m_min) / m_min)
     length = leg_length_mm(skeleton) if prismatic_length_mm is None else float(prismatic_length_mm)
     if not length > 0:
-        raise ShapeError(f"prismatic_length_mm: expected a positive length, found {length}")
+        raise ConfigError(f"prismatic_length_mm: expected a positive length, found {length}")
     mu = np.where(rot, mu, mu / length)
     return mu
 
 
+def canonical_effector(skeleton: Skeleton, name: str) -> Effector:
+    """The effector ``name`` (one of `EFFECTOR_CANONICAL`) at its canonical point.
+
+    ``head`` is the canonical head point, ``left_hand``/``right_hand`` the wrists,
+    ``left_foot``/``right_foot`` the ankles (Zhang et al. 2011 §4: head, hands, feet).
+
+    Raises
+    ------
+    UnknownNameError
+        For another name, or a skeleton without that canonical point (no legs).
+    """
+    if name not in EFFECTOR_CANONICAL:
+        raise unknown_name("effector", name, EFFECTOR_CANONICAL)
+    cname = EFFECTOR_CANONICAL[name]
+    if cname not in skeleton.canonical:
+        raise unknown_name(
+            "canonical joint", cname, skeleton.canonical, f"skeleton {skeleton.name!r} ({name})"
+        )
+    joint, point = skeleton.canonical[cname]
+    return Effector(name, joint, (float(point[0]), float(point[1]), float(point[2])))
+
+
 def default_effectors(skeleton: Skeleton) -> tuple[Effector, ...]:
-    """The five effectors of the paper on ``zhang21``: head centre, both wrists, both ankles."""
-    head_joint, head_point = skeleton.canonical.get("head", ("head", (0.0, 0.0, 0.0)))
-    return (
-        Effector("head", head_joint, tuple(float(x) for x in head_point)),  # type: ignore[arg-type]
-        Effector("left_hand", "l_hand"),
-        Effector("right_hand", "r_hand"),
-        Effector("left_foot", "l_foot"),
-        Effector("right_foot", "r_foot"),
-    )
+    """The effectors of the paper: head centre, the wrists and the ankles the skeleton has.
+
+    Five on ``zhang21``; head and both hands on an upper-body model (``azad14``).
+    """
+    names = ["head"]
+    names += [f"{arm.side}_hand" for arm in limbs.limbs_present(skeleton, "arm")]
+    names += [f"{lg.side}_foot" for lg in limbs.limbs_present(skeleton, "leg")]
+    return tuple(canonical_effector(skeleton, n) for n in names)
 
 
 class SDLSSolver:
@@ -614,8 +756,9 @@ class SDLSSolver:
     effectors : sequence of Effector, optional
         Defaults to `default_effectors` (head, hands, feet).
     config : IKConfig
-    planted_joints : sequence of str
-        Joints held on the ground (affects mass weights, Z8b).
+    planted_joints : sequence of str, optional
+        Joints held on the ground (affects mass weights, Z8b); by default the ankles
+        of the legs the skeleton has (`mocapkit.ik.secondary.planted_feet`).
     omega : array_like, shape (D,), optional
         Relaxed pose for the secondary task.
     """
@@ -625,17 +768,19 @@ class SDLSSolver:
         skeleton: Skeleton,
         effectors: Sequence[Effector] | None = None,
         config: IKConfig | None = None,
-        planted_joints: Sequence[str] = ("l_foot", "r_foot"),
+        planted_joints: Sequence[str] | None = None,
         omega: ArrayLike | None = None,
     ) -> None:
         self.skeleton = skeleton
         self.config = config or IKConfig()
         self.effectors = tuple(effectors) if effectors is not None else default_effectors(skeleton)
         if not self.effectors:
-            raise ShapeError("SDLSSolver: expected at least one effector, found none")
+            raise ConfigError("SDLSSolver: expected at least one effector, found none")
         names = [e.name for e in self.effectors]
         if len(set(names)) != len(names):
-            raise ShapeError(f"SDLSSolver: effector names must be unique, found {names}")
+            raise ConfigError(f"SDLSSolver: effector names must be unique, found {names}")
+        if planted_joints is None:
+            planted_joints = planted_feet(skeleton)
         planted = tuple(p for p in planted_joints if p in skeleton.joint_names)
         self.planted_joints = planted
         self.secondary = SecondaryTask(skeleton, planted, omega)
@@ -652,6 +797,30 @@ class SDLSSolver:
         self._eff_point = np.array([e.point_mm for e in self.effectors], dtype=float).reshape(-1, 3)
         self._lower = np.ascontiguousarray(skeleton.lower)
         self._upper = np.ascontiguousarray(skeleton.upper)
+        sec = self.secondary
+        self._weighting = IKWeighting(
+            mu=self.mu,
+            lower=self._lower,
+            upper=self._upper,
+            omega=sec.omega,
+            sec_mask=sec.mask,
+            planted=sec.planted,
+            mass=sec.mass,
+            com_local=sec.com_local,
+        )
+        cfg = self.config
+        self._settings = IKSettings(
+            gain=float(cfg.secondary_gain),
+            sec_max=float(min(cfg.secondary_max_step_rad, cfg.gamma_rad)),
+            dmax=float(self.dmax_mm),
+            gamma=float(cfg.gamma_rad),
+            soft=cfg.clamp == "soft",
+            tol=float(cfg.tol_mm),
+            max_iter=int(cfg.max_iterations),
+            min_iter=int(cfg.min_iterations),
+            stall_iter=int(cfg.stall_iterations),
+            stall_fraction=float(cfg.stall_fraction),
+        )
 
     @property
     def effector_names(self) -> tuple[str, ...]:
@@ -740,43 +909,21 @@ class SDLSSolver:
         frz = (
             np.zeros(sk.n_dofs, dtype=bool)
             if frozen is None
-            else np.ascontiguousarray(frozen, dtype=bool)
-        )
+            else np.array(frozen, dtype=bool, order="C")  # a fresh writable array: one
+        )  # kernel signature, whatever flags the caller's array has
         if frz.shape != (sk.n_dofs,):
             raise ShapeError(f"frozen: expected shape ({sk.n_dofs},), found {frz.shape}")
         idx = np.flatnonzero(act)
         cfg = self.config
         residual = np.full(len(idx), np.nan)
         trace = np.zeros((cfg.max_iterations if record_trace else 0, 4))
-        sec = self.secondary
-        n_it = solve_ik_nb(
-            q,
-            self._kin,
-            np.ascontiguousarray(self._eff_joint[idx]),
-            np.ascontiguousarray(self._eff_point[idx]),
-            np.ascontiguousarray(t[idx]),
-            frz,
-            self.mu,
-            self._lower,
-            self._upper,
-            sec.omega,
-            sec.mask,
-            sec.planted,
-            sec.mass,
-            sec.com_local,
-            float(cfg.secondary_gain),
-            float(min(cfg.secondary_max_step_rad, cfg.gamma_rad)),
-            float(self.dmax_mm),
-            float(cfg.gamma_rad),
-            cfg.clamp == "soft",
-            float(cfg.tol_mm),
-            int(cfg.max_iterations),
-            int(cfg.min_iterations),
-            int(cfg.stall_iterations),
-            float(cfg.stall_fraction),
-            residual,
-            trace,
+        task = IKTask(
+            eff_joint=np.ascontiguousarray(self._eff_joint[idx]),
+            eff_point=np.ascontiguousarray(self._eff_point[idx]),
+            targets=np.ascontiguousarray(t[idx]),
+            frozen=frz,
         )
+        n_it = solve_ik_nb(q, self._kin, task, self._weighting, self._settings, residual, trace)
         res_all = np.full(n_eff, np.nan)
         res_all[idx] = residual
         converged = bool(len(idx) == 0 or np.all(residual < cfg.tol_mm))
@@ -791,13 +938,18 @@ class SDLSSolver:
 
 __all__ = [
     "DEFAULT_GAMMA_RAD",
+    "EFFECTOR_CANONICAL",
     "REVOLUTE",
     "Effector",
     "IKConfig",
     "IKResult",
+    "IKSettings",
+    "IKTask",
+    "IKWeighting",
     "SDLSSolver",
     "SDLSStep",
     "arm_length_mm",
+    "canonical_effector",
     "clamp_max_abs",
     "clamp_target_error",
     "default_effectors",

@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import ShapeError
+from mocapkit.skeleton import limbs
 from mocapkit.skeleton.kinematics import (
     KinematicArrays,
     fk_pose_nb,
@@ -42,15 +43,26 @@ RELAXED_ELBOW_FLEXION_RAD = float(np.radians(15.0))
 def relaxed_pose(skeleton: Skeleton) -> FloatArray:
     """The relaxed configuration ``omega`` (D,): arms down, elbows flexed 15 deg, all else 0.
 
-    DoFs whose name contains ``elbow_flexion`` get 15 deg; every other DoF is 0
-    (for ``zhang21`` that is arms hanging, spine and neck straight, legs straight),
-    clipped into the joint limits.
+    The elbows are the flexion hinges of the arms the skeleton has
+    (`mocapkit.skeleton.limbs.flexion_dofs`), each flexed 15 deg in its own model's
+    sign: ``+15 deg`` for ``zhang21`` (range ``[0, 150] deg``), ``-15 deg`` for
+    ``azad14`` (``theta_4 <= 0`` about ``-x``), the same forward bend. Every other DoF
+    is 0 (for ``zhang21`` that is arms hanging, spine and neck straight, legs straight);
+    the result is clipped into the joint limits.
     """
     omega = np.zeros(skeleton.n_dofs)
-    for d, name in enumerate(skeleton.dof_names):
-        if "elbow_flexion" in name:
-            omega[d] = RELAXED_ELBOW_FLEXION_RAD
+    for arm in limbs.limbs_present(skeleton, "arm"):
+        dofs, signs = limbs.flexion_dofs(skeleton, arm)
+        omega[dofs] = signs * RELAXED_ELBOW_FLEXION_RAD
     return np.clip(omega, skeleton.lower, skeleton.upper)
+
+
+def planted_feet(skeleton: Skeleton) -> tuple[str, ...]:
+    """Default planted joints: the canonical ankles of the legs the skeleton has.
+
+    ``("l_foot", "r_foot")`` for ``zhang21``; none for an upper-body model (``azad14``).
+    """
+    return tuple(skeleton.joint_names[j] for j in limbs.ankle_joints(skeleton))
 
 
 def secondary_mask(skeleton: Skeleton) -> BoolArray:
@@ -189,8 +201,9 @@ class SecondaryTask:
     Parameters
     ----------
     skeleton : Skeleton
-    planted_joints : sequence of str
-        Joints held on the ground (their leg DoFs carry the complement mass).
+    planted_joints : sequence of str, optional
+        Joints held on the ground (their leg DoFs carry the complement mass);
+        `planted_feet` (both ankles, none without legs) when omitted.
     omega : array_like, shape (D,), optional
         Relaxed pose; `relaxed_pose` when omitted.
     """
@@ -198,10 +211,12 @@ class SecondaryTask:
     def __init__(
         self,
         skeleton: Skeleton,
-        planted_joints: Sequence[str] = ("l_foot", "r_foot"),
+        planted_joints: Sequence[str] | None = None,
         omega: ArrayLike | None = None,
     ) -> None:
         self.skeleton = skeleton
+        if planted_joints is None:
+            planted_joints = planted_feet(skeleton)
         self.omega = relaxed_pose(skeleton) if omega is None else np.asarray(omega, float).copy()
         if self.omega.shape != (skeleton.n_dofs,):
             raise ShapeError(

@@ -46,12 +46,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.errors import FormatError, unknown_name
-from mocapkit.io.motion import (
-    WORLD_FROM_FILE,
-    Motion,
-    canonical_map,
-    detect_convention,
-)
+from mocapkit.io.motion import Motion
+from mocapkit.io.naming import canonical_map, detect_convention
+from mocapkit.io.units import WORLD_FROM_FILE
 from mocapkit.skeleton.model import PRISMATIC, REVOLUTE, Skeleton
 
 FloatArray = NDArray[np.float64]

@@ -20,7 +20,7 @@ use the CMU unit, (1/0.45) inch = 56.444 mm (their OFFSETs are the ASF
 CMU joint names are read in CMU units when that gives a rest height between
 0.9 and 2.3 m. Other files (and CMU-named files outside that range, e.g.
 re-exported in cm): the unit among mm, cm, inch, CMU unit and m that makes the
-rest pose about 1.7 m tall (`mocapkit.io.motion.infer_unit_mm`).
+rest pose about 1.7 m tall (`mocapkit.io.units.infer_unit_mm`).
 
 Rest frame of the cgspeed MotionBuilder-friendly files: their frame 0 is a
 reference pose added by the converter. ``drop_rest_frame="auto"`` drops frame 0
@@ -64,13 +64,12 @@ from scipy.spatial.transform import Rotation
 
 from mocapkit.errors import FormatError
 from mocapkit.io.atomic import atomic_write
-from mocapkit.io.motion import (
+from mocapkit.io.motion import Motion
+from mocapkit.io.naming import canonical_map, detect_convention
+from mocapkit.io.units import (
     CMU_UNIT_MM,
     FILE_FROM_WORLD,
     WORLD_FROM_FILE,
-    Motion,
-    canonical_map,
-    detect_convention,
     infer_unit_mm,
     rest_height_units,
 )
@@ -429,7 +428,7 @@ def read_bvh(
     -------
     Motion
         ``time_s`` starts at 0 at the first returned frame; canonical joints are
-        filled from the naming tables in `mocapkit.io.motion` (joints whose name
+        filled from the naming tables in `mocapkit.io.naming` (joints whose name
         is not found are left out).
     """
     where = str(path)

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from mocapkit.errors import FormatError, UnknownNameError
+from mocapkit.errors import ConfigError, FormatError, UnknownNameError
 from mocapkit.io.markers import MarkerData, longest_true_run
 
 _SET_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
@@ -425,7 +425,7 @@ def estimate_height_mm(
         A head marker (or an explicitly given foot marker) is not in the file.
     """
     if not 0.0 < percentile <= 100.0:
-        raise ValueError(f"percentile: expected a value in (0, 100], found {percentile}")
+        raise ConfigError(f"percentile: expected a value in (0, 100], found {percentile}")
     z_head = evaluate_marker_sets(markers, head)[:, 0, 2]
     feet = []
     sides = ((left_foot, PLUG_IN_GAIT_LEFT_FOOT), (right_foot, PLUG_IN_GAIT_RIGHT_FOOT))

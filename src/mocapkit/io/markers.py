@@ -1,38 +1,20 @@
-"""Labelled 3-D marker trajectories (`MarkerData`), format dispatch, and the marker CSV format.
+"""Labelled 3-D marker trajectories (`MarkerData`) and their occlusion statistics.
 
-Every reader returns positions in mm with NaN for occluded samples (never zero-filled);
-``read_markers`` picks the reader from the file extension.
-
-CSV layout (one row per frame, comma separated, UTF-8)::
-
-    time_s,LFHD_x,LFHD_y,LFHD_z,RFHD_x,RFHD_y,RFHD_z,...
-    0.0,12.5,803.1,1601.2,,,,...
-
-Coordinates are in mm; an empty cell (or ``nan``) is a missing sample.
+Positions are in mm with NaN for occluded samples (never zero-filled). Files are read
+and written by the format modules (`mocapkit.io.c3d`, `mocapkit.io.trc`,
+`mocapkit.io.marker_csv`), chosen by suffix in `mocapkit.io.marker_files`.
 """
 
 from __future__ import annotations
 
-import csv
 import math
-import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import FormatError, ShapeError, UnknownNameError, unknown_name
-from mocapkit.io.atomic import atomic_write
-
-#: File extensions `read_markers` understands (lower case, with the dot).
-SUPPORTED_MARKER_EXTENSIONS: tuple[str, ...] = (".c3d", ".trc", ".csv")
-#: File extensions `write_markers` can write.
-WRITABLE_MARKER_EXTENSIONS: tuple[str, ...] = (".trc", ".csv")
-
-_AXES = ("x", "y", "z")
 
 
 def bare_marker_name(name: str) -> str:
@@ -329,77 +311,6 @@ class MarkerData:
         return f"{head}\n{self.occlusions().summary()}"
 
 
-# ---------------------------------------------------------------------- dispatch
-def read_markers(path: str | os.PathLike[str]) -> MarkerData:
-    """Read labelled marker trajectories from a C3D, TRC or CSV file.
-
-    Parameters
-    ----------
-    path : path-like
-        File whose extension (case-insensitive) is one of `SUPPORTED_MARKER_EXTENSIONS`.
-
-    Returns
-    -------
-    MarkerData
-        Positions in mm, NaN for missing samples.
-
-    Raises
-    ------
-    FormatError
-        Unsupported extension, or a file that does not follow its format.
-    FileNotFoundError
-        The file does not exist.
-    """
-    p = Path(path)
-    ext = p.suffix.lower()
-    if ext not in SUPPORTED_MARKER_EXTENSIONS:
-        raise FormatError(
-            f"{p}: unsupported marker file extension {p.suffix!r}; expected one of "
-            f"{', '.join(SUPPORTED_MARKER_EXTENSIONS)}"
-        )
-    if not p.is_file():
-        raise FileNotFoundError(f"{p}: marker file not found")
-    # Readers are imported here so that one format does not pull in the others' dependencies.
-    if ext == ".c3d":
-        from mocapkit.io.c3d import read_c3d
-
-        return read_c3d(p)
-    if ext == ".trc":
-        from mocapkit.io.trc import read_trc
-
-        return read_trc(p)
-    return read_markers_csv(p)
-
-
-def write_markers(path: str | os.PathLike[str], markers: MarkerData, **kwargs: Any) -> None:
-    """Write a `MarkerData` as TRC or CSV (chosen by extension), atomically.
-
-    Extra keyword arguments go to `mocapkit.io.trc.write_trc` (e.g. ``units="m"``).
-    """
-    p = Path(path)
-    ext = p.suffix.lower()
-    if ext not in WRITABLE_MARKER_EXTENSIONS:
-        raise FormatError(
-            f"{p}: cannot write markers with extension {p.suffix!r}; expected one of "
-            f"{', '.join(WRITABLE_MARKER_EXTENSIONS)}"
-        )
-    if ext == ".trc":
-        from mocapkit.io.trc import write_trc
-
-        write_trc(
-            p,
-            markers.time_s,
-            markers.names,
-            markers.positions_mm,
-            rate_hz=markers.rate_hz,
-            **kwargs,
-        )
-    else:
-        if kwargs:
-            raise TypeError(f"write_markers: CSV takes no options, found {sorted(kwargs)}")
-        write_markers_csv(p, markers.time_s, markers.names, markers.positions_mm)
-
-
 # ---------------------------------------------------------------------- helpers
 def infer_rate_hz(time_s: NDArray[np.float64], where: str) -> float:
     """Sampling rate from time stamps: the inverse of the median step.
@@ -448,145 +359,3 @@ def check_marker_arrays(
                 f"surrounding spaces"
             )
     return t, names, pos
-
-
-def _format_float(v: float) -> str:
-    # repr gives the shortest string that reads back to the same double: exact round trip.
-    return "" if v != v else repr(v)
-
-
-# ---------------------------------------------------------------------- CSV
-def write_markers_csv(
-    path: str | os.PathLike[str],
-    time_s: ArrayLike,
-    marker_names: Sequence[str],
-    positions_mm: ArrayLike,
-) -> None:
-    """Write marker trajectories as CSV (``time_s, NAME_x, NAME_y, NAME_z, ...``), atomically.
-
-    Values are written with full double precision (exact round trip); NaN becomes an
-    empty cell.
-
-    Parameters
-    ----------
-    path : path-like
-    time_s : (T,) float array
-        Strictly increasing time stamps in seconds.
-    marker_names : sequence of str
-        M unique names (no commas, tabs or line breaks).
-    positions_mm : (T, M, 3) float array
-        Positions in mm; NaN for missing samples.
-    """
-    t, names, pos = check_marker_arrays(time_s, marker_names, positions_mm, str(path))
-    header = ["time_s"] + [f"{n}_{a}" for n in names for a in _AXES]
-    flat = pos.reshape(t.shape[0], -1).tolist()
-    with atomic_write(path, "w", newline="") as fh:
-        writer = csv.writer(fh, lineterminator="\n")
-        writer.writerow(header)
-        for ti, row in zip(t.tolist(), flat):
-            writer.writerow([repr(ti)] + [_format_float(v) for v in row])
-
-
-def _parse_cell(text: str, where: str, line: int, col: int, column_name: str) -> float:
-    s = text.strip()
-    if not s:
-        return math.nan
-    try:
-        return float(s)
-    except ValueError:
-        raise FormatError(
-            f"{where} line {line} column {col} ({column_name}): expected a number or an empty "
-            f"cell, found {text!r}"
-        ) from None
-
-
-def read_markers_csv(path: str | os.PathLike[str]) -> MarkerData:
-    """Read marker trajectories from a CSV file (see the module docstring for the layout).
-
-    The sampling rate is the inverse of the median time step.
-
-    Raises
-    ------
-    FormatError
-        Missing ``time_s`` first column, a column not ending in ``_x``/``_y``/``_z``,
-        an incomplete x/y/z triple, a row with the wrong number of cells, a non-numeric
-        cell (file, line and column named), or non-increasing time stamps.
-    """
-    p = Path(path)
-    where = str(p)
-    with open(p, encoding="utf-8-sig", newline="") as fh:
-        rows = list(csv.reader(fh))
-    # Drop blank lines (e.g. a trailing newline) but keep line numbers for messages.
-    numbered = [(i + 1, r) for i, r in enumerate(rows) if any(c.strip() for c in r)]
-    if not numbered:
-        raise FormatError(
-            f"{where}: expected a header row starting with 'time_s', found an empty file"
-        )
-    header_line, header = numbered[0]
-    header = [h.strip() for h in header]
-    if header[0] != "time_s":
-        raise FormatError(
-            f"{where} line {header_line} column 1: expected the time column 'time_s', "
-            f"found {header[0]!r}"
-        )
-    names: list[str] = []
-    slots: dict[str, list[int]] = {}
-    for col, h in enumerate(header[1:], start=1):
-        stem, sep, axis = h.rpartition("_")
-        if not sep or not stem or axis not in _AXES:
-            raise FormatError(
-                f"{where} line {header_line} column {col + 1}: expected a column named "
-                f"NAME_x, NAME_y or NAME_z, found {h!r}"
-            )
-        if stem not in slots:
-            slots[stem] = [-1, -1, -1]
-            names.append(stem)
-        k = _AXES.index(axis)
-        if slots[stem][k] != -1:
-            raise FormatError(
-                f"{where} line {header_line} column {col + 1}: duplicate column {h!r}"
-            )
-        slots[stem][k] = col
-    for n in names:
-        lacking = [f"{n}_{a}" for a, c in zip(_AXES, slots[n]) if c == -1]
-        if lacking:
-            raise FormatError(
-                f"{where} line {header_line}: marker {n!r} lacks column(s) {', '.join(lacking)}"
-            )
-    body = numbered[1:]
-    n_cols = len(header)
-    t = np.empty(len(body))
-    values = np.empty((len(body), n_cols - 1))
-    for r, (line, row) in enumerate(body):
-        if len(row) != n_cols:
-            raise FormatError(
-                f"{where} line {line}: expected {n_cols} cells as in the header, found {len(row)}"
-            )
-        ts = row[0].strip()
-        try:
-            t[r] = float(ts)
-        except ValueError:
-            raise FormatError(
-                f"{where} line {line} column 1 (time_s): expected a number, found {row[0]!r}"
-            ) from None
-        if not math.isfinite(t[r]):
-            raise FormatError(
-                f"{where} line {line} column 1 (time_s): expected a finite time, found {row[0]!r}"
-            )
-        for c in range(1, n_cols):
-            values[r, c - 1] = _parse_cell(row[c], where, line, c + 1, header[c])
-    if len(body) > 1 and np.any(np.diff(t) <= 0):
-        k = int(np.flatnonzero(np.diff(t) <= 0)[0])
-        raise FormatError(
-            f"{where} line {body[k + 1][0]} column 1 (time_s): expected time stamps strictly "
-            f"increasing, found {t[k + 1]!r} after {t[k]!r}"
-        )
-    cols = np.array([slots[n] for n in names], dtype=np.int64).reshape(len(names), 3) - 1
-    pos = values[:, cols] if names else np.empty((len(body), 0, 3))
-    return MarkerData(
-        time_s=t,
-        names=tuple(names),
-        positions_mm=pos,
-        rate_hz=infer_rate_hz(t, where),
-        source=where,
-    )

@@ -1,9 +1,12 @@
-"""Read any supported motion file into a `Motion`, choosing the reader by file extension.
+"""Motion files by suffix: read or write a `Motion` in any supported format; the result folder.
 
 Extensions: ``.bvh`` (`mocapkit.io.bvh.read_bvh`), ``.amc`` (`mocapkit.io.asf_amc.read_amc`;
 the ASF skeleton is ``asf`` when given, else found by `mocapkit.io.asf_amc.find_asf`:
 same stem, then subject prefix before ``_``, then the only ``.asf`` in the folder) and
-``.npz`` (`mocapkit.io.motion.load_motion_npz`, written by `Motion.save_npz`).
+``.npz`` (`mocapkit.io.motion_npz.load_motion_npz`, written by `save_motion_npz`).
+`write_motion` writes ``.npz``, ``.bvh``, a canonical-joints ``.csv``
+(`mocapkit.io.joints_csv`) or the canonical joints as ``.trc`` markers;
+`write_result_folder` writes ``motion.npz``, ``joints.csv`` and ``motion.bvh``.
 """
 
 from __future__ import annotations
@@ -13,11 +16,16 @@ from pathlib import Path
 
 from mocapkit.errors import FormatError
 from mocapkit.io.asf_amc import read_amc
-from mocapkit.io.bvh import read_bvh
-from mocapkit.io.motion import Motion, load_motion_npz
+from mocapkit.io.bvh import read_bvh, write_bvh
+from mocapkit.io.joints_csv import write_joints_csv
+from mocapkit.io.motion import Motion
+from mocapkit.io.motion_npz import load_motion_npz, save_motion_npz
+from mocapkit.io.trc import write_trc
 
 #: Extensions `read_motion` accepts.
 MOTION_EXTENSIONS: tuple[str, ...] = (".bvh", ".amc", ".npz")
+#: Extensions `write_motion` writes.
+WRITABLE_MOTION_EXTENSIONS: tuple[str, ...] = (".npz", ".bvh", ".csv", ".trc")
 
 
 def read_motion(
@@ -62,4 +70,53 @@ def read_motion(
     )
 
 
-__all__ = ["MOTION_EXTENSIONS", "read_motion"]
+def write_motion(path: str | os.PathLike[str], motion: Motion) -> None:
+    """Write a motion in the format its extension names, atomically.
+
+    ``.npz``: the whole motion (`save_motion_npz`); ``.bvh``: skeleton and joint
+    parameters (`write_bvh`); ``.csv``: the canonical joints (`write_joints_csv`);
+    ``.trc``: the canonical joints as markers in mm (`mocapkit.io.trc.write_trc`).
+
+    Parameters
+    ----------
+    path : path-like
+    motion : Motion
+    """
+    p = Path(path)
+    ext = p.suffix.lower()
+    if ext == ".npz":
+        save_motion_npz(p, motion)
+    elif ext == ".bvh":
+        write_bvh(p, motion)
+    elif ext == ".csv":
+        write_joints_csv(p, motion)
+    elif ext == ".trc":
+        write_trc(p, motion.time_s, list(motion.joint_names), motion.joints_mm, units="mm")
+    else:
+        raise FormatError(
+            f"{p}: cannot write a motion with extension {ext or 'none'!r}; "
+            f"expected one of {', '.join(WRITABLE_MOTION_EXTENSIONS)}"
+        )
+
+
+def write_result_folder(folder: str | os.PathLike[str], motion: Motion) -> Path:
+    """Write ``motion.npz``, ``joints.csv`` and ``motion.bvh`` into a folder (each atomic).
+
+    Returns the folder path (created when missing). See `mocapkit.io.bvh.write_bvh`
+    for how frames without a pose are written to BVH.
+    """
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    save_motion_npz(out / "motion.npz", motion)
+    write_joints_csv(out / "joints.csv", motion)
+    write_bvh(out / "motion.bvh", motion)
+    return out
+
+
+__all__ = [
+    "MOTION_EXTENSIONS",
+    "WRITABLE_MOTION_EXTENSIONS",
+    "read_motion",
+    "write_motion",
+    "write_result_folder",
+]

@@ -19,6 +19,10 @@ Layout (all lengths in mm, times in s)::
     truth.npz                    synthetic only: time_s (T,), joint_names (J,),
                                  joints_mm (T, J, 3), marker_names (M,), markers_mm (T, M, 3)
 
+The files are read by their own modules: `mocapkit.io.cameras`, `mocapkit.io.video`
+(frames), `mocapkit.io.marker_files` (markers), `mocapkit.io.session_csv` (keypoints and
+time stamps) and `mocapkit.io.truth`; this module checks the folder as a whole.
+
 `Session.samples` streams the session in video time order. At every video frame it takes
 the newest marker sample at or before the frame time and keeps the time difference, as the
 hybrid tracker of Zhang et al. (2011, §3) samples its two independent streams (video at
@@ -34,7 +38,6 @@ z up in the anatomical position); optionally each member marker's own offset in 
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import os
@@ -43,355 +46,24 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import cv2
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
-from mocapkit.errors import FormatError, SessionError, ShapeError
+from mocapkit.errors import FormatError, SessionError
 from mocapkit.io.atomic import atomic_write
+from mocapkit.io.cameras import read_cameras
+from mocapkit.io.marker_files import read_markers
+from mocapkit.io.marker_sets import MarkerSet, evaluate_marker_sets
+from mocapkit.io.markers import MarkerData
+from mocapkit.io.session_csv import Keypoints, read_keypoints_csv, read_timestamps_csv
+from mocapkit.io.truth import Truth, load_truth
+from mocapkit.io.video import LazyFrame, VideoSource, probe_video
 from mocapkit.skeleton.model import CANONICAL_JOINTS, CANONICAL_SEGMENTS, TRUNK_SEGMENTS
 
 FloatArray = NDArray[np.float64]
 FORMAT_VERSION = 1
-IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 MARKER_FILES = ("markers.c3d", "markers.csv")
-
-
-# ====================================================================== small CSV formats
-
-
-def write_keypoints_csv(
-    path: str | os.PathLike[str], time_s: ArrayLike, joint_names: Sequence[str], pixels: ArrayLike
-) -> None:
-    """Write 2-D keypoints: ``time_s`` then ``<joint>_x_px, <joint>_y_px``; NaN where unseen.
-
-    Parameters
-    ----------
-    path : path-like
-    time_s : (T,) float array
-    joint_names : sequence of str
-        Canonical joint names (K).
-    pixels : (T, K, 2) float array
-        Image positions (px, distorted image); NaN where the joint is not seen.
-    """
-    t = np.asarray(time_s, dtype=float)
-    px = np.asarray(pixels, dtype=float)
-    names = tuple(joint_names)
-    if t.ndim != 1 or px.shape != (t.shape[0], len(names), 2):
-        raise ShapeError(
-            f"{path}: keypoints: expected time_s (T,) and pixels (T, {len(names)}, 2), found "
-            f"{t.shape} and {px.shape}"
-        )
-    bad = [n for n in names if n not in CANONICAL_JOINTS]
-    if bad:
-        raise ShapeError(f"{path}: keypoints: not canonical joint names: {bad}")
-    header = ["time_s"] + [f"{n}_{a}_px" for n in names for a in "xy"]
-    with atomic_write(path, "w", newline="") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow(header)
-        for ti, row in zip(t.tolist(), px.reshape(t.shape[0], -1).tolist()):
-            w.writerow([repr(ti)] + ["nan" if v != v else f"{v:.3f}" for v in row])
-
-
-@dataclass(frozen=True, eq=False)
-class Keypoints:
-    """2-D joint detections of one camera.
-
-    Attributes
-    ----------
-    time_s : (T,) float array
-    joint_names : tuple of str
-        Canonical names (K).
-    pixels : (T, K, 2) float array
-        Image positions (px); NaN where unseen.
-    source : str
-    """
-
-    time_s: FloatArray
-    joint_names: tuple[str, ...]
-    pixels: FloatArray
-    source: str = ""
-
-
-def _read_numeric_csv(path: Path, what: str) -> tuple[list[str], FloatArray]:
-    try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            rows = [r for r in csv.reader(fh) if r]
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FormatError(f"{path}: cannot read {what} ({exc})") from None
-    if not rows:
-        raise FormatError(f"{path}: {what}: expected a header line, found an empty file")
-    header = [h.strip() for h in rows[0]]
-    values = np.empty((len(rows) - 1, len(header)))
-    for i, row in enumerate(rows[1:]):
-        if len(row) != len(header):
-            raise FormatError(
-                f"{path}: line {i + 2}: expected {len(header)} columns, found {len(row)}"
-            )
-        for j, cell in enumerate(row):
-            c = cell.strip()
-            try:
-                values[i, j] = float(c) if c else math.nan
-            except ValueError:
-                raise FormatError(
-                    f"{path}: line {i + 2}, column {header[j]!r}: expected a number, found {c!r}"
-                ) from None
-    return header, values
-
-
-def _check_times(t: FloatArray, path: Path | str, what: str) -> None:
-    if not np.all(np.isfinite(t)):
-        raise FormatError(f"{path}: {what}: expected finite time stamps, found NaN or inf")
-    if t.shape[0] > 1 and np.any(np.diff(t) <= 0):
-        k = int(np.flatnonzero(np.diff(t) <= 0)[0])
-        raise FormatError(
-            f"{path}: {what}: expected strictly increasing time stamps, found {t[k + 1]!r} s at "
-            f"row {k + 1} after {t[k]!r} s"
-        )
-
-
-def read_keypoints_csv(path: str | os.PathLike[str]) -> Keypoints:
-    """Read a file written by `write_keypoints_csv`."""
-    p = Path(path)
-    header, values = _read_numeric_csv(p, "keypoints")
-    if header[0] != "time_s" or (len(header) - 1) % 2:
-        raise FormatError(
-            f"{p}: line 1: expected 'time_s' then pairs '<joint>_x_px,<joint>_y_px', found "
-            f"{header[:5]}"
-        )
-    names: list[str] = []
-    for k in range(1, len(header), 2):
-        base = header[k][: -len("_x_px")]
-        expect = [f"{base}_x_px", f"{base}_y_px"]
-        if header[k : k + 2] != expect:
-            raise FormatError(f"{p}: line 1: expected columns {expect}, found {header[k : k + 2]}")
-        if base not in CANONICAL_JOINTS:
-            raise FormatError(
-                f"{p}: line 1: column {header[k]!r}: expected a canonical joint "
-                f"({', '.join(CANONICAL_JOINTS)}), found {base!r}"
-            )
-        names.append(base)
-    t = values[:, 0]
-    _check_times(t, p, "time_s")
-    return Keypoints(t, tuple(names), values[:, 1:].reshape(len(t), len(names), 2), str(p))
-
-
-def write_timestamps_csv(path: str | os.PathLike[str], time_s: ArrayLike) -> None:
-    """Write per-frame video time stamps: ``frame,time_s``."""
-    t = np.asarray(time_s, dtype=float)
-    with atomic_write(path, "w", newline="") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow(["frame", "time_s"])
-        for i, ti in enumerate(t.tolist()):
-            w.writerow([i, repr(ti)])
-
-
-def read_timestamps_csv(path: str | os.PathLike[str]) -> FloatArray:
-    """Read per-frame video time stamps (a ``time_s`` column; ``frame`` optional)."""
-    p = Path(path)
-    header, values = _read_numeric_csv(p, "video time stamps")
-    if "time_s" not in header:
-        raise FormatError(f"{p}: line 1: expected a 'time_s' column, found {header}")
-    t = values[:, header.index("time_s")]
-    _check_times(t, p, "time_s")
-    return t
-
-
-# ====================================================================== truth
-
-
-@dataclass(frozen=True, eq=False)
-class Truth:
-    """Ground truth of a synthetic session (world frame, mm).
-
-    Attributes
-    ----------
-    time_s : (T,) float array
-        The video frame times.
-    joint_names : tuple of str
-        Canonical names (J).
-    joints_mm : (T, J, 3) float array
-    marker_names : tuple of str
-        Clean markers kept with the truth (incl. the elbow reference markers).
-    markers_mm : (T, M, 3) float array
-    """
-
-    time_s: FloatArray
-    joint_names: tuple[str, ...]
-    joints_mm: FloatArray
-    marker_names: tuple[str, ...] = ()
-    markers_mm: FloatArray = field(default_factory=lambda: np.zeros((0, 0, 3)))
-
-    def __post_init__(self) -> None:
-        if not self.marker_names and np.size(self.markers_mm) == 0:
-            n = int(np.shape(self.time_s)[0])
-            object.__setattr__(self, "markers_mm", np.zeros((n, 0, 3)))
-
-    def save(self, path: str | os.PathLike[str]) -> None:
-        """Write ``truth.npz`` atomically (no pickles)."""
-        from mocapkit.io.atomic import atomic_save_npz
-
-        atomic_save_npz(
-            path,
-            time_s=np.asarray(self.time_s, dtype=float),
-            joint_names=np.array(self.joint_names, dtype=np.str_),
-            joints_mm=np.asarray(self.joints_mm, dtype=float),
-            marker_names=np.array(self.marker_names, dtype=np.str_),
-            markers_mm=np.asarray(self.markers_mm, dtype=float),
-        )
-
-
-def load_truth(path: str | os.PathLike[str]) -> Truth:
-    """Read and validate a ``truth.npz``."""
-    p = Path(path)
-    try:
-        data = np.load(p, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise FormatError(f"{p}: cannot read as .npz ({exc})") from None
-    with data:
-        missing = [k for k in ("time_s", "joint_names", "joints_mm") if k not in data.files]
-        if missing:
-            raise FormatError(f"{p}: missing arrays {missing}; found {sorted(data.files)}")
-        t = np.asarray(data["time_s"], dtype=float)
-        names = tuple(str(n) for n in np.atleast_1d(data["joint_names"]))
-        joints = np.asarray(data["joints_mm"], dtype=float)
-        mnames = (
-            tuple(str(n) for n in np.atleast_1d(data["marker_names"]))
-            if ("marker_names" in data.files)
-            else ()
-        )
-        markers = (
-            np.asarray(data["markers_mm"], dtype=float)
-            if "markers_mm" in data.files
-            else (np.zeros((t.shape[0], 0, 3)))
-        )
-    if t.ndim != 1:
-        raise ShapeError(f"{p}: time_s: expected shape (T,), found {t.shape}")
-    _check_times(t, p, "time_s")
-    if joints.shape != (t.shape[0], len(names), 3):
-        raise ShapeError(
-            f"{p}: joints_mm: expected shape ({t.shape[0]}, {len(names)}, 3), found {joints.shape}"
-        )
-    bad = [n for n in names if n not in CANONICAL_JOINTS]
-    if bad:
-        raise FormatError(f"{p}: joint_names: expected canonical names, found {bad}")
-    if markers.shape != (t.shape[0], len(mnames), 3):
-        raise ShapeError(
-            f"{p}: markers_mm: expected shape ({t.shape[0]}, {len(mnames)}, 3), "
-            f"found {markers.shape}"
-        )
-    return Truth(t, names, joints, mnames, markers)
-
-
-# ====================================================================== video
-
-
-class VideoSource:
-    """Frames of one camera: an mp4 (read with `cv2.VideoCapture`) or an image folder.
-
-    Parameters
-    ----------
-    camera : str
-    path : Path
-        The video file or the image folder.
-    time_s : (N,) float array
-        Frame times (from ``timestamps.csv`` or the nominal rate).
-    """
-
-    def __init__(self, camera: str, path: Path, time_s: FloatArray) -> None:
-        self.camera = camera
-        self.path = path
-        self.time_s = time_s
-        self.is_folder = path.is_dir()
-        self._files: list[Path] = _image_files(path) if self.is_folder else []
-
-    @property
-    def n_frames(self) -> int:
-        """Number of frames."""
-        return int(self.time_s.shape[0])
-
-    def read(self, index: int) -> NDArray[np.uint8]:
-        """One frame (H, W, 3) BGR by index (random access; slow for videos)."""
-        if not 0 <= index < self.n_frames:
-            raise SessionError(f"{self.path}: frame {index} out of range [0, {self.n_frames})")
-        if self.is_folder:
-            return _imread(self._files[index])
-        cap = cv2.VideoCapture(str(self.path))
-        try:
-            cap.set(cv2.CAP_PROP_POS_FRAMES, index)
-            ok, img = cap.read()
-        finally:
-            cap.release()
-        if not ok:
-            raise SessionError(f"{self.path}: cannot decode frame {index}")
-        return np.asarray(img, dtype=np.uint8)
-
-    def open(self) -> _FrameStream:
-        """A sequential reader (cheap `grab`, decode on demand)."""
-        return _FrameStream(self)
-
-
-def _imread(path: Path) -> NDArray[np.uint8]:
-    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if img is None:
-        raise SessionError(f"{path}: cannot read image")
-    return np.asarray(img, dtype=np.uint8)
-
-
-def _image_files(folder: Path) -> list[Path]:
-    return sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_EXTENSIONS)
-
-
-class _FrameStream:
-    """Sequential frame access: `advance` grabs the next frame, `retrieve` decodes it."""
-
-    def __init__(self, source: VideoSource) -> None:
-        self.source = source
-        self.index = -1
-        self._cap = None if source.is_folder else cv2.VideoCapture(str(source.path))
-        self._cache: tuple[int, NDArray[np.uint8]] | None = None
-
-    def advance_to(self, index: int) -> None:
-        while self.index < index:
-            self.index += 1
-            if self._cap is not None and not self._cap.grab():
-                raise SessionError(f"{self.source.path}: cannot read frame {self.index}")
-
-    def retrieve(self, index: int) -> NDArray[np.uint8]:
-        if self._cache is not None and self._cache[0] == index:
-            return self._cache[1]
-        if index != self.index:
-            raise SessionError(
-                f"{self.source.path}: frame {index} is no longer available (the stream is at "
-                f"frame {self.index}); load images before advancing to the next sample"
-            )
-        if self._cap is None:
-            img = _imread(self.source._files[index])
-        else:
-            ok, raw = self._cap.retrieve()
-            if not ok:
-                raise SessionError(f"{self.source.path}: cannot decode frame {index}")
-            img = np.asarray(raw, dtype=np.uint8)
-        self._cache = (index, img)
-        return img
-
-    def close(self) -> None:
-        if self._cap is not None:
-            self._cap.release()
-
-
-class LazyFrame:
-    """A video frame decoded only when `load` is called (valid until the stream advances)."""
-
-    def __init__(self, stream: _FrameStream, index: int, time_s: float) -> None:
-        self._stream = stream
-        self.index = index
-        self.time_s = time_s
-
-    def load(self) -> NDArray[np.uint8]:
-        """The frame (H, W, 3) uint8 BGR."""
-        return self._stream.retrieve(self.index)
 
 
 # ====================================================================== samples
@@ -555,8 +227,6 @@ class Session:
             self.rates[str(key)] = float(v)
 
         # ---------------------------------------------------------------- cameras
-        from mocapkit.io.cameras import read_cameras
-
         cam_file = info.get("cameras", "cameras.json")
         if not isinstance(cam_file, str):
             raise FormatError(
@@ -591,8 +261,6 @@ class Session:
         self._videos = {c: self._videos[c] for c in names if c in self._videos}
 
         # ---------------------------------------------------------------- markers
-        from mocapkit.io.markers import MarkerData, read_markers
-
         present = [f for f in MARKER_FILES if (self.path / f).is_file()]
         if len(present) > 1:
             raise SessionError(
@@ -646,24 +314,7 @@ class Session:
 
     def _open_video(self, cam: str, entry: Path) -> VideoSource:
         ts_path = entry.parent / f"{cam}.timestamps.csv"
-        if entry.is_dir():
-            n = len(_image_files(entry))
-            if n == 0:
-                raise SessionError(
-                    f"{entry}: image folder of camera {cam!r} holds no images "
-                    f"({', '.join(IMAGE_EXTENSIONS)})"
-                )
-        else:
-            cap = cv2.VideoCapture(str(entry))
-            try:
-                if not cap.isOpened():
-                    raise SessionError(f"{entry}: cannot open video of camera {cam!r}")
-                n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
-                fps = float(cap.get(cv2.CAP_PROP_FPS))
-            finally:
-                cap.release()
-            if n <= 0:
-                raise SessionError(f"{entry}: video of camera {cam!r} has no frames")
+        n, fps = probe_video(entry, cam)
         if ts_path.is_file():
             t = read_timestamps_csv(ts_path)
             if t.shape[0] != n:
@@ -673,7 +324,7 @@ class Session:
                 )
         else:
             rate = self.rates.get("video_hz")
-            if rate is None and not entry.is_dir() and fps > 0:
+            if rate is None and fps > 0:  # an image folder has no rate of its own (fps 0)
                 rate = fps
             if rate is None:
                 raise SessionError(
@@ -716,8 +367,6 @@ class Session:
         Uses `mocapkit.io.marker_sets.evaluate_marker_sets` (mean of visible members,
         corrected for drop-outs).
         """
-        from mocapkit.io.marker_sets import MarkerSet, evaluate_marker_sets
-
         self.require(markers=True, marker_sets=tuple(names or ()))
         if self.markers is None:  # unreachable after require; keeps the type checker informed
             raise SessionError(f"{self.path}: session has no markers")

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike
 
-from mocapkit.errors import FormatError, ShapeError
+from mocapkit.errors import ConfigError, FormatError
 from mocapkit.io.atomic import atomic_write
 from mocapkit.io.markers import MarkerData, check_marker_arrays, infer_rate_hz
 
@@ -204,12 +204,12 @@ def write_trc(
     t, names, pos = check_marker_arrays(time_s, marker_names, positions_mm, where)
     if rate_hz is None:
         if t.shape[0] < 2:
-            raise ShapeError(f"{where}: rate_hz: required when fewer than 2 frames are written")
+            raise ConfigError(f"{where}: rate_hz: required when fewer than 2 frames are written")
         rate = infer_rate_hz(t, where)
     else:
         rate = float(rate_hz)
         if not (math.isfinite(rate) and rate > 0):
-            raise ShapeError(f"{where}: rate_hz: expected a positive rate, found {rate_hz}")
+            raise ConfigError(f"{where}: rate_hz: expected a positive rate, found {rate_hz}")
     scaled = (pos / TRC_UNITS_MM[units]).reshape(t.shape[0], -1)
     fmt = f"{{:.{_DECIMALS[units]}f}}"
     n_t, n_m = t.shape[0], len(names)

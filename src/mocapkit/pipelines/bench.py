@@ -20,7 +20,7 @@ import cv2
 import numpy as np
 
 from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
-from mocapkit.errors import ShapeError, unknown_name
+from mocapkit.errors import ConfigError, unknown_name
 from mocapkit.io.atomic import atomic_write
 from mocapkit.skeleton import canonical_positions, forward_kinematics, load_preset
 from mocapkit.skeleton.kinematics import points_and_jacobian
@@ -54,7 +54,7 @@ def bench_kinematics(
         ``fk_poses_per_s``, ``jacobians_per_s`` (medians), their minima, sizes.
     """
     if repeats < 1 or n_poses < 1 or n_jacobians < 1:
-        raise ShapeError(
+        raise ConfigError(
             f"bench_kinematics: expected repeats, n_poses, n_jacobians >= 1, found {repeats}, "
             f"{n_poses}, {n_jacobians}"
         )
@@ -149,7 +149,7 @@ def bench_hybrid(
         ``ik_solves_per_s``, ``mean_elbow_error_mm``, ``pipeline`` and sizes.
     """
     if repeats < 1 or n_frames < 2:
-        raise ShapeError(
+        raise ConfigError(
             f"bench_hybrid: expected repeats >= 1 and n_frames >= 2, found {repeats}, {n_frames}"
         )
     from mocapkit.cues.edges import prepare_frame, roi_distance_map
@@ -271,7 +271,7 @@ def run_benchmarks(name: str, repeats: int = 3) -> dict[str, dict[str, Any]]:
     if name != "all" and name not in BENCHMARKS:
         raise unknown_name("benchmark", name, [*BENCHMARKS, "all"], "mocapkit bench")
     if repeats < 1:
-        raise ShapeError(f"--repeats: expected at least 1, found {repeats}")
+        raise ConfigError(f"--repeats: expected at least 1, found {repeats}")
     names = list(BENCHMARKS) if name == "all" else [name]
     return {n: BENCHMARKS[n](repeats=repeats) for n in names}
 

@@ -14,9 +14,10 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mocapkit.errors import SessionError, ShapeError, unknown_name
+from mocapkit.errors import ConfigError, SessionError, ShapeError, unknown_name
 from mocapkit.ik.sdls import IKConfig, SDLSSolver
 from mocapkit.io.motion import Motion
+from mocapkit.io.motion_files import write_result_folder
 from mocapkit.progress import Progress
 from mocapkit.skeleton.model import Skeleton
 from mocapkit.skeleton.presets import load_preset
@@ -132,7 +133,7 @@ def parse_oriented_sets(text: str) -> tuple[str, ...]:
         if n not in ORIENTED_SETS:
             raise unknown_name("marker set", n, ORIENTED_SETS, "--oriented-sets")
     if not names:
-        raise ShapeError(
+        raise ConfigError(
             "--oriented-sets: expected 'none' or comma-separated marker sets "
             f"({', '.join(ORIENTED_SETS)}), found {text!r}"
         )
@@ -216,12 +217,12 @@ def track_hybrid_session(
     refine_config = None
     if max_elbow_speed_mm_per_s is not None:
         if paper:
-            raise ShapeError(
+            raise ConfigError(
                 "max_elbow_speed_mm_per_s: the paper mode has no elbow-jump penalty; "
                 "give one or the other"
             )
         if not max_elbow_speed_mm_per_s >= 0:
-            raise ShapeError(
+            raise ConfigError(
                 "max_elbow_speed_mm_per_s: expected a speed >= 0 mm/s (0: no penalty), "
                 f"found {max_elbow_speed_mm_per_s}"
             )
@@ -284,7 +285,7 @@ def track_hybrid_session(
         f"{'on' if cfg.use_video else 'off'}) on {session.path}",
     )
     if out_dir is not None:
-        motion.write_result_folder(out_dir)
+        write_result_folder(out_dir, motion)
     return motion
 
 
@@ -379,15 +380,15 @@ def track_hybrid_markers(
     left-hand to the right-hand set (`HybridTracker.initial_pose`); feet are planted
     where that first pose puts them, on the floor z = 0.
     """
+    from mocapkit.io.marker_files import read_markers
     from mocapkit.io.marker_sets import estimate_height_mm, evaluate_marker_sets, parse_marker_sets
-    from mocapkit.io.markers import read_markers
 
     markers = read_markers(markers_path)
     sets = parse_marker_sets(list(marker_sets))
     names = [s.name for s in sets]
     missing = [n for n in MARKER_SETS if n not in names]
     if missing:
-        raise ShapeError(
+        raise ConfigError(
             f"marker_sets: the hybrid tracker needs sets {list(MARKER_SETS)}; "
             f"missing {missing} (given {names})"
         )
@@ -407,7 +408,7 @@ def track_hybrid_markers(
         sk, markers.time_s, q, source=f"hybrid tracker IK on {Path(markers_path).name}"
     )
     if out_dir is not None:
-        motion.write_result_folder(out_dir)
+        write_result_folder(out_dir, motion)
     return motion
 
 
@@ -425,7 +426,7 @@ def bench_ik(n_frames: int = 2000, repeats: int = 5, rate_hz: float = 50.0) -> d
         ``max_residual_mm``, ``converged_fraction``, ``n_frames``.
     """
     if n_frames < 1 or repeats < 1:
-        raise ShapeError(
+        raise ConfigError(
             f"bench_ik: expected n_frames >= 1 and repeats >= 1, found {n_frames}, {repeats}"
         )
     sk = load_preset("zhang21")

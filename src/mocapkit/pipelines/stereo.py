@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 
 from mocapkit.errors import ConfigError, SessionError, unknown_name
 from mocapkit.io.motion import Motion
+from mocapkit.io.motion_files import write_result_folder
 from mocapkit.progress import Progress
 from mocapkit.tracking.stereo.arm_filter import ArmFilterConfig
 from mocapkit.tracking.stereo.tracker import (
@@ -151,7 +152,7 @@ def track_stereo_session(
         source=f"stereo tracker ({mode}, cameras {','.join(names)}) on {session.path}",
     )
     if out_dir is not None:
-        motion.write_result_folder(out_dir)
+        write_result_folder(out_dir, motion)
     return StereoRun(
         motion, np.asarray(yaws), np.asarray(meas), np.asarray(n_ik, dtype=np.int64), seconds
     )

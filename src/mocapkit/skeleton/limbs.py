@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.errors import UnknownNameError, unknown_name
-from mocapkit.skeleton.model import PRISMATIC, Skeleton
+from mocapkit.skeleton.model import PRISMATIC, REVOLUTE, Skeleton
 
 IntArray = NDArray[np.int64]
 
@@ -192,6 +192,64 @@ def spine_dofs(skeleton: Skeleton) -> IntArray:
 def foot_joints(skeleton: Skeleton, side: str) -> IntArray:
     """The canonical ankle joint of one side and all joints below it (foot, toe, end sites)."""
     return skeleton.subtree(leg(skeleton, side).end)
+
+
+def limbs_present(skeleton: Skeleton, kind: str) -> tuple[Limb, ...]:
+    """The arms or legs (``kind`` ``"arm"`` or ``"leg"``) the skeleton has, left first.
+
+    Empty for a model without them (``azad14`` and ``upper_stick`` have no legs).
+    """
+    if kind not in LIMB_KINDS:
+        raise unknown_name("limb kind", kind, LIMB_KINDS)
+    return tuple(
+        limb(skeleton, f"{side}_{kind}") for side in SIDES if has_limb(skeleton, f"{side}_{kind}")
+    )
+
+
+def ankle_joints(skeleton: Skeleton) -> IntArray:
+    """Canonical ankle joints of the legs the skeleton has (left first; empty without legs)."""
+    return np.asarray([lg.end for lg in limbs_present(skeleton, "leg")], dtype=np.int64)
+
+
+def limb_length_mm(skeleton: Skeleton, lmb: Limb, *, to_tip: bool = False) -> float:
+    """Rest length of a limb along its chain (mm).
+
+    The segments from the root joint to the end joint (shoulder to wrist, hip to
+    ankle); with ``to_tip`` also the end joint's own segment (the hand, the foot).
+    For ``zhang21``: left arm 300 + 350 (+ 80 hand) mm, left leg 386 + 550 mm.
+    """
+    lengths = skeleton.bone_length_mm
+    joints = lmb.chain if to_tip else lmb.chain[:-1]
+    total = 0.0
+    for j in joints:
+        total += float(lengths[j])
+    return total
+
+
+def flexion_dofs(skeleton: Skeleton, lmb: Limb) -> tuple[IntArray, NDArray[np.float64]]:
+    """Flexion hinge(s) of a limb's middle joint (elbow, knee) and the sign of flexion.
+
+    A model may flex its elbow either way round: ``zhang21`` has ``[0, 150] deg`` about
+    ``+x``, ``azad14`` has ``theta_4 in [-180, 0] deg`` about ``-x`` (Azad 2008). Both
+    bend the forearm forward from the straight pose; what they share is that a flexion
+    hinge stops at full extension (0), so its range lies on one side of zero. So the
+    flexion DoFs are the revolute DoFs of the middle joint whose range lies on one side
+    of zero (a two-sided hinge, such as a pronation axis, is not a flexion), and the
+    sign is the side the range lies on (+1 for ``[0, x]``, -1 for ``[x, 0]``). Where a
+    range is ``[0, 0]`` the sign is +1. A ball elbow has none.
+
+    Returns
+    -------
+    dofs : ndarray of int, shape (F,)
+    signs : ndarray of float, shape (F,)
+        +1 or -1: flexing by ``a`` rad sets the DoF to ``sign * a``.
+    """
+    on_joint = skeleton.dof_joint == lmb.middle
+    hinge = on_joint & (skeleton.dof_kind == REVOLUTE)
+    one_sided = (skeleton.lower >= 0.0) | (skeleton.upper <= 0.0)
+    dofs = np.flatnonzero(hinge & one_sided).astype(np.int64)
+    signs = np.where(skeleton.lower[dofs] >= 0.0, 1.0, -1.0)
+    return dofs, signs
 
 
 def dof_names_of(skeleton: Skeleton, dofs: IntArray) -> tuple[str, ...]:

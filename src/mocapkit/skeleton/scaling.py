@@ -7,7 +7,7 @@ from collections.abc import Mapping
 import numpy as np
 from numpy.typing import ArrayLike
 
-from mocapkit.errors import ShapeError, unknown_name
+from mocapkit.errors import ConfigError, ShapeError, unknown_name
 from mocapkit.geometry.rotations import matrix_from_axis_angle
 from mocapkit.skeleton.kinematics import canonical_positions, joint_positions
 from mocapkit.skeleton.model import CANONICAL_SEGMENTS, PRISMATIC, FloatArray, Skeleton
@@ -57,7 +57,7 @@ def scale_skeleton(
     sk = skeleton
     if height_mm is not None:
         if not np.isfinite(height_mm) or not 500.0 <= height_mm <= 2800.0:
-            raise ShapeError(
+            raise ConfigError(
                 f"height_mm: expected a stature between 500 and 2800 mm, found {height_mm}"
             )
         f = float(height_mm) / standing_height_mm(sk)
@@ -75,15 +75,15 @@ def scale_skeleton(
         )
     if mass_kg is not None:
         if not np.isfinite(mass_kg) or mass_kg <= 0:
-            raise ShapeError(f"mass_kg: expected a positive body mass, found {mass_kg}")
+            raise ConfigError(f"mass_kg: expected a positive body mass, found {mass_kg}")
         sk = sk.replace(mass_kg=sk.mass_kg * (float(mass_kg) / sk.total_mass_kg))
     for jname, length in (bone_lengths_mm or {}).items():
         j = sk.joint_index(jname)
         old = float(np.linalg.norm(sk.bone_end_mm[j]))
         if old == 0.0:
-            raise ShapeError(f"bone_lengths_mm[{jname!r}]: joint {jname!r} owns no segment")
+            raise ConfigError(f"bone_lengths_mm[{jname!r}]: joint {jname!r} owns no segment")
         if not np.isfinite(length) or length <= 0:
-            raise ShapeError(
+            raise ConfigError(
                 f"bone_lengths_mm[{jname!r}]: expected a positive length, found {length}"
             )
         f = float(length) / old
@@ -189,7 +189,7 @@ def fit_segments(
             raise unknown_name("body segment", seg, CANONICAL_SEGMENTS, "subject measurements")
     for seg, length in lengths.items():
         if not (np.isfinite(length) and length > 0):
-            raise ShapeError(f"bone length of {seg!r}: expected a positive length, found {length}")
+            raise ConfigError(f"bone length of {seg!r}: expected a positive length, found {length}")
     for seg, vec in vectors.items():
         if vec.shape != (3,) or not np.all(np.isfinite(vec)) or np.linalg.norm(vec) == 0:
             raise ShapeError(

@@ -29,7 +29,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.interpolate import PchipInterpolator
 
-from mocapkit.errors import ShapeError, unknown_name
+from mocapkit.errors import ConfigError, unknown_name
 from mocapkit.io.motion import Motion
 from mocapkit.skeleton.kinematics import canonical_positions
 from mocapkit.skeleton.model import Skeleton
@@ -253,7 +253,7 @@ def builtin_motion(name: str, duration_s: float = DEFAULT_DURATION_S) -> Motion:
     if name not in makers:
         raise unknown_name("built-in motion", name, BUILTIN_NAMES, "builtin:")
     if not (np.isfinite(duration_s) and 0.1 <= duration_s <= 3600.0):
-        raise ShapeError(f"duration_s: expected 0.1-3600 s, found {duration_s}")
+        raise ConfigError(f"duration_s: expected 0.1-3600 s, found {duration_s}")
     skel = load_preset("zhang21")
     n = round(duration_s * RATE_HZ) + 1
     t = np.arange(n) / RATE_HZ

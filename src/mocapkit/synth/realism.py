@@ -15,11 +15,23 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mocapkit.errors import ShapeError
+from mocapkit.errors import ConfigError
 from mocapkit.synth.render import CameraRenderer
 
 FloatArray = NDArray[np.float64]
 BACKGROUNDS = ("textured", "plain")
+
+
+#: Accepted range (inclusive) of each numeric `RealismOptions` field.
+REALISM_RANGES: dict[str, tuple[float, float]] = {
+    "noise": (0.0, 100.0),
+    "blur": (0.0, 1.0),
+    "marker_noise_mm": (0.0, 200.0),
+    "dropout": (0.0, 1.0),
+    "dropout_s": (0.0, 60.0),
+    "video_jitter_s": (0.0, 0.1),
+    "marker_jitter_s": (0.0, 0.1),
+}
 
 
 @dataclass(frozen=True)
@@ -56,22 +68,14 @@ class RealismOptions:
     marker_jitter_s: float = 0.0002
 
     def __post_init__(self) -> None:
-        checks = {
-            "noise": (self.noise, 0.0, 100.0),
-            "blur": (self.blur, 0.0, 1.0),
-            "marker_noise_mm": (self.marker_noise_mm, 0.0, 200.0),
-            "dropout": (self.dropout, 0.0, 1.0),
-            "dropout_s": (self.dropout_s, 0.0, 60.0),
-            "video_jitter_s": (self.video_jitter_s, 0.0, 0.1),
-            "marker_jitter_s": (self.marker_jitter_s, 0.0, 0.1),
-        }
-        for name, (v, lo, hi) in checks.items():
+        for name, (lo, hi) in REALISM_RANGES.items():
+            v = getattr(self, name)
             if not (np.isfinite(v) and lo <= v <= hi):
-                raise ShapeError(
+                raise ConfigError(
                     f"--{name.replace('_', '-')}: expected a value in [{lo}, {hi}], found {v}"
                 )
         if self.background not in BACKGROUNDS:
-            raise ShapeError(
+            raise ConfigError(
                 f"--background: expected one of {', '.join(BACKGROUNDS)}, found {self.background!r}"
             )
 

@@ -24,7 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
-from mocapkit.errors import ShapeError
+from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.geometry.rotations import matrix_from_axis_angle
 from mocapkit.skeleton.kinematics import forward_kinematics
 from mocapkit.skeleton.model import Skeleton
@@ -138,7 +138,7 @@ def parse_colour(text: str) -> tuple[int, int, int]:
             pass
         else:
             return (b, g, r)
-    raise ShapeError(
+    raise ConfigError(
         f"colour {text!r}: expected one of {', '.join(sorted(_NAMED_COLOURS_BGR))} or #RRGGBB"
     )
 
@@ -160,7 +160,7 @@ class Appearance:
     ) -> Appearance:
         """A seeded appearance; ``shirt`` (a colour name or #RRGGBB) overrides the draw."""
         if sleeve not in SLEEVES:
-            raise ShapeError(f"sleeve: expected one of {', '.join(SLEEVES)}, found {sleeve!r}")
+            raise ConfigError(f"sleeve: expected one of {', '.join(SLEEVES)}, found {sleeve!r}")
         names = ("red", "blue", "green", "yellow", "orange", "purple", "teal", "white")
         shirt_bgr = parse_colour(shirt) if shirt else _NAMED_COLOURS_BGR[str(rng.choice(names))]
         return Appearance(

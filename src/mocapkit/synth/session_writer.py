@@ -31,10 +31,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
-from mocapkit.errors import MocapError, SessionError, ShapeError
+from mocapkit.errors import ConfigError, MocapError, SessionError, ShapeError
 from mocapkit.io.atomic import atomic_folder, remove_stale_temporaries
 from mocapkit.io.motion import Motion
-from mocapkit.io.session import Truth, write_keypoints_csv, write_session_json, write_timestamps_csv
+from mocapkit.io.session import write_session_json
+from mocapkit.io.session_csv import write_keypoints_csv, write_timestamps_csv
+from mocapkit.io.truth import Truth
 from mocapkit.progress import Progress
 from mocapkit.skeleton.model import PRISMATIC, TRUNK_SEGMENTS
 from mocapkit.skeleton.scaling import (
@@ -70,6 +72,10 @@ FLOOR_CLEARANCE_MM = 30.0
 TRACKER_SETS = ("head", "left_hand", "right_hand")
 REFERENCE_MARKERS = ("left_elbow_ref", "right_elbow_ref")
 VIDEO_FORMATS = ("mp4", "png")
+#: Accepted video rates (frames per second), marker rates (Hz) and image sides (px).
+FPS_RANGE: tuple[float, float] = (1.0, 1000.0)
+MARKER_RATE_RANGE_HZ: tuple[float, float] = (1.0, 2000.0)
+IMAGE_SIDE_RANGE_PX: tuple[int, int] = (32, 8192)
 
 
 @dataclass(frozen=True)
@@ -98,23 +104,24 @@ class SynthOptions:
         if self.blackout_s is not None:
             b0, bd = self.blackout_s
             if not (np.isfinite(b0) and np.isfinite(bd) and b0 >= 0 and bd > 0):
-                raise ShapeError(
+                raise ConfigError(
                     f"--blackout-s: expected START,DURATION with START >= 0 s and DURATION > 0 s, "
                     f"found {self.blackout_s}"
                 )
         if not (np.isfinite(self.start_s) and self.start_s >= 0):
-            raise ShapeError(f"--start-s: expected a time >= 0 s, found {self.start_s}")
+            raise ConfigError(f"--start-s: expected a time >= 0 s, found {self.start_s}")
         if self.seconds is not None and not (np.isfinite(self.seconds) and self.seconds > 0):
-            raise ShapeError(f"--seconds: expected a positive duration, found {self.seconds}")
-        if not (1.0 <= self.fps <= 1000.0):
-            raise ShapeError(f"--fps: expected 1-1000 frames per second, found {self.fps}")
-        if not (1.0 <= self.marker_rate_hz <= 2000.0):
-            raise ShapeError(f"--marker-rate: expected 1-2000 Hz, found {self.marker_rate_hz}")
+            raise ConfigError(f"--seconds: expected a positive duration, found {self.seconds}")
+        if not (FPS_RANGE[0] <= self.fps <= FPS_RANGE[1]):
+            raise ConfigError(f"--fps: expected 1-1000 frames per second, found {self.fps}")
+        if not (MARKER_RATE_RANGE_HZ[0] <= self.marker_rate_hz <= MARKER_RATE_RANGE_HZ[1]):
+            raise ConfigError(f"--marker-rate: expected 1-2000 Hz, found {self.marker_rate_hz}")
         w, h = self.image_size
-        if not (32 <= w <= 8192 and 32 <= h <= 8192):
-            raise ShapeError(f"--size: expected WxH between 32 and 8192 px, found {w}x{h}")
+        lo, hi = IMAGE_SIDE_RANGE_PX
+        if not (lo <= w <= hi and lo <= h <= hi):
+            raise ConfigError(f"--size: expected WxH between 32 and 8192 px, found {w}x{h}")
         if self.video_format not in VIDEO_FORMATS:
-            raise ShapeError(
+            raise ConfigError(
                 f"video format: expected one of {', '.join(VIDEO_FORMATS)}, "
                 f"found {self.video_format!r}"
             )
@@ -338,7 +345,7 @@ def _render_session(motion_spec: str, out: Path, label: str, options: SynthOptio
         raise ShapeError(f"{motion.source}: expected at least 2 frames, found {t_m.shape[0]}")
     clip_end = float(t_m[-1])
     if opts.start_s >= clip_end:
-        raise ShapeError(
+        raise ConfigError(
             f"--start-s {opts.start_s}: the clip {motion.source} lasts {clip_end:.3f} s"
         )
     end = clip_end if opts.seconds is None else opts.start_s + opts.seconds
@@ -383,7 +390,7 @@ def _render_session(motion_spec: str, out: Path, label: str, options: SynthOptio
     )
     t_video = np.maximum.accumulate(t_video)
     if np.any(np.diff(t_video) <= 0):
-        raise ShapeError("video time stamps collapsed; increase --seconds or lower the jitter")
+        raise ConfigError("video time stamps collapsed; increase --seconds or lower the jitter")
     dt_m = 1.0 / opts.marker_rate_hz
     # the marker system runs independently of the camera and is already streaming when
     # the first video frame is taken: its first sample lies before t = 0 (by 0.05-0.75 of
@@ -401,7 +408,7 @@ def _render_session(motion_spec: str, out: Path, label: str, options: SynthOptio
 
     # -------------------------------------------------------- static data
     from mocapkit.io.cameras import write_cameras
-    from mocapkit.io.markers import write_markers_csv
+    from mocapkit.io.marker_csv import write_markers_csv
 
     write_cameras(out / "cameras.json", cameras)
     joints_local = joints_all[i0:i1] + shift

@@ -87,7 +87,7 @@ from mocapkit.cues.edges import (
     roi_around_points,
     roi_distance_map,
 )
-from mocapkit.errors import ShapeError, unknown_name
+from mocapkit.errors import ConfigError, ShapeError, unknown_name
 from mocapkit.geometry.rotations import axis_angle_matrix_nb
 from mocapkit.skeleton.kinematics import forward_kinematics
 from mocapkit.skeleton.model import REVOLUTE, Skeleton
@@ -219,18 +219,18 @@ class RefineConfig:
         }
         for name, ok in checks.items():
             if not ok:
-                raise ShapeError(
+                raise ConfigError(
                     f"RefineConfig.{name}: expected a positive value (maxfev >= 5), found "
                     f"{getattr(self, name)!r}"
                 )
         pts = np.asarray(self.effector_points_mm, dtype=float)
         if pts.shape != (2, 3) or not np.all(np.isfinite(pts)):
-            raise ShapeError(
+            raise ConfigError(
                 "RefineConfig.effector_points_mm: expected ((x, y, z), (x, y, z)) for the left "
                 f"and right hands, found {self.effector_points_mm!r}"
             )
         if self.solver not in ("numba", "scipy"):
-            raise ShapeError(
+            raise ConfigError(
                 f"RefineConfig.solver: expected 'numba' or 'scipy', found {self.solver!r}"
             )
 

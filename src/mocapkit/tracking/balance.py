@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mocapkit.errors import ShapeError
+from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.ik.sdls import SDLSSolver
 from mocapkit.skeleton.kinematics import center_of_mass, forward_kinematics
 from mocapkit.skeleton.model import Skeleton
@@ -65,15 +65,15 @@ class BalanceConfig:
 
     def __post_init__(self) -> None:
         if self.mode not in _BALANCE_MODES:
-            raise ShapeError(
+            raise ConfigError(
                 f"BalanceConfig.mode: expected one of {_BALANCE_MODES}, found {self.mode!r}"
             )
         if not 0.0 <= self.margin_fraction < 0.5:
-            raise ShapeError(
+            raise ConfigError(
                 f"BalanceConfig.margin_fraction: expected [0, 0.5), found {self.margin_fraction}"
             )
         if self.bisection_steps < 1:
-            raise ShapeError(
+            raise ConfigError(
                 f"BalanceConfig.bisection_steps: expected >= 1, found {self.bisection_steps}"
             )
 
@@ -323,7 +323,7 @@ def balance_pose(
     act = None if active is None else np.asarray(active, dtype=bool)
     if cfg.mode == "proportional":
         if model is None:
-            raise ShapeError("balance_pose: mode 'proportional' needs a calibrated BalanceModel")
+            raise ConfigError("balance_pose: mode 'proportional' needs a calibrated BalanceModel")
         taus = model.taus(dh)
     else:
         support = np.asarray(support_mm, dtype=float)

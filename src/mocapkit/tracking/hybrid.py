@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.cues.edges import EdgeConfig
-from mocapkit.errors import ShapeError, unknown_name
+from mocapkit.errors import ConfigError, ShapeError, unknown_name
 from mocapkit.ik.sdls import Effector, IKConfig, SDLSSolver
 from mocapkit.skeleton.kinematics import canonical_positions, forward_kinematics
 from mocapkit.skeleton.model import PRISMATIC, Skeleton
@@ -152,9 +152,11 @@ class HybridConfig:
 
     def __post_init__(self) -> None:
         if not self.gap_limit_s >= 0:
-            raise ShapeError(f"HybridConfig.gap_limit_s: expected >= 0 s, found {self.gap_limit_s}")
+            raise ConfigError(
+                f"HybridConfig.gap_limit_s: expected >= 0 s, found {self.gap_limit_s}"
+            )
         if not self.smoothing_min_cutoff_hz > 0 or not self.smoothing_beta >= 0:
-            raise ShapeError(
+            raise ConfigError(
                 "HybridConfig: expected smoothing_min_cutoff_hz > 0 and smoothing_beta >= 0, found "
                 f"{self.smoothing_min_cutoff_hz}, {self.smoothing_beta}"
             )
@@ -335,7 +337,7 @@ class HybridTracker:
                 raise unknown_name("marker set", name, effs, "HybridConfig.marker_offsets_mm")
             o = np.asarray(off, dtype=float)
             if o.shape != (3,) or not np.all(np.isfinite(o)):
-                raise ShapeError(
+                raise ConfigError(
                     f"HybridConfig.marker_offsets_mm[{name!r}]: expected 3 finite "
                     f"numbers (mm), found {off!r}"
                 )
@@ -352,7 +354,7 @@ class HybridTracker:
             for member, off in members.items():
                 o = np.asarray(off, dtype=float)
                 if o.shape != (3,) or not np.all(np.isfinite(o)):
-                    raise ShapeError(
+                    raise ConfigError(
                         f"HybridConfig.member_offsets_mm[{name!r}][{member!r}]: expected 3 "
                         f"finite numbers (mm), found {off!r}"
                     )

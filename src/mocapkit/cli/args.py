@@ -1,0 +1,107 @@
+"""Argument types shared by the subcommands: bad values become argparse usage errors.
+
+A ``type=`` built here rejects a value while the command line is parsed, so argparse
+prints the usage line and ``argument --opt: <reason>`` and exits with status 2, before
+any work starts. The library keeps its own checks (`mocapkit.errors.ConfigError`) for
+callers that do not go through the command line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections.abc import Callable
+from typing import TypeVar
+
+from mocapkit.errors import MocapError
+
+T = TypeVar("T")
+
+
+def _reason(exc: MocapError) -> str:
+    """The library's message without a leading ``--option:`` (argparse names the option)."""
+    text = str(exc)
+    if text.startswith("--") and ": " in text:
+        return text.split(": ", 1)[1]
+    return text
+
+
+def parsed_by(parse: Callable[[str], T], name: str) -> Callable[[str], T]:
+    """A ``type=`` that converts with a library parser; its `MocapError` is a usage error.
+
+    Parameters
+    ----------
+    parse : callable
+        Takes the argument text; raises a `MocapError` subclass for a bad value.
+    name : str
+        What the value is (argparse shows it in its own messages).
+    """
+
+    def convert(text: str) -> T:
+        try:
+            return parse(text)
+        except MocapError as exc:
+            raise argparse.ArgumentTypeError(_reason(exc)) from None
+
+    convert.__name__ = name
+    return convert
+
+
+def checked_by(check: Callable[[str], object], name: str) -> Callable[[str], str]:
+    """A ``type=`` that keeps the text as given once a library parser accepts it."""
+
+    def convert(text: str) -> str:
+        parsed_by(check, name)(text)
+        return text
+
+    convert.__name__ = name
+    return convert
+
+
+def number(
+    kind: type[float] | type[int] = float,
+    *,
+    at_least: float | None = None,
+    above: float | None = None,
+    at_most: float | None = None,
+) -> Callable[[str], float]:
+    """A ``type=`` for a finite number with optional bounds.
+
+    Parameters
+    ----------
+    kind : float or int
+    at_least, above, at_most : float, optional
+        ``value >= at_least``, ``value > above``, ``value <= at_most``.
+
+    Examples
+    --------
+    >>> number(at_least=0.0, at_most=1.0)("0.5")
+    0.5
+    """
+    what = "an integer" if kind is int else "a number"
+    bounds = [
+        f"{op} {b:g}"
+        for op, b in ((">=", at_least), (">", above), ("<=", at_most))
+        if b is not None
+    ]
+    expected = what + (" " + " and ".join(bounds) if bounds else "")
+
+    def convert(text: str) -> float:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {expected}, found {text!r}") from None
+        if not (
+            math.isfinite(value)
+            and (at_least is None or value >= at_least)
+            and (above is None or value > above)
+            and (at_most is None or value <= at_most)
+        ):
+            raise argparse.ArgumentTypeError(f"expected {expected}, found {text}")
+        return value
+
+    convert.__name__ = "int" if kind is int else "float"
+    return convert
+
+
+__all__ = ["checked_by", "number", "parsed_by"]
