@@ -19,7 +19,9 @@ explicit blob matching, which is deterministic and cheap:
    through it, since the merged centroid is neither hand;
 4. initialisation (and re-initialisation of a lost target): the head is the largest
    candidate (a face is the largest skin blob; the highest candidate can be a ghost
-   from a wrong pair), the hands the others, left/right by their side of the head in the
+   from a wrong pair), taken only when no other candidate lies more than 100 mm above
+   it (a subject turned away shows no face); the hands the others farther than
+   `HAND_HEAD_MIN_MM` from the head, left/right by their side of the head in the
    torso frame (x to the subject's right).
 """
 
@@ -39,6 +41,9 @@ from mocapkit.camera.triangulation import triangulate_views
 from mocapkit.errors import ConfigError
 
 FloatArray = NDArray[np.float64]
+
+#: Nearest a hand may be to the head when it is (re-)initialised (mm).
+HAND_HEAD_MIN_MM = 200.0
 
 #: Targets, in output order.
 TARGETS = ("head", "left_hand", "right_hand")
@@ -181,10 +186,18 @@ class HeadHandTracker:
                 taken.add(int(np.argmin(d)))
         free = [i for i in range(cands.shape[0]) if i not in taken]
         if 0 in which and free:
-            i = free[0]  # candidates come largest first: the face is the largest skin blob
-            self._set(0, cands[i])
-            free.remove(i)
+            # candidates come largest first: the face is the largest skin blob, and the
+            # head is above the hands; wait for a frame where both hold (a subject
+            # turned away shows no face, and a hand would be taken for it)
+            i = free[0]
+            top = max(float(cands[c, 2]) for c in free)
+            if cands[i, 2] >= top - 100.0:
+                self._set(0, cands[i])
+                free.remove(i)
         head = self.pos[0]
+        if np.all(np.isfinite(head)):
+            # a hand is not taken from the face's surroundings (a split face blob)
+            free = [c for c in free if np.linalg.norm(cands[c] - head) > HAND_HEAD_MIN_MM]
         for k in (1, 2):
             if k not in which or not free:
                 continue
