@@ -350,6 +350,34 @@ class GradientConfig:
             )
 
 
+@numba.njit(cache=True)
+def _remap_nb(
+    gx: Float32Array,
+    gy: Float32Array,
+    keep: UInt8Array,
+    masked: bool,
+    inv_sat: float,
+    oriented: bool,
+) -> None:
+    """In place: oriented, ``(gx, gy) * inv_sat / max(|g| inv_sat, 1)``; else ``gx :=
+    min(|g| inv_sat, 1)``; 0 where ``masked`` and ``keep == 0``."""
+    for r in range(gx.shape[0]):
+        for c in range(gx.shape[1]):
+            if masked and keep[r, c] == 0:
+                gx[r, c] = 0.0
+                gy[r, c] = 0.0
+                continue
+            x = gx[r, c] * inv_sat
+            y = gy[r, c] * inv_sat
+            m = math.sqrt(x * x + y * y)
+            if oriented:
+                f = 1.0 / m if m > 1.0 else 1.0
+                gx[r, c] = x * f
+                gy[r, c] = y * f
+            else:
+                gx[r, c] = m if m < 1.0 else 1.0
+
+
 def _gradient_core(
     image: ArrayLike,
     roi: Roi | None,
@@ -386,25 +414,18 @@ def _gradient_core(
         crop = np.asarray(cv2.GaussianBlur(crop, k, 0), dtype=np.uint8)
     gx = np.asarray(cv2.Sobel(crop, cv2.CV_32F, 1, 0, ksize=3), dtype=np.float32)
     gy = np.asarray(cv2.Sobel(crop, cv2.CV_32F, 0, 1, ksize=3), dtype=np.float32)
-    g = np.asarray(cv2.magnitude(gx, gy), dtype=np.float32)
-    g *= np.float32(1.0 / cfg.saturation)
-    keep = None
     if figure is not None:
         f = np.asarray(figure)
         if f.shape != (h, w):
             raise ShapeError(f"figure: expected shape {(h, w)}, found {f.shape}")
-        keep = f[cy0:cy1, cx0:cx1] != 0
-    k_post = (2 * r_post + 1, 2 * r_post + 1)
-    if oriented:
-        # the gradient vector, its length remapped as the magnitude's
-        scale = np.float32(1.0 / cfg.saturation) / np.maximum(g, np.float32(1.0))
-        comps = [(gx * scale).astype(np.float32), (gy * scale).astype(np.float32)]
+        keep = np.ascontiguousarray(f[cy0:cy1, cx0:cx1], dtype=np.uint8)
     else:
-        np.minimum(g, np.float32(1.0), out=g)
-        comps = [g]
+        keep = np.full((1, 1), 255, np.uint8)
+    # one compiled pass: remap to [0, 1] (the vector's length like the magnitude), mask
+    _remap_nb(gx, gy, keep, figure is not None, float(1.0 / cfg.saturation), oriented)
+    comps = [gx, gy] if oriented else [gx]
+    k_post = (2 * r_post + 1, 2 * r_post + 1)
     for c, target in zip(comps, outs):
-        if keep is not None:
-            c[~keep] = 0.0
         if cfg.post_blur_sigma_px > 0:
             c = np.asarray(cv2.GaussianBlur(c, k_post, cfg.post_blur_sigma_px), dtype=np.float32)
         target[y0:y1, x0:x1] = c[y0 - cy0 : y1 - cy0, x0 - cx0 : x1 - cx0]

@@ -285,6 +285,36 @@ class StereoTracker:
                 out.append(roi_around_points(px, c.image_size, 4.0))
         return out
 
+    def _arm_rois(
+        self, torso_root: FloatArray, rb: FloatArray, hands: dict[str, FloatArray]
+    ) -> list[Roi | None]:
+        """Where the arms can be this frame: per arm, the box spanned by the shoulder and
+        the measured hand grown by the upper arm's length (the elbow circle lies inside
+        it), or the arm's whole reach without a measured hand."""
+        pts = []
+        corners = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+        for s in SIDES:
+            a, b = self.lengths[s]
+            pad = float(self.radii[s].max()) + self.config.reach_pad_mm
+            sh = torso_root + rb @ (self.shoulder_off[s] + self.head_off)
+            h = hands[s]
+            if np.all(np.isfinite(h)):
+                lo = np.minimum(sh, h) - (a + pad)
+                hi = np.maximum(sh, h) + (a + pad)
+                pts.append(lo + (corners > 0) * (hi - lo))
+            else:
+                r = a + b + self.config.hand_offset + pad
+                pts.append(sh + r * corners)
+        allp = np.concatenate(pts)
+        out: list[Roi | None] = []
+        for c in self.cameras:
+            px = c.project(allp)
+            if not np.all(np.isfinite(px)):
+                out.append(None)
+            else:
+                out.append(roi_around_points(px, c.image_size, 4.0))
+        return out
+
     def _fit_shirt(self, images: list[NDArray[np.uint8]], head: FloatArray, rb: FloatArray) -> None:
         chest = head + rb @ np.array([0.0, 0.0, -280.0]) + rb @ np.array([0.0, 60.0, 0.0])
         samples = []
@@ -385,7 +415,8 @@ class StereoTracker:
         if images:
             if cfg.figure_ground and self.shirt is None and self.head_mm is not None:
                 self._fit_shirt(images, head, rb)
-            rois = self._rois(self.head_mm, rb)
+            hands_now = {"left": meas[1], "right": meas[2]}
+            rois = self._arm_rois(torso_root, rb, hands_now) if self.head_mm is not None else rois
             grads = self._gx
             grads_y = self._gy if cfg.arm.oriented_edges else None
             for i, (img, r) in enumerate(zip(images, rois)):
