@@ -20,7 +20,7 @@ from numpy.typing import ArrayLike, NDArray
 from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import ShapeError
 from mocapkit.skeleton.kinematics import forward_kinematics
-from mocapkit.skeleton.model import Skeleton
+from mocapkit.skeleton.model import CANONICAL_SEGMENTS, Skeleton
 from mocapkit.tracking.arm_refinement import cone_contour_generators_nb
 
 FloatArray = NDArray[np.float64]
@@ -124,6 +124,58 @@ def draw_body(
     return image
 
 
+def draw_sticks(
+    image: NDArray[np.uint8],
+    camera: Camera,
+    joint_names: Sequence[str],
+    joints_mm: ArrayLike,
+    colour: Colour = (0, 165, 255),
+    thickness: int = 2,
+) -> NDArray[np.uint8]:
+    """Draw canonical joints as dots joined by the `CANONICAL_SEGMENTS` sticks, in place.
+
+    Parameters
+    ----------
+    image : ndarray of uint8, shape (H, W, 3)
+        BGR canvas of the camera's size.
+    camera : Camera
+    joint_names : sequence of str, length K
+        Canonical joint names of the rows of ``joints_mm``.
+    joints_mm : array_like, shape (K, 3)
+        Joint positions in the world frame (mm); joints with NaN, and sticks touching
+        them, are left out, as are joints behind the camera.
+    colour : BGR
+    thickness : int
+        Line width (px); dots have this radius plus one.
+    """
+    pts = np.asarray(joints_mm, dtype=float).reshape(-1, 3)
+    if pts.shape[0] != len(joint_names):
+        raise ShapeError(
+            f"joints_mm: expected {len(joint_names)} joints (one per name), found {pts.shape[0]}"
+        )
+    in_camera = pts @ camera.camera_from_world[:3, :3].T + camera.camera_from_world[:3, 3]
+    ok = np.all(np.isfinite(pts), axis=1) & (in_camera[:, 2] > 1.0)
+    px = np.full((pts.shape[0], 2), np.nan)
+    if np.any(ok):
+        px[ok] = camera.project_camera_points(in_camera[ok])
+    ok &= np.all(np.isfinite(px), axis=1)
+    index = {n: k for k, n in enumerate(joint_names)}
+    shift = 4  # sub-pixel precision of OpenCV's drawing
+    scale = 1 << shift
+    fixed = np.round(np.where(ok[:, None], px, 0.0) * scale).astype(np.int64)
+    for a, b in CANONICAL_SEGMENTS.values():
+        ia, ib = index.get(a), index.get(b)
+        if ia is None or ib is None or not (ok[ia] and ok[ib]):
+            continue
+        pa = (int(fixed[ia, 0]), int(fixed[ia, 1]))
+        pb = (int(fixed[ib, 0]), int(fixed[ib, 1]))
+        cv2.line(image, pa, pb, colour, thickness, cv2.LINE_AA, shift)
+    for k in np.flatnonzero(ok):
+        centre = (int(fixed[k, 0]), int(fixed[k, 1]))
+        cv2.circle(image, centre, (thickness + 1) * scale, colour, -1, cv2.LINE_AA, shift)
+    return image
+
+
 def draw_points(
     image: NDArray[np.uint8], points_px: ArrayLike, colour: Colour = (0, 255, 255), radius: int = 1
 ) -> NDArray[np.uint8]:
@@ -134,4 +186,4 @@ def draw_points(
     return image
 
 
-__all__ = ["draw_body", "draw_points", "segment_silhouettes"]
+__all__ = ["draw_body", "draw_points", "draw_sticks", "segment_silhouettes"]
