@@ -4,8 +4,10 @@
 their 2-D keypoints) through `mocapkit.tracking.stereo.tracker.StereoTracker` and
 writes the usual result folder. `evaluate_stereo` scores a result against a synthetic
 session's truth: the mean error of shoulders, elbows and wrists and the torso yaw
-error (the yaw of the line between the shoulders). `bench_stereo` times the whole
-per-frame pipeline at 640x480 on a rendered stereo session.
+error (the yaw of the line between the shoulders). `stereo_accuracy` renders the
+standard in-view excerpts (`STEREO_CLIPS`) and scores each tracker mode
+(`ACCURACY_MODES`) on them. `bench_stereo` times the whole per-frame pipeline at
+640x480 on a rendered stereo session.
 """
 
 from __future__ import annotations
