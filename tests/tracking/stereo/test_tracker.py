@@ -136,3 +136,40 @@ def test_cli_track_stereo(session, tmp_path, capsys):
     assert (out / "motion.npz").is_file() and (out / "joints.csv").is_file()
     text = capsys.readouterr().out
     assert "arm mean" in text and "torso yaw" in text
+
+
+def test_arm_rois_hold_every_elbow_on_the_circle(session):
+    """The gradient maps are computed only in the arm RoIs: every arm pose that reaches the
+    measured hand (any alpha) must project inside them."""
+    import math
+
+    from mocapkit.ik.arm_analytic import arm_ik, make_problem
+    from mocapkit.tracking.stereo.tracker import StereoTracker, yaw_matrix
+
+    s = load_session(session)
+    sk = azad_skeleton(s.bone_lengths_mm, s.segment_vectors_mm)
+    cams = [s.camera(c) for c in ("stereo_left", "stereo_right")]
+    tracker = StereoTracker(sk, cams)
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        rb = yaw_matrix(rng.uniform(-0.5, 0.5))
+        root = np.array([0.0, 0.0, 1400.0]) + rng.normal(0, 50, 3)
+        hands = {}
+        for side in ("left", "right"):
+            sh = root + rb @ (tracker.shoulder_off[side] + tracker.head_off)
+            a, b = tracker.lengths[side]
+            d = rng.normal(size=3)
+            hands[side] = sh + rng.uniform(0.3, 0.95) * (a + b) * d / np.linalg.norm(d)
+        rois = tracker._arm_rois(root, rb, hands)
+        for side in ("left", "right"):
+            sh = root + rb @ (tracker.shoulder_off[side] + tracker.head_off)
+            a, b = tracker.lengths[side]
+            prob = make_problem(rb, sh, hands[side], a, b)
+            _q, elbows = arm_ik(prob, np.linspace(-math.pi, math.pi, 72))
+            for cam, roi in zip(cams, rois):
+                assert roi is not None
+                px = cam.project(np.vstack([elbows, sh, hands[side]]))
+                x0, y0, x1, y1 = roi
+                inside = (px[:, 0] >= x0) & (px[:, 0] < x1) & (px[:, 1] >= y0) & (px[:, 1] < y1)
+                in_image = cam.in_image(px)
+                assert np.all(inside | ~in_image)
