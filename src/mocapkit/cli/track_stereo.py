@@ -37,21 +37,44 @@ def register_method(methods: Any) -> None:
     p.add_argument(
         "--particles", type=int, default=None, help="particles per arm and run (default 150)"
     )
+    p.add_argument(
+        "--torso",
+        choices=("shoulders", "keypoints"),
+        default="shoulders",
+        help="torso orientation from the adaptive shoulders (default, the paper's inputs) or "
+        "from the shoulder/neck/pelvis keypoints (with --keypoints)",
+    )
+    p.add_argument(
+        "--fixed-shoulders",
+        action="store_true",
+        help="4 DoF per arm: no adaptive shoulder offsets (best with --torso keypoints)",
+    )
     p.add_argument("--json", action="store_true", help="print the evaluation as JSON")
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
+    from dataclasses import replace
     from pathlib import Path
 
+    from mocapkit.errors import ConfigError
     from mocapkit.pipelines.stereo import evaluate_stereo, track_stereo_session
+    from mocapkit.tracking.stereo.tracker import StereoConfig
 
+    if args.torso == "keypoints" and not args.keypoints:
+        raise ConfigError("--torso keypoints needs --keypoints")
+    if args.particles is not None and args.particles < 2:
+        raise ConfigError(f"--particles: expected at least 2, found {args.particles}")
+    cfg = StereoConfig(use_keypoints=args.keypoints, torso=args.torso)
+    if args.fixed_shoulders:
+        cfg = replace(cfg, arm=replace(cfg.arm, adaptive_shoulder=False))
     run = track_stereo_session(
         args.session,
         args.out,
         cameras=args.cameras,
         use_keypoints=args.keypoints,
         n_particles=args.particles,
+        config=cfg,
     )
     fps = run.motion.n_frames / max(run.seconds, 1e-9)
     print(f"tracked {run.motion.n_frames} frames in {run.seconds:.1f} s ({fps:.1f} frames/s)")

@@ -130,6 +130,9 @@ def test_cli_track_stereo(session, tmp_path, capsys):
             "30",
             "--cameras",
             "stereo_left,stereo_right,mono",
+            "--torso",
+            "keypoints",
+            "--fixed-shoulders",
         ]
     )
     assert rc == 0
@@ -173,3 +176,11 @@ def test_arm_rois_hold_every_elbow_on_the_circle(session):
                 inside = (px[:, 0] >= x0) & (px[:, 0] < x1) & (px[:, 1] >= y0) & (px[:, 1] < y1)
                 in_image = cam.in_image(px)
                 assert np.all(inside | ~in_image)
+
+
+def test_cli_refuses_a_keypoint_torso_without_keypoints(session, tmp_path, capsys):
+    rc = main(
+        ["track", "stereo", str(session), "--out", str(tmp_path / "r"), "--torso", "keypoints"]
+    )
+    assert rc == 2
+    assert "--torso keypoints needs --keypoints" in capsys.readouterr().err
