@@ -40,11 +40,7 @@ CORE_USING_SIDE: frozenset[str] = frozenset({"pipelines", "cli"})
 
 #: Upward imports that are known and being removed, with the branch that removes them.
 #: Each entry must still occur: when its import is gone, delete the entry.
-KNOWN_UPWARD_IMPORTS: Mapping[tuple[str, str], str] = {
-    # bb-kernels' branch moves the shared outline kernel out of tracking and removes
-    # this edge; drop the entry when that branch is merged.
-    ("mocapkit.viz.overlay", "mocapkit.tracking.arm_refinement"): "bb-kernels",
-}
+KNOWN_UPWARD_IMPORTS: Mapping[tuple[str, str], str] = {}
 
 #: A joint name of a preset (zhang21, upper_stick, azad14): generic code finds limbs
 #: through `mocapkit.skeleton.limbs` and canonical names instead.

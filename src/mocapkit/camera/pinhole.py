@@ -9,11 +9,13 @@ OpenCV's order ``k1, k2, p1, p2[, k3[, k4, k5, k6]]``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from mocapkit.camera.projection import CameraArrays, camera_arrays, project
 from mocapkit.errors import ShapeError
 from mocapkit.geometry.transforms import invert_transform, transform_points
 
@@ -96,25 +98,31 @@ class Camera:
         flat = p.reshape(-1, 3)
         return transform_points(self.camera_from_world, flat).reshape(p.shape)
 
+    @cached_property
+    def arrays(self) -> CameraArrays:
+        """This camera in the layout of the compiled kernels (`mocapkit.camera.projection`).
+
+        Raises `ShapeError` (on first use) for non-zero thin-prism/tilt coefficients.
+        """
+        return camera_arrays(self.K, self.dist, self.camera_from_world)
+
     def project(self, points_in_world: ArrayLike) -> FloatArray:
         """Project world points (..., 3) to pixels (..., 2), with distortion.
 
-        Points behind the camera (z <= 0) project to NaN.
+        Points closer to the camera plane than `NEAR_PLANE_MM` (1 mm), behind the camera
+        included, are not visible and project to NaN (`mocapkit.camera.projection`).
         """
-        return self.project_camera_points(self.to_camera(points_in_world))
+        p = np.asarray(points_in_world, dtype=float)
+        if p.shape[-1:] != (3,):
+            raise ShapeError(f"camera {self.name!r}: expected points (..., 3), found {p.shape}")
+        return project(self.arrays, p, in_world=True)
 
     def project_camera_points(self, points_in_camera: ArrayLike) -> FloatArray:
-        """Project camera-frame points (..., 3) to pixels (..., 2); NaN where z <= 0."""
+        """Project camera-frame points (..., 3) to pixels (..., 2); NaN where z < 1 mm."""
         p = np.asarray(points_in_camera, dtype=float)
-        z = p[..., 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            x = np.where(z > 0, p[..., 0] / z, np.nan)
-            y = np.where(z > 0, p[..., 1] / z, np.nan)
-        xd, yd = distort_normalized(x, y, self.dist)
-        k = self.K
-        u = k[0, 0] * xd + k[0, 1] * yd + k[0, 2]
-        v = k[1, 1] * yd + k[1, 2]
-        return np.stack([u, v], axis=-1)
+        if p.shape[-1:] != (3,):
+            raise ShapeError(f"camera {self.name!r}: expected points (..., 3), found {p.shape}")
+        return project(self.arrays, p, in_world=False)
 
     def undistort_pixels(self, pixels: ArrayLike) -> FloatArray:
         """Pixels (..., 2) to undistorted normalised image coordinates (..., 2)."""
@@ -147,6 +155,8 @@ def distort_normalized(
 ) -> tuple[FloatArray, FloatArray]:
     """Apply OpenCV's radial/tangential (and rational) distortion to normalised coordinates.
 
+    The projection kernel (`mocapkit.camera.projection`) with ``K = I`` at depth 1.
+
     Parameters
     ----------
     x, y : array_like, shape (...)
@@ -155,21 +165,10 @@ def distort_normalized(
         ``k1, k2, p1, p2[, k3[, k4, k5, k6]]``; thin-prism and tilt terms (n = 12, 14)
         are not supported here and raise `ShapeError` when non-zero.
     """
-    x = np.asarray(x, dtype=float)
-    y = np.asarray(y, dtype=float)
-    d = np.zeros(14)
-    dd = np.ravel(np.asarray(dist, dtype=float))
-    d[: dd.shape[0]] = dd
-    if np.any(d[8:] != 0):
-        raise ShapeError(
-            "distortion: thin-prism/tilt coefficients (s1..s4, tx, ty) are not supported"
-        )
-    k1, k2, p1, p2, k3, k4, k5, k6 = d[:8]
-    r2 = x * x + y * y
-    radial = (1 + k1 * r2 + k2 * r2**2 + k3 * r2**3) / (1 + k4 * r2 + k5 * r2**2 + k6 * r2**3)
-    xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
-    yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
-    return xd, yd
+    xa, ya = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
+    unit = camera_arrays(np.eye(3), dist, np.eye(4))
+    px = project(unit, np.stack([xa, ya, np.ones_like(xa)], axis=-1), in_world=False)
+    return px[..., 0], px[..., 1]
 
 
 def look_at(eye_mm: ArrayLike, target_mm: ArrayLike, up: ArrayLike = (0.0, 0.0, 1.0)) -> FloatArray:

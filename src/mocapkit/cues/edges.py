@@ -39,6 +39,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from mocapkit.cues.chamfer import ChamferMaps, lookup_points_nb
 from mocapkit.errors import ConfigError, ShapeError
 
 FloatArray = NDArray[np.float64]
@@ -161,28 +162,37 @@ class DistanceMap:
     def lookup(self, points_px: ArrayLike) -> FloatArray:
         """Bilinearly interpolated distance at image points (..., 2); ``cap_px`` outside.
 
-        A point counts as inside when all four neighbouring pixels are inside the RoI.
-        This is the same rule as the compiled chamfer cost of
-        :mod:`mocapkit.tracking.arm_refinement`.
+        A point counts as inside when all four neighbouring pixels are inside the RoI
+        (`mocapkit.cues.chamfer.bilinear_lookup_nb`, the look-up of every chamfer cost).
         """
         p = np.asarray(points_px, dtype=float)
         if p.shape[-1:] != (2,):
             raise ShapeError(f"DistanceMap.lookup: expected points (..., 2), found {p.shape}")
-        x = p[..., 0] - self.origin_px[0]
-        y = p[..., 1] - self.origin_px[1]
-        h, w = self.distance_px.shape
-        with np.errstate(invalid="ignore"):
-            inside = (x >= 0) & (y >= 0) & (x < w - 1) & (y < h - 1)
-        out = np.full(x.shape, float(self.cap_px))
-        xi, yi = x[inside], y[inside]
-        c0 = np.floor(xi).astype(np.int64)
-        r0 = np.floor(yi).astype(np.int64)
-        fx, fy = xi - c0, yi - r0
-        d = self.distance_px
-        out[inside] = (1 - fy) * ((1 - fx) * d[r0, c0] + fx * d[r0, c0 + 1]) + fy * (
-            (1 - fx) * d[r0 + 1, c0] + fx * d[r0 + 1, c0 + 1]
+        flat = np.ascontiguousarray(p.reshape(-1, 2))
+        out = np.empty(flat.shape[0])
+        x0, y0 = self.origin_px
+        lookup_points_nb(self.distance_px, flat, float(x0), float(y0), 1.0, float(self.cap_px), out)
+        return out.reshape(p.shape[:-1])
+
+    def chamfer_maps(self, oriented: bool = True) -> ChamferMaps:
+        """The maps for the compiled outline kernels (`mocapkit.cues.chamfer`).
+
+        The oriented maps when there are any and ``oriented`` is True, else the plain
+        map as the one bin.
+        """
+        if oriented and self.oriented_px is not None:
+            return ChamferMaps(
+                self.oriented_px,
+                np.asarray(self.oriented_origin_px, dtype=np.float64),
+                float(self.oriented_step_px),
+                float(self.cap_px),
+            )
+        return ChamferMaps(
+            np.ascontiguousarray(self.distance_px[None]),
+            np.asarray(self.origin_px, dtype=np.float64),
+            1.0,
+            float(self.cap_px),
         )
-        return out
 
 
 def to_grey(image: ArrayLike) -> UInt8Array:

@@ -213,45 +213,35 @@ def left_jacobian_so3_nb(r: FloatArray, out: FloatArray) -> None:
 
 @numba.njit(cache=True, fastmath=False)
 def matrix_rotvec_nb(m: FloatArray, out: FloatArray) -> None:
-    """Write the rotation vector (log map, angle in [0, pi]) of a rotation matrix into ``out``.
+    """Write the rotation vector (angle in [0, pi]) of a rotation matrix ``m`` (3, 3) into ``out``.
 
-    Through the unit quaternion (Shepperd's choice of the largest diagonal term), so
-    it stays accurate near pi, where the skew-part formula ``(R - R^T)/(2 sin p)``
-    loses all precision (errata A7).
+    Through the unit quaternion by Shepperd's choice of the largest diagonal term, so it
+    is well conditioned near pi as well as near 0 (the inverse of `rotvec_matrix_nb`).
     """
     tr = m[0, 0] + m[1, 1] + m[2, 2]
     if tr >= m[0, 0] and tr >= m[1, 1] and tr >= m[2, 2]:
-        w = 0.5 * np.sqrt(max(1.0 + tr, 0.0))
+        w = 0.5 * np.sqrt(1.0 + tr)
         f = 0.25 / w
-        x = (m[2, 1] - m[1, 2]) * f
-        y = (m[0, 2] - m[2, 0]) * f
-        z = (m[1, 0] - m[0, 1]) * f
+        x, y, z = (m[2, 1] - m[1, 2]) * f, (m[0, 2] - m[2, 0]) * f, (m[1, 0] - m[0, 1]) * f
     elif m[0, 0] >= m[1, 1] and m[0, 0] >= m[2, 2]:
-        x = 0.5 * np.sqrt(max(1.0 + 2.0 * m[0, 0] - tr, 0.0))
+        x = 0.5 * np.sqrt(1.0 + m[0, 0] - m[1, 1] - m[2, 2])
         f = 0.25 / x
-        w = (m[2, 1] - m[1, 2]) * f
-        y = (m[0, 1] + m[1, 0]) * f
-        z = (m[0, 2] + m[2, 0]) * f
+        w, y, z = (m[2, 1] - m[1, 2]) * f, (m[0, 1] + m[1, 0]) * f, (m[0, 2] + m[2, 0]) * f
     elif m[1, 1] >= m[2, 2]:
-        y = 0.5 * np.sqrt(max(1.0 + 2.0 * m[1, 1] - tr, 0.0))
+        y = 0.5 * np.sqrt(1.0 - m[0, 0] + m[1, 1] - m[2, 2])
         f = 0.25 / y
-        w = (m[0, 2] - m[2, 0]) * f
-        x = (m[0, 1] + m[1, 0]) * f
-        z = (m[1, 2] + m[2, 1]) * f
+        w, x, z = (m[0, 2] - m[2, 0]) * f, (m[0, 1] + m[1, 0]) * f, (m[1, 2] + m[2, 1]) * f
     else:
-        z = 0.5 * np.sqrt(max(1.0 + 2.0 * m[2, 2] - tr, 0.0))
+        z = 0.5 * np.sqrt(1.0 - m[0, 0] - m[1, 1] + m[2, 2])
         f = 0.25 / z
-        w = (m[1, 0] - m[0, 1]) * f
-        x = (m[0, 2] + m[2, 0]) * f
-        y = (m[1, 2] + m[2, 1]) * f
+        w, x, y = (m[1, 0] - m[0, 1]) * f, (m[0, 2] + m[2, 0]) * f, (m[1, 2] + m[2, 1]) * f
     if w < 0.0:
         w, x, y, z = -w, -x, -y, -z
     s = np.sqrt(x * x + y * y + z * z)
-    if s < 1e-300:
-        out[0], out[1], out[2] = 0.0, 0.0, 0.0
-        return
-    k = 2.0 * np.arctan2(s, w) / s
-    out[0], out[1], out[2] = k * x, k * y, k * z
+    scale = 2.0 * np.arctan2(s, w) / s if s > 1e-12 else 2.0 / w
+    out[0] = x * scale
+    out[1] = y * scale
+    out[2] = z * scale
 
 
 @numba.njit(cache=True, fastmath=False)

@@ -217,7 +217,8 @@ def bench_hybrid(
         prob = arm_problem(sk, cam, q_true[mid], "left", frame, canon[mid, 1], cfg)
         xs = prob.x0 + np.random.default_rng(seed).normal(0, 0.05, (20_000, 4))
         dmap = prob.maps
-        eval_rate, _ = _median_rate(lambda: arm_cost_many_nb(xs, prob.geo, dmap), len(xs), repeats)
+        model = prob.model
+        eval_rate, _ = _median_rate(lambda: arm_cost_many_nb(xs, model, dmap), len(xs), repeats)
         roi = prob.distance.roi
         edge_rate, _ = _median_rate(
             lambda: roi_distance_map(frame, roi, cfg.edges), 1, max(repeats, 20)

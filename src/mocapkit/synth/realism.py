@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from mocapkit.camera.projection import project
 from mocapkit.errors import ConfigError
 from mocapkit.synth.render import CameraRenderer
 
@@ -250,9 +251,7 @@ def _fill_world_polygon(
     colour: tuple[int, ...],
 ) -> None:
     """Fill a planar convex 3-D polygon, clipped against the plane z_camera = 100 mm."""
-    r = renderer._r
-    t = renderer._t
-    pc = corners_mm @ r.T + t
+    pc = renderer.camera.to_camera(corners_mm)
     near = 100.0
     clipped: list[FloatArray] = []
     n = len(pc)
@@ -266,11 +265,7 @@ def _fill_world_polygon(
     if len(clipped) < 3:
         return
     p = np.array(clipped)
-    k = renderer.canvas_K
-    u = k[0, 0] * p[:, 0] / p[:, 2] + k[0, 2]
-    v = k[1, 1] * p[:, 1] / p[:, 2] + k[1, 2]
-    pix = np.stack([u, v], axis=-1)
-    pix = np.clip(pix, -1e5, 1e5)
+    pix = np.clip(project(renderer.canvas_arrays, p, in_world=False), -1e5, 1e5)
     cv2.fillConvexPoly(
         canvas,
         np.round(pix * 4).astype(np.int32),

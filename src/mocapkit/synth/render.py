@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
+from mocapkit.camera.projection import camera_arrays, project
 from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.geometry.rotations import matrix_from_axis_angle
 from mocapkit.skeleton.kinematics import forward_kinematics
@@ -582,17 +583,17 @@ class CameraRenderer:
         map_y = (ideal_y + my).astype(np.float32)
         self._map1, self._map2 = cv2.convertMaps(map_x, map_y, cv2.CV_16SC2)
         self._r = np.asarray(camera.camera_from_world)[:3, :3]
-        self._t = np.asarray(camera.camera_from_world)[:3, 3]
+        # the ideal camera of the canvas: no distortion, principal point moved by the margin
+        self.canvas_arrays = camera_arrays(self.canvas_K, [], camera.camera_from_world)
 
     def project_canvas(self, points_in_world: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Ideal canvas pixels (..., 2) and depths (...,) of world points (..., 3)."""
-        pc = points_in_world @ self._r.T + self._t
-        z = pc[..., 2]
-        zs = np.where(z > 1.0, z, np.nan)
-        k = self.canvas_K
-        u = k[0, 0] * pc[..., 0] / zs + k[0, 1] * pc[..., 1] / zs + k[0, 2]
-        v = k[1, 1] * pc[..., 1] / zs + k[1, 2]
-        return np.stack([u, v], axis=-1), z
+        """Ideal canvas pixels (..., 2) and depths (...,) of world points (..., 3).
+
+        Pixels are NaN where a point is not visible (`mocapkit.camera.projection`).
+        """
+        points_in_camera = self.camera.to_camera(points_in_world)
+        px = project(self.canvas_arrays, points_in_camera, in_world=False)
+        return px, points_in_camera[..., 2]
 
     def warp(self, canvas: NDArray[np.uint8]) -> NDArray[np.uint8]:
         """Apply the lens distortion: canvas (ideal camera) to the camera's image."""
@@ -694,7 +695,7 @@ class CameraRenderer:
         # an ellipse with axes from the SVD of M.
         centre = pts[0]
         axes = _unit(pts[1:] - centre) * np.asarray(radii)[:, None]  # (3, 3) rows
-        pc = self._r @ centre + self._t
+        pc = self.camera.to_camera(centre)
         k = self.canvas_K
         x, y, z = pc
         jac = (

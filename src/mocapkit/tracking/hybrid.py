@@ -35,7 +35,7 @@ from mocapkit.errors import ConfigError, ShapeError, unknown_name
 from mocapkit.ik.sdls import Effector, IKConfig, SDLSSolver
 from mocapkit.skeleton.kinematics import canonical_positions, forward_kinematics
 from mocapkit.skeleton.model import PRISMATIC, Skeleton
-from mocapkit.tracking.arm_refinement import SIDES, RefineConfig, arm_joint_names, refine_arms
+from mocapkit.tracking.arm_refinement import SIDES, RefineConfig, arm_limb, refine_arms
 from mocapkit.tracking.balance import (
     BalanceConfig,
     BalanceModel,
@@ -622,11 +622,8 @@ class HybridTracker:
         world = forward_kinematics(sk, q)
         out = {}
         for side in SIDES:
-            humerus, radius = arm_joint_names(side)[:2]
-            out[side] = (
-                world[sk.parents[sk.joint_index(humerus)]],
-                world[sk.joint_index(radius), :3, 3],
-            )
+            limb = arm_limb(sk, side)
+            out[side] = (world[limb.parent], world[limb.middle, :3, 3])
         return out
 
     def _elbows_in_shoulder_parents(self, q: FloatArray) -> dict[str, FloatArray]:

@@ -2,7 +2,7 @@
 
 Each segment with a length and radii is drawn as its silhouette under the camera:
 the quadrilateral between its two contour generators
-(`mocapkit.tracking.arm_refinement.cone_contour_generators_nb`, exact under
+(`mocapkit.geometry.cones.cone_contour_generators_nb`, exact under
 perspective) plus a disc of the projected radius at each end, so limbs look like
 tapered capsules. Segments are painted far to near. Corners are projected with the
 camera's distortion and joined by straight lines, which is exact for a distortion-free
@@ -18,10 +18,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.camera.pinhole import Camera
+from mocapkit.camera.projection import NEAR_PLANE_MM
 from mocapkit.errors import ShapeError
+from mocapkit.geometry.cones import cone_contour_generators_nb
 from mocapkit.skeleton.kinematics import forward_kinematics
 from mocapkit.skeleton.model import CANONICAL_SEGMENTS, Skeleton
-from mocapkit.tracking.arm_refinement import cone_contour_generators_nb
 
 FloatArray = NDArray[np.float64]
 Colour = tuple[int, int, int]
@@ -45,7 +46,8 @@ def segment_silhouettes(
     Returns
     -------
     list of (joint name, quad (4, 2) px, end discs (2, 3) as ``u, v, radius px``, depth mm)
-        Segments with an end behind the camera are left out.
+        Segments with an end that is not visible (nearer than 1 mm to the camera plane,
+        `mocapkit.camera.projection`) are left out.
     """
     qa = np.asarray(q, dtype=float)
     skeleton.check_q(qa)
@@ -58,17 +60,14 @@ def segment_silhouettes(
         ]
     else:
         idx = [skeleton.joint_index(n) for n in joints]
-    cam_r = camera.camera_from_world[:3, :3]
-    cam_t = camera.camera_from_world[:3, 3]
     fx = float(camera.K[0, 0])
     out = []
     lines = np.empty((2, 2, 3))
     for j in idx:
         a_w = world[j, :3, 3]
         b_w = world[j, :3, :3] @ skeleton.bone_end_mm[j] + a_w
-        a = cam_r @ a_w + cam_t
-        b = cam_r @ b_w + cam_t
-        if a[2] <= 1.0 or b[2] <= 1.0:
+        a, b = camera.to_camera(np.stack([a_w, b_w]))
+        if a[2] < NEAR_PLANE_MM or b[2] < NEAR_PLANE_MM:
             continue
         ra, rb = (float(r) for r in skeleton.radii_mm[j])
         cone_contour_generators_nb(a, b, ra, rb, lines)
