@@ -11,6 +11,7 @@ import pytest
 
 from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
 from mocapkit.errors import ConfigError
+from mocapkit.geometry.cones import cone_contour_generators
 from mocapkit.geometry.rotations import matrix_from_rotvec
 from mocapkit.skeleton.kinematics import canonical_positions
 from mocapkit.skeleton.limbs import arm
@@ -62,16 +63,12 @@ def _points(x, model):
 
 
 def _outline_lines(pts, cam):
-    """The four outline segments (start, end) in 3-D, as the module describes them."""
+    """The four outline segments (start, end), camera frame: the cones' contour generators."""
     lines = []
-    c = cam.center_in_world
     for seg in range(2):
-        p0, p1 = pts[seg], pts[seg + 1]
-        r0, r1 = RADII[2 * seg], RADII[2 * seg + 1]
-        n = np.cross(p1 - p0, 0.5 * (p0 + p1) - c)
-        n /= np.linalg.norm(n)
-        for sg in (1.0, -1.0):
-            lines.append((p0 + sg * r0 * n, p1 + sg * r1 * n))
+        a, b = cam.to_camera(pts[seg]), cam.to_camera(pts[seg + 1])
+        gen = cone_contour_generators(a, b, RADII[2 * seg], RADII[2 * seg + 1])
+        lines += [(gen[0, 0], gen[0, 1]), (gen[1, 0], gen[1, 1])]
     return lines
 
 
@@ -81,7 +78,7 @@ def _render_outlines(pts, cams):
     for cam in cams:
         img = np.zeros((SIZE[1], SIZE[0]), np.float32)
         for a, b in _outline_lines(pts, cam):
-            pa, pb = cam.project(np.stack([a, b]))
+            pa, pb = cam.project_camera_points(np.stack([a, b]))
             cv2.line(img, tuple(np.round(pa).astype(int)), tuple(np.round(pb).astype(int)), 1.0, 2)
         maps.append(np.asarray(cv2.GaussianBlur(img, (0, 0), 1.0), dtype=np.float32) * 1.5)
         np.clip(maps[-1], 0, 1, out=maps[-1])
@@ -143,7 +140,7 @@ def test_batch_weights_equal_a_brute_force_reference(oriented):
         for cam, g, gy in zip(cams, maps, maps_y):
             vals = []
             for a, b in _outline_lines(pts, cam):
-                pa, pb = cam.project(np.stack([a, b]))
+                pa, pb = cam.project_camera_points(np.stack([a, b]))
                 length = np.linalg.norm(pb - pa)
                 normal = np.array([-(pb - pa)[1], (pb - pa)[0]]) / length
                 n = min(max(math.ceil(length / 5.0) + 1, 2), 48)

@@ -26,11 +26,10 @@ samples of the analytic IK (§VII) with alpha uniform in the side's range and th
 previous shoulder offset; runs 2-4 resample and perturb; the estimate is the weighted
 mean of the last run (rotations by their chordal mean, the paper leaves this open).
 
-Contour generators: the silhouette lines of a cone ``P0 (r0) -> P1 (r1)`` seen from
-the camera centre ``C`` are approximated by ``P0 +- r0 n`` to ``P1 +- r1 n`` with ``n``
-perpendicular to the axis and to the line of sight to the axis' midpoint. This is a
-local stand-in with a small interface (`ViewStack`, `ArmModel`) until the shared
-projection and cone-contour kernels land in ``camera/`` and ``geometry/``.
+Outlines: the exact contour generators of each cone under perspective
+(`mocapkit.geometry.cones`), projected with the one shared projection kernel
+(`mocapkit.camera.projection`; points nearer than its near plane are not visible and
+count as off the image).
 """
 
 from __future__ import annotations
@@ -44,7 +43,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
+from mocapkit.camera.projection import (
+    CameraArrays,
+    camera_arrays,
+    project_camera_point_nb,
+    to_camera_nb,
+)
 from mocapkit.errors import ConfigError, ShapeError
+from mocapkit.geometry.cones import cone_contour_generators_nb
 from mocapkit.geometry.rotations import matrix_rotvec_nb, rotvec_matrix_nb
 from mocapkit.ik.arm_analytic import ALPHA_RANGE_RAD, arm_ik, make_problem
 from mocapkit.tracking.stereo.fusion import FusionParams, default_fusion, fused_weight_nb
@@ -54,24 +60,15 @@ Float32Array = NDArray[np.float32]
 
 #: Particle layout.
 N_STATE = 7
-_MIN_Z_MM = 1.0
 
 
 class ViewStack(NamedTuple):
-    """Cameras and gradient maps of one frame, stacked over V views.
+    """Cameras and gradient maps of one frame, over V views.
 
     Attributes
     ----------
-    rotation : (V, 3, 3)
-        Camera-from-world rotations.
-    translation : (V, 3)
-        Camera-from-world translations (mm).
-    intrinsics : (V, 5)
-        ``fx, fy, cx, cy, skew`` (px).
-    dist : (V, 8)
-        OpenCV ``k1, k2, p1, p2, k3, k4, k5, k6`` (zeros where absent).
-    centre : (V, 3)
-        Optical centres, world (mm).
+    cameras : tuple of CameraArrays, length V
+        The views in the shared projection's layout (`mocapkit.camera.projection`).
     gradient : (V, H, W) float32
         Gradient maps in [0, 1] (`mocapkit.cues.skin.gradient_map`); 0 where not
         computed. With oriented edges: the gradient's x component
@@ -80,11 +77,7 @@ class ViewStack(NamedTuple):
         The gradient's y component with oriented edges; unused (1x1) otherwise.
     """
 
-    rotation: FloatArray
-    translation: FloatArray
-    intrinsics: FloatArray
-    dist: FloatArray
-    centre: FloatArray
+    cameras: tuple[CameraArrays, ...]
     gradient: Float32Array
     gradient_y: Float32Array
 
@@ -137,19 +130,7 @@ def view_stack(
     if len(shapes) != 1:
         raise ShapeError(f"view_stack: gradient maps differ in size: {sorted(shapes)}")
     v = len(cameras)
-    rot = np.empty((v, 3, 3))
-    tr = np.empty((v, 3))
-    intr = np.empty((v, 5))
-    dist = np.zeros((v, 8))
-    centre = np.empty((v, 3))
-    for i, c in enumerate(cameras):
-        m = np.asarray(c.camera_from_world)
-        rot[i], tr[i] = m[:3, :3], m[:3, 3]
-        k = np.asarray(c.K)
-        intr[i] = (k[0, 0], k[1, 1], k[0, 2], k[1, 2], k[0, 1])
-        d = np.asarray(c.dist).ravel()[:8]
-        dist[i, : d.shape[0]] = d
-        centre[i] = c.center_in_world
+    cams = tuple(camera_arrays(c.K, c.dist, c.camera_from_world) for c in cameras)
     grad = _stacked(gradients)
     if gradients_y is None:
         grad_y = np.zeros((v, 1, 1), np.float32)
@@ -159,7 +140,7 @@ def view_stack(
             raise ShapeError(
                 f"view_stack: y gradients {grad_y.shape} differ from x gradients {grad.shape}"
             )
-    return ViewStack(rot, tr, intr, dist, centre, grad, grad_y)
+    return ViewStack(cams, grad, grad_y)
 
 
 def _stacked(maps: list[Float32Array] | Float32Array) -> Float32Array:
@@ -169,29 +150,6 @@ def _stacked(maps: list[Float32Array] | Float32Array) -> Float32Array:
 
 
 # ------------------------------------------------------------------ compiled kernels
-
-
-@numba.njit(cache=True, inline="always")
-def _project_nb(views: ViewStack, v: int, x: float, y: float, z: float) -> tuple[float, float]:
-    """Pixel of a world point in view ``v`` (OpenCV's model); NaN behind the camera."""
-    r = views.rotation[v]
-    t = views.translation[v]
-    xc = r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + t[0]
-    yc = r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + t[1]
-    zc = r[2, 0] * x + r[2, 1] * y + r[2, 2] * z + t[2]
-    if zc < _MIN_Z_MM:
-        return math.nan, math.nan
-    xn = xc / zc
-    yn = yc / zc
-    d = views.dist[v]
-    r2 = xn * xn + yn * yn
-    radial = (1.0 + r2 * (d[0] + r2 * (d[1] + r2 * d[4]))) / (
-        1.0 + r2 * (d[5] + r2 * (d[6] + r2 * d[7]))
-    )
-    xd = xn * radial + 2.0 * d[2] * xn * yn + d[3] * (r2 + 2.0 * xn * xn)
-    yd = yn * radial + d[2] * (r2 + 2.0 * yn * yn) + 2.0 * d[3] * xn * yn
-    k = views.intrinsics[v]
-    return k[0] * xd + k[4] * yd + k[2], k[1] * yd + k[3]
 
 
 @numba.njit(cache=True, inline="always")
@@ -235,45 +193,43 @@ def arm_points_nb(x: FloatArray, model: ArmModel, out: FloatArray) -> None:
 
 
 @numba.njit(cache=True)
-def _edge_error_nb(pts: FloatArray, model: ArmModel, views: ViewStack) -> float:
-    """Eq. (1) averaged over the views for the arm points ``pts`` (4, 3)."""
-    n_views = views.rotation.shape[0]
+def _edge_error_nb(
+    pts: FloatArray, model: ArmModel, views: ViewStack, scratch: FloatArray, gen: FloatArray
+) -> float:
+    """Eq. (1) averaged over the views for the arm points ``pts`` (4, 3).
+
+    ``scratch`` (2, 3) and ``gen`` (2, 2, 3) are work arrays (no allocation per call).
+    """
+    n_views = len(views.cameras)
     step = model.sampling[0]
     max_n = int(model.sampling[1])
     oriented = model.sampling[2] > 0.5
     total = 0.0
     for v in range(n_views):
+        cam = views.cameras[v]
         acc = 0.0
         count = 0
-        cx, cy, cz = views.centre[v, 0], views.centre[v, 1], views.centre[v, 2]
         for seg in range(2):
             p0 = pts[seg]
             p1 = pts[seg + 1]
-            r0 = model.radii_mm[2 * seg]
-            r1 = model.radii_mm[2 * seg + 1]
-            ux, uy, uz = p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]
-            wx = 0.5 * (p0[0] + p1[0]) - cx
-            wy = 0.5 * (p0[1] + p1[1]) - cy
-            wz = 0.5 * (p0[2] + p1[2]) - cz
-            nx, ny, nz = uy * wz - uz * wy, uz * wx - ux * wz, ux * wy - uy * wx
-            nn = math.sqrt(nx * nx + ny * ny + nz * nz)
-            if nn < 1e-9:  # seen end-on: no outline to read
-                continue
-            nx, ny, nz = nx / nn, ny / nn, nz / nn
+            x, y, z = to_camera_nb(cam, p0[0], p0[1], p0[2])
+            scratch[0, 0], scratch[0, 1], scratch[0, 2] = x, y, z
+            x, y, z = to_camera_nb(cam, p1[0], p1[1], p1[2])
+            scratch[1, 0], scratch[1, 1], scratch[1, 2] = x, y, z
+            cone_contour_generators_nb(
+                scratch[0], scratch[1], model.radii_mm[2 * seg], model.radii_mm[2 * seg + 1], gen
+            )
             for side in range(2):
-                sg = 1.0 if side == 0 else -1.0
-                ax = p0[0] + sg * r0 * nx
-                ay = p0[1] + sg * r0 * ny
-                az = p0[2] + sg * r0 * nz
-                bx = p1[0] + sg * r1 * nx
-                by = p1[1] + sg * r1 * ny
-                bz = p1[2] + sg * r1 * nz
-                ua, va = _project_nb(views, v, ax, ay, az)
-                ub, vb = _project_nb(views, v, bx, by, bz)
-                length = math.sqrt((ub - ua) ** 2 + (vb - va) ** 2)
-                if not (length == length):  # behind a camera: counts as off the image
+                ua, va, oka = project_camera_point_nb(
+                    cam, gen[side, 0, 0], gen[side, 0, 1], gen[side, 0, 2]
+                )
+                ub, vb, okb = project_camera_point_nb(
+                    cam, gen[side, 1, 0], gen[side, 1, 1], gen[side, 1, 2]
+                )
+                if not (oka and okb):  # not visible: counts as off the image
                     count += 2
                     continue
+                length = math.sqrt((ub - ua) ** 2 + (vb - va) ** 2)
                 n = min(max(math.ceil(length / step) + 1, 2), max_n)
                 # sampled linearly between the projected ends: the lens bends one limb
                 # outline by well under a pixel
@@ -311,10 +267,12 @@ def arm_weights_nb(
     and the raw squared hand distances (mm^2; NaN without a measured hand), all (N,).
     """
     pts = np.empty((4, 3))
+    scratch = np.empty((2, 3))
+    gen = np.empty((2, 2, 3))
     h = model.hand_mm
     for i in range(particles.shape[0]):
         arm_points_nb(particles[i], model, pts)
-        eg = _edge_error_nb(pts, model, views)
+        eg = _edge_error_nb(pts, model, views, scratch, gen)
         d2 = (pts[3, 0] - h[0]) ** 2 + (pts[3, 1] - h[1]) ** 2 + (pts[3, 2] - h[2]) ** 2
         out_edge[i] = eg
         out_dist_sq[i] = d2
