@@ -14,6 +14,7 @@ from mocapkit.cues.skin import (
     figure_mask,
     fit_shirt_model,
     gradient_map,
+    gradient_vector_map,
     shirt_mask,
     skin_mask,
     ycrcb_from_bgr,
@@ -185,3 +186,16 @@ def test_gradient_map_keeps_only_the_figure():
     g = gradient_map(img, figure=fig, config=GradientConfig(post_blur_sigma_px=0.0))
     assert g[:, 15:30].max() == 0.0
     assert g[30, 54:56].max() > 0.9
+
+
+def test_gradient_vector_points_across_the_edge_with_the_maps_length():
+    rng = np.random.default_rng(5)
+    img = cv2.GaussianBlur(rng.integers(0, 256, (60, 80)).astype(np.uint8), (0, 0), 3)
+    cfg = GradientConfig(post_blur_sigma_px=0.0)
+    gx, gy = gradient_vector_map(img, config=cfg)
+    mag = np.hypot(gx, gy)
+    np.testing.assert_allclose(mag, gradient_map(img, config=cfg), atol=1e-5)
+    step = np.full((40, 60), 40, np.uint8)
+    step[:, 30:] = 200  # brighter to the right: the gradient points along +x
+    sx, sy = gradient_vector_map(step, config=cfg)
+    assert sx[20, 29:31].max() == pytest.approx(1.0) and np.abs(sy).max() < 1e-6

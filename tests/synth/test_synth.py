@@ -188,6 +188,25 @@ def test_rigs_face_the_subject():
     assert cams[0].center_in_world[1] > 2900  # in front: the subject faces +y
 
 
+def test_multi_rig_adds_a_side_camera():
+    cams = make_rig("multi", np.zeros(3), np.array([0.0, 1.0, 0.0]), 1300.0)
+    assert [c.name for c in cams] == ["mono", "stereo_left", "stereo_right", "side"]
+    chest = np.array([0.0, 0.0, 1300.0])
+    side = cams[3]
+    assert side.in_image(side.project(chest))
+    assert np.linalg.norm(side.center_in_world - chest) == pytest.approx(3000.0, abs=1.0)
+    # 45 degrees around the subject from the mono camera, on the stereo head's far side
+    to_mono = cams[0].center_in_world[:2] / np.linalg.norm(cams[0].center_in_world[:2])
+    to_side = side.center_in_world[:2] / np.linalg.norm(side.center_in_world[:2])
+    assert float(to_mono @ to_side) == pytest.approx(np.cos(np.radians(45.0)), abs=1e-6)
+    to_stereo = cams[1].center_in_world[:2]
+
+    def turn(u, v):  # z of the 2-D cross product
+        return u[0] * v[1] - u[1] * v[0]
+
+    assert turn(to_mono, to_side) * turn(to_mono, to_stereo) < 0
+
+
 def test_cli_synth(tmp_path, capsys):
     out = tmp_path / "cli"
     rc = main(

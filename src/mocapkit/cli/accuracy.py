@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from mocapkit.cli.accuracy_stereo import register_method as register_stereo
 from mocapkit.cli.args import parsed_by
 from mocapkit.errors import SessionError
 from mocapkit.pipelines.accuracy import format_rows, hybrid_accuracy, summary, to_json
@@ -46,6 +47,7 @@ def register(subparsers: Any) -> None:
     from mocapkit.cli.accuracy_mono import add_mono_accuracy_parser
 
     add_mono_accuracy_parser(methods)
+    register_stereo(methods)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -42,6 +42,18 @@ def _size(text: str) -> tuple[int, int]:
     return (w, h)
 
 
+def _blackout(text: str) -> tuple[float, float]:
+    parts = text.split(",")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        return (float(parts[0]), float(parts[1]))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected START,DURATION in seconds (e.g. 2.0,0.5), found {text!r}"
+        ) from None
+
+
 def _realism(name: str) -> Callable[[str], float]:
     """The ``type=`` of a realism option: a number in its `REALISM_RANGES` range."""
     lo, hi = REALISM_RANGES[name]
@@ -134,6 +146,13 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         default=None,
         help="shirt colour name or #RRGGBB (default: seeded)",
     )
+    p.add_argument(
+        "--blackout-s",
+        type=_blackout,
+        default=None,
+        metavar="START,DURATION",
+        help="blank every view (black frames, no keypoints) from START for DURATION s",
+    )
     p.add_argument("--png", action="store_true", help="write PNG image folders instead of mp4")
     p.add_argument("--overwrite", action="store_true", help="replace an existing session folder")
     p.set_defaults(func=run)
@@ -165,6 +184,7 @@ def run(args: argparse.Namespace) -> int:
         video_format="png" if args.png else "mp4",
         overwrite=args.overwrite,
         realism=realism,
+        blackout_s=args.blackout_s,
     )
     summary = synthesize_session(args.motion, args.out, options)
     print(summary.text())

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from mocapkit.cli.track_stereo import register_method as register_stereo
+
 
 def register(subparsers: Any) -> None:
     """Add ``track`` with its ``hybrid`` sub-subcommand."""
@@ -70,6 +72,7 @@ def register(subparsers: Any) -> None:
     from mocapkit.cli.track_mono import add_mono_parser
 
     add_mono_parser(methods)
+    register_stereo(methods)
 
 
 def _run_hybrid(args: argparse.Namespace) -> int:

@@ -54,6 +54,7 @@ import math
 from dataclasses import dataclass, field
 
 import cv2
+import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -199,6 +200,20 @@ def _skin_default() -> ColourModel:
 DEFAULT_SKIN = _skin_default()
 
 
+@numba.njit(cache=True)
+def _classify_nb(
+    ycc: UInt8Array, table: UInt8Array, luma_lo: int, luma_hi: int, out: UInt8Array
+) -> None:
+    """``out = table[Cr, Cb]`` where ``luma_lo <= Y <= luma_hi``, else 0 (one pass)."""
+    for r in range(ycc.shape[0]):
+        for c in range(ycc.shape[1]):
+            y = ycc[r, c, 0]
+            if luma_lo <= y <= luma_hi:
+                out[r, c] = table[ycc[r, c, 1], ycc[r, c, 2]]
+            else:
+                out[r, c] = 0
+
+
 def colour_mask(
     image_bgr: ArrayLike,
     model: ColourModel,
@@ -226,11 +241,10 @@ def colour_mask(
     x0, y0, x1, y1 = (0, 0, w, h) if roi is None else clip_roi(roi, (w, h))
     if x1 <= x0 or y1 <= y0:
         return out
-    ycc = cv2.cvtColor(img[y0:y1, x0:x1], cv2.COLOR_BGR2YCrCb)
+    ycc = np.asarray(cv2.cvtColor(img[y0:y1, x0:x1], cv2.COLOR_BGR2YCrCb), dtype=np.uint8)
     lo, hi = model.luma_range
-    luma = ycc[..., 0]
-    m = model.table[ycc[..., 1], ycc[..., 2]]
-    m &= np.asarray(cv2.inRange(luma, math.ceil(lo), math.floor(hi)), dtype=np.uint8)
+    m = np.empty(ycc.shape[:2], dtype=np.uint8)
+    _classify_nb(ycc, model.table, math.ceil(lo), math.floor(hi), m)
     if open_px > 0:
         k = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * open_px + 1, 2 * open_px + 1))
         m = np.asarray(cv2.morphologyEx(m, cv2.MORPH_OPEN, k), dtype=np.uint8)
@@ -336,11 +350,96 @@ class GradientConfig:
             )
 
 
+@numba.njit(cache=True)
+def _remap_nb(
+    gx: Float32Array,
+    gy: Float32Array,
+    keep: UInt8Array,
+    masked: bool,
+    inv_sat: float,
+    oriented: bool,
+) -> None:
+    """In place: oriented, ``(gx, gy) * inv_sat / max(|g| inv_sat, 1)``; else ``gx :=
+    min(|g| inv_sat, 1)``; 0 where ``masked`` and ``keep == 0``."""
+    for r in range(gx.shape[0]):
+        for c in range(gx.shape[1]):
+            if masked and keep[r, c] == 0:
+                gx[r, c] = 0.0
+                gy[r, c] = 0.0
+                continue
+            x = gx[r, c] * inv_sat
+            y = gy[r, c] * inv_sat
+            m = math.sqrt(x * x + y * y)
+            if oriented:
+                f = 1.0 / m if m > 1.0 else 1.0
+                gx[r, c] = x * f
+                gy[r, c] = y * f
+            else:
+                gx[r, c] = m if m < 1.0 else 1.0
+
+
+def _gradient_core(
+    image: ArrayLike,
+    roi: Roi | None,
+    figure: ArrayLike | None,
+    config: GradientConfig,
+    oriented: bool,
+    out: tuple[Float32Array, ...] | None = None,
+) -> tuple[Float32Array, Float32Array | None]:
+    cfg = config
+    grey = to_grey(np.asarray(image))
+    h, w = grey.shape
+    n_out = 2 if oriented else 1
+    if out is None:
+        outs = [np.zeros((h, w), dtype=np.float32) for _ in range(n_out)]
+    else:
+        if len(out) != n_out or any(o.shape != (h, w) or o.dtype != np.float32 for o in out):
+            raise ShapeError(
+                f"out: expected {n_out} float32 array(s) of shape {(h, w)}, found "
+                f"{[(o.shape, o.dtype) for o in out]}"
+            )
+        outs = list(out)
+        for o in outs:
+            o.fill(0.0)
+    x0, y0, x1, y1 = (0, 0, w, h) if roi is None else clip_roi(roi, (w, h))
+    if x1 <= x0 or y1 <= y0:
+        return outs[0], (outs[1] if oriented else None)
+    # a margin so that the blurs and Sobel see real neighbours at the RoI's border
+    r_post = math.ceil(3 * cfg.post_blur_sigma_px)
+    m = cfg.pre_blur_ksize // 2 + 1 + r_post
+    cx0, cy0, cx1, cy1 = max(x0 - m, 0), max(y0 - m, 0), min(x1 + m, w), min(y1 + m, h)
+    crop = grey[cy0:cy1, cx0:cx1]
+    if cfg.pre_blur_ksize > 1:
+        k = (cfg.pre_blur_ksize, cfg.pre_blur_ksize)
+        crop = np.asarray(cv2.GaussianBlur(crop, k, 0), dtype=np.uint8)
+    gx = np.asarray(cv2.Sobel(crop, cv2.CV_32F, 1, 0, ksize=3), dtype=np.float32)
+    gy = np.asarray(cv2.Sobel(crop, cv2.CV_32F, 0, 1, ksize=3), dtype=np.float32)
+    if figure is not None:
+        f = np.asarray(figure)
+        if f.shape != (h, w):
+            raise ShapeError(f"figure: expected shape {(h, w)}, found {f.shape}")
+        keep = np.ascontiguousarray(f[cy0:cy1, cx0:cx1], dtype=np.uint8)
+    else:
+        keep = np.full((1, 1), 255, np.uint8)
+    # one compiled pass: remap to [0, 1] (the vector's length like the magnitude), mask
+    _remap_nb(gx, gy, keep, figure is not None, float(1.0 / cfg.saturation), oriented)
+    comps = [gx, gy] if oriented else [gx]
+    k_post = (2 * r_post + 1, 2 * r_post + 1)
+    for c, target in zip(comps, outs):
+        if cfg.post_blur_sigma_px > 0:
+            c = np.asarray(cv2.GaussianBlur(c, k_post, cfg.post_blur_sigma_px), dtype=np.float32)
+        target[y0:y1, x0:x1] = c[y0 - cy0 : y1 - cy0, x0 - cx0 : x1 - cx0]
+    if not oriented:
+        np.clip(outs[0], 0.0, 1.0, out=outs[0])
+    return outs[0], (outs[1] if oriented else None)
+
+
 def gradient_map(
     image: ArrayLike,
     roi: Roi | None = None,
     figure: ArrayLike | None = None,
     config: GradientConfig | None = None,
+    out: Float32Array | None = None,
 ) -> Float32Array:
     """Gradient image ``I_g`` remapped to ``[0, 1]`` (Azad §II-B, eq. (1)), shape (H, W).
 
@@ -354,42 +453,35 @@ def gradient_map(
         Figure mask (`figure_mask`): gradients outside it are set to 0 (edges of the
         background do not count).
     config : GradientConfig, optional
+    out : ndarray of float32, shape (H, W), optional
+        Written in place (and returned) instead of a new array.
 
     Returns
     -------
     ndarray of float32, shape (H, W), values in [0, 1]
     """
-    cfg = config or GradientConfig()
-    grey = to_grey(np.asarray(image))
-    h, w = grey.shape
-    out = np.zeros((h, w), dtype=np.float32)
-    x0, y0, x1, y1 = (0, 0, w, h) if roi is None else clip_roi(roi, (w, h))
-    if x1 <= x0 or y1 <= y0:
-        return out
-    # a margin so that the blurs and Sobel see real neighbours at the RoI's border
-    r_post = math.ceil(3 * cfg.post_blur_sigma_px)
-    m = cfg.pre_blur_ksize // 2 + 1 + r_post
-    cx0, cy0, cx1, cy1 = max(x0 - m, 0), max(y0 - m, 0), min(x1 + m, w), min(y1 + m, h)
-    crop = grey[cy0:cy1, cx0:cx1]
-    if cfg.pre_blur_ksize > 1:
-        k = (cfg.pre_blur_ksize, cfg.pre_blur_ksize)
-        crop = np.asarray(cv2.GaussianBlur(crop, k, 0), dtype=np.uint8)
-    gx = cv2.Sobel(crop, cv2.CV_32F, 1, 0, ksize=3)
-    gy = cv2.Sobel(crop, cv2.CV_32F, 0, 1, ksize=3)
-    g = np.asarray(cv2.magnitude(gx, gy), dtype=np.float32)
-    g *= np.float32(1.0 / cfg.saturation)
-    np.minimum(g, np.float32(1.0), out=g)
-    if figure is not None:
-        f = np.asarray(figure)
-        if f.shape != (h, w):
-            raise ShapeError(f"figure: expected shape {(h, w)}, found {f.shape}")
-        g[f[cy0:cy1, cx0:cx1] == 0] = 0.0
-    if cfg.post_blur_sigma_px > 0:
-        k_post = (2 * r_post + 1, 2 * r_post + 1)
-        g = np.asarray(cv2.GaussianBlur(g, k_post, cfg.post_blur_sigma_px), dtype=np.float32)
-    out[y0:y1, x0:x1] = g[y0 - cy0 : y1 - cy0, x0 - cx0 : x1 - cx0]
-    np.clip(out, 0.0, 1.0, out=out)
-    return out
+    o = None if out is None else (out,)
+    return _gradient_core(image, roi, figure, config or GradientConfig(), False, o)[0]
+
+
+def gradient_vector_map(
+    image: ArrayLike,
+    roi: Roi | None = None,
+    figure: ArrayLike | None = None,
+    config: GradientConfig | None = None,
+    out: tuple[Float32Array, Float32Array] | None = None,
+) -> tuple[Float32Array, Float32Array]:
+    """The gradient as a vector field whose length is remapped like `gradient_map`'s.
+
+    ``(gx, gy)``, each (H, W) float32 with ``|(gx, gy)| <= 1``: the Sobel gradient scaled
+    by ``1 / saturation`` and shortened to length 1 where it is longer, masked and
+    blurred as `gradient_map` (same parameters). Reading ``|g . n|`` with ``n`` the unit
+    normal of a model outline scores only edges that run along it (an extension of
+    eq. (1); `mocapkit.tracking.stereo.arm_filter`). ``out``: two (H, W) float32
+    arrays written in place instead of new ones.
+    """
+    gx, gy = _gradient_core(image, roi, figure, config or GradientConfig(), True, out)
+    return gx, (np.zeros_like(gx) if gy is None else gy)
 
 
 __all__ = [
@@ -400,6 +492,7 @@ __all__ = [
     "figure_mask",
     "fit_shirt_model",
     "gradient_map",
+    "gradient_vector_map",
     "shirt_mask",
     "skin_mask",
     "ycrcb_from_bgr",

@@ -242,3 +242,42 @@ def matrix_rotvec_nb(m: FloatArray, out: FloatArray) -> None:
     out[0] = x * scale
     out[1] = y * scale
     out[2] = z * scale
+
+
+@numba.njit(cache=True, fastmath=False)
+def signed_angle_nb(u: FloatArray, v: FloatArray, k: FloatArray) -> float:
+    """Signed angle (rad) from ``u`` to ``v`` about axis ``k``, all (3,), after projecting
+    both onto the plane perpendicular to ``k``: ``atan2(k_hat . (u' x v'), u' . v')``
+    (IVT's three-argument ``Angle``; errata A5). 0 when either projection vanishes."""
+    kn = np.sqrt(k[0] * k[0] + k[1] * k[1] + k[2] * k[2])
+    if kn == 0.0:
+        return 0.0
+    kx, ky, kz = k[0] / kn, k[1] / kn, k[2] / kn
+    du = u[0] * kx + u[1] * ky + u[2] * kz
+    dv = v[0] * kx + v[1] * ky + v[2] * kz
+    ux, uy, uz = u[0] - du * kx, u[1] - du * ky, u[2] - du * kz
+    vx, vy, vz = v[0] - dv * kx, v[1] - dv * ky, v[2] - dv * kz
+    cx = uy * vz - uz * vy
+    cy = uz * vx - ux * vz
+    cz = ux * vy - uy * vx
+    return float(np.arctan2(kx * cx + ky * cy + kz * cz, ux * vx + uy * vy + uz * vz))
+
+
+@numba.njit(cache=True, fastmath=False)
+def rotate_nb(v: FloatArray, k: FloatArray, angle: float, out: FloatArray) -> None:
+    """Write ``v`` (3,) rotated right-handedly about axis ``k`` (3,, any length) by
+    ``angle`` into ``out`` (Rodrigues' formula; ``out`` may not alias ``v``)."""
+    kn = np.sqrt(k[0] * k[0] + k[1] * k[1] + k[2] * k[2])
+    if kn == 0.0:
+        out[0], out[1], out[2] = v[0], v[1], v[2]
+        return
+    kx, ky, kz = k[0] / kn, k[1] / kn, k[2] / kn
+    c = np.cos(angle)
+    s = np.sin(angle)
+    d = (kx * v[0] + ky * v[1] + kz * v[2]) * (1.0 - c)
+    cx = ky * v[2] - kz * v[1]
+    cy = kz * v[0] - kx * v[2]
+    cz = kx * v[1] - ky * v[0]
+    out[0] = v[0] * c + cx * s + kx * d
+    out[1] = v[1] * c + cy * s + ky * d
+    out[2] = v[2] * c + cz * s + kz * d

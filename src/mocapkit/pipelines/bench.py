@@ -256,10 +256,18 @@ def bench_hybrid(
     }
 
 
+def _bench_stereo(repeats: int = 3) -> dict[str, Any]:
+    """The stereo tracker's figures (`mocapkit.pipelines.stereo.bench_stereo`)."""
+    from mocapkit.pipelines.stereo import bench_stereo
+
+    return bench_stereo(repeats=repeats)
+
+
 BENCHMARKS: dict[str, Callable[..., dict[str, Any]]] = {
     "kinematics": bench_kinematics,
     "hybrid": bench_hybrid,
     "mono": bench_mono,
+    "stereo": _bench_stereo,
 }
 
 

@@ -16,7 +16,7 @@ from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
 from mocapkit.errors import ShapeError, unknown_name
 
 #: Rig names accepted by `make_rig`.
-RIG_NAMES: tuple[str, ...] = ("mono", "stereo", "all")
+RIG_NAMES: tuple[str, ...] = ("mono", "stereo", "all", "multi")
 
 #: Horizontal field of view (degrees): a 1.8 m subject fills about 3/4 of a 4:3 image at 3 m.
 HORIZONTAL_FOV_DEG = 62.0
@@ -28,6 +28,9 @@ STEREO_BASELINE_MM = 90.0
 #: The stereo head sits this far (degrees) around the subject from the mono camera, so that
 #: the ``all`` rig gives two distinct viewpoints.
 STEREO_AZIMUTH_DEG = 15.0
+#: The ``multi`` rig's fourth camera, ``side``: this far (degrees) around the subject on the
+#: other side of the mono camera, at the mono camera's distance and height.
+SIDE_AZIMUTH_DEG = -45.0
 #: Nominal lens distortion ``k1, k2, p1, p2, k3`` (mild barrel), jittered per camera.
 NOMINAL_DIST = np.array([-0.10, 0.03, 0.0, 0.0, 0.0])
 
@@ -52,10 +55,12 @@ def make_rig(
 
     Parameters
     ----------
-    rig : {"mono", "stereo", "all"}
+    rig : {"mono", "stereo", "all", "multi"}
         ``mono``: one camera named ``mono`` about 3 m in front of the subject at chest
         height. ``stereo``: ``stereo_left`` and ``stereo_right``, 90 mm apart with parallel
-        optical axes, about 2.7 m away at head height. ``all``: both.
+        optical axes, about 2.7 m away at head height. ``all``: both. ``multi``: both and
+        a fourth camera ``side`` like ``mono`` but 45 degrees around the subject the other
+        way (for trackers over more than three views).
     subject_mm : array_like, shape (3,)
         Subject position (pelvis) in the world, mm; only x and y are used.
     forward : array_like, shape (3,)
@@ -86,11 +91,11 @@ def make_rig(
     def dist() -> np.ndarray:
         return _distortion(rng) if rng is not None else NOMINAL_DIST.copy()
 
-    if rig in ("mono", "all"):
+    if rig in ("mono", "all", "multi"):
         eye = base + MONO_DISTANCE_MM * fwd + np.array([0.0, 0.0, chest_height_mm])
         target = base + np.array([0.0, 0.0, chest_height_mm - 150.0])
         cams.append(Camera("mono", image_size, k, dist(), look_at(eye, target)))
-    if rig in ("stereo", "all"):
+    if rig in ("stereo", "all", "multi"):
         a = np.radians(STEREO_AZIMUTH_DEG)
         c, s = np.cos(a), np.sin(a)
         dirn = np.array([c * fwd[0] - s * fwd[1], s * fwd[0] + c * fwd[1], 0.0])
@@ -104,4 +109,11 @@ def make_rig(
             m = view.copy()
             m[:3, 3] = -view[:3, :3] @ eye  # parallel axes, shifted along the baseline
             cams.append(Camera(name, image_size, k, dist(), m))
+    if rig == "multi":
+        a = np.radians(SIDE_AZIMUTH_DEG)
+        c, s = np.cos(a), np.sin(a)
+        dirn = np.array([c * fwd[0] - s * fwd[1], s * fwd[0] + c * fwd[1], 0.0])
+        eye = base + MONO_DISTANCE_MM * dirn + np.array([0.0, 0.0, chest_height_mm])
+        target = base + np.array([0.0, 0.0, chest_height_mm - 150.0])
+        cams.append(Camera("side", image_size, k, dist(), look_at(eye, target)))
     return cams

@@ -96,8 +96,18 @@ class SynthOptions:
     video_format: str = "mp4"
     overwrite: bool = False
     realism: RealismOptions = field(default_factory=RealismOptions)
+    #: ``(start, duration)`` in s of the excerpt during which every view is blank
+    #: (black frames, keypoints NaN): a loss of sight, for testing recovery.
+    blackout_s: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
+        if self.blackout_s is not None:
+            b0, bd = self.blackout_s
+            if not (np.isfinite(b0) and np.isfinite(bd) and b0 >= 0 and bd > 0):
+                raise ConfigError(
+                    f"--blackout-s: expected START,DURATION with START >= 0 s and DURATION > 0 s, "
+                    f"found {self.blackout_s}"
+                )
         if not (np.isfinite(self.start_s) and self.start_s >= 0):
             raise ConfigError(f"--start-s: expected a time >= 0 s, found {self.start_s}")
         if self.seconds is not None and not (np.isfinite(self.seconds) and self.seconds > 0):
@@ -414,9 +424,14 @@ def _render_session(motion_spec: str, out: Path, label: str, options: SynthOptio
         body.markers_at(t_mark), opts.marker_rate_hz, opts.realism, rng_markers
     )
     write_markers_csv(out / "markers.csv", t_mark, MARKER_NAMES, markers)
+    blank = np.zeros(t_video.shape[0], dtype=bool)
+    if opts.blackout_s is not None:
+        b0, bd = opts.blackout_s
+        blank = (t_video >= b0) & (t_video < b0 + bd)
     for cam in cameras:
         px = cam.project(truth.joints_mm)
         px[~cam.in_image(px)] = np.nan
+        px[blank] = np.nan  # a blank view sees nothing
         write_keypoints_csv(out / "keypoints" / f"{cam.name}.csv", t_video, names, px)
     vdir = out / "video"
     vdir.mkdir(parents=True, exist_ok=True)
@@ -454,6 +469,7 @@ def _render_session(motion_spec: str, out: Path, label: str, options: SynthOptio
             "rig": opts.rig,
             "shift_mm": [round(float(v), 3) for v in shift],
             "sleeve": opts.sleeve,
+            "blackout_s": None if opts.blackout_s is None else list(opts.blackout_s),
             "realism": asdict(opts.realism),
             "notes": notes,
         },
@@ -491,6 +507,8 @@ def _render_session(motion_spec: str, out: Path, label: str, options: SynthOptio
                             cv2.addWeighted(canvas, 0.5, second, 0.5, 0.0), dtype=np.uint8
                         )
                     image = finish_frame(r.warp(canvas), light, opts.realism.noise, rng_noise)
+                    if blank[k]:
+                        image = np.zeros_like(image)
                     w.write(image)
                 progress.update()
     finally:

@@ -1,0 +1,186 @@
+"""The stereo tracker on small rendered sessions: two and three views, keypoints and skin blobs,
+a blackout, the CLI."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocapkit.cli.main import main
+from mocapkit.errors import ConfigError, UnknownNameError
+from mocapkit.io.session import load_session
+from mocapkit.pipelines.stereo import (
+    ARM_JOINTS,
+    evaluate_stereo,
+    parse_cameras,
+    track_stereo_session,
+)
+from mocapkit.synth.realism import RealismOptions
+from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+from mocapkit.tracking.stereo.arm_filter import ArmFilterConfig
+from mocapkit.tracking.stereo.tracker import StereoConfig, azad_skeleton
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    out = tmp_path_factory.mktemp("stereo") / "wave"
+    synthesize_session(
+        "builtin:wave",
+        out,
+        SynthOptions(
+            rig="all",
+            seconds=0.5,
+            image_size=(320, 240),
+            sleeve="long",
+            video_format="png",
+            blackout_s=(0.2, 0.1),
+            realism=RealismOptions(blur=0.0),
+        ),
+    )
+    return out
+
+
+SMALL = StereoConfig(arm=ArmFilterConfig(n_particles=40))
+
+
+def test_blackout_blanks_every_view_and_its_keypoints(session):
+    s = load_session(session)
+    t = s.truth.time_s
+    blank = (t >= 0.2) & (t < 0.3)
+    assert blank.any() and not blank.all()
+    for k, smp in enumerate(s.samples()):
+        for cam in s.camera_names:
+            img = smp.image(cam)
+            assert (img.max() == 0) == bool(blank[k])
+            kp = s.keypoints[cam].pixels[k]
+            assert np.all(np.isnan(kp)) or not blank[k]
+
+
+@pytest.mark.parametrize(
+    ("cams", "torso"),
+    [("stereo_left,stereo_right", "shoulders"), (None, "shoulders"), (None, "keypoints")],
+)
+def test_keypoint_tracking_over_two_and_three_views(session, cams, torso):
+    cfg = StereoConfig(arm=SMALL.arm, use_keypoints=True, torso=torso)
+    run = track_stereo_session(session, None, cameras=cams, config=cfg)
+    m = run.motion
+    assert m.n_frames == load_session(session).truth.time_s.shape[0]
+    assert np.all(np.isfinite(m.joints_mm))
+    ev = evaluate_stereo(run, session)
+    assert set(ev["per_joint_mm"]) == set(ARM_JOINTS)
+    # wrists are measured directly: they stay close whenever the views see them
+    assert ev["per_joint_mm"]["right_wrist"] < 60.0
+    # IK samples (60 % of 40) in the first run whenever both hands are measured, none
+    # while the views are blank
+    t = m.time_s
+    blank = (t >= 0.2) & (t < 0.3)
+    assert np.all(run.n_ik[blank] == 0)
+    assert np.all(run.n_ik[~blank] == 24)
+    if torso == "keypoints":  # the torso's yaw is the truth's wherever the views see it
+        assert ev["torso_yaw_error_deg"] < 10.0
+
+
+def test_skin_blob_tracking_runs_and_finds_the_head(session):
+    run = track_stereo_session(session, None, config=SMALL)
+    assert np.all(np.isfinite(run.motion.q))
+    s = load_session(session)
+    head = s.truth.joints_mm[:, list(s.truth.joint_names).index("head")]
+    seen = np.all(np.isfinite(run.measured_mm[:, 0]), axis=1)
+    assert seen.sum() >= 0.5 * seen.shape[0]
+    assert np.median(np.linalg.norm(run.measured_mm[seen, 0] - head[seen], axis=1)) < 100.0
+
+
+def test_keypoint_torso_needs_keypoints():
+    with pytest.raises(ConfigError, match="use_keypoints"):
+        StereoConfig(torso="keypoints")
+    with pytest.raises(ConfigError, match="torso"):
+        StereoConfig(torso="pelvis")
+
+
+def test_camera_choice_is_checked():
+    with pytest.raises(UnknownNameError, match="camera"):
+        parse_cameras("stereo_left,nope", ["stereo_left", "stereo_right"])
+    with pytest.raises(ConfigError, match="two or more"):
+        parse_cameras("stereo_left", ["stereo_left", "stereo_right"])
+
+
+def test_subject_skeleton_takes_the_session_measurements(session):
+    s = load_session(session)
+    sk = azad_skeleton(s.bone_lengths_mm, s.segment_vectors_mm)
+    from mocapkit.skeleton.kinematics import canonical_positions
+
+    names = ("left_shoulder", "left_elbow", "left_wrist", "neck")
+    p = canonical_positions(sk, sk.zero_pose(), names)
+    assert np.linalg.norm(p[1] - p[0]) == pytest.approx(s.bone_lengths_mm["left_upper_arm"])
+    assert np.linalg.norm(p[2] - p[1]) == pytest.approx(s.bone_lengths_mm["left_forearm"])
+    np.testing.assert_allclose(p[0] - p[3], s.segment_vectors_mm["left_clavicle"], atol=1e-9)
+
+
+def test_cli_track_stereo(session, tmp_path, capsys):
+    out = tmp_path / "res"
+    rc = main(
+        [
+            "track",
+            "stereo",
+            str(session),
+            "--out",
+            str(out),
+            "--keypoints",
+            "--particles",
+            "30",
+            "--cameras",
+            "stereo_left,stereo_right,mono",
+            "--torso",
+            "keypoints",
+            "--fixed-shoulders",
+        ]
+    )
+    assert rc == 0
+    assert (out / "motion.npz").is_file() and (out / "joints.csv").is_file()
+    text = capsys.readouterr().out
+    assert "arm mean" in text and "torso yaw" in text
+
+
+def test_arm_rois_hold_every_elbow_on_the_circle(session):
+    """The gradient maps are computed only in the arm RoIs: every arm pose that reaches the
+    measured hand (any alpha) must project inside them."""
+    import math
+
+    from mocapkit.ik.arm_analytic import arm_ik, make_problem
+    from mocapkit.tracking.stereo.tracker import StereoTracker, yaw_matrix
+
+    s = load_session(session)
+    sk = azad_skeleton(s.bone_lengths_mm, s.segment_vectors_mm)
+    cams = [s.camera(c) for c in ("stereo_left", "stereo_right")]
+    tracker = StereoTracker(sk, cams)
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        rb = yaw_matrix(rng.uniform(-0.5, 0.5))
+        root = np.array([0.0, 0.0, 1400.0]) + rng.normal(0, 50, 3)
+        hands = {}
+        for side in ("left", "right"):
+            sh = root + rb @ (tracker.shoulder_off[side] + tracker.head_off)
+            a, b = tracker.lengths[side]
+            d = rng.normal(size=3)
+            hands[side] = sh + rng.uniform(0.3, 0.95) * (a + b) * d / np.linalg.norm(d)
+        rois = tracker._arm_rois(root, rb, hands)
+        for side in ("left", "right"):
+            sh = root + rb @ (tracker.shoulder_off[side] + tracker.head_off)
+            a, b = tracker.lengths[side]
+            prob = make_problem(rb, sh, hands[side], a, b)
+            _q, elbows = arm_ik(prob, np.linspace(-math.pi, math.pi, 72))
+            for cam, roi in zip(cams, rois):
+                assert roi is not None
+                px = cam.project(np.vstack([elbows, sh, hands[side]]))
+                x0, y0, x1, y1 = roi
+                inside = (px[:, 0] >= x0) & (px[:, 0] < x1) & (px[:, 1] >= y0) & (px[:, 1] < y1)
+                in_image = cam.in_image(px)
+                assert np.all(inside | ~in_image)
+
+
+def test_cli_refuses_a_keypoint_torso_without_keypoints(session, tmp_path, capsys):
+    rc = main(
+        ["track", "stereo", str(session), "--out", str(tmp_path / "r"), "--torso", "keypoints"]
+    )
+    assert rc == 2
+    assert "--torso keypoints needs --keypoints" in capsys.readouterr().err
