@@ -113,9 +113,20 @@ def run_tracker(
     out = None
     if out_dir is not None:
         with timer.stage("write"):
-            out = write_result_folder(out_dir, motion)
-            write_fit_csv(out / FIT_FILE, results)
+            out = write_run_folder(out_dir, motion, results)
     return RunResult(motion, results, out)
+
+
+def write_run_folder(
+    out_dir: str | os.PathLike[str], motion: Motion, results: Sequence[FrameResult]
+) -> Path:
+    """Write a result folder: ``motion.npz``, ``joints.csv``, ``motion.bvh``
+    (`mocapkit.io.motion_files.write_result_folder`) and ``fit.csv`` (`write_fit_csv`),
+    each atomically. Shared by `run_tracker` and the trackers that need the whole
+    sequence before their motion exists (the offline mono tracker); returns the folder."""
+    out = write_result_folder(out_dir, motion)
+    write_fit_csv(out / FIT_FILE, results)
+    return out
 
 
 def _columns(results: Sequence[FrameResult]) -> tuple[list[str], list[str]]:
@@ -175,4 +186,11 @@ def read_fit_csv(path: str | os.PathLike[str]) -> tuple[list[dict[str, str]], di
     return rows, numeric
 
 
-__all__ = ["FIT_FILE", "RunResult", "read_fit_csv", "run_tracker", "write_fit_csv"]
+__all__ = [
+    "FIT_FILE",
+    "RunResult",
+    "read_fit_csv",
+    "run_tracker",
+    "write_fit_csv",
+    "write_run_folder",
+]
