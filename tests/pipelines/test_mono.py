@@ -15,8 +15,9 @@ from mocapkit.io.cameras import write_cameras
 from mocapkit.io.session import write_session_json
 from mocapkit.io.session_csv import write_keypoints_csv
 from mocapkit.io.truth import Truth
-from mocapkit.pipelines.mono import FIT_FILE, track_mono
+from mocapkit.pipelines.mono import track_mono
 from mocapkit.pipelines.mono_accuracy import write_openpose_with_bystander
+from mocapkit.pipelines.run import FIT_FILE
 from mocapkit.skeleton.model import UPPER_BODY_JOINTS
 from tests.tracking.mono.test_tracker import FPS, camera, stick_motion
 
