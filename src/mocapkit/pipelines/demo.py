@@ -48,6 +48,11 @@ from mocapkit.viz.report.page import ReportPage, Section, Table, write_report_pa
 STEREO_MODE = "keypoints+torso+static"
 #: The stereo tracker's cameras: the pair of the ``all`` rig.
 STEREO_CAMERAS = "stereo_left,stereo_right"
+#: Why mono's MPJPE is large, said under the table.
+MONO_NOTE = (
+    "mono: one camera leaves the body's distance and size open, so its MPJPE is large; "
+    "PA-MPJPE (after the best rotation, translation and scale) shows its pose."
+)
 #: Order of the trackers in the table and the report.
 TRACKER_NAMES = ("hybrid", "stereo", "mono")
 
@@ -176,7 +181,7 @@ def format_table(rows: dict[str, TrackerRow]) -> list[str]:
 
 
 def _index_page(
-    folder: Path, session: Path, rows: dict[str, TrackerRow], hybrid_line: str, summary_text: str
+    folder: Path, session: Path, rows: dict[str, TrackerRow], hybrid_line: str, rendered: str
 ) -> Path:
     table = Table(
         "Upper body against the truth",
@@ -194,10 +199,11 @@ def _index_page(
         ),
     )
     notes = [
-        summary_text,
+        rendered,
         "The keypoints are the truth's joints projected into each camera (no detector "
         "noise). frames/s: wall clock of one run on this machine, loading the session "
         "included, after an untimed warm-up that compiles the Numba kernels.",
+        MONO_NOTE,
         hybrid_line,
     ]
     links = [
@@ -326,7 +332,11 @@ def _run(
         f"{v['positions_only_ik']:.1f} -> {v['positions_only_video']:.1f} mm with their "
         "positions only (the paper's input), where the video resolves the elbow swivel."
     )
-    index = _index_page(report_dir, session, rows, hybrid_line, summary.text())
+    rendered = (
+        f"{summary.motion}: {summary.n_frames} frames over {summary.duration_s:.2f} s seen by "
+        f"{', '.join(summary.cameras)}; {summary.n_marker_samples} marker samples."
+    )
+    index = _index_page(report_dir, session, rows, hybrid_line, rendered)
 
     say("")
     say(f"builtin:table-tennis, {seconds:g} s, upper body against the truth:")
@@ -339,10 +349,7 @@ def _run(
         "frames/s: wall clock of one run on this machine, loading the session included, "
         "after an untimed warm-up that compiles the Numba kernels."
     )
-    tell(
-        "mono: one camera leaves the body's distance and size open, so its MPJPE is large; "
-        "PA-MPJPE (after the best rotation, translation and scale) shows its pose."
-    )
+    tell(MONO_NOTE)
     tell(f"open {rows['hybrid'].result_dir / 'motion.bvh'} in Blender (File > Import > BVH).")
     if not all(np.isfinite(row.report.elbow_mm) for row in rows.values()):
         say("warning: a tracker produced no comparable pose")
