@@ -79,26 +79,40 @@ def test_eval_missing_truth_session_names_the_path(
 
 def test_demo_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     out = tmp_path / "demo"
-    assert main(["demo", "--out", str(out), "--seconds", "1"]) == 0
-    text = capsys.readouterr().out
+    assert main(["demo", "--out", str(out), "--seconds", "1", "--quiet"]) == 0
+    captured = capsys.readouterr()
+    text = captured.out
     rows = {}
-    for title in ("elbow error", "MPJPE", "PA-MPJPE"):
-        m = re.search(rf"^{title}" + r"\s+(\d+\.\d)" * 4 + "$", text, flags=re.MULTILINE)
-        assert m, f"no {title!r} row in the demo's table:\n{text}"
-        rows[title] = tuple(float(g) for g in m.groups())
-    assert re.search(r"^coverage(\s+100%){4}$", text, flags=re.MULTILINE), text
-    # plausible upper-body errors (mm) for a tracker driven by head and hand markers:
-    # not zero (it is not reading the truth) and far below a body length
-    for row in rows.values():
-        assert all(1.0 < err_mm < 400.0 for err_mm in row), row
-    subs = ("ik_only", "with_video", "positions_only_ik", "positions_only_video")
-    for sub in (f"result_{s}" for s in subs):
+    for tracker in ("hybrid", "stereo", "mono"):
+        m = re.search(rf"^{tracker}" + r"\s+(\d+\.\d)" * 4 + r"  \S", text, flags=re.MULTILINE)
+        assert m, f"no {tracker!r} row in the demo's table:\n{text}"
+        rows[tracker] = tuple(float(g) for g in m.groups())
+    # plausible errors (mm): not zero (no tracker reads the truth) and, for the
+    # trackers that see the body's place (markers, a stereo pair), far below a body
+    # length; mono's pose after Procrustes alignment likewise
+    for tracker, (mpjpe, pa_mpjpe, elbow, fps) in rows.items():
+        assert all(1.0 < e < 400.0 for e in (pa_mpjpe,)), (tracker, rows)
+        if tracker != "mono":
+            assert all(1.0 < e < 400.0 for e in (mpjpe, elbow)), (tracker, rows)
+        assert fps > 0.0
+    page = out / "report" / "index.html"
+    assert text.rstrip().endswith(f"report: {page}")
+    # --quiet: the table and the report's path only, no narration, no progress
+    assert "tracked" not in text and "session written" not in text, text
+    assert captured.err == ""
+    html = page.read_text()
+    for tracker in ("hybrid", "stereo", "mono"):
+        assert f'href="{tracker}/index.html"' in html
+        assert (out / "report" / tracker / "index.html").is_file()
         for name in ("motion.npz", "joints.csv", "motion.bvh"):
-            assert (out / sub / name).is_file(), f"{sub}/{name} missing"
+            assert (out / f"result_{tracker}" / name).is_file(), f"result_{tracker}/{name}"
+    for sub in ("ik_only", "positions_only_ik", "positions_only_video"):
+        assert (out / f"result_hybrid_{sub}" / "motion.npz").is_file(), sub
     for name in ("session.json", "cameras.json", "markers.csv", "truth.npz"):
         assert (out / "session" / name).is_file(), f"session/{name} missing"
-    assert (out / "session" / "video" / "mono.mp4").is_file()
-    assert f"open {out / 'result_with_video' / 'motion.bvh'} in Blender" in text
+    for cam in ("mono", "stereo_left", "stereo_right"):
+        assert (out / "session" / "video" / f"{cam}.mp4").is_file()
+        assert (out / "session" / "keypoints" / f"{cam}.csv").is_file()
 
 
 def test_track_hybrid_refuses_options_that_do_not_apply(tmp_path, capsys) -> None:
