@@ -464,16 +464,12 @@ def track_mono(
             f"{kp.source}: neck and pelvis are seen together in no frame, so no pose can be "
             "built (with --skin: the waist cue, the paper's golden belt, was never found)"
         )
-    frames = _run(lengths, cam, dt, cfg, model, t, px)
     refine = length_passes > 1 and not use_session_lengths and cfg.camera_model == "perspective"
-    for _ in range(length_passes - 1 if refine else 0):
+    n_refine = length_passes - 1 if refine else 0
+    # every pass but the last runs here; the last one streams through the runner below
+    for _ in range(n_refine):
+        frames = _run(lengths, cam, dt, cfg, model, t, px)
         lengths = refined_lengths(frames, model, lengths)
-        seen = np.isfinite(px[:, [0, model.child[model.link_index("trunk")]]]).all(axis=(1, 2))
-    if not seen.any():
-        raise SessionError(
-            f"{kp.source}: neck and pelvis are seen together in no frame, so no pose can be "
-            "built (with --skin: the waist cue, the paper's golden belt, was never found)"
-        )
     lengths_mm = lengths / scale if ortho else lengths
     skeleton = output_skeleton(model, lengths_mm)
     stream = MonoStream(MonoTracker(lengths, cam, dt, cfg, model), skeleton, cam, scale)
