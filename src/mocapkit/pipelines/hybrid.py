@@ -10,6 +10,7 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -17,14 +18,18 @@ from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import ConfigError, SessionError, ShapeError, unknown_name
 from mocapkit.ik.sdls import IKConfig, SDLSSolver
+from mocapkit.io.lab_frame import LabFrame, detect_lab_frame, to_world
+from mocapkit.io.markers import MarkerData
 from mocapkit.io.motion import Motion
-from mocapkit.pipelines.run import RunResult, run_tracker
+from mocapkit.io.motion_files import write_result_folder
+from mocapkit.pipelines.run import FIT_FILE, RunResult, run_tracker, write_fit_csv
 from mocapkit.skeleton.limbs import arm, head_joint, spine_dofs
 from mocapkit.skeleton.model import PRISMATIC, Skeleton
 from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments, scale_skeleton
 from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.arm_refinement import RefineConfig
+from mocapkit.tracking.base import FrameResult
 from mocapkit.tracking.hybrid import (
     MARKER_SETS,
     HybridConfig,
@@ -376,6 +381,27 @@ def track_hybrid_marker_arrays(
     return sk, np.asarray(run.motion.q), poses
 
 
+@dataclass
+class MarkerFileRun:
+    """What `track_hybrid_marker_file` produced.
+
+    Attributes
+    ----------
+    motion : Motion
+        The tracked motion; its ``joints_mm`` are in the input file's frame unless
+        ``world_output`` was asked (``q`` and the BVH are always the Z-up world's, so a
+        BVH lands upright in Blender).
+    frame : LabFrame
+        The file's up axis and floor used.
+    results : list of FrameResult
+        The tracker's per-frame results (fit figures in ``fit``).
+    """
+
+    motion: Motion
+    frame: LabFrame
+    results: list[FrameResult]
+
+
 def track_hybrid_markers(
     markers_path: str | os.PathLike[str],
     marker_sets: Sequence[str],
@@ -384,12 +410,35 @@ def track_hybrid_markers(
     config: HybridConfig | None = None,
     plant_feet: bool = True,
     timer: StageTimer = NULL_TIMER,
+    up: str | None = None,
 ) -> Motion:
-    """Run the hybrid tracker's IK on a raw marker file (C3D, TRC, CSV) without a session.
+    """`track_hybrid_marker_file` on a file path, returning the motion only."""
+    from mocapkit.io.marker_files import read_markers
+
+    with timer.stage("load"):
+        markers = read_markers(markers_path)
+    return track_hybrid_marker_file(
+        markers, marker_sets, height_mm, out_dir, config, plant_feet, timer, up
+    ).motion
+
+
+def track_hybrid_marker_file(
+    markers: MarkerData,
+    marker_sets: Sequence[str],
+    height_mm: float | None = None,
+    out_dir: str | os.PathLike[str] | None = None,
+    config: HybridConfig | None = None,
+    plant_feet: bool = True,
+    timer: StageTimer = NULL_TIMER,
+    up: str | None = None,
+    world_output: bool = False,
+) -> MarkerFileRun:
+    """Run the hybrid tracker's IK on raw marker data (C3D, TRC, CSV) without a session.
 
     Parameters
     ----------
-    markers_path : path
+    markers : MarkerData
+        In the file's own lab frame.
     marker_sets : sequence of str
         Specs ``"name=M1+M2+..."`` for ``head``, ``left_hand`` and ``right_hand``
         (e.g. ``head=LFHD+RFHD+LBHD+RBHD``); a set's position is the mean of its members.
@@ -398,26 +447,29 @@ def track_hybrid_markers(
         (`mocapkit.io.marker_sets.estimate_height_mm`: head-set height over standing
         frames plus a head-top offset).
     out_dir : path, optional
-        Result folder.
+        Result folder (joints.csv in the file's frame unless ``world_output``).
     config : HybridConfig, optional
         Default: IK only (``use_video=False``).
     plant_feet : bool
         Hold the feet where the first frame puts them (the paper); False for takes
         where the subject walks (ignored when ``config`` is given).
     timer : StageTimer, optional
-        Stage times (``"load"``: reading the file, then the runner's and tracker's).
+        Stage times (the runner's and tracker's).
+    up : str, optional
+        The file's up axis (`mocapkit.io.lab_frame.UP_AXES`); found from the head
+        markers when omitted (`mocapkit.io.lab_frame.detect_lab_frame`).
+    world_output : bool
+        Give joints in the library's Z-up world (floor at z = 0) instead of the file's frame.
 
     Notes
     -----
-    The root starts under the head marker, facing so the body's right points from the
+    The markers are turned into the Z-up world with the floor at z = 0, where the root
+    starts under the head marker, facing so the body's right points from the
     left-hand to the right-hand set (`HybridTracker.initial_pose`); feet are planted
-    where that first pose puts them, on the floor z = 0.
+    where that first pose puts them, on the floor.
     """
-    from mocapkit.io.marker_files import read_markers
     from mocapkit.io.marker_sets import estimate_height_mm, evaluate_marker_sets, parse_marker_sets
 
-    with timer.stage("load"):
-        markers = read_markers(markers_path)
     sets = parse_marker_sets(list(marker_sets))
     names = [s.name for s in sets]
     missing = [n for n in MARKER_SETS if n not in names]
@@ -426,26 +478,46 @@ def track_hybrid_markers(
             f"marker_sets: the hybrid tracker needs sets {list(MARKER_SETS)}; "
             f"missing {missing} (given {names})"
         )
-    pos = evaluate_marker_sets(markers, sets)
+    head = sets[names.index("head")]
+    frame = detect_lab_frame(markers, evaluate_marker_sets(markers, head)[:, 0], up)
+    world = to_world(markers, frame)
+    pos = evaluate_marker_sets(world, sets)
     if height_mm is None:
-        height_mm = float(estimate_height_mm(markers, head=sets[names.index("head")]))
+        height_mm = float(estimate_height_mm(world, head=head))
     cfg = config or HybridConfig(
         use_video=False,
         plant_feet=plant_feet,
         start_upright=False,
         replant_mm=RAW_MARKERS_REPLANT_MM,
     )
-    source = f"hybrid tracker IK on {Path(markers_path).name}"
-    sk, q, _ = track_hybrid_marker_arrays(
-        markers.time_s,
+    where = "the Z-up world" if world_output else "the file's frame"
+    source = (
+        f"hybrid tracker IK on {Path(markers.source).name} (file up = {frame.up}, floor "
+        f"{frame.floor_mm:.0f} mm; joints in {where})"
+    )
+    sk, q, poses = track_hybrid_marker_arrays(
+        world.time_s,
         {n: pos[:, i] for i, n in enumerate(names)},
         height_mm,
         cfg,
-        out_dir=out_dir,
         source=source,
         timer=timer,
     )
-    return Motion.from_q(sk, markers.time_s, q, source=source)
+    motion = Motion.from_q(sk, world.time_s, q, source=source)
+    if not world_output:
+        motion = Motion(
+            sk,
+            motion.time_s,
+            motion.q,
+            motion.joint_names,
+            frame.lab_from_world_points(motion.joints_mm),
+            source,
+        )
+    if out_dir is not None:
+        with timer.stage("write"):
+            out = write_result_folder(out_dir, motion)
+            write_fit_csv(out / FIT_FILE, poses)
+    return MarkerFileRun(motion, frame, list(poses))
 
 
 def bench_ik(n_frames: int = 2000, repeats: int = 5, rate_hz: float = 50.0) -> dict[str, float]:
