@@ -62,7 +62,8 @@ class FitReport:
         out = [
             f"fit over {self.n_frames} frames (each effector's distance to its marker set "
             "or foot plant):",
-            f"  {'effector':12s} {'seen':>6s} {'mean mm':>8s} {'max mm':>8s}  > {self.warn_mm:g} mm",
+            f"  {'effector':12s} {'seen':>6s} {'mean mm':>8s} {'max mm':>8s}"
+            f"  > {self.warn_mm:g} mm",
         ]
         for s in self.sets:
             out.append(
