@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -36,6 +36,7 @@ from mocapkit.tracking.hybrid import (
     HybridPose,
     HybridSample,
     HybridTracker,
+    default_marker_effectors,
 )
 
 FloatArray = NDArray[np.float64]
@@ -339,7 +340,9 @@ def track_hybrid_marker_arrays(
     ----------
     time_s : array_like, shape (T,)
     sets_mm : mapping of str to array_like (T, 3)
-        ``head``, ``left_hand``, ``right_hand`` positions (NaN when occluded).
+        ``head``, ``left_hand``, ``right_hand`` positions (NaN when occluded); one hand
+        set may be absent (a subject instrumented on one side): that arm is left out
+        (`drop_unobserved_arms`).
     height_mm : float
         Subject stature (scales ``zhang21``).
     config : HybridConfig, optional
@@ -361,9 +364,7 @@ def track_hybrid_marker_arrays(
     if t.ndim != 1 or t.size == 0:
         raise ShapeError(f"time_s: expected a non-empty 1-D array of times (s), found {t.shape}")
     arrays = {}
-    for name in MARKER_SETS:
-        if name not in sets_mm:
-            raise ShapeError(f"sets_mm: missing marker set {name!r}; found {sorted(sets_mm)}")
+    for name in partial_marker_sets(sets_mm, "sets_mm"):
         a = np.asarray(sets_mm[name], dtype=float)
         if a.shape != (t.size, 3):
             raise ShapeError(f"sets_mm[{name!r}]: expected shape ({t.size}, 3), found {a.shape}")
@@ -372,13 +373,61 @@ def track_hybrid_marker_arrays(
         use_video=False, start_upright=False, replant_mm=RAW_MARKERS_REPLANT_MM
     )
     sk = hybrid_skeleton(height_mm)
-    tracker = HybridTracker(sk, None, cfg, timer=timer)
+    effectors = default_marker_effectors(sk)
+    tracker = HybridTracker(
+        sk, None, cfg, timer=timer, marker_effectors={n: effectors[n] for n in arrays}
+    )
     samples = (
         HybridSample(float(t[i]), {k: v[i] for k, v in arrays.items()}) for i in range(t.size)
     )
-    run = run_tracker(tracker, samples, t.size, out_dir, label, source=source, timer=timer)
+    run = run_tracker(tracker, samples, t.size, None, label, source=source, timer=timer)
     poses = [p for p in run.results if isinstance(p, HybridPose)]
+    if out_dir is not None:
+        with timer.stage("write"):
+            out = write_result_folder(out_dir, drop_unobserved_arms(run.motion, arrays))
+            write_fit_csv(out / FIT_FILE, run.results)
     return sk, np.asarray(run.motion.q), poses
+
+
+def partial_marker_sets(sets: Iterable[str], where: str) -> tuple[str, ...]:
+    """The hybrid marker sets present among ``sets``, in `MARKER_SETS` order.
+
+    A subject instrumented on one side has one hand set: the head set and at least one
+    hand set are needed; an arm without its hand set is left out (its elbow and wrist are
+    NaN in the results, see `drop_unobserved_arms`), never invented.
+    """
+    given = set(sets)
+    present = tuple(n for n in MARKER_SETS if n in given)
+    if "head" not in given or len(present) < 2:
+        raise ShapeError(
+            f"{where}: the hybrid tracker needs marker set 'head' and at least one of "
+            f"'left_hand', 'right_hand'; missing marker set "
+            f"{'head' if 'head' not in given else 'left_hand/right_hand'!r}; found {sorted(given)}"
+        )
+    return present
+
+
+def drop_unobserved_arms(motion: Motion, sets: Iterable[str]) -> Motion:
+    """``motion`` with the elbow and wrist of each side without a hand set set to NaN.
+
+    The tracker leaves such an arm in the secondary task's relaxed pose, which no marker
+    saw, so its joints are not reported (``q`` keeps the pose, so the BVH still plays).
+    """
+    given = set(sets)
+    drop = [
+        motion.joint_names.index(f"{side}_{j}")
+        for side in ("left", "right")
+        if f"{side}_hand" not in given
+        for j in ("elbow", "wrist")
+        if f"{side}_{j}" in motion.joint_names
+    ]
+    if not drop:
+        return motion
+    joints = motion.joints_mm.copy()
+    joints[:, drop] = np.nan
+    return Motion(
+        motion.skeleton, motion.time_s, motion.q, motion.joint_names, joints, motion.source
+    )
 
 
 @dataclass
@@ -442,6 +491,8 @@ def track_hybrid_marker_file(
     marker_sets : sequence of str
         Specs ``"name=M1+M2+..."`` for ``head``, ``left_hand`` and ``right_hand``
         (e.g. ``head=LFHD+RFHD+LBHD+RBHD``); a set's position is the mean of its members.
+        One hand set may be left out (one-sided marker sets): that arm's elbow and
+        wrist are NaN and it has no fit figures.
     height_mm : float, optional
         Subject stature; estimated from the head markers when omitted
         (`mocapkit.io.marker_sets.estimate_height_mm`: head-set height over standing
@@ -472,12 +523,10 @@ def track_hybrid_marker_file(
 
     sets = parse_marker_sets(list(marker_sets))
     names = [s.name for s in sets]
-    missing = [n for n in MARKER_SETS if n not in names]
-    if missing:
-        raise ConfigError(
-            f"marker_sets: the hybrid tracker needs sets {list(MARKER_SETS)}; "
-            f"missing {missing} (given {names})"
-        )
+    try:
+        partial_marker_sets(names, "marker_sets")
+    except ShapeError as exc:
+        raise ConfigError(str(exc)) from None
     head = sets[names.index("head")]
     frame = detect_lab_frame(markers, evaluate_marker_sets(markers, head)[:, 0], up)
     world = to_world(markers, frame)
@@ -503,7 +552,7 @@ def track_hybrid_marker_file(
         source=source,
         timer=timer,
     )
-    motion = Motion.from_q(sk, world.time_s, q, source=source)
+    motion = drop_unobserved_arms(Motion.from_q(sk, world.time_s, q, source=source), names)
     if not world_output:
         motion = Motion(
             sk,
