@@ -384,7 +384,9 @@ def track_hybrid_marker_arrays(
     poses = [p for p in run.results if isinstance(p, HybridPose)]
     if out_dir is not None:
         with timer.stage("write"):
-            out = write_result_folder(out_dir, drop_unobserved_arms(run.motion, arrays))
+            out = write_result_folder(
+                out_dir, drop_unobserved_arms(run.motion, arrays, run.results)
+            )
             write_fit_csv(out / FIT_FILE, run.results)
     return sk, np.asarray(run.motion.q), poses
 
@@ -407,24 +409,40 @@ def partial_marker_sets(sets: Iterable[str], where: str) -> tuple[str, ...]:
     return present
 
 
-def drop_unobserved_arms(motion: Motion, sets: Iterable[str]) -> Motion:
-    """``motion`` with the elbow and wrist of each side without a hand set set to NaN.
+def drop_unobserved_arms(
+    motion: Motion, sets: Iterable[str], results: Sequence[FrameResult] = ()
+) -> Motion:
+    """``motion`` with the elbow and wrist of an arm that no hand set sees set to NaN.
 
-    The tracker leaves such an arm in the secondary task's relaxed pose, which no marker
-    saw, so its joints are not reported (``q`` keeps the pose, so the BVH still plays).
+    An arm is left out on every frame when ``sets`` has no hand set for its side, and on
+    the frames where ``results`` report its hand set ``released`` or ``missing`` (past
+    the gap the tracker bridges). The tracker leaves such an arm in the secondary task's
+    relaxed pose, which no marker saw, so its joints are not reported (``q`` keeps the
+    pose, so the BVH still plays).
     """
     given = set(sets)
-    drop = [
-        motion.joint_names.index(f"{side}_{j}")
-        for side in ("left", "right")
-        if f"{side}_hand" not in given
-        for j in ("elbow", "wrist")
-        if f"{side}_{j}" in motion.joint_names
-    ]
-    if not drop:
-        return motion
     joints = motion.joints_mm.copy()
-    joints[:, drop] = np.nan
+    changed = False
+    for side in ("left", "right"):
+        hand = f"{side}_hand"
+        cols = [
+            motion.joint_names.index(f"{side}_{j}")
+            for j in ("elbow", "wrist")
+            if f"{side}_{j}" in motion.joint_names
+        ]
+        if hand not in given:
+            rows = np.ones(motion.n_frames, dtype=bool)
+        else:
+            rows = np.array(
+                [r.status.get(hand) in ("released", "missing") for r in results], dtype=bool
+            )
+            if rows.size != motion.n_frames:
+                rows = np.zeros(motion.n_frames, dtype=bool)
+        if cols and rows.any():
+            joints[np.ix_(rows, np.asarray(cols, dtype=np.intp))] = np.nan
+            changed = True
+    if not changed:
+        return motion
     return Motion(
         motion.skeleton, motion.time_s, motion.q, motion.joint_names, joints, motion.source
     )
@@ -552,7 +570,7 @@ def track_hybrid_marker_file(
         source=source,
         timer=timer,
     )
-    motion = drop_unobserved_arms(Motion.from_q(sk, world.time_s, q, source=source), names)
+    motion = drop_unobserved_arms(Motion.from_q(sk, world.time_s, q, source=source), names, poses)
     if not world_output:
         motion = Motion(
             sk,
