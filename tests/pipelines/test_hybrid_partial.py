@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from mocapkit.cli.main import main
 from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.io.joints_csv import read_joints_csv
 from mocapkit.pipelines.hybrid import (
@@ -91,3 +92,13 @@ def test_one_hand_only_head_refused(shared_data):
     m = read_markers(shared_data / "c3d" / "kinematics_basket_sprint.c3d")
     with pytest.raises(ConfigError, match="marker_sets: the hybrid tracker needs marker set"):
         track_hybrid_marker_file(m, ["head=Forehead+TempleL+EarL"])
+
+
+def test_cli_lab_frame_options(tmp_path, capsys):
+    args = ["track", "hybrid", "--markers", str(tmp_path / "none.c3d"), "--out", str(tmp_path)]
+    assert main([*args, "--up", "w"]) == 2
+    assert "--up: expected one of x, y, z, -x, -y, -z, found 'w'" in capsys.readouterr().err
+    assert main([*args, "--warn-fraction", "2"]) == 2
+    assert "--warn-fraction: expected a share in [0, 1]" in capsys.readouterr().err
+    assert main(["track", "hybrid", str(tmp_path), "--up", "z", "--out", str(tmp_path)]) == 2
+    assert "--up apply to --markers" in capsys.readouterr().err

@@ -108,6 +108,7 @@ def _run_hybrid(args: argparse.Namespace) -> int:
     import sys
 
     from mocapkit.errors import SessionError
+    from mocapkit.io.lab_frame import parse_up
     from mocapkit.io.marker_files import read_markers
     from mocapkit.pipelines.fit_report import WARN_FRACTION, WARN_MM, summarize_fit
     from mocapkit.pipelines.hybrid import (
@@ -139,8 +140,10 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             raise SessionError(
                 f"track hybrid: {', '.join(unused)} apply to a SESSION; --markers runs IK only"
             )
-        # checked before the long run (summarize_fit checks them again)
+        # checked before the long run (summarize_fit and the pipeline check them again)
         summarize_fit([], warn_mm, warn_fraction)
+        if args.up is not None:
+            parse_up(args.up)
         run = track_hybrid_marker_file(
             read_markers(args.markers),
             args.marker_set,
