@@ -29,7 +29,11 @@ _SUMMARY_FIGURES = ("rms_mm", "max_mm")
 
 @dataclass(frozen=True)
 class SetFit:
-    """Fit of one marker set over a run (mm; NaN when never seen)."""
+    """Fit of one effector over a run (mm; NaN when never seen).
+
+    ``n_seen`` counts the frames with a target: its marker set seen or bridged, or a
+    foot plant.
+    """
 
     name: str
     n_seen: int
@@ -62,7 +66,7 @@ class FitReport:
         out = [
             f"fit over {self.n_frames} frames (each effector's distance to its marker set "
             "or foot plant):",
-            f"  {'effector':12s} {'seen':>6s} {'mean mm':>8s} {'max mm':>8s}"
+            f"  {'effector':12s} {'frames':>6s} {'mean mm':>8s} {'max mm':>8s}"
             f"  > {self.warn_mm:g} mm",
         ]
         for s in self.sets:
