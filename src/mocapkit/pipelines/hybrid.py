@@ -21,8 +21,7 @@ from mocapkit.ik.sdls import IKConfig, SDLSSolver
 from mocapkit.io.lab_frame import LabFrame, detect_lab_frame, to_world
 from mocapkit.io.markers import MarkerData
 from mocapkit.io.motion import Motion
-from mocapkit.io.motion_files import write_result_folder
-from mocapkit.pipelines.run import FIT_FILE, RunResult, run_tracker, write_fit_csv
+from mocapkit.pipelines.run import RunResult, run_tracker, write_run_folder
 from mocapkit.skeleton.limbs import arm, head_joint, spine_dofs
 from mocapkit.skeleton.model import PRISMATIC, Skeleton
 from mocapkit.skeleton.presets import load_preset
@@ -384,10 +383,9 @@ def track_hybrid_marker_arrays(
     poses = [p for p in run.results if isinstance(p, HybridPose)]
     if out_dir is not None:
         with timer.stage("write"):
-            out = write_result_folder(
-                out_dir, drop_unobserved_arms(run.motion, arrays, run.results)
+            write_run_folder(
+                out_dir, drop_unobserved_arms(run.motion, arrays, run.results), run.results
             )
-            write_fit_csv(out / FIT_FILE, run.results)
     return sk, np.asarray(run.motion.q), poses
 
 
@@ -582,8 +580,7 @@ def track_hybrid_marker_file(
         )
     if out_dir is not None:
         with timer.stage("write"):
-            out = write_result_folder(out_dir, motion)
-            write_fit_csv(out / FIT_FILE, poses)
+            write_run_folder(out_dir, motion, poses)
     return MarkerFileRun(motion, frame, list(poses))
 
 
