@@ -154,6 +154,12 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             world_output=args.world_frame,
         )
         print(run.frame.summary())
+        if not run.frame.sure:
+            print(
+                f"WARNING: the up axis {run.frame.up!r} of {args.markers} is a guess; "
+                "give --up if it is wrong",
+                file=sys.stderr,
+            )
         motion, results = run.motion, run.results
     else:
         if not args.session:
