@@ -110,7 +110,7 @@ def test_marker_arrays_track_synthetic_feet_planted():
     assert max(p.residual_mm["right_hand"] for p in poses) <= 2.0
 
 
-def test_cli_markers(shared_data, tmp_path):
+def test_cli_markers(shared_data, tmp_path, capsys):
     path = shared_data / "c3d" / "kinematics_tennis_serve.c3d"
     args = [
         "track",
@@ -127,6 +127,9 @@ def test_cli_markers(shared_data, tmp_path):
         args += ["--marker-set", spec]
     assert main(args) == 0
     assert (tmp_path / "o" / "joints.csv").is_file()
+    out = capsys.readouterr().out
+    assert "lab frame: up = z (detected (head markers highest); sure)" in out
+    assert "fit over 1092 frames" in out
 
 
 def test_cli_needs_input(tmp_path, capsys):

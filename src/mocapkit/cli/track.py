@@ -68,6 +68,35 @@ def register(subparsers: Any) -> None:
         action="store_true",
         help="with --markers: do not hold the feet at their first positions",
     )
+    hyb.add_argument(
+        "--up",
+        default=None,
+        metavar="AXIS",
+        help="with --markers: the file's up axis (x, y, z, -x, -y, -z; default: found from "
+        "the head markers, printed)",
+    )
+    hyb.add_argument(
+        "--world-frame",
+        action="store_true",
+        help="with --markers: write joints in the library's Z-up world (floor at 0) instead "
+        "of the file's frame",
+    )
+    hyb.add_argument(
+        "--warn-mm",
+        type=float,
+        default=None,
+        metavar="MM",
+        help="fit report: a marker set further than this from the model is off on that "
+        "frame (default 30)",
+    )
+    hyb.add_argument(
+        "--warn-fraction",
+        type=float,
+        default=None,
+        metavar="SHARE",
+        help="fit report: warn when a set is off on more than this share of its frames "
+        "(default 0.05)",
+    )
     hyb.set_defaults(func=_run_hybrid)
     from mocapkit.cli.track_mono import add_mono_parser
 
@@ -76,12 +105,20 @@ def register(subparsers: Any) -> None:
 
 
 def _run_hybrid(args: argparse.Namespace) -> int:
+    import sys
+
     from mocapkit.errors import SessionError
+    from mocapkit.io.lab_frame import parse_up
+    from mocapkit.io.marker_files import read_markers
+    from mocapkit.pipelines.fit_report import WARN_FRACTION, WARN_MM, summarize_fit
     from mocapkit.pipelines.hybrid import (
         parse_oriented_sets,
-        track_hybrid_markers,
-        track_hybrid_session,
+        track_hybrid_marker_file,
+        track_hybrid_session_run,
     )
+
+    warn_mm = WARN_MM if args.warn_mm is None else args.warn_mm
+    warn_fraction = WARN_FRACTION if args.warn_fraction is None else args.warn_fraction
 
     if args.markers:
         if args.session:
@@ -103,9 +140,27 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             raise SessionError(
                 f"track hybrid: {', '.join(unused)} apply to a SESSION; --markers runs IK only"
             )
-        motion = track_hybrid_markers(
-            args.markers, args.marker_set, args.height_mm, args.out, plant_feet=not args.free_feet
+        # checked before the long run (summarize_fit and the pipeline check them again)
+        summarize_fit([], warn_mm, warn_fraction)
+        if args.up is not None:
+            parse_up(args.up)
+        run = track_hybrid_marker_file(
+            read_markers(args.markers),
+            args.marker_set,
+            args.height_mm,
+            args.out,
+            plant_feet=not args.free_feet,
+            up=args.up,
+            world_output=args.world_frame,
         )
+        print(run.frame.summary())
+        if not run.frame.sure:
+            print(
+                f"WARNING: the up axis {run.frame.up!r} of {args.markers} is a guess; "
+                "give --up if it is wrong",
+                file=sys.stderr,
+            )
+        motion, results = run.motion, run.results
     else:
         if not args.session:
             raise SessionError(
@@ -117,6 +172,8 @@ def _run_hybrid(args: argparse.Namespace) -> int:
                 ("--marker-set", bool(args.marker_set)),
                 ("--height-mm", args.height_mm is not None),
                 ("--free-feet", args.free_feet),
+                ("--up", args.up is not None),
+                ("--world-frame", args.world_frame),
             )
             if on
         ]
@@ -137,7 +194,8 @@ def _run_hybrid(args: argparse.Namespace) -> int:
         oriented = (
             parse_oriented_sets(args.oriented_sets) if args.oriented_sets is not None else None
         )
-        motion = track_hybrid_session(
+        summarize_fit([], warn_mm, warn_fraction)
+        session_run = track_hybrid_session_run(
             args.session,
             args.out,
             use_video=not args.no_video,
@@ -145,5 +203,10 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             oriented_sets=() if args.positions_only else oriented,
             max_elbow_speed_mm_per_s=args.max_elbow_speed,
         )
+        motion, results = session_run.motion, session_run.results
     print(f"tracked {motion.n_frames} frames -> {args.out}")
+    report = summarize_fit(results, warn_mm, warn_fraction)
+    print("\n".join(report.lines()))
+    for line in report.warnings():
+        print(line, file=sys.stderr)
     return 0

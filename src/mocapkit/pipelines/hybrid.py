@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -17,20 +18,24 @@ from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import ConfigError, SessionError, ShapeError, unknown_name
 from mocapkit.ik.sdls import IKConfig, SDLSSolver
+from mocapkit.io.lab_frame import LabFrame, detect_lab_frame, to_world
+from mocapkit.io.markers import MarkerData
 from mocapkit.io.motion import Motion
-from mocapkit.pipelines.run import RunResult, run_tracker
+from mocapkit.pipelines.run import RunResult, run_tracker, write_run_folder
 from mocapkit.skeleton.limbs import arm, head_joint, spine_dofs
 from mocapkit.skeleton.model import PRISMATIC, Skeleton
 from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments, scale_skeleton
 from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.arm_refinement import RefineConfig
+from mocapkit.tracking.base import FrameResult
 from mocapkit.tracking.hybrid import (
     MARKER_SETS,
     HybridConfig,
     HybridPose,
     HybridSample,
     HybridTracker,
+    default_marker_effectors,
 )
 
 FloatArray = NDArray[np.float64]
@@ -334,7 +339,9 @@ def track_hybrid_marker_arrays(
     ----------
     time_s : array_like, shape (T,)
     sets_mm : mapping of str to array_like (T, 3)
-        ``head``, ``left_hand``, ``right_hand`` positions (NaN when occluded).
+        ``head``, ``left_hand``, ``right_hand`` positions (NaN when occluded); one hand
+        set may be absent (a subject instrumented on one side): that arm is left out
+        (`drop_unobserved_arms`).
     height_mm : float
         Subject stature (scales ``zhang21``).
     config : HybridConfig, optional
@@ -356,9 +363,7 @@ def track_hybrid_marker_arrays(
     if t.ndim != 1 or t.size == 0:
         raise ShapeError(f"time_s: expected a non-empty 1-D array of times (s), found {t.shape}")
     arrays = {}
-    for name in MARKER_SETS:
-        if name not in sets_mm:
-            raise ShapeError(f"sets_mm: missing marker set {name!r}; found {sorted(sets_mm)}")
+    for name in partial_marker_sets(sets_mm, "sets_mm"):
         a = np.asarray(sets_mm[name], dtype=float)
         if a.shape != (t.size, 3):
             raise ShapeError(f"sets_mm[{name!r}]: expected shape ({t.size}, 3), found {a.shape}")
@@ -367,13 +372,99 @@ def track_hybrid_marker_arrays(
         use_video=False, start_upright=False, replant_mm=RAW_MARKERS_REPLANT_MM
     )
     sk = hybrid_skeleton(height_mm)
-    tracker = HybridTracker(sk, None, cfg, timer=timer)
+    effectors = default_marker_effectors(sk)
+    tracker = HybridTracker(
+        sk, None, cfg, timer=timer, marker_effectors={n: effectors[n] for n in arrays}
+    )
     samples = (
         HybridSample(float(t[i]), {k: v[i] for k, v in arrays.items()}) for i in range(t.size)
     )
-    run = run_tracker(tracker, samples, t.size, out_dir, label, source=source, timer=timer)
+    run = run_tracker(tracker, samples, t.size, None, label, source=source, timer=timer)
     poses = [p for p in run.results if isinstance(p, HybridPose)]
+    if out_dir is not None:
+        with timer.stage("write"):
+            write_run_folder(
+                out_dir, drop_unobserved_arms(run.motion, arrays, run.results), run.results
+            )
     return sk, np.asarray(run.motion.q), poses
+
+
+def partial_marker_sets(sets: Iterable[str], where: str) -> tuple[str, ...]:
+    """The hybrid marker sets present among ``sets``, in `MARKER_SETS` order.
+
+    A subject instrumented on one side has one hand set: the head set and at least one
+    hand set are needed; an arm without its hand set is left out (its elbow and wrist are
+    NaN in the results, see `drop_unobserved_arms`), never invented.
+    """
+    given = set(sets)
+    present = tuple(n for n in MARKER_SETS if n in given)
+    if "head" not in given or len(present) < 2:
+        raise ShapeError(
+            f"{where}: the hybrid tracker needs marker set 'head' and at least one of "
+            f"'left_hand', 'right_hand'; missing marker set "
+            f"{'head' if 'head' not in given else 'left_hand/right_hand'!r}; found {sorted(given)}"
+        )
+    return present
+
+
+def drop_unobserved_arms(
+    motion: Motion, sets: Iterable[str], results: Sequence[FrameResult] = ()
+) -> Motion:
+    """``motion`` with the elbow and wrist of an arm that no hand set sees set to NaN.
+
+    An arm is left out on every frame when ``sets`` has no hand set for its side, and on
+    the frames where ``results`` report its hand set ``released`` or ``missing`` (past
+    the gap the tracker bridges). The tracker leaves such an arm in the secondary task's
+    relaxed pose, which no marker saw, so its joints are not reported (``q`` keeps the
+    pose, so the BVH still plays).
+    """
+    given = set(sets)
+    joints = motion.joints_mm.copy()
+    changed = False
+    for side in ("left", "right"):
+        hand = f"{side}_hand"
+        cols = [
+            motion.joint_names.index(f"{side}_{j}")
+            for j in ("elbow", "wrist")
+            if f"{side}_{j}" in motion.joint_names
+        ]
+        if hand not in given:
+            rows = np.ones(motion.n_frames, dtype=bool)
+        else:
+            rows = np.array(
+                [r.status.get(hand) in ("released", "missing") for r in results], dtype=bool
+            )
+            if rows.size != motion.n_frames:
+                rows = np.zeros(motion.n_frames, dtype=bool)
+        if cols and rows.any():
+            joints[np.ix_(rows, np.asarray(cols, dtype=np.intp))] = np.nan
+            changed = True
+    if not changed:
+        return motion
+    return Motion(
+        motion.skeleton, motion.time_s, motion.q, motion.joint_names, joints, motion.source
+    )
+
+
+@dataclass
+class MarkerFileRun:
+    """What `track_hybrid_marker_file` produced.
+
+    Attributes
+    ----------
+    motion : Motion
+        The tracked motion; its ``joints_mm`` are in the input file's frame unless
+        ``world_output`` was asked (``q`` and the BVH are always the Z-up world's, so a
+        BVH lands upright in Blender).
+    frame : LabFrame
+        The file's up axis and floor used.
+    results : list of FrameResult
+        The tracker's per-frame results (fit figures in ``fit``).
+    """
+
+    motion: Motion
+    frame: LabFrame
+    results: list[FrameResult]
 
 
 def track_hybrid_markers(
@@ -384,68 +475,113 @@ def track_hybrid_markers(
     config: HybridConfig | None = None,
     plant_feet: bool = True,
     timer: StageTimer = NULL_TIMER,
+    up: str | None = None,
 ) -> Motion:
-    """Run the hybrid tracker's IK on a raw marker file (C3D, TRC, CSV) without a session.
+    """`track_hybrid_marker_file` on a file path, returning the motion only."""
+    from mocapkit.io.marker_files import read_markers
+
+    with timer.stage("load"):
+        markers = read_markers(markers_path)
+    return track_hybrid_marker_file(
+        markers, marker_sets, height_mm, out_dir, config, plant_feet, timer, up
+    ).motion
+
+
+def track_hybrid_marker_file(
+    markers: MarkerData,
+    marker_sets: Sequence[str],
+    height_mm: float | None = None,
+    out_dir: str | os.PathLike[str] | None = None,
+    config: HybridConfig | None = None,
+    plant_feet: bool = True,
+    timer: StageTimer = NULL_TIMER,
+    up: str | None = None,
+    world_output: bool = False,
+) -> MarkerFileRun:
+    """Run the hybrid tracker's IK on raw marker data (C3D, TRC, CSV) without a session.
 
     Parameters
     ----------
-    markers_path : path
+    markers : MarkerData
+        In the file's own lab frame.
     marker_sets : sequence of str
         Specs ``"name=M1+M2+..."`` for ``head``, ``left_hand`` and ``right_hand``
         (e.g. ``head=LFHD+RFHD+LBHD+RBHD``); a set's position is the mean of its members.
+        One hand set may be left out (one-sided marker sets): that arm's elbow and
+        wrist are NaN and it has no fit figures.
     height_mm : float, optional
         Subject stature; estimated from the head markers when omitted
         (`mocapkit.io.marker_sets.estimate_height_mm`: head-set height over standing
         frames plus a head-top offset).
     out_dir : path, optional
-        Result folder.
+        Result folder (joints.csv in the file's frame unless ``world_output``).
     config : HybridConfig, optional
         Default: IK only (``use_video=False``).
     plant_feet : bool
         Hold the feet where the first frame puts them (the paper); False for takes
         where the subject walks (ignored when ``config`` is given).
     timer : StageTimer, optional
-        Stage times (``"load"``: reading the file, then the runner's and tracker's).
+        Stage times (the runner's and tracker's).
+    up : str, optional
+        The file's up axis (`mocapkit.io.lab_frame.UP_AXES`); found from the head
+        markers when omitted (`mocapkit.io.lab_frame.detect_lab_frame`).
+    world_output : bool
+        Give joints in the library's Z-up world (floor at z = 0) instead of the file's frame.
 
     Notes
     -----
-    The root starts under the head marker, facing so the body's right points from the
+    The markers are turned into the Z-up world with the floor at z = 0, where the root
+    starts under the head marker, facing so the body's right points from the
     left-hand to the right-hand set (`HybridTracker.initial_pose`); feet are planted
-    where that first pose puts them, on the floor z = 0.
+    where that first pose puts them, on the floor.
     """
-    from mocapkit.io.marker_files import read_markers
     from mocapkit.io.marker_sets import estimate_height_mm, evaluate_marker_sets, parse_marker_sets
 
-    with timer.stage("load"):
-        markers = read_markers(markers_path)
     sets = parse_marker_sets(list(marker_sets))
     names = [s.name for s in sets]
-    missing = [n for n in MARKER_SETS if n not in names]
-    if missing:
-        raise ConfigError(
-            f"marker_sets: the hybrid tracker needs sets {list(MARKER_SETS)}; "
-            f"missing {missing} (given {names})"
-        )
-    pos = evaluate_marker_sets(markers, sets)
+    try:
+        partial_marker_sets(names, "marker_sets")
+    except ShapeError as exc:
+        raise ConfigError(str(exc)) from None
+    head = sets[names.index("head")]
+    frame = detect_lab_frame(markers, evaluate_marker_sets(markers, head)[:, 0], up)
+    world = to_world(markers, frame)
+    pos = evaluate_marker_sets(world, sets)
     if height_mm is None:
-        height_mm = float(estimate_height_mm(markers, head=sets[names.index("head")]))
+        height_mm = float(estimate_height_mm(world, head=head))
     cfg = config or HybridConfig(
         use_video=False,
         plant_feet=plant_feet,
         start_upright=False,
         replant_mm=RAW_MARKERS_REPLANT_MM,
     )
-    source = f"hybrid tracker IK on {Path(markers_path).name}"
-    sk, q, _ = track_hybrid_marker_arrays(
-        markers.time_s,
+    where = "the Z-up world" if world_output else "the file's frame"
+    source = (
+        f"hybrid tracker IK on {Path(markers.source).name} (file up = {frame.up}, floor "
+        f"{frame.floor_mm:.0f} mm; joints in {where})"
+    )
+    sk, q, poses = track_hybrid_marker_arrays(
+        world.time_s,
         {n: pos[:, i] for i, n in enumerate(names)},
         height_mm,
         cfg,
-        out_dir=out_dir,
         source=source,
         timer=timer,
     )
-    return Motion.from_q(sk, markers.time_s, q, source=source)
+    motion = drop_unobserved_arms(Motion.from_q(sk, world.time_s, q, source=source), names, poses)
+    if not world_output:
+        motion = Motion(
+            sk,
+            motion.time_s,
+            motion.q,
+            motion.joint_names,
+            frame.lab_from_world_points(motion.joints_mm),
+            source,
+        )
+    if out_dir is not None:
+        with timer.stage("write"):
+            write_run_folder(out_dir, motion, poses)
+    return MarkerFileRun(motion, frame, list(poses))
 
 
 def bench_ik(n_frames: int = 2000, repeats: int = 5, rate_hz: float = 50.0) -> dict[str, float]:

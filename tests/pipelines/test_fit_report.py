@@ -1,0 +1,70 @@
+"""Tests of the end-of-run fit report and its warnings."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from mocapkit.errors import ConfigError
+from mocapkit.pipelines.fit_report import summarize_fit
+from mocapkit.tracking.base import FrameResult, fit_summary
+
+
+def _result(i: int, distances: dict[str, float]) -> FrameResult:
+    fit, worst = fit_summary(distances)
+    return FrameResult(i / 10.0, np.zeros(3), np.zeros((15, 3)), {}, fit, worst)
+
+
+def test_known_values_and_flags():
+    # head 10 mm on 19 frames and 50 mm on 1 (5 %: not flagged, the limit is "more than");
+    # left hand 40 mm on 2 of its 10 seen frames (20 %: flagged); right hand never seen
+    results = [
+        _result(
+            i,
+            {
+                "head": 50.0 if i == 0 else 10.0,
+                "left_hand": (40.0 if i < 2 else 5.0) if i < 10 else math.nan,
+                "right_hand": math.nan,
+            },
+        )
+        for i in range(20)
+    ]
+    report = summarize_fit(results, warn_mm=30.0, warn_fraction=0.05)
+    by = {s.name: s for s in report.sets}
+    assert set(by) == {"head", "left_hand", "right_hand"}
+    assert (by["head"].n_seen, by["head"].n_over) == (20, 1)
+    assert by["head"].mean_mm == pytest.approx((50.0 + 19 * 10.0) / 20)
+    assert by["head"].max_mm == 50.0
+    assert (by["left_hand"].n_seen, by["left_hand"].n_over) == (10, 2)
+    assert by["left_hand"].fraction_over == pytest.approx(0.2)
+    assert by["right_hand"].n_seen == 0 and math.isnan(by["right_hand"].mean_mm)
+    assert [s.name for s in report.flagged] == ["left_hand"]
+    (warning,) = report.warnings()
+    assert warning.startswith("WARNING: 'left_hand' is more than 30 mm from the model on 20.0 %")
+    assert len(report.lines()) == 2 + 3
+    # a stricter fraction flags the head too
+    assert len(summarize_fit(results, 30.0, 0.04).flagged) == 2
+
+
+def test_bad_thresholds():
+    with pytest.raises(ConfigError, match="--warn-mm: expected a distance > 0 mm, found 0"):
+        summarize_fit([], warn_mm=0.0)
+    with pytest.raises(ConfigError, match=r"--warn-fraction: expected a share in \[0, 1\]"):
+        summarize_fit([], warn_fraction=1.5)
+
+
+def test_short_stature_warns_on_tennis_serve(shared_data):
+    """A 900 mm stature for an adult player: the head set is out of the model's reach."""
+    from mocapkit.io.marker_files import read_markers
+    from mocapkit.io.markers import MarkerData
+    from mocapkit.pipelines.hybrid import track_hybrid_marker_file
+
+    m = read_markers(shared_data / "c3d" / "kinematics_tennis_serve.c3d")
+    n = 100
+    part = MarkerData(m.time_s[:n], m.names, m.positions_mm[:n], m.rate_hz, m.source)
+    sets = ["head=LFHD+RFHD+LBHD+RBHD", "left_hand=LWRA+LWRB", "right_hand=RWRA+RWRB"]
+    run = track_hybrid_marker_file(part, sets, height_mm=900.0)
+    flagged = {s.name for s in summarize_fit(run.results).flagged}
+    assert "head" in flagged
