@@ -80,7 +80,7 @@ def _run_hybrid(args: argparse.Namespace) -> int:
     from mocapkit.pipelines.hybrid import (
         parse_oriented_sets,
         track_hybrid_markers,
-        track_hybrid_session,
+        track_hybrid_session_run,
     )
 
     if args.markers:
@@ -137,7 +137,7 @@ def _run_hybrid(args: argparse.Namespace) -> int:
         oriented = (
             parse_oriented_sets(args.oriented_sets) if args.oriented_sets is not None else None
         )
-        motion = track_hybrid_session(
+        run = track_hybrid_session_run(
             args.session,
             args.out,
             use_video=not args.no_video,
@@ -145,5 +145,10 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             oriented_sets=() if args.positions_only else oriented,
             max_elbow_speed_mm_per_s=args.max_elbow_speed,
         )
+        motion = run.motion
+        # frames where a marker set was not observed have no joints of its limb
+        # (NaN in joints.csv, the status in fit.csv): say where
+        for gap in run.gaps:
+            print(f"gap: {gap}")
     print(f"tracked {motion.n_frames} frames -> {args.out}")
     return 0
