@@ -270,3 +270,51 @@ def test_session_max_elbow_speed(wave_session):
         track_hybrid_session(wave_session, None, paper=True, max_elbow_speed_mm_per_s=100.0)
     with pytest.raises(ConfigError, match=r"expected a speed >= 0 mm/s .*found -1.0"):
         track_hybrid_session(wave_session, None, max_elbow_speed_mm_per_s=-1.0)
+
+
+def _edit_markers_csv(folder, edit):
+    """Rewrite a session's markers.csv: ``edit(header, rows)`` changes the rows in place."""
+    import csv
+
+    path = folder / "markers.csv"
+    with open(path, newline="") as fh:
+        header, *body = list(csv.reader(fh))
+    edit(header, body)
+    with open(path, "w", newline="") as fh:
+        csv.writer(fh, lineterminator="\n").writerows([header, *body])
+
+
+def test_session_with_a_set_never_seen_is_refused(wave_session, tmp_path):
+    """The right hand's markers are all empty: its limb would be invented (issue 14)."""
+    copy = _copy_session(wave_session, tmp_path / "blind_hand")
+
+    def blank(header, rows):
+        cols = [i for i, h in enumerate(header) if h.startswith("right_hand")]
+        for r in rows:
+            for i in cols:
+                r[i] = ""
+
+    _edit_markers_csv(copy, blank)
+    with pytest.raises(SessionError, match=r"blind_hand: marker set\(s\) \['right_hand'\] have no"):
+        track_hybrid_session(copy, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+
+
+def test_session_whose_markers_end_early_has_nan_joints(wave_session, tmp_path):
+    """Markers that stop before the video: the frames after the bridge have no joints
+    and fit.csv says released; the last marker sample is not used as live (issue 14)."""
+    from mocapkit.io.session import load_session
+    from mocapkit.pipelines.hybrid import track_hybrid_session_run
+    from mocapkit.pipelines.run import read_fit_csv
+
+    copy = _copy_session(wave_session, tmp_path / "short_markers")
+    _edit_markers_csv(copy, lambda header, rows: rows.__delitem__(slice(len(rows) // 8, None)))
+    last_marker_s = load_session(copy).markers.time_s[-1]
+    run = track_hybrid_session_run(copy, tmp_path / "out", use_video=False)
+    late = run.motion.time_s > last_marker_s + HybridConfig().gap_limit_s
+    assert late.any() and (~late).any()
+    assert np.all(np.isnan(run.motion.joints_mm[late]))
+    assert np.all(np.isfinite(run.motion.joints_mm[~late][:, :3]))
+    rows, _ = read_fit_csv(tmp_path / "out" / "fit.csv")
+    assert {r["head_status"] for r, x in zip(rows, late) if x} == {"released"}
+    assert [g.name for g in run.gaps] == ["head", "left_hand", "right_hand"]

@@ -146,6 +146,36 @@ def member_offsets(
     return out
 
 
+def require_observed_sets(
+    sets_mm: Mapping[str, ArrayLike], where: str | os.PathLike[str], error: type[Exception]
+) -> None:
+    """Refuse marker sets the hybrid tracker needs (`MARKER_SETS`) that are never seen.
+
+    A set with no finite sample in the whole recording (a hand whose markers were never
+    labelled) would leave its limb wholly made up by the relaxed pose; the tracker needs
+    each one at least once.
+
+    Parameters
+    ----------
+    sets_mm : mapping of str to array_like (T, 3)
+        Set positions over the recording (NaN where unseen).
+    where : path or str
+        The file or session, for the message.
+    error : exception type
+        `SessionError` for a session, `ConfigError` for ``--marker-set`` specs.
+    """
+    never = [
+        n
+        for n in MARKER_SETS
+        if n in sets_mm and not np.any(np.all(np.isfinite(np.asarray(sets_mm[n])), axis=-1))
+    ]
+    if never:
+        raise error(
+            f"{where}: marker set(s) {never} have no sample in the whole recording; the "
+            f"hybrid tracker needs {list(MARKER_SETS)} seen at least once"
+        )
+
+
 def track_hybrid_session(
     session_dir: str | os.PathLike[str],
     out_dir: str | os.PathLike[str] | None,
@@ -234,6 +264,10 @@ def track_hybrid_session_run(
             f"{session.path}: the hybrid tracker needs marker sets {list(MARKER_SETS)} in "
             f"session.json; missing {missing or 'the marker file'}"
         )
+    positions = session.marker_set_positions(MARKER_SETS)
+    require_observed_sets(
+        {n: positions[:, i] for i, n in enumerate(MARKER_SETS)}, session.path, SessionError
+    )
     if oriented_sets is None:
         oriented_sets = () if paper else ORIENTED_SETS
     refine_config = None
@@ -427,6 +461,7 @@ def track_hybrid_markers(
             f"missing {missing} (given {names})"
         )
     pos = evaluate_marker_sets(markers, sets)
+    require_observed_sets({n: pos[:, i] for i, n in enumerate(names)}, markers_path, ConfigError)
     if height_mm is None:
         height_mm = float(estimate_height_mm(markers, head=sets[names.index("head")]))
     cfg = config or HybridConfig(
