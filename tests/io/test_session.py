@@ -248,3 +248,65 @@ def test_bad_member_offsets_rejected(copy):
     (copy / "session.json").write_text(json.dumps(info))
     with pytest.raises(FormatError, match=r"head.offset_mm: expected 3 finite numbers"):
         load_session(copy)
+
+
+def _set_marker_cell(folder: Path, column: str, row: int, value: str) -> None:
+    import csv
+
+    path = folder / "markers.csv"
+    with open(path, newline="") as fh:
+        header, *body = list(csv.reader(fh))
+    body[row][header.index(column)] = value
+    with open(path, "w", newline="") as fh:
+        csv.writer(fh, lineterminator="\n").writerows([header, *body])
+
+
+def test_absurd_segment_length_is_refused(copy):
+    """A 35 m forearm is finite and positive, but no body has it (issue 14)."""
+    info = json.loads((copy / "session.json").read_text())
+    info["subject"]["bone_lengths_mm"]["left_forearm"] = 35000.0
+    (copy / "session.json").write_text(json.dumps(info))
+    with pytest.raises(
+        FormatError,
+        match=r"subject.bone_lengths_mm.left_forearm: expected at most half the stature "
+        r"\(\d+ mm\), found 35000.0 mm",
+    ):
+        load_session(copy)
+
+
+def test_absurd_marker_coordinates_are_refused(copy):
+    _set_marker_cell(copy, "head_z", 3, "1e9")
+    with pytest.raises(
+        FormatError, match=r"markers.csv: marker 'head' at .* s: expected coordinates within"
+    ):
+        load_session(copy)
+
+
+def test_marker_jump_is_refused(copy):
+    """2 m in one 120 Hz step is 240 m/s: a glitch, not a motion."""
+    import csv
+
+    with open(copy / "markers.csv", newline="") as fh:
+        header, *body = list(csv.reader(fh))
+    x = float(body[5][header.index("left_hand_x")])
+    _set_marker_cell(copy, "left_hand_x", 5, repr(x + 2000.0))
+    with pytest.raises(FormatError, match=r"marker 'left_hand' at .* s: expected a speed below"):
+        load_session(copy)
+
+
+def test_member_far_from_its_siblings_is_refused(copy):
+    """members_mm puts the glasses' members ~140 mm apart; one of them 500 mm away in one
+    sample (60 m/s, no glitch of speed) is refused with the set, the pair and the time
+    named (issue 14)."""
+    info = json.loads((copy / "session.json").read_text())
+    members = list(info["marker_offsets_mm"]["head"]["members_mm"])
+    s = load_session(copy)
+    k = s.markers.names.index(members[0])
+    moved = float(s.markers.positions_mm[0, k, 0]) + 500.0
+    _set_marker_cell(copy, f"{members[0]}_x", 0, repr(moved))
+    with pytest.raises(
+        SessionError,
+        match=r"marker_offsets_mm.head.members_mm: '.*' and '.*' are declared \d+ mm apart, "
+        r"found \d+ mm at",
+    ):
+        load_session(copy)

@@ -55,7 +55,7 @@ from mocapkit.io.atomic import atomic_write
 from mocapkit.io.cameras import read_cameras
 from mocapkit.io.marker_files import read_markers
 from mocapkit.io.marker_sets import MarkerSet, evaluate_marker_sets
-from mocapkit.io.markers import MarkerData
+from mocapkit.io.markers import MarkerData, check_plausible_markers
 from mocapkit.io.session_csv import Keypoints, read_keypoints_csv, read_timestamps_csv
 from mocapkit.io.truth import Truth, load_truth
 from mocapkit.io.video import LazyFrame, VideoSource, probe_video
@@ -185,6 +185,15 @@ class Session:
                     f"{info_path}: subject.bone_lengths_mm: unknown segment {k!r}; expected "
                     f"one of {sorted(CANONICAL_SEGMENTS)}"
                 )
+        # no segment is half as long as the body (the shank, the longest, is about a
+        # quarter of the stature); without a stature, half the tallest one allowed
+        longest = 0.5 * (self.height_mm if self.height_mm is not None else 2800.0)
+        for k, v in bones.items():
+            if v > longest:
+                raise FormatError(
+                    f"{info_path}: subject.bone_lengths_mm.{k}: expected at most half the "
+                    f"stature ({longest:.0f} mm), found {v!r} mm"
+                )
         self.bone_lengths_mm: dict[str, float] = {str(k): float(v) for k, v in bones.items()}
         vectors = subject.get("segment_vectors_mm", {})
         if not isinstance(vectors, dict):
@@ -267,6 +276,8 @@ class Session:
                 f"{self.path}: both {present[0]} and {present[1]}; keep one marker file"
             )
         self.markers: MarkerData | None = read_markers(self.path / present[0]) if present else None
+        if self.markers is not None:
+            check_plausible_markers(self.markers)  # the subject's markers: speeds too
         sets = info.get("marker_sets", {})
         if not isinstance(sets, dict):
             raise FormatError(
@@ -295,6 +306,10 @@ class Session:
                     f"{info_path}: marker_offsets_mm.{set_name}.members_mm names {strange}, "
                     f"which are not members of marker set {set_name!r} (members: {declared})"
                 )
+
+        if self.markers is not None:
+            for set_name, members_mm in self.marker_member_offsets.items():
+                _check_member_spacing(self.markers, set_name, members_mm, info_path)
 
         # ---------------------------------------------------------------- keypoints, truth
         self.keypoints: dict[str, Keypoints] = {}
@@ -577,6 +592,39 @@ def _parse_member_offsets(doc: Any, where: Path) -> dict[str, dict[str, FloatArr
             parsed[str(marker)] = off
         out[str(name)] = parsed
     return out
+
+
+#: How far (mm) two members of a rigid marker set may be from their declared spacing.
+MEMBER_SPACING_TOLERANCE_MM = 100.0
+
+
+def _check_member_spacing(
+    markers: MarkerData, set_name: str, members_mm: Mapping[str, FloatArray], where: Path
+) -> None:
+    """Refuse a marker set whose members are not where ``members_mm`` puts them.
+
+    The members ride on one rigid body part, so the distance between two of them is the
+    distance between their declared offsets, give or take skin motion and noise
+    (`MEMBER_SPACING_TOLERANCE_MM`); a member 1e9 mm from its siblings is a glitch
+    the IK would chase.
+    """
+    names = [n for n in members_mm if n in markers.names]
+    for a in range(len(names)):
+        for b in range(a + 1, len(names)):
+            declared = float(np.linalg.norm(members_mm[names[a]] - members_mm[names[b]]))
+            pa, pb = markers.trajectory(names[a]), markers.trajectory(names[b])
+            seen = np.flatnonzero(np.all(np.isfinite(pa) & np.isfinite(pb), axis=1))
+            found = np.linalg.norm(pa[seen] - pb[seen], axis=1)
+            bad = np.flatnonzero(np.abs(found - declared) > MEMBER_SPACING_TOLERANCE_MM)
+            if bad.size:
+                f = int(seen[bad[0]])
+                raise SessionError(
+                    f"{where}: marker_offsets_mm.{set_name}.members_mm: {names[a]!r} and "
+                    f"{names[b]!r} are declared {declared:.0f} mm apart, found "
+                    f"{found[bad[0]]:.0f} mm at {markers.time_s[f]:.4f} s in "
+                    f"{Path(markers.source).name} ({bad.size} samples off by more than "
+                    f"{MEMBER_SPACING_TOLERANCE_MM:.0f} mm)"
+                )
 
 
 def write_session_json(path: str | os.PathLike[str], info: Mapping[str, Any]) -> None:

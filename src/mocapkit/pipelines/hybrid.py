@@ -449,9 +449,11 @@ def track_hybrid_markers(
     """
     from mocapkit.io.marker_files import read_markers
     from mocapkit.io.marker_sets import estimate_height_mm, evaluate_marker_sets, parse_marker_sets
+    from mocapkit.io.markers import check_plausible_markers
 
     with timer.stage("load"):
         markers = read_markers(markers_path)
+    check_plausible_markers(markers)
     sets = parse_marker_sets(list(marker_sets))
     names = [s.name for s in sets]
     missing = [n for n in MARKER_SETS if n not in names]
