@@ -318,3 +318,30 @@ def test_session_whose_markers_end_early_has_nan_joints(wave_session, tmp_path):
     rows, _ = read_fit_csv(tmp_path / "out" / "fit.csv")
     assert {r["head_status"] for r, x in zip(rows, late) if x} == {"released"}
     assert [g.name for g in run.gaps] == ["head", "left_hand", "right_hand"]
+
+
+@pytest.mark.parametrize(
+    ("case", "edit"),
+    [
+        # the translation written in metres: the camera sits inside the subject
+        ("metres", lambda m: [*([*row[:3], row[3] / 1000.0] for row in m[:3]), m[3]]),
+        # turned round (x and z negated): it looks away from the subject
+        ("behind", lambda m: [[-v for v in m[0]], m[1], [-v for v in m[2]], m[3]]),
+    ],
+)
+def test_camera_that_cannot_see_the_subject_is_refused(wave_session, tmp_path, case, edit):
+    import json
+
+    copy = _copy_session(wave_session, tmp_path / case)
+    path = copy / "cameras.json"
+    doc = json.loads(path.read_text())
+    doc["cameras"][0]["camera_from_world"] = edit(doc["cameras"][0]["camera_from_world"])
+    path.write_text(json.dumps(doc))
+    with pytest.raises(
+        SessionError,
+        match=r"camera 'mono' does not see the subject: of \d+ marker-set positions in the "
+        r"first 1 s, \d+ lie in front of it \(median depth -?\d+ mm\) and 0 inside its 320x240",
+    ):
+        track_hybrid_session(copy, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+    track_hybrid_session(copy, None, use_video=False)  # the markers alone still track
