@@ -27,6 +27,7 @@ from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import FormatError
 from mocapkit.geometry.transforms import make_transform
 from mocapkit.io.atomic import atomic_write
+from mocapkit.io.files import read_text
 
 FORMAT_VERSION = 1
 _KEYS = ("name", "image_size", "K", "dist", "camera_from_world")
@@ -159,12 +160,7 @@ def read_cameras(path: PathLike) -> list[Camera]:
     Raises `FormatError` naming the file and the field on any deviation.
     """
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError as exc:
-        raise FormatError(f"{p}: camera file not found") from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FormatError(f"{p}: cannot read camera file ({exc})") from exc
+    text = read_text(p, "camera file")
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:

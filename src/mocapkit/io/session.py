@@ -53,6 +53,7 @@ from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import FormatError, SessionError
 from mocapkit.io.atomic import atomic_write
 from mocapkit.io.cameras import read_cameras
+from mocapkit.io.files import read_text
 from mocapkit.io.marker_files import read_markers
 from mocapkit.io.marker_sets import MarkerSet, evaluate_marker_sets
 from mocapkit.io.markers import MarkerData, check_plausible_markers
@@ -145,7 +146,7 @@ class Session:
                 f"{self.path}: missing session.json (every session folder needs one)"
             )
         try:
-            info = json.loads(info_path.read_text(encoding="utf-8"))
+            info = json.loads(read_text(info_path, "session.json"))
         except json.JSONDecodeError as exc:
             raise FormatError(
                 f"{info_path}: not valid JSON (line {exc.lineno}: {exc.msg})"

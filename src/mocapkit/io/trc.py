@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike
 
 from mocapkit.errors import ConfigError, FormatError
 from mocapkit.io.atomic import atomic_write
+from mocapkit.io.files import read_text
 from mocapkit.io.markers import MarkerData, check_marker_arrays, infer_rate_hz
 
 #: Length units a TRC file may declare, with their size in mm.
@@ -55,8 +56,7 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerData:
     """
     p = Path(path)
     where = str(p)
-    with open(p, encoding="utf-8-sig") as fh:
-        lines = fh.readlines()
+    lines = read_text(p, "TRC marker file").splitlines(keepends=True)
     if len(lines) < 5:
         raise FormatError(
             f"{where}: expected at least 5 header lines (PathFileType, keys, values, marker "
