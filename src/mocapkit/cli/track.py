@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from mocapkit.cli.args import output_folder
 from mocapkit.cli.track_stereo import register_method as register_stereo
 
 
@@ -20,7 +21,7 @@ def register(subparsers: Any) -> None:
         "marker file (IK only). Writes motion.npz, joints.csv and motion.bvh to --out.",
     )
     hyb.add_argument("session", nargs="?", help="session folder (omit with --markers)")
-    hyb.add_argument("--out", required=True, help="result folder")
+    hyb.add_argument("--out", required=True, type=output_folder, help="result folder")
     hyb.add_argument("--no-video", action="store_true", help="skip the video refinement")
     hyb.add_argument(
         "--paper",
