@@ -310,3 +310,37 @@ def test_member_far_from_its_siblings_is_refused(copy):
         r"found \d+ mm at",
     ):
         load_session(copy)
+
+
+def test_refuses_streams_of_different_lengths(copy):
+    """Videos, truth and markers that cannot be one recording are refused (issue 14)."""
+    path = copy / "video" / "stereo_left.timestamps.csv"
+    t = read_timestamps_csv(path)
+    write_timestamps_csv(path, t * 2.0)
+    with pytest.raises(
+        SessionError, match=r"video of camera 'stereo_left' spans .* s, the video of camera 'mono'"
+    ):
+        load_session(copy)
+    write_timestamps_csv(path, t)
+
+    truth = dict(np.load(copy / "truth.npz"))
+    cut = {
+        k: (v[:-3] if k in ("time_s", "joints_mm", "markers_mm") else v) for k, v in truth.items()
+    }
+    np.savez(copy / "truth.npz", **cut)
+    with pytest.raises(
+        SessionError, match=rf"truth.npz has {len(t) - 3} samples, the video of camera 'mono' "
+    ):
+        load_session(copy)
+    np.savez(copy / "truth.npz", **truth)
+
+    import csv
+
+    with open(copy / "markers.csv", newline="") as fh:
+        header, *body = list(csv.reader(fh))
+    for r in body:
+        r[0] = repr(float(r[0]) + 100.0)
+    with open(copy / "markers.csv", "w", newline="") as fh:
+        csv.writer(fh, lineterminator="\n").writerows([header, *body])
+    with pytest.raises(SessionError, match=r"the markers span .* s and the video of camera 'mono'"):
+        load_session(copy)

@@ -325,6 +325,43 @@ class Session:
                 self.keypoints[f.stem] = read_keypoints_csv(f)
         tpath = self.path / "truth.npz"
         self.truth: Truth | None = load_truth(tpath) if tpath.is_file() else None
+        self._check_lengths()
+
+    def _check_lengths(self) -> None:
+        """Refuse streams that cannot belong to one recording.
+
+        Every video lasts as long as the first (within two of its frames); ``truth.npz``
+        has one sample per frame of the first video; the marker stream overlaps the
+        video's time line. Markers that start late or end early are allowed: frames
+        whose newest marker sample is too old have no marker observation (the hybrid
+        tracker's age rule, ``HybridConfig.gap_limit_s``), which the result reports.
+        """
+        if not self._videos:
+            return
+        first = next(iter(self._videos.values()))
+        t0, t1 = float(first.time_s[0]), float(first.time_s[-1])
+        step = (t1 - t0) / max(first.n_frames - 1, 1)
+        for cam, v in self._videos.items():
+            s0, s1 = float(v.time_s[0]), float(v.time_s[-1])
+            if max(abs(s0 - t0), abs(s1 - t1)) > 2 * step + 1e-9:
+                raise SessionError(
+                    f"{self.path}: video of camera {cam!r} spans {s0:.3f}-{s1:.3f} s, the "
+                    f"video of camera {first.camera!r} {t0:.3f}-{t1:.3f} s; expected the "
+                    "same recording"
+                )
+        if self.truth is not None and self.truth.time_s.shape[0] != first.n_frames:
+            raise SessionError(
+                f"{self.path}: truth.npz has {self.truth.time_s.shape[0]} samples, the video "
+                f"of camera {first.camera!r} {first.n_frames} frames; expected one per frame"
+            )
+        if self.markers is not None:
+            m0, m1 = float(self.markers.time_s[0]), float(self.markers.time_s[-1])
+            if m1 < t0 or m0 > t1:
+                raise SessionError(
+                    f"{self.path}: the markers span {m0:.3f}-{m1:.3f} s and the video of "
+                    f"camera {first.camera!r} {t0:.3f}-{t1:.3f} s; expected clocks that "
+                    "overlap"
+                )
 
     # ------------------------------------------------------------------ video helpers
 
