@@ -344,3 +344,27 @@ def test_refuses_streams_of_different_lengths(copy):
         csv.writer(fh, lineterminator="\n").writerows([header, *body])
     with pytest.raises(SessionError, match=r"the markers span .* s and the video of camera 'mono'"):
         load_session(copy)
+
+
+def test_lenient_fields_are_refused(copy):
+    """``"format": true`` is not 1, reference markers must be in the marker file, a K
+    entry must be a number, not the string "532", and k1 = 50 is no lens (issue 14)."""
+    doc = json.loads((copy / "session.json").read_text())
+    (copy / "session.json").write_text(json.dumps({**doc, "format": True}))
+    with pytest.raises(FormatError, match=r"field 'format': expected 1, found True"):
+        load_session(copy)
+    (copy / "session.json").write_text(json.dumps({**doc, "reference_markers": ["LELB"]}))
+    with pytest.raises(SessionError, match=r"reference_markers names \['LELB'\], which markers"):
+        load_session(copy)
+    (copy / "session.json").write_text(json.dumps(doc))
+    cams = json.loads((copy / "cameras.json").read_text())
+    good = json.loads(json.dumps(cams))
+    cams["cameras"][0]["K"][0][0] = "532"
+    (copy / "cameras.json").write_text(json.dumps(cams))
+    with pytest.raises(FormatError, match=r"cameras\[0\] \('mono'\).K: expected a \(3, 3\) array"):
+        load_session(copy)
+    cams = json.loads(json.dumps(good))
+    cams["cameras"][0]["dist"][0] = 50.0
+    (copy / "cameras.json").write_text(json.dumps(cams))
+    with pytest.raises(FormatError, match=r"dist\[0\] \(k1\): expected a radial coefficient"):
+        load_session(copy)

@@ -207,6 +207,7 @@ def test_session_writes_result_folder_on_video_time_line(wave_session, wave_resu
 def test_session_ignores_elbow_reference_markers(wave_session, wave_result, tmp_path):
     """The elbow reference markers are for evaluation only: removing them changes nothing."""
     import csv
+    import json
 
     from mocapkit.io.session import load_session
 
@@ -218,6 +219,10 @@ def test_session_ignores_elbow_reference_markers(wave_session, wave_result, tmp_
     assert len(keep) == len(rows[0]) - 6  # two markers, three columns each
     with open(path, "w", newline="") as fh:
         csv.writer(fh, lineterminator="\n").writerows([[r[i] for i in keep] for r in rows])
+    # session.json no longer lists them either (it may name only markers the file holds)
+    info = json.loads((copy / "session.json").read_text())
+    info["reference_markers"] = []
+    (copy / "session.json").write_text(json.dumps(info))
     assert not any("elbow" in n for n in load_session(copy).markers.names)
 
     motion = track_hybrid_session(copy, None)
@@ -345,3 +350,19 @@ def test_camera_that_cannot_see_the_subject_is_refused(wave_session, tmp_path, c
         track_hybrid_session(copy, tmp_path / "out")
     assert not (tmp_path / "out").exists()
     track_hybrid_session(copy, None, use_video=False)  # the markers alone still track
+
+
+def test_extra_marker_set_is_refused(tmp_path):
+    """A --marker-set the tracker does not use is refused, not silently ignored."""
+    from mocapkit.io.marker_files import write_markers
+    from mocapkit.io.markers import MarkerData
+
+    names = ("H", "L", "R", "E")
+    pos = np.tile(
+        np.array([[0, 0, 1600], [-300, 0, 900], [300, 0, 900], [0, 0, 1000.0]]), (4, 1, 1)
+    )
+    path = tmp_path / "m.csv"
+    write_markers(path, MarkerData(np.arange(4) / 50.0, names, pos, 50.0, "test"))
+    sets = ["head=H", "left_hand=L", "right_hand=R", "elbow=E"]
+    with pytest.raises(ConfigError, match=r"uses only sets .*found \['elbow'\] as well"):
+        track_hybrid_markers(path, sets, 1700.0)

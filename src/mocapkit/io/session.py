@@ -153,7 +153,7 @@ class Session:
             ) from None
         if not isinstance(info, dict):
             raise FormatError(f"{info_path}: expected a JSON object, found {type(info).__name__}")
-        if info.get("format") != FORMAT_VERSION:
+        if info.get("format") != FORMAT_VERSION or isinstance(info.get("format"), bool):
             raise FormatError(
                 f"{info_path}: field 'format': expected {FORMAT_VERSION}, "
                 f"found {info.get('format')!r}"
@@ -292,6 +292,12 @@ class Session:
         )
         if self.markers is not None:
             have = set(self.markers.names)
+            unknown = [m for m in self.reference_markers if m not in have]
+            if unknown:
+                raise SessionError(
+                    f"{info_path}: reference_markers names {unknown}, which "
+                    f"{present[0]} does not hold (it has {sorted(have)})"
+                )
             for set_name, members in self.marker_sets.items():
                 lost = [m for m in members if m not in have]
                 if lost:

@@ -82,6 +82,10 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerData:
         raise FormatError(
             f"{where} line 3 (DataRate): expected a number, found {header['DataRate']!r}"
         ) from None
+    if rate <= 0:  # NaN (not written) falls back on the time stamps below
+        raise FormatError(
+            f"{where} line 3 (DataRate): expected a positive rate in Hz, found {rate:g}"
+        )
     n_frames_decl, n_markers_decl = 0, 0
     for key in ("NumFrames", "NumMarkers"):
         try:

@@ -518,6 +518,12 @@ def track_hybrid_markers(
             f"marker_sets: the hybrid tracker needs sets {list(MARKER_SETS)}; "
             f"missing {missing} (given {names})"
         )
+    extra = [n for n in names if n not in MARKER_SETS]
+    if extra:
+        raise ConfigError(
+            f"marker_sets: the hybrid tracker uses only sets {list(MARKER_SETS)}; "
+            f"found {extra} as well, which it would ignore"
+        )
     pos = evaluate_marker_sets(markers, sets)
     require_observed_sets({n: pos[:, i] for i, n in enumerate(names)}, markers_path, ConfigError)
     if height_mm is None:
