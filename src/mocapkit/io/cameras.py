@@ -49,9 +49,7 @@ def _numbers_only(value: Any) -> bool:
         return value.dtype.kind in "iuf"
     if isinstance(value, list | tuple):
         return all(_numbers_only(v) for v in value)
-    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(
-        value, bool
-    )
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
 
 
 def _matrix(value: Any, shape: tuple[int, ...], where: str) -> NDArray[np.float64]:
