@@ -15,9 +15,20 @@ from mocapkit.io.cameras import write_cameras
 from mocapkit.io.session import write_session_json
 from mocapkit.io.session_csv import write_keypoints_csv
 from mocapkit.io.truth import Truth
-from mocapkit.pipelines.mono import FIT_FILE, track_mono
+from mocapkit.pipelines.mono import (
+    MonoResult,
+    MonoSample,
+    MonoStream,
+    output_skeleton,
+    to_world,
+    track_mono,
+)
 from mocapkit.pipelines.mono_accuracy import write_openpose_with_bystander
-from mocapkit.skeleton.model import UPPER_BODY_JOINTS
+from mocapkit.pipelines.run import FIT_FILE
+from mocapkit.skeleton.model import CANONICAL_JOINTS, UPPER_BODY_JOINTS
+from mocapkit.tracking.base import DelayedTracker, FrameResult
+from mocapkit.tracking.mono.stick import stick_model
+from mocapkit.tracking.mono.tracker import MonoConfig, MonoTracker
 from tests.tracking.mono.test_tracker import FPS, camera, stick_motion
 
 N = 30
@@ -146,3 +157,45 @@ def test_no_trunk_in_any_frame_is_refused(tmp_path: Path) -> None:
         track_mono(session, None, pixels=px)
     with pytest.raises(ConfigError, match="either --skin or --keypoints"):
         track_mono(session, None, keypoints=tmp_path, skin=True)
+
+
+@pytest.mark.parametrize("lag", [None, 4])
+def test_mono_stream_answers_with_the_stated_latency(lag: int | None) -> None:
+    """Online, frame k's result comes with frame k + smooth_lag + lag; offline, all come
+    from ``finish``. Either way one world `FrameResult` per frame, in time order, whose
+    joints follow the tracker's frame placed in the world."""
+    joints, names, _ = stick_motion(N)
+    cam = camera()
+    px = cam.project(joints)
+    cfg = MonoConfig(lag=lag)
+    model = stick_model(cfg.legs, cfg.limits)
+    idx = [list(names).index(n) for n in model.joint_names]
+    lengths = np.array([300.0] * len(model.segments))
+    for k in range(len(model.segments)):
+        a, b = model.parent[k], model.child[k]
+        lengths[k] = np.median(np.linalg.norm(joints[:, idx[b]] - joints[:, idx[a]], axis=-1))
+    sk = output_skeleton(model, lengths)
+    stream = MonoStream(MonoTracker(lengths, cam, 1.0 / FPS, cfg, model), sk, cam, float("nan"))
+    assert isinstance(stream, DelayedTracker)
+    got: list[FrameResult] = []
+    for k in range(N):
+        out = stream.push(MonoSample(k / FPS, px[k, idx]))
+        if lag is None:
+            assert out == []
+        else:
+            latency = cfg.smooth_lag + lag
+            assert [r.time_s for r in out] == ([(k - latency) / FPS] if k >= latency else [])
+        got += out
+    got += stream.finish()
+    assert [r.time_s for r in got] == [k / FPS for k in range(N)]
+    for r in got:
+        assert isinstance(r, MonoResult) and r.frame is not None
+        assert r.joints_mm.shape == (len(CANONICAL_JOINTS), 3)
+        assert set(r.status) == {"head", "left_arm", "right_arm"}
+        assert set(r.status.values()) == {"seen"}  # every joint is in every frame
+        assert r.fit["residual_px"] == r.frame.residual_px < 1.0
+        assert r.fit["survivors"] == r.frame.n_survivors <= r.fit["candidates"]
+        neck = r.joints_mm[CANONICAL_JOINTS.index("neck")]
+        np.testing.assert_allclose(
+            neck, to_world([r.frame], model, cam, cfg, float("nan"))[0, 0], atol=1e-9
+        )

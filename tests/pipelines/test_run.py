@@ -7,12 +7,12 @@ import math
 import numpy as np
 import pytest
 
-from mocapkit.errors import ShapeError
+from mocapkit.errors import ShapeError, UnknownNameError
 from mocapkit.io.motion_npz import load_motion_npz
 from mocapkit.pipelines.run import FIT_FILE, read_fit_csv, run_tracker
 from mocapkit.skeleton import CANONICAL_JOINTS, canonical_positions, load_preset
 from mocapkit.timing import StageTimer
-from mocapkit.tracking.base import FrameResult, canonical_joints_mm
+from mocapkit.tracking.base import DelayedTracker, FrameResult, canonical_joints_mm
 from mocapkit.tracking.hybrid import HybridConfig, HybridSample, HybridTracker
 
 
@@ -125,3 +125,40 @@ def test_run_tracker_keeps_nan_joints_and_lists_the_gaps(tmp_path) -> None:
     _t, names, joints = read_joints_csv(tmp_path / "res" / "joints.csv")
     assert np.all(np.isnan(joints[3:, names.index("left_wrist")]))
     assert [str(g) for g in run.gaps] == ["left_arm released 0.060-0.100 s (3 frames)"]
+
+
+class LaggedReplay(ReplayTracker):
+    """A `DelayedTracker`: the result of sample k comes with sample k + lag."""
+
+    def __init__(self, skeleton, lag):
+        super().__init__(skeleton)
+        self.lag = lag
+        self.pending = []
+
+    def push(self, sample):
+        self.pending.append(self.update(sample))
+        return [self.pending.pop(0)] if len(self.pending) > self.lag else []
+
+    def finish(self):
+        out, self.pending = self.pending, []
+        return out
+
+
+def test_run_tracker_drains_a_delayed_tracker_and_takes_its_joints(tmp_path) -> None:
+    sk = load_preset("upper_stick")
+    rng = np.random.default_rng(5)
+    q = np.clip(rng.normal(0.0, 0.2, (7, sk.n_dofs)), sk.lower, sk.upper)
+    t = np.arange(7) * 0.02
+    tracker = LaggedReplay(sk, 3)
+    assert isinstance(tracker, DelayedTracker)
+    names = ("pelvis", "neck", "left_wrist")
+    run = run_tracker(tracker, zip(t, q), 7, tmp_path / "res", joint_names=names)
+    np.testing.assert_array_equal(run.motion.time_s, t)
+    np.testing.assert_array_equal(run.motion.q, q)
+    assert run.motion.joint_names == names
+    want = canonical_positions(sk, q, names)
+    np.testing.assert_allclose(run.motion.joints_mm, want, atol=1e-9)
+    _rows, numeric = read_fit_csv(tmp_path / "res" / FIT_FILE)
+    np.testing.assert_allclose(numeric["time_s"], t, atol=1e-9)
+    with pytest.raises(UnknownNameError, match="elbow_tip"):
+        run_tracker(LaggedReplay(sk, 1), zip(t, q), 7, joint_names=("elbow_tip",))

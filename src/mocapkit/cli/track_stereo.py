@@ -20,8 +20,8 @@ def register_method(methods: Any) -> None:
         help="two or more cameras, no markers (Azad, Asfour, Dillmann 2008)",
         description="Track the upper body of a session folder with two or more calibrated "
         "cameras: skin-blob (or keypoint) head and hands in 3-D, one particle filter per "
-        "arm on the edge and distance cues. Writes motion.npz, joints.csv and motion.bvh to "
-        "--out; with a truth.npz in the session, prints the arm joints' errors too.",
+        "arm on the edge and distance cues. Writes motion.npz, joints.csv, motion.bvh and fit.csv "
+        "to --out; with a truth.npz in the session, prints the arm joints' errors too.",
     )
     p.add_argument("session", help="session folder")
     p.add_argument("--out", required=True, type=output_folder, help="result folder")

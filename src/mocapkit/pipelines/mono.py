@@ -11,10 +11,8 @@ the neck's depth.
 
 from __future__ import annotations
 
-import csv
-import io
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -22,15 +20,15 @@ from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import ConfigError, SessionError
-from mocapkit.io.atomic import atomic_write
 from mocapkit.io.motion import Motion
-from mocapkit.io.motion_files import write_result_folder
 from mocapkit.io.session import Session, load_session
 from mocapkit.io.session_csv import Keypoints, read_keypoints_csv
+from mocapkit.pipelines.run import run_tracker
 from mocapkit.progress import Progress
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
 from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments
+from mocapkit.tracking.base import FrameResult
 from mocapkit.tracking.mono.lengths import estimate_link_lengths, pixels_per_mm
 from mocapkit.tracking.mono.pose_fit import fit_stick_pose
 from mocapkit.tracking.mono.smoother import smooth_keypoints
@@ -38,8 +36,6 @@ from mocapkit.tracking.mono.stick import StickModel, stick_model
 from mocapkit.tracking.mono.tracker import MonoConfig, MonoFrame, MonoTracker
 
 FloatArray = NDArray[np.float64]
-
-FIT_FILE = "fit.csv"
 
 
 @dataclass
@@ -55,6 +51,8 @@ class MonoRun:
     model : StickModel
     px_per_mm : float
         Image scale used to turn orthographic px into mm (NaN for the other models).
+    results : list of MonoResult
+        The last pass's per-frame results, as written to ``fit.csv``.
     """
 
     motion: Motion
@@ -62,6 +60,7 @@ class MonoRun:
     lengths: FloatArray
     model: StickModel
     px_per_mm: float
+    results: list[MonoResult] = field(default_factory=list)
 
     def summary(self) -> dict[str, float]:
         """Mean survivors, candidates, share pruned, residual (px) and frames with a pose."""
@@ -245,25 +244,6 @@ def _apply(camera: Camera, points_in_camera: FloatArray) -> FloatArray:
     return transform_points(camera.world_from_camera, flat).reshape(points_in_camera.shape)
 
 
-def write_fit_csv(path: str | os.PathLike[str], frames: list[MonoFrame]) -> None:
-    """Per-frame fit quality (atomic): residual, candidates, survivors, all pruned, depth."""
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(
-        ["frame", "time_s", "residual_px", "candidates", "survivors", "all_pruned", "depth_mm",
-         "flips"]
-    )  # fmt: skip
-    for f in frames:
-        w.writerow(
-            [
-                f.index, f"{f.time_s:.9f}", f"{f.residual_px:.3f}", f.n_candidates,
-                f.n_survivors, int(f.pruned_all), f"{f.depth_mm:.1f}", f.code,
-            ]
-        )  # fmt: skip
-    with atomic_write(path, "w", newline="") as fh:
-        fh.write(buf.getvalue())
-
-
 def _run(
     lengths: FloatArray,
     cam: Camera,
@@ -282,6 +262,113 @@ def _run(
     frames += tracker.finish()
     frames.sort(key=lambda f: f.index)
     return frames
+
+
+@dataclass
+class MonoSample:
+    """One frame for `MonoStream`: the stick's joints (K, 2) px, NaN where unseen."""
+
+    time_s: float
+    points_px: FloatArray
+
+
+#: Limbs whose status a `MonoResult` reports, by the stick joint at their end.
+MONO_LIMBS: dict[str, str] = {
+    "head": "head",
+    "left_arm": "left_wrist",
+    "right_arm": "right_wrist",
+    "left_leg": "left_ankle",
+    "right_leg": "right_ankle",
+}
+
+
+@dataclass
+class MonoResult(FrameResult):
+    """A `FrameResult` of the mono tracker, keeping its `MonoFrame`.
+
+    ``status`` per limb of `MONO_LIMBS` the stick has: ``seen`` (its end joint in this
+    frame's 2-D points and the frame posed), ``bridged`` (posed, the end joint read off
+    the smoother over a gap), ``released`` (no pose for it after having one),
+    ``missing`` (never posed yet). ``fit``: ``residual_px`` (mean 2-D distance of the
+    chosen pose's projection to the input points), ``candidates`` and ``survivors``
+    (poses before and after pruning), ``all_pruned`` (1 where every pose was pruned and
+    the unpruned set kept), ``depth_mm`` (neck depth; NaN orthographic) and ``flips``
+    (the chosen flip code, -1 without a pose).
+    """
+
+    frame: MonoFrame | None = None
+
+
+class MonoStream:
+    """`MonoTracker` as a `mocapkit.tracking.base.DelayedTracker` of world results.
+
+    Each frame the tracker makes final is placed in the world (`to_world`), its
+    ``upper_stick`` pose fitted (`mocapkit.tracking.mono.pose_fit.fit_stick_pose`) and
+    returned as a `MonoResult`. Offline (``config.lag`` None) every result comes from
+    ``finish``; online, the result of frame k comes with frame k + ``smooth_lag + lag``.
+
+    Parameters
+    ----------
+    tracker : MonoTracker
+    skeleton : Skeleton
+        `output_skeleton` of the tracker's lengths.
+    camera : Camera or None
+    px_per_mm : float
+        Image scale (orthographic model; NaN otherwise).
+    """
+
+    def __init__(
+        self, tracker: MonoTracker, skeleton: Skeleton, camera: Camera | None, px_per_mm: float
+    ) -> None:
+        self.tracker = tracker
+        self.skeleton = skeleton
+        self.camera = camera
+        self.px_per_mm = px_per_mm
+        model = tracker.model
+        self.joint_names = tuple(n for n in CANONICAL_JOINTS if n in model.joint_names)
+        self._order = [model.joint_names.index(n) for n in self.joint_names]
+        self._rows = [CANONICAL_JOINTS.index(n) for n in self.joint_names]
+        self._limbs = {
+            limb: model.joint_names.index(j)
+            for limb, j in MONO_LIMBS.items()
+            if j in model.joint_names
+        }
+        self._raw: list[FloatArray] = []
+        self._posed: set[str] = set()
+
+    def push(self, sample: MonoSample) -> list[FrameResult]:
+        """Track one frame; returns the results it makes final."""
+        self._raw.append(np.asarray(sample.points_px, dtype=float))
+        return [self._result(f) for f in self.tracker.push(sample.time_s, sample.points_px)]
+
+    def finish(self) -> list[FrameResult]:
+        """The results still pending (all of them offline)."""
+        return [self._result(f) for f in self.tracker.finish()]
+
+    def _result(self, f: MonoFrame) -> MonoResult:
+        t = self.tracker
+        world = to_world([f], t.model, self.camera, t.config, self.px_per_mm)[0]
+        joints = world[self._order]
+        q = fit_stick_pose(self.skeleton, self.joint_names, joints[None])[0]
+        canonical = np.full((len(CANONICAL_JOINTS), 3), np.nan)
+        canonical[self._rows] = joints
+        raw = self._raw[f.index]
+        status = {}
+        for limb, j in self._limbs.items():
+            if f.code >= 0 and np.all(np.isfinite(world[j])):
+                self._posed.add(limb)
+                status[limb] = "seen" if np.all(np.isfinite(raw[j])) else "bridged"
+            else:
+                status[limb] = "released" if limb in self._posed else "missing"
+        fit = {
+            "residual_px": f.residual_px,
+            "candidates": float(f.n_candidates),
+            "survivors": float(f.n_survivors),
+            "all_pruned": float(f.pruned_all),
+            "depth_mm": f.depth_mm,
+            "flips": float(f.code),
+        }
+        return MonoResult(f.time_s, q, canonical, status, fit, "", frame=f)
 
 
 def refined_lengths(frames: list[MonoFrame], model: StickModel, lengths: FloatArray) -> FloatArray:
@@ -387,16 +474,18 @@ def track_mono(
             f"{kp.source}: neck and pelvis are seen together in no frame, so no pose can be "
             "built (with --skin: the waist cue, the paper's golden belt, was never found)"
         )
-    frames = _run(lengths, cam, dt, cfg, model, t, px)
-    world = to_world(frames, model, cam, cfg, scale)
     lengths_mm = lengths / scale if ortho else lengths
     skeleton = output_skeleton(model, lengths_mm)
-    names = [n for n in CANONICAL_JOINTS if n in model.joint_names]
-    order = [model.joint_names.index(n) for n in names]
-    joints = world[:, order]
-    q = fit_stick_pose(skeleton, names, joints)
-    motion = Motion(skeleton, t, q, tuple(names), joints, f"mono tracker on {session.path}")
-    if out_dir is not None:
-        out = write_result_folder(out_dir, motion)
-        write_fit_csv(out / FIT_FILE, frames)
-    return MonoRun(motion, frames, lengths, model, scale)
+    stream = MonoStream(MonoTracker(lengths, cam, dt, cfg, model), skeleton, cam, scale)
+    run = run_tracker(
+        stream,
+        (MonoSample(float(ti), p) for ti, p in zip(t, px)),
+        len(t),
+        out_dir,
+        label="track mono",
+        source=f"mono tracker on {session.path}",
+        joint_names=stream.joint_names,
+    )
+    results = [r for r in run.results if isinstance(r, MonoResult)]
+    frames = [r.frame for r in results if r.frame is not None]
+    return MonoRun(run.motion, frames, lengths, model, scale, results)

@@ -22,14 +22,14 @@ from typing import Any
 
 import numpy as np
 
-from mocapkit.errors import ShapeError
+from mocapkit.errors import ShapeError, unknown_name
 from mocapkit.io.atomic import atomic_write
 from mocapkit.io.motion import Motion
 from mocapkit.io.motion_files import write_result_folder
 from mocapkit.progress import Progress
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
 from mocapkit.timing import NULL_TIMER, StageTimer
-from mocapkit.tracking.base import FrameResult, Tracker
+from mocapkit.tracking.base import DelayedTracker, FrameResult, Tracker
 
 #: Name of the per-frame fit and status file in a result folder.
 FIT_FILE = "fit.csv"
@@ -60,7 +60,7 @@ class RunResult:
 
 
 def run_tracker(
-    tracker: Tracker,
+    tracker: Tracker | DelayedTracker,
     samples: Iterable[Any],
     n_samples: int,
     out_dir: str | os.PathLike[str] | None = None,
@@ -68,12 +68,15 @@ def run_tracker(
     source: str = "",
     timer: StageTimer = NULL_TIMER,
     skeleton: Skeleton | None = None,
+    joint_names: Sequence[str] | None = None,
 ) -> RunResult:
     """Stream ``samples`` through ``tracker.update`` and write the result folder.
 
     Parameters
     ----------
-    tracker : Tracker
+    tracker : Tracker or DelayedTracker
+        A `DelayedTracker` is fed with ``push`` and drained with ``finish``; its
+        results are put in time order.
     samples : iterable
         The tracker's samples, in time order. Drawing one (reading markers, decoding the
         video frame) is timed as stage ``"input"``.
@@ -91,6 +94,10 @@ def run_tracker(
         tracker may time its own stages on the same timer.
     skeleton : Skeleton, optional
         Default ``tracker.skeleton``.
+    joint_names : sequence of str, optional
+        Canonical joints of the motion taken from the results' ``joints_mm`` (trackers
+        that estimate joints first and fit ``q`` to them, as the mono tracker); default:
+        the skeleton's canonical joints by forward kinematics of ``q``.
 
     Raises
     ------
@@ -99,6 +106,8 @@ def run_tracker(
     """
     sk = tracker.skeleton if skeleton is None else skeleton
     results: list[FrameResult] = []
+    delayed = tracker if isinstance(tracker, DelayedTracker) else None
+    streaming = None if isinstance(tracker, DelayedTracker) else tracker
     it = iter(samples)
     stage_in, stage_track = timer.stage("input"), timer.stage("track")
     with Progress(n_samples, label) as prog:
@@ -108,18 +117,33 @@ def run_tracker(
             if sample is None:
                 break
             with stage_track:
-                results.append(tracker.update(sample))
+                if delayed is not None:
+                    results += delayed.push(sample)
+                elif streaming is not None:
+                    results.append(streaming.update(sample))
             prog.update()
+    if delayed is not None:
+        with stage_track:
+            results += delayed.finish()
+        results.sort(key=lambda r: r.time_s)
     if not results:
         raise ShapeError(f"{label}: no samples to track")
     t = np.array([r.time_s for r in results])
     q = np.stack([r.q for r in results])
-    motion = _without_unobserved_joints(Motion.from_q(sk, t, q, source=source), results)
+    if joint_names is None:
+        motion = _without_unobserved_joints(Motion.from_q(sk, t, q, source=source), results)
+    else:
+        names = tuple(joint_names)
+        unknown = [n for n in names if n not in CANONICAL_JOINTS]
+        if unknown:
+            raise unknown_name("canonical joint", unknown[0], CANONICAL_JOINTS, "joint_names")
+        rows = [CANONICAL_JOINTS.index(n) for n in names]
+        joints = np.stack([r.joints_mm[rows] for r in results])
+        motion = Motion(sk, t, q, names, joints, source)
     out = None
     if out_dir is not None:
         with timer.stage("write"):
-            out = write_result_folder(out_dir, motion)
-            write_fit_csv(out / FIT_FILE, results)
+            out = write_run_folder(out_dir, motion, results)
     return RunResult(motion, results, out)
 
 
@@ -192,6 +216,18 @@ def find_gaps(results: Sequence[FrameResult]) -> list[Gap]:
     return sorted(gaps, key=lambda g: (g.start_s, g.name))
 
 
+def write_run_folder(
+    out_dir: str | os.PathLike[str], motion: Motion, results: Sequence[FrameResult]
+) -> Path:
+    """Write a result folder: ``motion.npz``, ``joints.csv``, ``motion.bvh``
+    (`mocapkit.io.motion_files.write_result_folder`) and ``fit.csv`` (`write_fit_csv`),
+    each atomically. Shared by `run_tracker` and the trackers that need the whole
+    sequence before their motion exists (the offline mono tracker); returns the folder."""
+    out = write_result_folder(out_dir, motion)
+    write_fit_csv(out / FIT_FILE, results)
+    return out
+
+
 def _columns(results: Sequence[FrameResult]) -> tuple[list[str], list[str]]:
     status: dict[str, None] = {}
     fit: dict[str, None] = {}
@@ -257,4 +293,5 @@ __all__ = [
     "read_fit_csv",
     "run_tracker",
     "write_fit_csv",
+    "write_run_folder",
 ]

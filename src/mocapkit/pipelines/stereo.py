@@ -2,11 +2,12 @@
 
 `track_stereo_session` streams a session (two or more cameras with video; optionally
 their 2-D keypoints) through `mocapkit.tracking.stereo.tracker.StereoTracker` and
-writes the usual result folder. `evaluate_stereo` scores a result against a synthetic
-session's truth: the mean error of shoulders, elbows and wrists and the torso yaw
-error (the yaw of the line between the shoulders). `stereo_accuracy` renders the
-standard in-view excerpts (`STEREO_CLIPS`) and scores each tracker mode
-(`ACCURACY_MODES`) on them. `bench_stereo` times the whole per-frame pipeline at
+writes the usual result folder through the shared runner
+(`mocapkit.pipelines.run.run_tracker`, with ``fit.csv``). `evaluate_stereo` scores a
+result against a synthetic session's truth: the mean error of shoulders, elbows and
+wrists and the torso yaw error (the yaw of the line between the shoulders).
+`stereo_accuracy` renders the standard in-view excerpts (`STEREO_CLIPS`) and scores
+each tracker mode (`ACCURACY_MODES`) on them. `bench_stereo` times the whole per-frame pipeline at
 640x480 on a rendered stereo session.
 """
 
@@ -15,10 +16,10 @@ from __future__ import annotations
 import math
 import os
 import time
-from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import cv2
 import numpy as np
@@ -26,11 +27,12 @@ from numpy.typing import NDArray
 
 from mocapkit.errors import ConfigError, SessionError, unknown_name
 from mocapkit.io.motion import Motion
-from mocapkit.io.motion_files import write_result_folder
-from mocapkit.progress import Progress
+from mocapkit.pipelines.run import run_tracker
+from mocapkit.timing import StageTimer
 from mocapkit.tracking.stereo.arm_filter import ArmFilterConfig
 from mocapkit.tracking.stereo.tracker import (
     StereoConfig,
+    StereoPose,
     StereoSample,
     StereoTracker,
     azad_skeleton,
@@ -51,13 +53,14 @@ ARM_JOINTS = (
 
 @dataclass
 class StereoRun:
-    """A tracked session: the motion and per-frame diagnostics."""
+    """A tracked session: the motion, per-frame diagnostics and `StereoPose` results."""
 
     motion: Motion
     yaw_rad: FloatArray  # (T,)
     measured_mm: FloatArray  # (T, 3, 3)
     n_ik: NDArray[np.int64]  # (T, 2)
-    seconds: float
+    seconds: float  # reading and tracking, without writing
+    results: list[StereoPose] = field(default_factory=list)  # per frame, as fit.csv
 
 
 def parse_cameras(text: str | None, available: Sequence[str]) -> list[str]:
@@ -92,7 +95,8 @@ def track_stereo_session(
     session_dir : path
         Session folder with two or more cameras with video (`mocapkit.io.session`).
     out_dir : path, optional
-        Result folder (``motion.npz``, ``joints.csv``, ``motion.bvh``).
+        Result folder (``motion.npz``, ``joints.csv``, ``motion.bvh``, ``fit.csv``), written
+        by `mocapkit.pipelines.run.run_tracker`.
     cameras : str or sequence of str, optional
         ``"A,B[,C...]"``; default every camera with a video.
     use_keypoints : bool
@@ -131,32 +135,33 @@ def track_stereo_session(
     n = session.video(names[0]).n_frames
     if max_frames is not None:
         n = min(n, int(max_frames))
-    ts, qs, yaws, meas, n_ik = [], [], [], [], []
-    t0 = time.perf_counter()
-    with Progress(n, f"track stereo {Path(session_dir).name}") as progress:
+
+    def samples() -> Iterator[StereoSample]:
         for k, s in enumerate(session.samples(names)):
             if k >= n:
                 break
-            images = {c: s.image(c) for c in names}
-            pose = tracker.update(StereoSample(s.time_s, images, dict(s.keypoints_px)))
-            ts.append(pose.time_s)
-            qs.append(pose.q)
-            yaws.append(pose.torso_yaw_rad)
-            meas.append(pose.measured_mm)
-            n_ik.append([pose.arms["left"].n_ik, pose.arms["right"].n_ik])
-            progress.update()
-    seconds = time.perf_counter() - t0
+            yield StereoSample(s.time_s, {c: s.image(c) for c in names}, dict(s.keypoints_px))
+
     mode = "keypoints" if cfg.use_keypoints else "skin blobs"
-    motion = Motion.from_q(
-        sk,
-        np.asarray(ts),
-        np.asarray(qs),
+    timer = StageTimer()
+    run = run_tracker(
+        tracker,
+        samples(),
+        n,
+        out_dir,
+        label=f"track stereo {Path(session_dir).name}",
         source=f"stereo tracker ({mode}, cameras {','.join(names)}) on {session.path}",
+        timer=timer,
     )
-    if out_dir is not None:
-        write_result_folder(out_dir, motion)
+    poses = [cast(StereoPose, r) for r in run.results]
+    totals = timer.totals_s()
     return StereoRun(
-        motion, np.asarray(yaws), np.asarray(meas), np.asarray(n_ik, dtype=np.int64), seconds
+        run.motion,
+        np.array([p.torso_yaw_rad for p in poses]),
+        np.array([p.measured_mm for p in poses]),
+        np.array([[p.arms[s].n_ik for s in ("left", "right")] for p in poses], dtype=np.int64),
+        totals.get("input", 0.0) + totals.get("track", 0.0),
+        poses,
     )
 
 

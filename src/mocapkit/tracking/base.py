@@ -4,7 +4,8 @@ A tracker is fed one sample at a time (as a live feed would) and answers with a
 `FrameResult`: the pose ``q``, the canonical joints in the world, a status per tracked
 effector or limb and named fit-quality figures. The runner
 (`mocapkit.pipelines.run.run_tracker`) streams any tracker over a recording and writes
-the result folder plus ``fit.csv`` from these results alone.
+the result folder plus ``fit.csv`` from these results alone. A tracker whose answer
+comes with a latency (the mono tracker's Viterbi) is a `DelayedTracker` instead.
 """
 
 from __future__ import annotations
@@ -70,6 +71,27 @@ class Tracker(Protocol):
         ...
 
 
+@runtime_checkable
+class DelayedTracker(Protocol):
+    """A streaming tracker that answers with a latency (a fixed-lag or offline decoder).
+
+    ``push`` takes one sample and returns the results it makes final (none, one or
+    several, in time order; with a fixed lag of L samples, the result of sample k comes
+    with sample k + L); ``finish`` returns every result still pending (all of them for
+    an offline decoder). Over a whole recording there is one result per sample.
+    """
+
+    skeleton: Skeleton
+
+    def push(self, sample: Any) -> list[FrameResult]:
+        """Track one sample; returns the results this makes final."""
+        ...
+
+    def finish(self) -> list[FrameResult]:
+        """End of the recording: the results still pending."""
+        ...
+
+
 def canonical_joints_mm(skeleton: Skeleton, joints_mm: FloatArray) -> FloatArray:
     """Spread a skeleton's canonical joints (``skeleton.canonical_names`` order) over the
     full `CANONICAL_JOINTS` order, NaN for the joints the skeleton lacks; shape (15, 3)."""
@@ -112,4 +134,11 @@ def fit_summary(distances_mm: Mapping[str, float]) -> tuple[dict[str, float], st
     return fit, worst
 
 
-__all__ = ["STATUSES", "FrameResult", "Tracker", "canonical_joints_mm", "fit_summary"]
+__all__ = [
+    "STATUSES",
+    "DelayedTracker",
+    "FrameResult",
+    "Tracker",
+    "canonical_joints_mm",
+    "fit_summary",
+]

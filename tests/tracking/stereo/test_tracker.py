@@ -9,14 +9,17 @@ import pytest
 from mocapkit.cli.main import main
 from mocapkit.errors import ConfigError, UnknownNameError
 from mocapkit.io.session import load_session
+from mocapkit.pipelines.run import FIT_FILE, read_fit_csv
 from mocapkit.pipelines.stereo import (
     ARM_JOINTS,
     evaluate_stereo,
     parse_cameras,
     track_stereo_session,
 )
+from mocapkit.skeleton.model import CANONICAL_JOINTS
 from mocapkit.synth.realism import RealismOptions
 from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+from mocapkit.tracking.base import STATUSES, FrameResult
 from mocapkit.tracking.stereo.arm_filter import ArmFilterConfig
 from mocapkit.tracking.stereo.tracker import StereoConfig, azad_skeleton
 
@@ -80,6 +83,38 @@ def test_keypoint_tracking_over_two_and_three_views(session, cams, torso):
         assert ev["torso_yaw_error_deg"] < 10.0
 
 
+@pytest.mark.parametrize(("gap_limit_s", "lost"), [(0.25, "bridged"), (0.05, "released")])
+def test_blackout_hands_are_bridged_then_released_never_held_as_seen(
+    session, tmp_path, gap_limit_s, lost
+):
+    """The 0.1 s blackout: every measured point is ``bridged`` within the gap limit and
+    ``released`` after it; a released arm's elbow and wrist are NaN in the FrameResult
+    and its hand distance is NaN; fit.csv carries the same statuses."""
+    cfg = StereoConfig(arm=SMALL.arm, use_keypoints=True, gap_limit_s=gap_limit_s)
+    run = track_stereo_session(session, tmp_path / "r", config=cfg)
+    assert all(isinstance(r, FrameResult) for r in run.results)
+    t = run.motion.time_s
+    blank = (t >= 0.2) & (t < 0.3)
+    names = ("head", "left_hand", "right_hand")
+    for r, b in zip(run.results, blank):
+        assert r.joints_mm.shape == (len(CANONICAL_JOINTS), 3)
+        assert set(r.status) == set(names) and set(r.status.values()) <= set(STATUSES)
+        if not b:
+            assert all(r.status[n] == "seen" for n in names)
+            assert np.isfinite(r.fit["left_hand_mm"]) and np.isfinite(r.fit["rms_mm"])
+            continue
+        assert np.isnan(r.fit["left_hand_mm"]) and np.isnan(r.fit["right_hand_mm"])
+        assert all(r.status[n] in ("bridged", "released") for n in names)
+        for side in ("left", "right"):
+            arm_rows = [CANONICAL_JOINTS.index(f"{side}_{j}") for j in ("elbow", "wrist")]
+            released = r.status[f"{side}_hand"] == "released"
+            assert np.all(np.isnan(r.joints_mm[arm_rows])) == released
+    statuses = {r.status["left_hand"] for r, b in zip(run.results, blank) if b}
+    assert lost in statuses
+    rows, _ = read_fit_csv(tmp_path / "r" / FIT_FILE)
+    assert [row["left_hand_status"] for row in rows] == [r.status["left_hand"] for r in run.results]
+
+
 def test_skin_blob_tracking_runs_and_finds_the_head(session):
     run = track_stereo_session(session, None, config=SMALL)
     assert np.all(np.isfinite(run.motion.q))
@@ -136,7 +171,11 @@ def test_cli_track_stereo(session, tmp_path, capsys):
         ]
     )
     assert rc == 0
-    assert (out / "motion.npz").is_file() and (out / "joints.csv").is_file()
+    for f in ("motion.npz", "joints.csv", "motion.bvh", FIT_FILE):
+        assert (out / f).is_file()
+    rows, numeric = read_fit_csv(out / FIT_FILE)
+    assert len(rows) == load_session(session).truth.time_s.shape[0]
+    assert {"left_hand_mm", "right_hand_mm", "left_arm_edge_error"} <= set(numeric)
     text = capsys.readouterr().out
     assert "arm mean" in text and "torso yaw" in text
 

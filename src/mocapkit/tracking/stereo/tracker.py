@@ -1,6 +1,6 @@
 """Streaming stereo / multi-view markerless upper-body tracker (Azad, Asfour, Dillmann 2008).
 
-``StereoTracker.update(sample) -> StereoPose`` per frame:
+``StereoTracker.update(sample) -> StereoPose`` (a `mocapkit.tracking.base.FrameResult`) per frame:
 
 1. **Image pipeline** (§II-B, per view): skin mask (`mocapkit.cues.skin`), restricted
    after initialisation to the box the head and both arms can reach; shirt-colour
@@ -59,7 +59,8 @@ from mocapkit.errors import ConfigError, SessionError, ShapeError
 from mocapkit.geometry.rotations import rotvec_from_matrix
 from mocapkit.skeleton.kinematics import canonical_positions, joint_positions
 from mocapkit.skeleton.limbs import arm
-from mocapkit.skeleton.model import Skeleton
+from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
+from mocapkit.tracking.base import FrameResult, canonical_joints_mm, fit_summary
 from mocapkit.tracking.stereo.arm_filter import (
     ArmEstimate,
     ArmFilterConfig,
@@ -102,6 +103,9 @@ class StereoConfig:
         from the neck keypoint).
     reach_pad_mm : float
         Margin of the arms' reach box.
+    gap_limit_s : float
+        Longest gap (s) in a measured point that its status calls ``bridged``; longer
+        gaps are ``released`` (the hybrid tracker's default, 0.25 s).
     seed : int
     """
 
@@ -115,6 +119,7 @@ class StereoConfig:
     yaw_gain: float = 0.6
     torso: str = "shoulders"
     reach_pad_mm: float = 80.0
+    gap_limit_s: float = 0.25
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -124,6 +129,8 @@ class StereoConfig:
             raise ConfigError("torso='keypoints' needs use_keypoints (the session's 2-D keypoints)")
         if not 0.0 <= self.yaw_gain <= 1.0:
             raise ConfigError(f"yaw_gain: expected a share in [0, 1], found {self.yaw_gain}")
+        if not self.gap_limit_s >= 0:
+            raise ConfigError(f"gap_limit_s: expected >= 0 s, found {self.gap_limit_s}")
         if self.hand_offset_mm is not None and not self.hand_offset_mm >= 0:
             raise ConfigError(f"hand_offset_mm: expected >= 0 mm, found {self.hand_offset_mm}")
 
@@ -148,28 +155,44 @@ class StereoSample:
     keypoints_px: Mapping[str, FloatArray] = field(default_factory=dict)
 
 
+#: Measured points of the tracker, in the order of ``StereoPose.measured_mm``.
+MEASURED = ("head", "left_hand", "right_hand")
+
+
 @dataclass
-class StereoPose:
-    """Result of one `StereoTracker.update`.
+class StereoPose(FrameResult):
+    """Result of one `StereoTracker.update`: a `FrameResult` with the stereo tracker's details.
 
     Attributes
     ----------
     time_s : float
     q : (D,) float array
         Pose of the tracker's ``azad14`` skeleton.
-    joints_mm : mapping of canonical name to (3,) array
+    joints_mm : (15, 3) float array
+        Canonical joints (`CANONICAL_JOINTS` order, world, mm); NaN where the skeleton has
+        none, the head's row NaN while the head is ``released`` or ``missing``, and an
+        arm's elbow and wrist rows NaN while its hand is (the filter then runs on the edge
+        cue alone, or on nothing in a blackout: its pose is not reported as if seen).
+    status : dict of str to str
+        ``head``, ``left_hand``, ``right_hand``: ``seen`` (measured this frame),
+        ``bridged`` (not measured for at most ``StereoConfig.gap_limit_s``), ``released``
+        (longer) or ``missing`` (never measured yet).
+    fit : dict of str to float
+        ``"<side>_hand_mm"``: distance of the arm's hand point to the measured hand (NaN
+        when not measured); ``"rms_mm"``, ``"max_mm"`` over the measured ones;
+        ``"<side>_arm_edge_error"``: the arm filter's fused edge error (dimensionless, in
+        [0, 1]; 0 when every model point lies on a full gradient).
+    worst : str
+        The hand at ``fit["max_mm"]``.
     measured_mm : (3, 3) float array
         Measured head, left hand, right hand (NaN where not measured).
     torso_yaw_rad : float
     arms : mapping of side to ArmEstimate
     """
 
-    time_s: float
-    q: FloatArray
-    joints_mm: dict[str, FloatArray]
-    measured_mm: FloatArray
-    torso_yaw_rad: float
-    arms: dict[str, ArmEstimate]
+    measured_mm: FloatArray = field(default_factory=lambda: np.full((3, 3), np.nan))
+    torso_yaw_rad: float = math.nan
+    arms: dict[str, ArmEstimate] = field(default_factory=dict)
 
 
 def yaw_matrix(yaw_rad: float) -> FloatArray:
@@ -248,6 +271,8 @@ class StereoTracker:
         self.shirt: ColourModel | None = None
         self.head_mm: FloatArray | None = None
         self.n_frames = 0
+        #: time (s) each measured point (`MEASURED`) was last measured; None: never
+        self.last_seen_s: dict[str, float | None] = dict.fromkeys(MEASURED)
         w, h = self.cameras[0].image_size
         # gradient maps, written in place every frame (no per-frame stacking copies)
         self._gx = np.zeros((len(self.cameras), h, w), np.float32)
@@ -461,7 +486,7 @@ class StereoTracker:
                 meas_yaw = math.atan2(right[1], right[0])
                 self.yaw = _wrap(self.yaw + cfg.yaw_gain * _wrap(meas_yaw - self.yaw))
         self.n_frames += 1
-        return self._pose(sample.time_s, torso_root, rb, ests, meas)
+        return self._pose(float(sample.time_s), torso_root, rb, ests, meas)
 
     def _pose(
         self,
@@ -480,16 +505,50 @@ class StereoTracker:
             limb = self.limbs[s]
             q[limb.translation_dofs] = ests[s].state[4:]
             q[limb.dofs] = ests[s].state[:4]
-        names = sk.canonical_names
-        pos = canonical_positions(sk, q, names)
+        joints = canonical_joints_mm(sk, canonical_positions(sk, q))
+        status = self._status(time_s, meas)
+        lost = ("released", "missing")
+        if status["head"] in lost:
+            joints[CANONICAL_JOINTS.index("head")] = np.nan
+        for s in SIDES:
+            if status[f"{s}_hand"] in lost:
+                for j in ("elbow", "wrist"):
+                    joints[CANONICAL_JOINTS.index(f"{s}_{j}")] = np.nan
+        dist = {
+            f"{s}_hand": ests[s].dist_mm if np.all(np.isfinite(meas[1 + i])) else math.nan
+            for i, s in enumerate(SIDES)
+        }
+        fit, worst = fit_summary(dist)
+        for s in SIDES:
+            fit[f"{s}_arm_edge_error"] = float(ests[s].edge_error)
         return StereoPose(
-            time_s,
-            q,
-            dict(zip(names, pos)),
-            meas,
-            yaw,
-            ests,
+            time_s=time_s,
+            q=q,
+            joints_mm=joints,
+            status=status,
+            fit=fit,
+            worst=worst,
+            measured_mm=meas,
+            torso_yaw_rad=yaw,
+            arms=ests,
         )
+
+    def _status(self, time_s: float, meas: FloatArray) -> dict[str, str]:
+        """Per measured point: seen, bridged, released or missing (never measured yet)."""
+        out = {}
+        for name, p in zip(MEASURED, meas):
+            if np.all(np.isfinite(p)):
+                self.last_seen_s[name] = time_s
+                out[name] = "seen"
+                continue
+            last = self.last_seen_s[name]
+            if last is None:
+                out[name] = "missing"
+            elif time_s - last <= self.config.gap_limit_s:
+                out[name] = "bridged"
+            else:
+                out[name] = "released"
+        return out
 
 
 def azad_skeleton(
@@ -539,6 +598,7 @@ def azad_skeleton(
 
 
 __all__ = [
+    "MEASURED",
     "SIDES",
     "StereoConfig",
     "StereoPose",
