@@ -366,3 +366,13 @@ def test_extra_marker_set_is_refused(tmp_path):
     sets = ["head=H", "left_hand=L", "right_hand=R", "elbow=E"]
     with pytest.raises(ConfigError, match=r"uses only sets .*found \['elbow'\] as well"):
         track_hybrid_markers(path, sets, 1700.0)
+
+
+def test_cli_lists_the_gaps(wave_session, tmp_path, capsys):
+    """`track hybrid` prints where each marker set was released (issue 14)."""
+    copy = _copy_session(wave_session, tmp_path / "short")
+    _edit_markers_csv(copy, lambda header, rows: rows.__delitem__(slice(len(rows) // 8, None)))
+    assert main(["track", "hybrid", str(copy), "--no-video", "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    for name in ("head", "left_hand", "right_hand"):
+        assert f"gap: {name} released " in out
