@@ -135,3 +135,36 @@ def test_eval_joints_and_demo_seconds(tmp_path: Path, capsys: pytest.CaptureFixt
     err = _usage_error(["demo", "--out", str(tmp_path / "d"), "--seconds", "0"], capsys)
     assert "argument --seconds: expected a number > 0, found 0" in err
     assert not (tmp_path / "d").exists()
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["track", "hybrid", "session"],
+        ["track", "mono", "session"],
+        ["track", "stereo", "session"],
+        ["synth", "builtin:wave"],
+        ["batch", "sessions"],
+        ["demo"],
+        ["view", "result"],
+    ],
+)
+def test_out_naming_a_file_is_refused_before_the_work(
+    argv: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Every subcommand that writes a folder checks --out while parsing (issue 14)."""
+    existing = tmp_path / "taken.txt"
+    existing.write_text("x")
+    err = _usage_error([*argv, "--out", str(existing)], capsys)
+    assert "argument --out: " in err and "expected a folder, found an existing file" in err
+    err = _usage_error([*argv, "--out", str(existing / "sub")], capsys)
+    assert "cannot create a folder under" in err and "which is a file" in err
+
+
+def test_output_folder_accepts_new_and_existing_folders(tmp_path: Path) -> None:
+    from mocapkit.cli.args import output_folder
+
+    assert output_folder(str(tmp_path)) == str(tmp_path)
+    assert output_folder(str(tmp_path / "a" / "b")) == str(tmp_path / "a" / "b")
+    with pytest.raises(argparse.ArgumentTypeError, match="empty path"):
+        output_folder(" ")

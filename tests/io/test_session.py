@@ -248,3 +248,123 @@ def test_bad_member_offsets_rejected(copy):
     (copy / "session.json").write_text(json.dumps(info))
     with pytest.raises(FormatError, match=r"head.offset_mm: expected 3 finite numbers"):
         load_session(copy)
+
+
+def _set_marker_cell(folder: Path, column: str, row: int, value: str) -> None:
+    import csv
+
+    path = folder / "markers.csv"
+    with open(path, newline="") as fh:
+        header, *body = list(csv.reader(fh))
+    body[row][header.index(column)] = value
+    with open(path, "w", newline="") as fh:
+        csv.writer(fh, lineterminator="\n").writerows([header, *body])
+
+
+def test_absurd_segment_length_is_refused(copy):
+    """A 35 m forearm is finite and positive, but no body has it (issue 14)."""
+    info = json.loads((copy / "session.json").read_text())
+    info["subject"]["bone_lengths_mm"]["left_forearm"] = 35000.0
+    (copy / "session.json").write_text(json.dumps(info))
+    with pytest.raises(
+        FormatError,
+        match=r"subject.bone_lengths_mm.left_forearm: expected at most half the stature "
+        r"\(\d+ mm\), found 35000.0 mm",
+    ):
+        load_session(copy)
+
+
+def test_absurd_marker_coordinates_are_refused(copy):
+    _set_marker_cell(copy, "head_z", 3, "1e9")
+    with pytest.raises(
+        FormatError, match=r"markers.csv: marker 'head' at .* s: expected coordinates within"
+    ):
+        load_session(copy)
+
+
+def test_marker_jump_is_refused(copy):
+    """2 m in one 120 Hz step is 240 m/s: a glitch, not a motion."""
+    import csv
+
+    with open(copy / "markers.csv", newline="") as fh:
+        header, *body = list(csv.reader(fh))
+    x = float(body[5][header.index("left_hand_x")])
+    _set_marker_cell(copy, "left_hand_x", 5, repr(x + 2000.0))
+    with pytest.raises(FormatError, match=r"marker 'left_hand' at .* s: expected a speed below"):
+        load_session(copy)
+
+
+def test_member_far_from_its_siblings_is_refused(copy):
+    """members_mm puts the glasses' members ~140 mm apart; one of them 500 mm away in one
+    sample (60 m/s, no glitch of speed) is refused with the set, the pair and the time
+    named (issue 14)."""
+    info = json.loads((copy / "session.json").read_text())
+    members = list(info["marker_offsets_mm"]["head"]["members_mm"])
+    s = load_session(copy)
+    k = s.markers.names.index(members[0])
+    moved = float(s.markers.positions_mm[0, k, 0]) + 500.0
+    _set_marker_cell(copy, f"{members[0]}_x", 0, repr(moved))
+    with pytest.raises(
+        SessionError,
+        match=r"marker_offsets_mm.head.members_mm: '.*' and '.*' are declared \d+ mm apart, "
+        r"found \d+ mm at",
+    ):
+        load_session(copy)
+
+
+def test_refuses_streams_of_different_lengths(copy):
+    """Videos, truth and markers that cannot be one recording are refused (issue 14)."""
+    path = copy / "video" / "stereo_left.timestamps.csv"
+    t = read_timestamps_csv(path)
+    write_timestamps_csv(path, t * 2.0)
+    with pytest.raises(
+        SessionError, match=r"video of camera 'stereo_left' spans .* s, the video of camera 'mono'"
+    ):
+        load_session(copy)
+    write_timestamps_csv(path, t)
+
+    truth = dict(np.load(copy / "truth.npz"))
+    cut = {
+        k: (v[:-3] if k in ("time_s", "joints_mm", "markers_mm") else v) for k, v in truth.items()
+    }
+    np.savez(copy / "truth.npz", **cut)
+    with pytest.raises(
+        SessionError, match=rf"truth.npz has {len(t) - 3} samples, the video of camera 'mono' "
+    ):
+        load_session(copy)
+    np.savez(copy / "truth.npz", **truth)
+
+    import csv
+
+    with open(copy / "markers.csv", newline="") as fh:
+        header, *body = list(csv.reader(fh))
+    for r in body:
+        r[0] = repr(float(r[0]) + 100.0)
+    with open(copy / "markers.csv", "w", newline="") as fh:
+        csv.writer(fh, lineterminator="\n").writerows([header, *body])
+    with pytest.raises(SessionError, match=r"the markers span .* s and the video of camera 'mono'"):
+        load_session(copy)
+
+
+def test_lenient_fields_are_refused(copy):
+    """``"format": true`` is not 1, reference markers must be in the marker file, a K
+    entry must be a number, not the string "532", and k1 = 50 is no lens (issue 14)."""
+    doc = json.loads((copy / "session.json").read_text())
+    (copy / "session.json").write_text(json.dumps({**doc, "format": True}))
+    with pytest.raises(FormatError, match=r"field 'format': expected 1, found True"):
+        load_session(copy)
+    (copy / "session.json").write_text(json.dumps({**doc, "reference_markers": ["LELB"]}))
+    with pytest.raises(SessionError, match=r"reference_markers names \['LELB'\], which markers"):
+        load_session(copy)
+    (copy / "session.json").write_text(json.dumps(doc))
+    cams = json.loads((copy / "cameras.json").read_text())
+    good = json.loads(json.dumps(cams))
+    cams["cameras"][0]["K"][0][0] = "532"
+    (copy / "cameras.json").write_text(json.dumps(cams))
+    with pytest.raises(FormatError, match=r"cameras\[0\] \('mono'\).K: expected a \(3, 3\) array"):
+        load_session(copy)
+    cams = json.loads(json.dumps(good))
+    cams["cameras"][0]["dist"][0] = 50.0
+    (copy / "cameras.json").write_text(json.dumps(cams))
+    with pytest.raises(FormatError, match=r"dist\[0\] \(k1\): expected a radial coefficient"):
+        load_session(copy)

@@ -172,3 +172,15 @@ def test_c3d_to_trc_round_trip(shared_data: Path, tmp_path: Path) -> None:
     assert back.names == m.names
     assert back.rate_hz == m.rate_hz
     np.testing.assert_allclose(back.positions_mm, m.positions_mm, **ROUND_TRIP)
+
+
+def test_negative_data_rate_is_refused(tmp_path: Path) -> None:
+    path = tmp_path / "m.trc"
+    write_trc(path, np.arange(3) / 50.0, ["A"], np.zeros((3, 1, 3)), rate_hz=50.0)
+    lines = path.read_text().splitlines(keepends=True)
+    values = lines[2].split("\t")
+    values[0] = "-50"
+    lines[2] = "\t".join(values)
+    path.write_text("".join(lines))
+    with pytest.raises(FormatError, match=r"line 3 \(DataRate\): expected a positive rate"):
+        read_trc(path)

@@ -210,6 +210,7 @@ def test_session_writes_result_folder_on_video_time_line(wave_session, wave_resu
 def test_session_ignores_elbow_reference_markers(wave_session, wave_result, tmp_path):
     """The elbow reference markers are for evaluation only: removing them changes nothing."""
     import csv
+    import json
 
     from mocapkit.io.session import load_session
 
@@ -221,6 +222,10 @@ def test_session_ignores_elbow_reference_markers(wave_session, wave_result, tmp_
     assert len(keep) == len(rows[0]) - 6  # two markers, three columns each
     with open(path, "w", newline="") as fh:
         csv.writer(fh, lineterminator="\n").writerows([[r[i] for i in keep] for r in rows])
+    # session.json no longer lists them either (it may name only markers the file holds)
+    info = json.loads((copy / "session.json").read_text())
+    info["reference_markers"] = []
+    (copy / "session.json").write_text(json.dumps(info))
     assert not any("elbow" in n for n in load_session(copy).markers.names)
 
     motion = track_hybrid_session(copy, None)
@@ -273,3 +278,104 @@ def test_session_max_elbow_speed(wave_session):
         track_hybrid_session(wave_session, None, paper=True, max_elbow_speed_mm_per_s=100.0)
     with pytest.raises(ConfigError, match=r"expected a speed >= 0 mm/s .*found -1.0"):
         track_hybrid_session(wave_session, None, max_elbow_speed_mm_per_s=-1.0)
+
+
+def _edit_markers_csv(folder, edit):
+    """Rewrite a session's markers.csv: ``edit(header, rows)`` changes the rows in place."""
+    import csv
+
+    path = folder / "markers.csv"
+    with open(path, newline="") as fh:
+        header, *body = list(csv.reader(fh))
+    edit(header, body)
+    with open(path, "w", newline="") as fh:
+        csv.writer(fh, lineterminator="\n").writerows([header, *body])
+
+
+def test_session_with_a_set_never_seen_is_refused(wave_session, tmp_path):
+    """The right hand's markers are all empty: its limb would be invented (issue 14)."""
+    copy = _copy_session(wave_session, tmp_path / "blind_hand")
+
+    def blank(header, rows):
+        cols = [i for i, h in enumerate(header) if h.startswith("right_hand")]
+        for r in rows:
+            for i in cols:
+                r[i] = ""
+
+    _edit_markers_csv(copy, blank)
+    with pytest.raises(SessionError, match=r"blind_hand: marker set\(s\) \['right_hand'\] have no"):
+        track_hybrid_session(copy, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+
+
+def test_session_whose_markers_end_early_has_nan_joints(wave_session, tmp_path):
+    """Markers that stop before the video: the frames after the bridge have no joints
+    and fit.csv says released; the last marker sample is not used as live (issue 14)."""
+    from mocapkit.io.session import load_session
+    from mocapkit.pipelines.hybrid import track_hybrid_session_run
+    from mocapkit.pipelines.run import read_fit_csv
+
+    copy = _copy_session(wave_session, tmp_path / "short_markers")
+    _edit_markers_csv(copy, lambda header, rows: rows.__delitem__(slice(len(rows) // 8, None)))
+    last_marker_s = load_session(copy).markers.time_s[-1]
+    run = track_hybrid_session_run(copy, tmp_path / "out", use_video=False)
+    late = run.motion.time_s > last_marker_s + HybridConfig().gap_limit_s
+    assert late.any() and (~late).any()
+    assert np.all(np.isnan(run.motion.joints_mm[late]))
+    assert np.all(np.isfinite(run.motion.joints_mm[~late][:, :3]))
+    rows, _ = read_fit_csv(tmp_path / "out" / "fit.csv")
+    assert {r["head_status"] for r, x in zip(rows, late) if x} == {"released"}
+    assert [g.name for g in run.gaps] == ["head", "left_hand", "right_hand"]
+
+
+@pytest.mark.parametrize(
+    ("case", "edit"),
+    [
+        # the translation written in metres: the camera sits inside the subject
+        ("metres", lambda m: [*([*row[:3], row[3] / 1000.0] for row in m[:3]), m[3]]),
+        # turned round (x and z negated): it looks away from the subject
+        ("behind", lambda m: [[-v for v in m[0]], m[1], [-v for v in m[2]], m[3]]),
+    ],
+)
+def test_camera_that_cannot_see_the_subject_is_refused(wave_session, tmp_path, case, edit):
+    import json
+
+    copy = _copy_session(wave_session, tmp_path / case)
+    path = copy / "cameras.json"
+    doc = json.loads(path.read_text())
+    doc["cameras"][0]["camera_from_world"] = edit(doc["cameras"][0]["camera_from_world"])
+    path.write_text(json.dumps(doc))
+    with pytest.raises(
+        SessionError,
+        match=r"camera 'mono' does not see the subject: of \d+ marker-set positions in the "
+        r"first 1 s, \d+ lie in front of it \(median depth -?\d+ mm\) and 0 inside its 320x240",
+    ):
+        track_hybrid_session(copy, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
+    track_hybrid_session(copy, None, use_video=False)  # the markers alone still track
+
+
+def test_extra_marker_set_is_refused(tmp_path):
+    """A --marker-set the tracker does not use is refused, not silently ignored."""
+    from mocapkit.io.marker_files import write_markers
+    from mocapkit.io.markers import MarkerData
+
+    names = ("H", "L", "R", "E")
+    pos = np.tile(
+        np.array([[0, 0, 1600], [-300, 0, 900], [300, 0, 900], [0, 0, 1000.0]]), (4, 1, 1)
+    )
+    path = tmp_path / "m.csv"
+    write_markers(path, MarkerData(np.arange(4) / 50.0, names, pos, 50.0, "test"))
+    sets = ["head=H", "left_hand=L", "right_hand=R", "elbow=E"]
+    with pytest.raises(ConfigError, match=r"uses only sets .*found \['elbow'\] as well"):
+        track_hybrid_markers(path, sets, 1700.0)
+
+
+def test_cli_lists_the_gaps(wave_session, tmp_path, capsys):
+    """`track hybrid` prints where each marker set was released (issue 14)."""
+    copy = _copy_session(wave_session, tmp_path / "short")
+    _edit_markers_csv(copy, lambda header, rows: rows.__delitem__(slice(len(rows) // 8, None)))
+    assert main(["track", "hybrid", str(copy), "--no-video", "--out", str(tmp_path / "o")]) == 0
+    out = capsys.readouterr().out
+    for name in ("head", "left_hand", "right_hand"):
+        assert f"gap: {name} released " in out

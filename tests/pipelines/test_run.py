@@ -98,6 +98,35 @@ def test_hybrid_through_the_runner_reports_status_and_fit(tmp_path) -> None:
     assert math.isfinite(numeric["max_mm"][-1])
 
 
+class ReleasingTracker(ReplayTracker):
+    """Replays poses; from 0.05 s the left arm is released and its joints are NaN."""
+
+    def update(self, sample):
+        t, q = sample
+        joints = canonical_joints_mm(self.skeleton, canonical_positions(self.skeleton, q))
+        released = t >= 0.05
+        if released:
+            joints[CANONICAL_JOINTS.index("left_wrist")] = np.nan
+        status = {"left_arm": "released" if released else "seen", "head": "seen"}
+        return FrameResult(t, q, joints, status, {}, "")
+
+
+def test_run_tracker_keeps_nan_joints_and_lists_the_gaps(tmp_path) -> None:
+    from mocapkit.io.joints_csv import read_joints_csv
+
+    sk = load_preset("upper_stick")
+    q = np.tile(np.clip(np.zeros(sk.n_dofs), sk.lower, sk.upper), (6, 1))
+    t = np.arange(6) * 0.02
+    run = run_tracker(ReleasingTracker(sk), zip(t, q), 6, tmp_path / "res")
+    k = run.motion.joint_names.index("left_wrist")
+    assert np.all(np.isfinite(run.motion.joints_mm[:3, k]))
+    assert np.all(np.isnan(run.motion.joints_mm[3:, k]))
+    assert np.all(np.isfinite(run.motion.q))  # the BVH keeps the pose
+    _t, names, joints = read_joints_csv(tmp_path / "res" / "joints.csv")
+    assert np.all(np.isnan(joints[3:, names.index("left_wrist")]))
+    assert [str(g) for g in run.gaps] == ["left_arm released 0.060-0.100 s (3 frames)"]
+
+
 class LaggedReplay(ReplayTracker):
     """A `DelayedTracker`: the result of sample k comes with sample k + lag."""
 

@@ -372,3 +372,55 @@ def test_refiner_gets_the_previous_elbows_carried_by_the_trunk(truth, paper):
             local = prev_world[parent, :3, :3].T @ (elbow_prev - prev_world[parent, :3, 3])
             expected = now_world[parent, :3, :3] @ local + now_world[parent, :3, 3]
             np.testing.assert_allclose(kw["previous_elbows_mm"][side], expected, atol=1e-9)
+
+
+def test_stale_marker_sample_is_no_observation(truth):
+    """Markers that end before the video: the last sample, older than the bridge, is not
+    used as live; the sets are released and their joints are NaN (issue 14)."""
+    sk, t, _q, pos = truth
+    cfg = HybridConfig(use_video=False, gap_limit_s=0.1)
+    tracker = HybridTracker(sk, config=cfg)
+    names = ("head", "left_hand", "right_hand")
+    last = 29
+    for i in range(len(t)):
+        k = min(i, last)  # the marker stream stops at frame 29; the video goes on
+        s = HybridSample(float(t[i]), {n: pos[k, j] for j, n in enumerate(names)}, float(t[k]))
+        pose = tracker.update(s)
+        age = t[i] - t[last]
+        if age <= 0.1:
+            assert set(pose.status.values()) <= {"seen"}
+            assert np.all(np.isfinite(pose.joints_mm[:3]))
+        else:
+            assert pose.status == dict.fromkeys(names, "released")
+            assert np.all(np.isnan(pose.joints_mm))
+            assert np.all(np.isfinite(pose.q))  # the pose is kept for BVH
+    assert [e[2] for e in tracker.events if e[1] == "head"] == ["released"]
+
+
+def test_no_pose_before_the_markers_start(truth):
+    sk, t, _q, pos = truth
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False))
+    names = ("head", "left_hand", "right_hand")
+    first = tracker.update(HybridSample(0.0, {}))
+    assert first.status == dict.fromkeys(names, "missing")
+    assert np.all(np.isnan(first.q)) and np.all(np.isnan(first.joints_mm))
+    # the first pose is placed when the markers come, on them
+    pose = tracker.update(HybridSample(float(t[1]), {n: pos[1, j] for j, n in enumerate(names)}))
+    assert set(pose.status.values()) == {"seen"}
+    assert max(pose.residual_mm[n] for n in names) <= HybridConfig().smoothing_polish_tol_mm
+
+
+def test_released_hand_has_nan_arm_joints(truth):
+    from mocapkit.skeleton import CANONICAL_JOINTS
+
+    sk, t, _q, pos = truth
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False, gap_limit_s=0.05))
+    for i in range(len(t)):
+        marks = {"head": pos[i, 0], "right_hand": pos[i, 2]}
+        if i < 10:
+            marks["left_hand"] = pos[i, 1]
+        pose = tracker.update(HybridSample(float(t[i]), marks))
+    assert pose.status["left_hand"] == "released"
+    nan = [n for n in CANONICAL_JOINTS if np.isnan(pose.joints_mm[CANONICAL_JOINTS.index(n)]).any()]
+    assert {"left_elbow", "left_wrist"} <= set(nan)
+    assert "right_wrist" not in nan and "head" not in nan

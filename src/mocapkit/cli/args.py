@@ -105,3 +105,31 @@ def number(
 
 
 __all__ = ["checked_by", "number", "parsed_by"]
+
+
+def output_folder(text: str) -> str:
+    """A ``type=`` for ``--out`` folders: checked before any work starts.
+
+    Refuses an existing path that is not a folder (a file would only be found after the
+    whole run, when the first output is written) and a folder whose nearest existing
+    ancestor cannot be written to (a read-only place). Whether an existing folder may be
+    reused stays the subcommand's rule.
+    """
+    import os
+    from pathlib import Path
+
+    p = Path(text).expanduser()
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a folder, found an empty path")
+    if p.exists() and not p.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: expected a folder, found an existing file")
+    ancestor = p
+    while not ancestor.exists() and ancestor != ancestor.parent:
+        ancestor = ancestor.parent
+    if not ancestor.is_dir():
+        raise argparse.ArgumentTypeError(
+            f"{text}: cannot create a folder under {ancestor}, which is a file"
+        )
+    if not os.access(ancestor, os.W_OK | os.X_OK):
+        raise argparse.ArgumentTypeError(f"{text}: cannot write to {ancestor} (read-only)")
+    return text

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from mocapkit.cli.args import checked_by, number
+from mocapkit.cli.args import checked_by, number, output_folder
 from mocapkit.eval.metrics import joint_subset
 from mocapkit.io.marker_sets import parse_marker_set
 from mocapkit.pipelines.registry import AUTO, TRACKERS
@@ -33,7 +33,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("study", metavar="STUDY_DIR", help="folder searched for sessions")
-    p.add_argument("--out", required=True, metavar="RESULTS_DIR", help="results folder")
+    p.add_argument(
+        "--out", required=True, metavar="RESULTS_DIR", type=output_folder, help="results folder"
+    )
     p.add_argument(
         "--method",
         default=AUTO,

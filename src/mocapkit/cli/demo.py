@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from mocapkit.cli.args import number
+from mocapkit.cli.args import number, output_folder
 from mocapkit.pipelines.demo import run_demo
 
 
@@ -21,7 +21,12 @@ def register(subparsers: Any) -> None:
         "keypoints) methods, prints one table of upper-body accuracy and speed, writes a "
         "report per tracker under OUT/report and prints the path of its index page.",
     )
-    p.add_argument("--out", default="demo-output", help="output folder (default: demo-output)")
+    p.add_argument(
+        "--out",
+        default="demo-output",
+        type=output_folder,
+        help="output folder (default: demo-output)",
+    )
     p.add_argument(
         "--seconds", type=number(above=0.0), default=4.0, help="length of the excerpt (s)"
     )

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-from mocapkit.cli.args import checked_by, number
+from mocapkit.cli.args import checked_by, number, output_folder
 from mocapkit.synth.realism import BACKGROUNDS, REALISM_RANGES, RealismOptions
 from mocapkit.synth.render import SLEEVES, parse_colour
 from mocapkit.synth.rigs import RIG_NAMES
@@ -72,7 +72,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     )
     d = RealismOptions()
     p.add_argument("motion", metavar="MOTION", help="BVH/AMC file or builtin:NAME")
-    p.add_argument("--out", required=True, help="session folder to create")
+    p.add_argument("--out", required=True, type=output_folder, help="session folder to create")
     p.add_argument("--rig", choices=RIG_NAMES, default="mono", help="cameras (default mono)")
     p.add_argument(
         "--start-s", type=number(at_least=0.0), default=0.0, help="excerpt start in the clip (s)"

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from mocapkit.cli.args import output_folder
 from mocapkit.cli.track_stereo import register_method as register_stereo
 
 
@@ -20,7 +21,7 @@ def register(subparsers: Any) -> None:
         "marker file (IK only). Writes motion.npz, joints.csv and motion.bvh to --out.",
     )
     hyb.add_argument("session", nargs="?", help="session folder (omit with --markers)")
-    hyb.add_argument("--out", required=True, help="result folder")
+    hyb.add_argument("--out", required=True, type=output_folder, help="result folder")
     hyb.add_argument("--no-video", action="store_true", help="skip the video refinement")
     hyb.add_argument(
         "--paper",
@@ -116,6 +117,7 @@ def _run_hybrid(args: argparse.Namespace) -> int:
         track_hybrid_marker_file,
         track_hybrid_session_run,
     )
+    from mocapkit.pipelines.run import find_gaps
 
     warn_mm = WARN_MM if args.warn_mm is None else args.warn_mm
     warn_fraction = WARN_FRACTION if args.warn_fraction is None else args.warn_fraction
@@ -204,6 +206,10 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             max_elbow_speed_mm_per_s=args.max_elbow_speed,
         )
         motion, results = session_run.motion, session_run.results
+    # frames where a marker set was not observed have no joints of its limb (NaN in
+    # joints.csv, the status in fit.csv): say where
+    for gap in find_gaps(results):
+        print(f"gap: {gap}")
     print(f"tracked {motion.n_frames} frames -> {args.out}")
     report = summarize_fit(results, warn_mm, warn_fraction)
     print("\n".join(report.lines()))

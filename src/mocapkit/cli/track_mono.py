@@ -10,6 +10,8 @@ import argparse
 import json
 from typing import Any
 
+from mocapkit.cli.args import output_folder
+
 
 def add_mono_parser(methods: Any) -> None:
     """Add ``track mono`` to the ``track`` methods."""
@@ -22,7 +24,7 @@ def add_mono_parser(methods: Any) -> None:
         "Writes motion.npz, joints.csv, motion.bvh and fit.csv to --out.",
     )
     p.add_argument("session", help="session folder")
-    p.add_argument("--out", required=True, help="result folder")
+    p.add_argument("--out", required=True, type=output_folder, help="result folder")
     p.add_argument("--camera", help="camera name (default: the first with keypoints)")
     p.add_argument("--keypoints", help="keypoints CSV file or OpenPose JSON folder")
     p.add_argument(

@@ -10,6 +10,8 @@ import argparse
 import json
 from typing import Any
 
+from mocapkit.cli.args import output_folder
+
 
 def register_method(methods: Any) -> None:
     """Add ``stereo`` to the ``track`` methods."""
@@ -22,7 +24,7 @@ def register_method(methods: Any) -> None:
         "to --out; with a truth.npz in the session, prints the arm joints' errors too.",
     )
     p.add_argument("session", help="session folder")
-    p.add_argument("--out", required=True, help="result folder")
+    p.add_argument("--out", required=True, type=output_folder, help="result folder")
     p.add_argument(
         "--cameras",
         default=None,

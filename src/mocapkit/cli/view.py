@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from mocapkit.cli.args import output_folder
 from mocapkit.pipelines.report import build_report
 
 
@@ -30,7 +31,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "no truth)",
     )
     p.add_argument("--markers", metavar="FILE", help="marker file to show (raw-marker results)")
-    p.add_argument("--out", metavar="DIR", help="report folder (default RESULT/report)")
+    p.add_argument(
+        "--out", metavar="DIR", type=output_folder, help="report folder (default RESULT/report)"
+    )
     p.set_defaults(func=run)
 
 

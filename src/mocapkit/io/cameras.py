@@ -27,11 +27,15 @@ from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import FormatError
 from mocapkit.geometry.transforms import make_transform
 from mocapkit.io.atomic import atomic_write
+from mocapkit.io.files import read_text
 
 FORMAT_VERSION = 1
 _KEYS = ("name", "image_size", "K", "dist", "camera_from_world")
 _DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
 _ROTATION_TOL = 1e-6
+#: Largest |k1|, |k2| accepted: real lenses, fisheye-like wide angles included, stay
+#: within a few units under OpenCV's model (larger values fold the image on itself).
+MAX_RADIAL_DISTORTION = 10.0
 
 PathLike = str | os.PathLike[str]
 
@@ -39,7 +43,19 @@ PathLike = str | os.PathLike[str]
 # ----------------------------------------------------------------------------- cameras.json
 
 
+def _numbers_only(value: Any) -> bool:
+    """Whether a nested list holds JSON numbers only (no strings, booleans or nulls)."""
+    if isinstance(value, np.ndarray):  # from cv2.FileStorage
+        return value.dtype.kind in "iuf"
+    if isinstance(value, list | tuple):
+        return all(_numbers_only(v) for v in value)
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
+
+
 def _matrix(value: Any, shape: tuple[int, ...], where: str) -> NDArray[np.float64]:
+    if not _numbers_only(value):
+        # numpy would turn "532" into 532.0: a string is a mistake to name, not a number
+        raise FormatError(f"{where}: expected a {shape} array of numbers, found {value!r}")
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError) as exc:
@@ -98,6 +114,12 @@ def _camera_from_dict(entry: Any, where: str) -> Camera:
             f"{where}.dist: expected {', '.join(map(str, _DIST_LENGTHS))} OpenCV coefficients, "
             f"found {dist.shape[0]}"
         )
+    for i in (0, 1):  # k1, k2
+        if dist.shape[0] > i and abs(dist[i]) > MAX_RADIAL_DISTORTION:
+            raise FormatError(
+                f"{where}.dist[{i}] (k{i + 1}): expected a radial coefficient within "
+                f"+-{MAX_RADIAL_DISTORTION:g}, found {dist[i]:g}"
+            )
     m = _matrix(entry["camera_from_world"], (4, 4), f"{where}.camera_from_world")
     if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0]):
         raise FormatError(
@@ -159,12 +181,7 @@ def read_cameras(path: PathLike) -> list[Camera]:
     Raises `FormatError` naming the file and the field on any deviation.
     """
     p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError as exc:
-        raise FormatError(f"{p}: camera file not found") from exc
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FormatError(f"{p}: cannot read camera file ({exc})") from exc
+    text = read_text(p, "camera file")
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:

@@ -14,6 +14,7 @@ from numpy.typing import NDArray
 
 from mocapkit.errors import FormatError
 from mocapkit.io.atomic import atomic_write
+from mocapkit.io.files import read_text
 from mocapkit.io.motion import Motion
 
 FloatArray = NDArray[np.float64]
@@ -50,11 +51,7 @@ def read_joints_csv(path: str | os.PathLike[str]) -> tuple[FloatArray, tuple[str
         NaN where the file holds ``nan``.
     """
     where = str(path)
-    try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            rows = list(csv.reader(fh))
-    except OSError as exc:
-        raise FormatError(f"{where}: cannot read ({exc})") from None
+    rows = list(csv.reader(io.StringIO(read_text(path, "joints CSV"))))
     if not rows or not rows[0] or rows[0][0] != "time_s":
         found = rows[0][:1] if rows else "an empty file"
         raise FormatError(

@@ -11,6 +11,7 @@ Coordinates are in mm; an empty cell (or ``nan``) is a missing sample.
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 from collections.abc import Sequence
@@ -21,6 +22,7 @@ from numpy.typing import ArrayLike
 
 from mocapkit.errors import FormatError
 from mocapkit.io.atomic import atomic_write
+from mocapkit.io.files import read_text
 from mocapkit.io.markers import MarkerData, check_marker_arrays, infer_rate_hz
 
 _AXES = ("x", "y", "z")
@@ -89,8 +91,7 @@ def read_markers_csv(path: str | os.PathLike[str]) -> MarkerData:
     """
     p = Path(path)
     where = str(p)
-    with open(p, encoding="utf-8-sig", newline="") as fh:
-        rows = list(csv.reader(fh))
+    rows = list(csv.reader(io.StringIO(read_text(p, "marker CSV"))))
     # Drop blank lines (e.g. a trailing newline) but keep line numbers for messages.
     numbered = [(i + 1, r) for i, r in enumerate(rows) if any(c.strip() for c in r)]
     if not numbered:

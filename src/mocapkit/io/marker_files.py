@@ -9,7 +9,7 @@ from typing import Any
 from mocapkit.errors import FormatError
 from mocapkit.io.c3d import read_c3d
 from mocapkit.io.marker_csv import read_markers_csv, write_markers_csv
-from mocapkit.io.markers import MarkerData
+from mocapkit.io.markers import MarkerData, check_plausible_markers
 from mocapkit.io.trc import read_trc, write_trc
 
 #: File extensions `read_markers` understands (lower case, with the dot).
@@ -34,7 +34,8 @@ def read_markers(path: str | os.PathLike[str]) -> MarkerData:
     Raises
     ------
     FormatError
-        Unsupported extension, or a file that does not follow its format.
+        Unsupported extension, a file that does not follow its format, or coordinates
+        beyond any lab (`mocapkit.io.markers.check_plausible_markers`).
     FileNotFoundError
         The file does not exist.
     """
@@ -48,10 +49,13 @@ def read_markers(path: str | os.PathLike[str]) -> MarkerData:
     if not p.is_file():
         raise FileNotFoundError(f"{p}: marker file not found")
     if ext == ".c3d":
-        return read_c3d(p)  # ezc3d itself is imported only when a C3D is read
-    if ext == ".trc":
-        return read_trc(p)
-    return read_markers_csv(p)
+        markers = read_c3d(p)  # ezc3d itself is imported only when a C3D is read
+    elif ext == ".trc":
+        markers = read_trc(p)
+    else:
+        markers = read_markers_csv(p)
+    check_plausible_markers(markers, speeds=False)
+    return markers
 
 
 def write_markers(path: str | os.PathLike[str], markers: MarkerData, **kwargs: Any) -> None:

@@ -359,3 +359,55 @@ def check_marker_arrays(
                 f"surrounding spaces"
             )
     return t, names, pos
+
+
+#: Largest marker coordinate (mm) a recording may hold: 100 m from the lab origin, far
+#: beyond any capture volume; larger finite values are glitches or unit mistakes.
+MAX_MARKER_COORDINATE_MM = 100_000.0
+#: Largest marker speed (mm/s) between two consecutive samples: 100 m/s, several times
+#: what a hand or a racket reaches (the real serve and sprint takes peak near 14 m/s).
+MAX_MARKER_SPEED_MM_PER_S = 100_000.0
+
+
+def check_plausible_markers(markers: MarkerData, speeds: bool = True) -> None:
+    """Refuse finite marker values no body can produce (at the boundary where they enter).
+
+    Every marker reader checks the coordinates (`mocapkit.io.marker_files.read_markers`);
+    the speeds are checked where the markers are taken as a body's motion (a session, the
+    hybrid tracker's raw marker files), since a marker file may hold other point clouds.
+
+    Parameters
+    ----------
+    markers : MarkerData
+    speeds : bool
+        Also check the speed between consecutive samples.
+
+    Raises
+    ------
+    FormatError
+        Naming the file, the marker and the time of the first coordinate beyond
+        `MAX_MARKER_COORDINATE_MM` or step faster than `MAX_MARKER_SPEED_MM_PER_S`.
+    """
+    pos = markers.positions_mm
+    with np.errstate(invalid="ignore"):
+        far = np.abs(pos) > MAX_MARKER_COORDINATE_MM
+    if np.any(far):
+        f, m, _ = (int(i) for i in np.argwhere(far)[0])
+        raise FormatError(
+            f"{markers.source}: marker {markers.names[m]!r} at {markers.time_s[f]:.4f} s: "
+            f"expected coordinates within +-{MAX_MARKER_COORDINATE_MM:.0f} mm, found "
+            f"{pos[f, m].tolist()}"
+        )
+    if not speeds or markers.n_frames < 2:
+        return
+    step = np.linalg.norm(np.diff(pos, axis=0), axis=2)
+    speed = step / np.diff(markers.time_s)[:, None]
+    with np.errstate(invalid="ignore"):
+        fast = speed > MAX_MARKER_SPEED_MM_PER_S
+    if np.any(fast):
+        f, m = (int(i) for i in np.argwhere(fast)[0])
+        raise FormatError(
+            f"{markers.source}: marker {markers.names[m]!r} at {markers.time_s[f + 1]:.4f} s: "
+            f"expected a speed below {MAX_MARKER_SPEED_MM_PER_S:.0f} mm/s, found "
+            f"{speed[f, m]:.0f} mm/s (a jump of {step[f, m]:.0f} mm)"
+        )

@@ -13,6 +13,7 @@ import numpy as np
 
 from mocapkit.errors import FormatError
 from mocapkit.io.atomic import atomic_save_npz
+from mocapkit.io.files import load_npz
 from mocapkit.io.motion import Motion
 from mocapkit.skeleton.serialize import skeleton_from_json, skeleton_to_json
 
@@ -41,28 +42,24 @@ def save_motion_npz(path: str | os.PathLike[str], motion: Motion) -> None:
 def load_motion_npz(path: str | os.PathLike[str]) -> Motion:
     """Load a motion saved by `save_motion_npz`."""
     where = str(path)
-    try:
-        data = np.load(path, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise FormatError(f"{where}: cannot read as .npz ({exc})") from None
-    with data:
-        need = ("format", "time_s", "q", "joints_mm", "joint_names", "skeleton_json", "source")
-        missing = [k for k in need if k not in data.files]
-        if missing:
-            raise FormatError(f"{where}: not a mocapkit motion file; missing arrays {missing}")
-        if str(data["format"]) != "mocapkit.motion":
-            raise FormatError(
-                f"{where}: field 'format' should be 'mocapkit.motion', found {data['format']}"
-            )
-        skeleton = skeleton_from_json(str(data["skeleton_json"]), where)
-        return Motion(
-            skeleton,
-            data["time_s"],
-            data["q"],
-            tuple(str(n) for n in data["joint_names"]),
-            data["joints_mm"],
-            str(data["source"]),
+    data = load_npz(path, "mocapkit motion (.npz)")
+    need = ("format", "time_s", "q", "joints_mm", "joint_names", "skeleton_json", "source")
+    missing = [k for k in need if k not in data]
+    if missing:
+        raise FormatError(f"{where}: not a mocapkit motion file; missing arrays {missing}")
+    if str(data["format"]) != "mocapkit.motion":
+        raise FormatError(
+            f"{where}: field 'format' should be 'mocapkit.motion', found {data['format']}"
         )
+    skeleton = skeleton_from_json(str(data["skeleton_json"]), where)
+    return Motion(
+        skeleton,
+        data["time_s"],
+        data["q"],
+        tuple(str(n) for n in data["joint_names"]),
+        data["joints_mm"],
+        str(data["source"]),
+    )
 
 
 __all__ = ["load_motion_npz", "save_motion_npz"]

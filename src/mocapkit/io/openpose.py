@@ -46,6 +46,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import FormatError, SessionError, ShapeError
+from mocapkit.io.files import read_text
 from mocapkit.io.session_csv import Keypoints
 
 FloatArray = NDArray[np.float64]
@@ -114,9 +115,7 @@ def read_openpose_frame(path: str | os.PathLike[str]) -> tuple[str, FloatArray]:
     """
     p = Path(path)
     try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FormatError(f"{p}: cannot read ({exc})") from None
+        doc = json.loads(read_text(p, "OpenPose JSON"))
     except json.JSONDecodeError as exc:
         raise FormatError(f"{p}: not valid JSON (line {exc.lineno}: {exc.msg})") from None
     if not isinstance(doc, dict) or not isinstance(doc.get("people"), list):

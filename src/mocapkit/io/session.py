@@ -53,9 +53,10 @@ from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import FormatError, SessionError
 from mocapkit.io.atomic import atomic_write
 from mocapkit.io.cameras import read_cameras
+from mocapkit.io.files import read_text
 from mocapkit.io.marker_files import read_markers
 from mocapkit.io.marker_sets import MarkerSet, evaluate_marker_sets
-from mocapkit.io.markers import MarkerData
+from mocapkit.io.markers import MarkerData, check_plausible_markers
 from mocapkit.io.session_csv import Keypoints, read_keypoints_csv, read_timestamps_csv
 from mocapkit.io.truth import Truth, load_truth
 from mocapkit.io.video import LazyFrame, VideoSource, probe_video
@@ -145,14 +146,14 @@ class Session:
                 f"{self.path}: missing session.json (every session folder needs one)"
             )
         try:
-            info = json.loads(info_path.read_text(encoding="utf-8"))
+            info = json.loads(read_text(info_path, "session.json"))
         except json.JSONDecodeError as exc:
             raise FormatError(
                 f"{info_path}: not valid JSON (line {exc.lineno}: {exc.msg})"
             ) from None
         if not isinstance(info, dict):
             raise FormatError(f"{info_path}: expected a JSON object, found {type(info).__name__}")
-        if info.get("format") != FORMAT_VERSION:
+        if info.get("format") != FORMAT_VERSION or isinstance(info.get("format"), bool):
             raise FormatError(
                 f"{info_path}: field 'format': expected {FORMAT_VERSION}, "
                 f"found {info.get('format')!r}"
@@ -184,6 +185,15 @@ class Session:
                 raise FormatError(
                     f"{info_path}: subject.bone_lengths_mm: unknown segment {k!r}; expected "
                     f"one of {sorted(CANONICAL_SEGMENTS)}"
+                )
+        # no segment is half as long as the body (the shank, the longest, is about a
+        # quarter of the stature); without a stature, half the tallest one allowed
+        longest = 0.5 * (self.height_mm if self.height_mm is not None else 2800.0)
+        for k, v in bones.items():
+            if v > longest:
+                raise FormatError(
+                    f"{info_path}: subject.bone_lengths_mm.{k}: expected at most half the "
+                    f"stature ({longest:.0f} mm), found {v!r} mm"
                 )
         self.bone_lengths_mm: dict[str, float] = {str(k): float(v) for k, v in bones.items()}
         vectors = subject.get("segment_vectors_mm", {})
@@ -267,6 +277,8 @@ class Session:
                 f"{self.path}: both {present[0]} and {present[1]}; keep one marker file"
             )
         self.markers: MarkerData | None = read_markers(self.path / present[0]) if present else None
+        if self.markers is not None:
+            check_plausible_markers(self.markers)  # the subject's markers: speeds too
         sets = info.get("marker_sets", {})
         if not isinstance(sets, dict):
             raise FormatError(
@@ -280,6 +292,12 @@ class Session:
         )
         if self.markers is not None:
             have = set(self.markers.names)
+            unknown = [m for m in self.reference_markers if m not in have]
+            if unknown:
+                raise SessionError(
+                    f"{info_path}: reference_markers names {unknown}, which "
+                    f"{present[0]} does not hold (it has {sorted(have)})"
+                )
             for set_name, members in self.marker_sets.items():
                 lost = [m for m in members if m not in have]
                 if lost:
@@ -296,6 +314,10 @@ class Session:
                     f"which are not members of marker set {set_name!r} (members: {declared})"
                 )
 
+        if self.markers is not None:
+            for set_name, members_mm in self.marker_member_offsets.items():
+                _check_member_spacing(self.markers, set_name, members_mm, info_path)
+
         # ---------------------------------------------------------------- keypoints, truth
         self.keypoints: dict[str, Keypoints] = {}
         kdir = self.path / "keypoints"
@@ -309,6 +331,43 @@ class Session:
                 self.keypoints[f.stem] = read_keypoints_csv(f)
         tpath = self.path / "truth.npz"
         self.truth: Truth | None = load_truth(tpath) if tpath.is_file() else None
+        self._check_lengths()
+
+    def _check_lengths(self) -> None:
+        """Refuse streams that cannot belong to one recording.
+
+        Every video lasts as long as the first (within two of its frames); ``truth.npz``
+        has one sample per frame of the first video; the marker stream overlaps the
+        video's time line. Markers that start late or end early are allowed: frames
+        whose newest marker sample is too old have no marker observation (the hybrid
+        tracker's age rule, ``HybridConfig.gap_limit_s``), which the result reports.
+        """
+        if not self._videos:
+            return
+        first = next(iter(self._videos.values()))
+        t0, t1 = float(first.time_s[0]), float(first.time_s[-1])
+        step = (t1 - t0) / max(first.n_frames - 1, 1)
+        for cam, v in self._videos.items():
+            s0, s1 = float(v.time_s[0]), float(v.time_s[-1])
+            if max(abs(s0 - t0), abs(s1 - t1)) > 2 * step + 1e-9:
+                raise SessionError(
+                    f"{self.path}: video of camera {cam!r} spans {s0:.3f}-{s1:.3f} s, the "
+                    f"video of camera {first.camera!r} {t0:.3f}-{t1:.3f} s; expected the "
+                    "same recording"
+                )
+        if self.truth is not None and self.truth.time_s.shape[0] != first.n_frames:
+            raise SessionError(
+                f"{self.path}: truth.npz has {self.truth.time_s.shape[0]} samples, the video "
+                f"of camera {first.camera!r} {first.n_frames} frames; expected one per frame"
+            )
+        if self.markers is not None:
+            m0, m1 = float(self.markers.time_s[0]), float(self.markers.time_s[-1])
+            if m1 < t0 or m0 > t1:
+                raise SessionError(
+                    f"{self.path}: the markers span {m0:.3f}-{m1:.3f} s and the video of "
+                    f"camera {first.camera!r} {t0:.3f}-{t1:.3f} s; expected clocks that "
+                    "overlap"
+                )
 
     # ------------------------------------------------------------------ video helpers
 
@@ -577,6 +636,39 @@ def _parse_member_offsets(doc: Any, where: Path) -> dict[str, dict[str, FloatArr
             parsed[str(marker)] = off
         out[str(name)] = parsed
     return out
+
+
+#: How far (mm) two members of a rigid marker set may be from their declared spacing.
+MEMBER_SPACING_TOLERANCE_MM = 100.0
+
+
+def _check_member_spacing(
+    markers: MarkerData, set_name: str, members_mm: Mapping[str, FloatArray], where: Path
+) -> None:
+    """Refuse a marker set whose members are not where ``members_mm`` puts them.
+
+    The members ride on one rigid body part, so the distance between two of them is the
+    distance between their declared offsets, give or take skin motion and noise
+    (`MEMBER_SPACING_TOLERANCE_MM`); a member 1e9 mm from its siblings is a glitch
+    the IK would chase.
+    """
+    names = [n for n in members_mm if n in markers.names]
+    for a in range(len(names)):
+        for b in range(a + 1, len(names)):
+            declared = float(np.linalg.norm(members_mm[names[a]] - members_mm[names[b]]))
+            pa, pb = markers.trajectory(names[a]), markers.trajectory(names[b])
+            seen = np.flatnonzero(np.all(np.isfinite(pa) & np.isfinite(pb), axis=1))
+            found = np.linalg.norm(pa[seen] - pb[seen], axis=1)
+            bad = np.flatnonzero(np.abs(found - declared) > MEMBER_SPACING_TOLERANCE_MM)
+            if bad.size:
+                f = int(seen[bad[0]])
+                raise SessionError(
+                    f"{where}: marker_offsets_mm.{set_name}.members_mm: {names[a]!r} and "
+                    f"{names[b]!r} are declared {declared:.0f} mm apart, found "
+                    f"{found[bad[0]]:.0f} mm at {markers.time_s[f]:.4f} s in "
+                    f"{Path(markers.source).name} ({bad.size} samples off by more than "
+                    f"{MEMBER_SPACING_TOLERANCE_MM:.0f} mm)"
+                )
 
 
 def write_session_json(path: str | os.PathLike[str], info: Mapping[str, Any]) -> None:

@@ -7,6 +7,7 @@ joint (``nan`` where unseen). ``video/<camera>.timestamps.csv``: ``frame,time_s`
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 from collections.abc import Sequence
@@ -18,6 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import FormatError, ShapeError
 from mocapkit.io.atomic import atomic_write
+from mocapkit.io.files import read_text
 from mocapkit.skeleton.model import CANONICAL_JOINTS
 
 FloatArray = NDArray[np.float64]
@@ -77,11 +79,7 @@ class Keypoints:
 
 
 def _read_numeric_csv(path: Path, what: str) -> tuple[list[str], FloatArray]:
-    try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            rows = [r for r in csv.reader(fh) if r]
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FormatError(f"{path}: cannot read {what} ({exc})") from None
+    rows = [r for r in csv.reader(io.StringIO(read_text(path, what))) if r]
     if not rows:
         raise FormatError(f"{path}: {what}: expected a header line, found an empty file")
     header = [h.strip() for h in rows[0]]

@@ -26,6 +26,7 @@ from numpy.typing import ArrayLike
 
 from mocapkit.errors import ConfigError, FormatError
 from mocapkit.io.atomic import atomic_write
+from mocapkit.io.files import read_text
 from mocapkit.io.markers import MarkerData, check_marker_arrays, infer_rate_hz
 
 #: Length units a TRC file may declare, with their size in mm.
@@ -55,8 +56,7 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerData:
     """
     p = Path(path)
     where = str(p)
-    with open(p, encoding="utf-8-sig") as fh:
-        lines = fh.readlines()
+    lines = read_text(p, "TRC marker file").splitlines(keepends=True)
     if len(lines) < 5:
         raise FormatError(
             f"{where}: expected at least 5 header lines (PathFileType, keys, values, marker "
@@ -82,6 +82,10 @@ def read_trc(path: str | os.PathLike[str]) -> MarkerData:
         raise FormatError(
             f"{where} line 3 (DataRate): expected a number, found {header['DataRate']!r}"
         ) from None
+    if rate <= 0:  # NaN (not written) falls back on the time stamps below
+        raise FormatError(
+            f"{where} line 3 (DataRate): expected a positive rate in Hz, found {rate:g}"
+        )
     n_frames_decl, n_markers_decl = 0, 0
     for key in ("NumFrames", "NumMarkers"):
         try:

@@ -11,6 +11,7 @@ from numpy.typing import NDArray
 
 from mocapkit.errors import FormatError, ShapeError
 from mocapkit.io.atomic import atomic_save_npz
+from mocapkit.io.files import load_npz
 from mocapkit.io.session_csv import check_times
 from mocapkit.skeleton.model import CANONICAL_JOINTS
 
@@ -59,27 +60,23 @@ class Truth:
 def load_truth(path: str | os.PathLike[str]) -> Truth:
     """Read and validate a ``truth.npz``."""
     p = Path(path)
-    try:
-        data = np.load(p, allow_pickle=False)
-    except (OSError, ValueError) as exc:
-        raise FormatError(f"{p}: cannot read as .npz ({exc})") from None
-    with data:
-        missing = [k for k in ("time_s", "joint_names", "joints_mm") if k not in data.files]
-        if missing:
-            raise FormatError(f"{p}: missing arrays {missing}; found {sorted(data.files)}")
-        t = np.asarray(data["time_s"], dtype=float)
-        names = tuple(str(n) for n in np.atleast_1d(data["joint_names"]))
-        joints = np.asarray(data["joints_mm"], dtype=float)
-        mnames = (
-            tuple(str(n) for n in np.atleast_1d(data["marker_names"]))
-            if ("marker_names" in data.files)
-            else ()
-        )
-        markers = (
-            np.asarray(data["markers_mm"], dtype=float)
-            if "markers_mm" in data.files
-            else (np.zeros((t.shape[0], 0, 3)))
-        )
+    data = load_npz(p, "truth (.npz)")
+    missing = [k for k in ("time_s", "joint_names", "joints_mm") if k not in data]
+    if missing:
+        raise FormatError(f"{p}: missing arrays {missing}; found {sorted(data)}")
+    t = np.asarray(data["time_s"], dtype=float)
+    names = tuple(str(n) for n in np.atleast_1d(data["joint_names"]))
+    joints = np.asarray(data["joints_mm"], dtype=float)
+    mnames = (
+        tuple(str(n) for n in np.atleast_1d(data["marker_names"]))
+        if ("marker_names" in data)
+        else ()
+    )
+    markers = (
+        np.asarray(data["markers_mm"], dtype=float)
+        if "markers_mm" in data
+        else (np.zeros((t.shape[0], 0, 3)))
+    )
     if t.ndim != 1:
         raise ShapeError(f"{p}: time_s: expected shape (T,), found {t.shape}")
     check_times(t, p, "time_s")

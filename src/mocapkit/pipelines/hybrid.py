@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import ConfigError, SessionError, ShapeError, unknown_name
 from mocapkit.ik.sdls import IKConfig, SDLSSolver
 from mocapkit.io.lab_frame import LabFrame, detect_lab_frame, to_world
@@ -151,6 +152,89 @@ def member_offsets(
     return out
 
 
+def require_observed_sets(
+    sets_mm: Mapping[str, ArrayLike], where: str | os.PathLike[str], error: type[Exception]
+) -> None:
+    """Refuse marker sets the hybrid tracker needs (`MARKER_SETS`) that are never seen.
+
+    A set with no finite sample in the whole recording (a hand whose markers were never
+    labelled) would leave its limb wholly made up by the relaxed pose; the tracker needs
+    each one at least once.
+
+    Parameters
+    ----------
+    sets_mm : mapping of str to array_like (T, 3)
+        Set positions over the recording (NaN where unseen).
+    where : path or str
+        The file or session, for the message.
+    error : exception type
+        `SessionError` for a session, `ConfigError` for ``--marker-set`` specs.
+    """
+    never = [
+        n
+        for n in MARKER_SETS
+        if n in sets_mm and not np.any(np.all(np.isfinite(np.asarray(sets_mm[n])), axis=-1))
+    ]
+    if never:
+        raise error(
+            f"{where}: marker set(s) {never} have no sample in the whole recording; the "
+            f"hybrid tracker needs {list(MARKER_SETS)} seen at least once"
+        )
+
+
+#: Seconds of markers at the start over which `check_camera_sees` judges a camera.
+CAMERA_CHECK_S = 1.0
+
+
+def check_camera_sees(
+    camera: Camera, time_s: ArrayLike, points_mm: ArrayLike, where: str | os.PathLike[str]
+) -> None:
+    """Refuse a camera that cannot see the subject over the first `CAMERA_CHECK_S`.
+
+    The subject's marker-set positions (head, hands) must lie in front of the camera
+    and project inside its image for at least half of the seen samples; a camera placed
+    behind the subject, or whose translation was written in metres (3 mm from the
+    origin instead of 3 m), fails. The video refinement would otherwise fit the arms to
+    edges of an image the subject is not in.
+
+    Parameters
+    ----------
+    camera : Camera
+    time_s : array_like, shape (T,)
+        Marker sample times (s).
+    points_mm : array_like, shape (T, S, 3)
+        Marker-set positions in the world (NaN where unseen).
+    where : path or str
+        The session, for the message.
+
+    Raises
+    ------
+    SessionError
+        With the counts, the median depth and the median pixel.
+    """
+    t = np.asarray(time_s, dtype=float)
+    pts = np.asarray(points_mm, dtype=float)
+    first = pts[t <= t[0] + CAMERA_CHECK_S].reshape(-1, 3) if t.size else pts.reshape(-1, 3)
+    seen = first[np.all(np.isfinite(first), axis=1)]
+    if seen.shape[0] == 0:
+        return
+    depth = camera.to_camera(seen)[:, 2]
+    px = camera.project(seen)
+    inside = camera.in_image(px) & (depth > 0)
+    if np.count_nonzero(inside) * 2 >= seen.shape[0]:
+        return
+    w, h = camera.image_size
+    shown = np.nanmedian(px, axis=0) if np.any(np.isfinite(px)) else np.full(2, np.nan)
+    raise SessionError(
+        f"{where}: camera {camera.name!r} does not see the subject: of {seen.shape[0]} "
+        f"marker-set positions in the first {CAMERA_CHECK_S:g} s, "
+        f"{np.count_nonzero(depth > 0)} lie in front of it (median depth "
+        f"{np.median(depth):.0f} mm) and {np.count_nonzero(inside)} inside its {w}x{h} "
+        f"image (median pixel ({shown[0]:.0f}, {shown[1]:.0f})); expected at least half. "
+        "Check its pose in cameras.json (translations in mm, camera_from_world)"
+    )
+
+
 def track_hybrid_session(
     session_dir: str | os.PathLike[str],
     out_dir: str | os.PathLike[str] | None,
@@ -239,6 +323,10 @@ def track_hybrid_session_run(
             f"{session.path}: the hybrid tracker needs marker sets {list(MARKER_SETS)} in "
             f"session.json; missing {missing or 'the marker file'}"
         )
+    positions = session.marker_set_positions(MARKER_SETS)
+    require_observed_sets(
+        {n: positions[:, i] for i, n in enumerate(MARKER_SETS)}, session.path, SessionError
+    )
     if oriented_sets is None:
         oriented_sets = () if paper else ORIENTED_SETS
     refine_config = None
@@ -281,6 +369,8 @@ def track_hybrid_session_run(
             f"{session.path}: no camera with a video; the hybrid tracker's time line is the video's"
         )
     camera = session.camera(cams[0])
+    if cfg.use_video:
+        check_camera_sees(camera, session.markers.time_s, positions, session.path)
     # the camera also sets the initial facing, so it is passed even without video
     tracker = HybridTracker(sk, camera, cfg, timer=timer)
     n = session.video(cams[0]).n_frames
@@ -536,9 +626,17 @@ def track_hybrid_marker_file(
     where that first pose puts them, on the floor.
     """
     from mocapkit.io.marker_sets import estimate_height_mm, evaluate_marker_sets, parse_marker_sets
+    from mocapkit.io.markers import check_plausible_markers
 
+    check_plausible_markers(markers)
     sets = parse_marker_sets(list(marker_sets))
     names = [s.name for s in sets]
+    extra = [n for n in names if n not in MARKER_SETS]
+    if extra:
+        raise ConfigError(
+            f"marker_sets: the hybrid tracker uses only sets {list(MARKER_SETS)}; "
+            f"found {extra} as well, which it would ignore"
+        )
     try:
         partial_marker_sets(names, "marker_sets")
     except ShapeError as exc:
@@ -547,6 +645,7 @@ def track_hybrid_marker_file(
     frame = detect_lab_frame(markers, evaluate_marker_sets(markers, head)[:, 0], up)
     world = to_world(markers, frame)
     pos = evaluate_marker_sets(world, sets)
+    require_observed_sets({n: pos[:, i] for i, n in enumerate(names)}, markers.source, ConfigError)
     if height_mm is None:
         height_mm = float(estimate_height_mm(world, head=head))
     cfg = config or HybridConfig(

@@ -53,6 +53,11 @@ class RunResult:
     results: list[FrameResult]
     out_dir: Path | None
 
+    @property
+    def gaps(self) -> list[Gap]:
+        """Where effectors were released or missing (`find_gaps`)."""
+        return find_gaps(self.results)
+
 
 def run_tracker(
     tracker: Tracker | DelayedTracker,
@@ -126,7 +131,7 @@ def run_tracker(
     t = np.array([r.time_s for r in results])
     q = np.stack([r.q for r in results])
     if joint_names is None:
-        motion = Motion.from_q(sk, t, q, source=source)
+        motion = _without_unobserved_joints(Motion.from_q(sk, t, q, source=source), results)
     else:
         names = tuple(joint_names)
         unknown = [n for n in names if n not in CANONICAL_JOINTS]
@@ -140,6 +145,75 @@ def run_tracker(
         with timer.stage("write"):
             out = write_run_folder(out_dir, motion, results)
     return RunResult(motion, results, out)
+
+
+def _without_unobserved_joints(motion: Motion, results: Sequence[FrameResult]) -> Motion:
+    """``motion`` with NaN joints wherever a tracker's `FrameResult.joints_mm` has NaN
+    (a released limb): ``joints.csv`` and ``motion.npz`` then hold no made-up joints,
+    while ``q`` (and so the BVH, which cannot hold NaN) keeps the tracker's pose."""
+    joints = np.array(motion.joints_mm, copy=True)
+    changed = False
+    for i, r in enumerate(results):
+        rj = np.asarray(r.joints_mm, dtype=float)
+        if rj.shape != (len(CANONICAL_JOINTS), 3):
+            continue
+        for k, name in enumerate(motion.joint_names):
+            if np.isnan(rj[CANONICAL_JOINTS.index(name)]).any():
+                joints[i, k] = np.nan
+                changed = True
+    if not changed:
+        return motion
+    return Motion(
+        motion.skeleton, motion.time_s, motion.q, motion.joint_names, joints, motion.source
+    )
+
+
+@dataclass(frozen=True)
+class Gap:
+    """A stretch of frames where one effector or limb was not observed.
+
+    Attributes
+    ----------
+    name : str
+        The effector or limb (``"left_hand"``, ...).
+    status : str
+        ``"released"`` or ``"missing"`` (`mocapkit.tracking.base.STATUSES`).
+    start_s, end_s : float
+        Times of its first and last frame (s).
+    n_frames : int
+    """
+
+    name: str
+    status: str
+    start_s: float
+    end_s: float
+    n_frames: int
+
+    def __str__(self) -> str:
+        return (
+            f"{self.name} {self.status} {self.start_s:.3f}-{self.end_s:.3f} s "
+            f"({self.n_frames} frames)"
+        )
+
+
+def find_gaps(results: Sequence[FrameResult]) -> list[Gap]:
+    """The runs of frames whose status is ``released`` or ``missing``, per effector, in
+    time order (what a run's summary lists; fit.csv has the per-frame status)."""
+    gaps: list[Gap] = []
+    names: dict[str, None] = {}
+    for r in results:
+        names.update(dict.fromkeys(r.status))
+    for name in names:
+        start, current = 0, None
+        for i in range(len(results) + 1):
+            st = results[i].status.get(name) if i < len(results) else None
+            if st == current:
+                continue
+            if current in ("released", "missing"):
+                end = results[i - 1].time_s
+                gaps.append(Gap(name, str(current), results[start].time_s, end, i - start))
+            start, current = i, st
+    return sorted(gaps, key=lambda g: (g.start_s, g.name))
 
 
 def write_run_folder(
@@ -213,7 +287,9 @@ def read_fit_csv(path: str | os.PathLike[str]) -> tuple[list[dict[str, str]], di
 
 __all__ = [
     "FIT_FILE",
+    "Gap",
     "RunResult",
+    "find_gaps",
     "read_fit_csv",
     "run_tracker",
     "write_fit_csv",

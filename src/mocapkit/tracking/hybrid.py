@@ -35,7 +35,7 @@ from mocapkit.errors import ConfigError, ShapeError, unknown_name
 from mocapkit.ik.sdls import Effector, IKConfig, IKResult, SDLSSolver
 from mocapkit.skeleton.kinematics import canonical_positions, forward_kinematics
 from mocapkit.skeleton.limbs import SIDES, arm, head_joint, leg, limbs_present
-from mocapkit.skeleton.model import PRISMATIC, Skeleton
+from mocapkit.skeleton.model import CANONICAL_JOINTS, PRISMATIC, Skeleton
 from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.arm_refinement import ArmDiagnostics, RefineConfig, refine_arms
 from mocapkit.tracking.balance import (
@@ -52,6 +52,12 @@ FloatArray = NDArray[np.float64]
 #: Marker-set names the hybrid tracker drives, and their default effectors on ``zhang21``.
 MARKER_SETS: tuple[str, ...] = ("head", "left_hand", "right_hand")
 FEET: tuple[str, ...] = ("left_foot", "right_foot")
+#: Canonical joints that only a marker set places: NaN in the output while it is released.
+RELEASED_JOINTS: dict[str, tuple[str, ...]] = {
+    "head": ("head",),
+    "left_hand": ("left_elbow", "left_wrist"),
+    "right_hand": ("right_elbow", "right_wrist"),
+}
 
 Refiner = Callable[..., FloatArray]
 
@@ -510,7 +516,18 @@ class HybridTracker:
         return self._refiner
 
     def _targets(self, sample: HybridSample) -> tuple[FloatArray, list[str], list[str]]:
+        """Effector targets of one sample, the sets bridged and the sets released.
+
+        One age rule for every way a marker sample can be old (markers that end before
+        the video, clocks that do not overlap, a stalled stream): a marker sample older
+        than ``gap_limit_s`` at the frame time is no observation of this frame. Its sets
+        are then absent, and the gap since their last observation, measured on the
+        frame's clock, bridges or releases them as any occlusion would.
+        """
         t_m = sample.time_s if sample.marker_time_s is None else float(sample.marker_time_s)
+        stale = not sample.time_s - t_m <= self.config.gap_limit_s
+        if stale:
+            t_m = float(sample.time_s)
         n = len(self.marker_sets)
         targets = np.full((n + 2 + len(self.members), 3), np.nan)
         for k, (set_name, member) in enumerate(self.members):
@@ -523,7 +540,7 @@ class HybridTracker:
                 )
             raw_set = sample.markers_mm.get(set_name)
             set_seen = raw_set is not None and bool(np.all(np.isfinite(raw_set)))
-            if p is not None and set_seen and np.all(np.isfinite(p)):
+            if p is not None and set_seen and not stale and np.all(np.isfinite(p)):
                 targets[n + 2 + k] = p
         bridged: list[str] = []
         released: list[str] = []
@@ -536,7 +553,7 @@ class HybridTracker:
                     f"sample.markers_mm[{name!r}]: expected 3 coordinates (mm), "
                     f"found shape {p.shape}"
                 )
-            if p is not None and np.all(np.isfinite(p)):
+            if p is not None and not stale and np.all(np.isfinite(p)):
                 if tr.released or tr.gap_start_s is not None:
                     self.events.append((t_m, name, "recovered"))
                 tr.released, tr.gap_start_s = False, None
@@ -770,6 +787,10 @@ class HybridTracker:
         timer = self._timer
         targets, bridged, released = self._targets(sample)
         n = len(self.marker_sets)
+        if self._q is None and not np.any(np.isfinite(targets[:n])):
+            # nothing observed yet (the video starts before the markers): no pose, and
+            # the first pose is placed when the markers come
+            return self._no_pose(sample, bridged, released)
         iterations = 0
         with timer.stage("ik"):
             if self._q is None:
@@ -888,7 +909,7 @@ class HybridTracker:
         return HybridPose(
             time_s=float(sample.time_s),
             q=q,
-            joints_mm=canonical_joints_mm(sk, joints),
+            joints_mm=self._unobserved_to_nan(canonical_joints_mm(sk, joints), released),
             status=self._status(bridged, released),
             fit=fit,
             worst=worst,
@@ -901,6 +922,44 @@ class HybridTracker:
                 sample.time_s if sample.marker_time_s is None else sample.marker_time_s
             ),
             refined=refined,
+        )
+
+    def _unobserved_to_nan(self, joints_mm: FloatArray, released: Sequence[str]) -> FloatArray:
+        """Canonical joints (15, 3) with those of released marker sets set to NaN.
+
+        A released set's effector is out of the IK task, so its limb hangs in the
+        relaxed pose the secondary task pulls it to: made up, not measured. The joints
+        it alone places (`RELEASED_JOINTS`) are NaN; with every set released, all are.
+        ``q`` keeps the pose (BVH cannot hold NaN) and the status says ``released``.
+        """
+        out = joints_mm.copy()
+        if released and all(name in released for name in self.marker_sets):
+            out[:] = np.nan
+            return out
+        for name in released:
+            for joint in RELEASED_JOINTS.get(name, ()):
+                out[CANONICAL_JOINTS.index(joint)] = np.nan
+        return out
+
+    def _no_pose(
+        self, sample: HybridSample, bridged: Sequence[str], released: Sequence[str]
+    ) -> HybridPose:
+        """The result of a frame without a pose (NaN ``q`` and joints)."""
+        names = self.marker_sets + FEET + tuple(m for _, m in self.members)
+        fit, worst = fit_summary(dict.fromkeys(names, math.nan))
+        return HybridPose(
+            time_s=float(sample.time_s),
+            q=np.full(self.skeleton.n_dofs, np.nan),
+            joints_mm=np.full((len(CANONICAL_JOINTS), 3), np.nan),
+            status=self._status(bridged, released),
+            fit=fit,
+            worst=worst,
+            residual_mm=dict.fromkeys(names, math.nan),
+            released=tuple(released),
+            bridged=tuple(bridged),
+            marker_time_s=float(
+                sample.time_s if sample.marker_time_s is None else sample.marker_time_s
+            ),
         )
 
     def _status(self, bridged: Sequence[str], released: Sequence[str]) -> dict[str, str]:
