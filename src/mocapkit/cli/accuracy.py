@@ -6,10 +6,8 @@ import argparse
 from typing import Any
 
 from mocapkit.cli.accuracy_stereo import register_method as register_stereo
-from mocapkit.cli.args import parsed_by
-from mocapkit.errors import SessionError
+from mocapkit.cli.args import mocap_folder, parsed_by
 from mocapkit.pipelines.accuracy import format_rows, hybrid_accuracy, summary, to_json
-from mocapkit.pipelines.demo import find_shared_data
 from mocapkit.pipelines.hybrid import parse_oriented_sets
 
 
@@ -52,12 +50,7 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the accuracy study and print it."""
-    mocap = args.mocap
-    if mocap is None:
-        data = find_shared_data()
-        if data is None:
-            raise SessionError("no --mocap folder given and ../shared/data/mocap not found")
-        mocap = data / "mocap"
+    mocap = mocap_folder(args.mocap)
     say = (lambda _line: None) if args.json else print
     if not args.json:
         print(format_rows([]))

@@ -37,17 +37,11 @@ def add_mono_accuracy_parser(methods: Any) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from mocapkit.errors import SessionError
-    from mocapkit.pipelines.demo import find_shared_data
+    from mocapkit.cli.args import mocap_folder
     from mocapkit.pipelines.mono_accuracy import format_rows, mono_accuracy, to_json
     from mocapkit.tracking.mono.tracker import MonoConfig
 
-    mocap = args.mocap
-    if mocap is None:
-        data = find_shared_data()
-        if data is None:
-            raise SessionError("no --mocap folder given and ../shared/data/mocap not found")
-        mocap = data / "mocap"
+    mocap = mocap_folder(args.mocap)
     if not args.json:
         print(format_rows([]))
     rows = mono_accuracy(

@@ -34,16 +34,10 @@ def register_method(methods: Any) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from mocapkit.errors import SessionError
-    from mocapkit.pipelines.demo import find_shared_data
+    from mocapkit.cli.args import mocap_folder
     from mocapkit.pipelines.stereo import accuracy_header, stereo_accuracy
 
-    mocap = args.mocap
-    if mocap is None:
-        data = find_shared_data()
-        if data is None:
-            raise SessionError("no --mocap folder given and ../shared/data/mocap not found")
-        mocap = data / "mocap"
+    mocap = mocap_folder(args.mocap)
     if not args.json:
         print(accuracy_header())
     rows = stereo_accuracy(

@@ -11,9 +11,10 @@ from __future__ import annotations
 import argparse
 import math
 from collections.abc import Callable
+from pathlib import Path
 from typing import TypeVar
 
-from mocapkit.errors import MocapError
+from mocapkit.errors import MocapError, SessionError
 
 T = TypeVar("T")
 
@@ -133,3 +134,21 @@ def output_folder(text: str) -> str:
     if not os.access(ancestor, os.W_OK | os.X_OK):
         raise argparse.ArgumentTypeError(f"{text}: cannot write to {ancestor} (read-only)")
     return text
+
+
+def mocap_folder(given: str | None) -> Path:
+    """The ``--mocap`` folder of the accuracy studies: as given, else ``../shared/data/mocap``.
+
+    Raises
+    ------
+    SessionError
+        Neither given nor found.
+    """
+    from mocapkit.pipelines.demo import find_shared_data
+
+    if given is not None:
+        return Path(given)
+    data = find_shared_data()
+    if data is None:
+        raise SessionError("no --mocap folder given and ../shared/data/mocap not found")
+    return data / "mocap"
