@@ -105,3 +105,17 @@ def test_flexion_dofs_skip_two_sided_hinges() -> None:
     fake = dataclasses.replace(arm, middle=arm.root)
     dofs, signs = limbs.flexion_dofs(sk, fake)
     assert dofs.size == 0 and signs.size == 0
+
+
+def test_vertical_root_dof() -> None:
+    sk = load_preset("zhang21")
+    assert sk.dof_names[limbs.vertical_root_dof(sk)] == "root_tz"
+    sk = load_preset("azad14")
+    assert sk.dof_names[limbs.vertical_root_dof(sk)] == "base_tz"
+    sk = load_preset("upper_stick")
+    assert sk.dof_names[limbs.vertical_root_dof(sk)] == "waist_tz"
+    axes = sk.dof_axis.copy()
+    axes[limbs.vertical_root_dof(sk)] = (1.0, 0.0, 0.0)  # a root that only slides sideways
+    fixed_root = sk.replace(dof_axis=axes)
+    with pytest.raises(UnknownNameError, match="no prismatic DoF along"):
+        limbs.vertical_root_dof(fixed_root)

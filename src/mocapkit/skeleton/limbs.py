@@ -255,3 +255,29 @@ def flexion_dofs(skeleton: Skeleton, lmb: Limb) -> tuple[IntArray, NDArray[np.fl
 def dof_names_of(skeleton: Skeleton, dofs: IntArray) -> tuple[str, ...]:
     """Names of DoF indices, for messages and reports."""
     return tuple(skeleton.dof_names[int(d)] for d in dofs)
+
+
+def vertical_root_dof(skeleton: Skeleton) -> int:
+    """The root joint's prismatic DoF along the world vertical (+z at ``q = 0``).
+
+    The root's frame is parallel to the world at ``q = 0`` and its prismatic DoFs come
+    before its rotations, so the DoF whose axis is +z moves the whole body up and down
+    (``root_tz`` of ``zhang21``; errata Z13).
+
+    Raises
+    ------
+    UnknownNameError
+        A skeleton whose root has no vertical translation.
+    """
+    mask = (
+        (skeleton.dof_joint == 0)
+        & (skeleton.dof_kind == PRISMATIC)
+        & np.isclose(skeleton.dof_axis[:, 2], 1.0)
+    )
+    found = np.flatnonzero(mask)
+    if found.size == 0:
+        raise UnknownNameError(
+            f"skeleton {skeleton.name!r}: its root joint {skeleton.joint_names[0]!r} has no "
+            f"prismatic DoF along +z (the vertical root translation)"
+        )
+    return int(found[0])

@@ -47,7 +47,7 @@ from numpy.typing import ArrayLike, NDArray
 from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.ik.sdls import SDLSSolver
 from mocapkit.skeleton.kinematics import center_of_mass, forward_kinematics
-from mocapkit.skeleton.limbs import SIDES, foot_joints, has_limb, spine_dofs
+from mocapkit.skeleton.limbs import SIDES, foot_joints, has_limb, spine_dofs, vertical_root_dof
 from mocapkit.skeleton.model import Skeleton
 
 FloatArray = NDArray[np.float64]
@@ -443,7 +443,7 @@ def balance_pose(
         return BalanceResult(
             qa.copy(), np.zeros(len(spine)), np.full(len(solver.effectors), np.nan)
         )
-    dh = float(qa[sk.dof_index("root_tz")] - root_height0_mm)
+    dh = float(qa[vertical_root_dof(sk)] - root_height0_mm)
     t = np.asarray(targets_mm, dtype=float)
     act = None if active is None else np.asarray(active, dtype=bool)
     solved: tuple[FloatArray, FloatArray] | None = None

@@ -34,7 +34,14 @@ from mocapkit.cues.edges import EdgeConfig, prepare_frame
 from mocapkit.errors import ConfigError, ShapeError, unknown_name
 from mocapkit.ik.sdls import Effector, IKConfig, IKResult, SDLSSolver
 from mocapkit.skeleton.kinematics import canonical_positions, forward_kinematics
-from mocapkit.skeleton.limbs import SIDES, arm, head_joint, leg, limbs_present
+from mocapkit.skeleton.limbs import (
+    SIDES,
+    arm,
+    head_joint,
+    leg,
+    limbs_present,
+    vertical_root_dof,
+)
 from mocapkit.skeleton.model import CANONICAL_JOINTS, PRISMATIC, Skeleton
 from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.arm_refinement import ArmDiagnostics, RefineConfig, refine_arms
@@ -798,7 +805,7 @@ class HybridTracker:
                 feet = self.solver.effector_positions(q)[n : n + 2]
                 self._feet = feet
                 self._support = support_points(sk, q)
-                self._root_z0 = float(q[sk.dof_index("root_tz")])
+                self._root_z0 = float(q[vertical_root_dof(sk)])
                 standing = self.solver.effector_positions(
                     np.clip(sk.zero_pose(), sk.lower, sk.upper)
                 )
