@@ -49,6 +49,7 @@ from mocapkit.camera.projection import (
     project_camera_point_nb,
     to_camera_nb,
 )
+from mocapkit.cues.chamfer import bilinear_lookup_nb
 from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.geometry.cones import cone_contour_generators_nb
 from mocapkit.geometry.rotations import matrix_rotvec_nb, rotvec_matrix_nb
@@ -154,16 +155,9 @@ def _stacked(maps: list[Float32Array] | Float32Array) -> Float32Array:
 
 @numba.njit(cache=True, inline="always")
 def _read_nb(g: Float32Array, u: float, v: float) -> float:
-    """Bilinear gradient at pixel (u, v); 0 off the image (recipe A)."""
-    if not (u >= 0.0 and v >= 0.0 and u < g.shape[1] - 1 and v < g.shape[0] - 1):
-        return 0.0
-    c0 = int(u)
-    r0 = int(v)
-    fx = u - c0
-    fy = v - r0
-    top = (1.0 - fx) * g[r0, c0] + fx * g[r0, c0 + 1]
-    bot = (1.0 - fx) * g[r0 + 1, c0] + fx * g[r0 + 1, c0 + 1]
-    return (1.0 - fy) * top + fy * bot
+    """Bilinear gradient at pixel (u, v); 0 off the image (recipe A): the one map look-up
+    of `mocapkit.cues.chamfer` on a full-frame map (origin 0, step 1, cap 0)."""
+    return bilinear_lookup_nb(g, u, v, 0.0, 0.0, 1.0, 0.0)
 
 
 @numba.njit(cache=True)
