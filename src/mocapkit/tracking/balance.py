@@ -199,6 +199,17 @@ def _spine_split(skeleton: Skeleton, spine: tuple[int, ...]) -> FloatArray:
     return lengths / lengths.sum()
 
 
+def _lean_range(skeleton: Skeleton, q: FloatArray) -> tuple[FloatArray, float, float]:
+    """How a total lean is split over the spine DoFs (by bone length), and the smallest
+    and largest total lean (rad) from ``q`` that keeps every spine DoF in its limits."""
+    spine = list(spine_dof_indices(skeleton))
+    split = _spine_split(skeleton, tuple(spine))
+    base = q[spine]
+    lo = float(np.max((skeleton.lower[spine] - base) / split))
+    hi = float(np.min((skeleton.upper[spine] - base) / split))
+    return split, lo, hi
+
+
 def apply_lean(
     solver: SDLSSolver,
     q: ArrayLike,
@@ -247,11 +258,7 @@ def _bisect_lean(
 
     ``at_zero``: the restore without lean (pose, residuals) when already solved."""
     sk = solver.skeleton
-    spine = spine_dof_indices(sk)
-    split = _spine_split(sk, spine)
-    base = q[list(spine)]
-    lo = float(np.max((sk.lower[list(spine)] - base) / split))
-    hi = float(np.min((sk.upper[list(spine)] - base) / split))
+    split, lo, hi = _lean_range(sk, q)
 
     def f(total: float) -> float:
         if total == 0.0 and at_zero is not None:
@@ -301,11 +308,7 @@ def _secant_lean(
     as `_bisect_lean` does.
     """
     sk = solver.skeleton
-    spine = spine_dof_indices(sk)
-    split = _spine_split(sk, spine)
-    base = q[list(spine)]
-    lo = float(np.max((sk.lower[list(spine)] - base) / split))
-    hi = float(np.min((sk.upper[list(spine)] - base) / split))
+    split, lo, hi = _lean_range(sk, q)
     tried: dict[float, tuple[float, FloatArray, FloatArray]] = {}
 
     def f(total: float) -> float:
