@@ -12,7 +12,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     """Add the ``bench`` subcommand."""
     p = subparsers.add_parser(
         "bench",
-        help="time the kinematics and the hybrid tracker",
+        help="time the kinematics and the hybrid, stereo and mono trackers",
         description="Run a speed benchmark (after a warm-up; medians over repeats) and print "
         "a table, or JSON with --json.",
     )

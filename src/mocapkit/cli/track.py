@@ -18,7 +18,7 @@ def register(subparsers: Any) -> None:
         "hybrid",
         help="head and hand marker sets plus one camera (Zhang et al. 2011)",
         description="Track a session folder (markers + video), or with --markers a raw "
-        "marker file (IK only). Writes motion.npz, joints.csv and motion.bvh to --out.",
+        "marker file (IK only). Writes motion.npz, joints.csv, motion.bvh and fit.csv to --out.",
     )
     hyb.add_argument("session", nargs="?", help="session folder (omit with --markers)")
     hyb.add_argument("--out", required=True, type=output_folder, help="result folder")
