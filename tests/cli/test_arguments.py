@@ -168,3 +168,39 @@ def test_output_folder_accepts_new_and_existing_folders(tmp_path: Path) -> None:
     assert output_folder(str(tmp_path / "a" / "b")) == str(tmp_path / "a" / "b")
     with pytest.raises(argparse.ArgumentTypeError, match="empty path"):
         output_folder(" ")
+
+
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["track", "hybrid", "SESSION"],
+        ["track", "stereo", "SESSION"],
+        ["track", "mono", "SESSION"],
+        ["synth", "builtin:wave"],
+    ],
+)
+def test_out_on_a_read_only_place_is_refused_before_the_work(
+    argv: list[str], tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch
+) -> None:
+    """A read-only --out is refused while parsing (issue 14). Root passes `os.access`
+    everywhere, so both ways are tested: `os.access` saying no (monkeypatched), and a
+    place where root passes `os.access` but nothing can be made (/proc)."""
+    import os
+
+    err = _usage_error([*argv, "--out", "/proc/mocapkit-result"], capsys)
+    assert "argument --out: /proc/mocapkit-result: cannot write to /proc (read-only)" in err
+    readonly = tmp_path / "ro"
+    readonly.mkdir()
+    real_access = os.access
+
+    def access(path: object, mode: int) -> bool:
+        return False if Path(str(path)) == readonly else real_access(path, mode)
+
+    monkeypatch.setattr(os, "access", access)
+    err = _usage_error([*argv, "--out", str(readonly / "new" / "result")], capsys)
+    assert f"cannot write to {readonly} (read-only)" in err
+    # an existing --out is swapped in from beside it: the folder holding it must be writable
+    (readonly / "old").mkdir()
+    err = _usage_error([*argv, "--out", str(readonly / "old")], capsys)
+    assert f"cannot write to {readonly} (read-only)" in err
+    assert sorted(p.name for p in readonly.iterdir()) == ["old"]  # no probe left behind

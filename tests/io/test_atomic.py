@@ -105,3 +105,27 @@ def test_atomic_folder_swaps_whole_or_not_at_all(tmp_path: Path) -> None:
         (tmp / "c.csv").write_text("3")
     assert [p.name for p in target.iterdir()] == ["c.csv"]  # no old file mixed in
     assert sorted(p.name for p in tmp_path.iterdir()) == ["result"]
+
+
+def test_stale_temporaries_are_cleared_and_a_folder_caught_mid_swap_restored(
+    tmp_path: Path,
+) -> None:
+    from mocapkit.io.atomic import remove_stale_temporaries
+
+    # a kill between the swap's two renames: NAME is aside, whole, and the new one unfinished
+    aside = tmp_path / ".res.old-abc"
+    (aside / "res").mkdir(parents=True)
+    (aside / "res" / "joints.csv").write_text("old result")
+    (tmp_path / ".res.new-def").mkdir()
+    (tmp_path / ".res.new-def" / "motion.npz").write_bytes(b"half")
+    (tmp_path / ".res.joints.csv.x1.tmp").write_text("half")
+    (tmp_path / "..res.new-def.new-ghi").mkdir()
+    (tmp_path / "other").mkdir()
+    remove_stale_temporaries(tmp_path, "res")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["other", "res"]
+    assert (tmp_path / "res" / "joints.csv").read_text() == "old result"
+    # with NAME in place, an aside copy is the remains of a finished swap: deleted
+    (tmp_path / ".res.old-jkl" / "res").mkdir(parents=True)
+    remove_stale_temporaries(tmp_path, "res")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["other", "res"]
+    assert (tmp_path / "res" / "joints.csv").read_text() == "old result"

@@ -112,9 +112,13 @@ def output_folder(text: str) -> str:
     """A ``type=`` for ``--out`` folders: checked before any work starts.
 
     Refuses an existing path that is not a folder (a file would only be found after the
-    whole run, when the first output is written) and a folder whose nearest existing
-    ancestor cannot be written to (a read-only place). Whether an existing folder may be
-    reused stays the subcommand's rule.
+    whole run, when the first output is written) and a place that cannot be written to:
+    the nearest existing ancestor of a new folder, or an existing folder and the folder
+    that holds it (results are built beside ``--out`` and swapped in,
+    `mocapkit.io.atomic.atomic_folder`). Writable means both that `os.access` allows it
+    and that a folder can really be made there and removed again: root passes
+    `os.access` everywhere, even where nothing can be written (``/proc``, a read-only
+    mount). Whether an existing folder may be reused stays the subcommand's rule.
     """
     import os
     from pathlib import Path
@@ -124,16 +128,30 @@ def output_folder(text: str) -> str:
         raise argparse.ArgumentTypeError("expected a folder, found an empty path")
     if p.exists() and not p.is_dir():
         raise argparse.ArgumentTypeError(f"{text}: expected a folder, found an existing file")
-    ancestor = p
+    ancestor = p.parent if p.exists() else p
     while not ancestor.exists() and ancestor != ancestor.parent:
         ancestor = ancestor.parent
     if not ancestor.is_dir():
         raise argparse.ArgumentTypeError(
             f"{text}: cannot create a folder under {ancestor}, which is a file"
         )
-    if not os.access(ancestor, os.W_OK | os.X_OK):
-        raise argparse.ArgumentTypeError(f"{text}: cannot write to {ancestor} (read-only)")
+    for place in [ancestor] + ([p] if p.exists() else []):
+        if not os.access(place, os.W_OK | os.X_OK) or not _can_make_folder_in(place):
+            raise argparse.ArgumentTypeError(f"{text}: cannot write to {place} (read-only)")
     return text
+
+
+def _can_make_folder_in(folder: object) -> bool:
+    """Whether a folder can be made in ``folder`` (made and removed at once)."""
+    import os
+    import tempfile
+
+    try:
+        probe = tempfile.mkdtemp(prefix=".mocapkit-probe-", dir=str(folder))
+    except OSError:
+        return False
+    os.rmdir(probe)
+    return True
 
 
 def mocap_folder(given: str | None) -> Path:

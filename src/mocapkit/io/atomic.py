@@ -75,8 +75,9 @@ def atomic_folder(path: str | os.PathLike[str]) -> Iterator[Path]:
     ``path`` and the old one deleted; on any exception (Ctrl-C included) the temporary
     folder is deleted and ``path`` is left as it was. The swap is two renames on one
     file system: a kill between them leaves the old folder whole under its aside name
-    (``.NAME.old-*``) and no half-written ``path``. Callers decide beforehand whether
-    ``path`` may be replaced.
+    (``.NAME.old-*``) and no half-written ``path``; `remove_stale_temporaries` renames it
+    back. Callers decide beforehand whether ``path`` may be replaced, and call
+    `remove_stale_temporaries` first to clear what a killed earlier build left.
     """
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
@@ -97,11 +98,25 @@ def atomic_folder(path: str | os.PathLike[str]) -> Iterator[Path]:
 
 
 def remove_stale_temporaries(folder: str | os.PathLike[str], name: str) -> None:
-    """Delete what interrupted `atomic_write` / `atomic_folder` calls left beside ``name``."""
+    """Clear what interrupted `atomic_write` / `atomic_folder` calls left beside ``name``.
+
+    Deleted: ``.NAME.*.tmp`` files, ``.NAME.new-*`` folders (a build that never finished)
+    and the temporaries of a folder built inside such a build (``..NAME.new-*``, as when a
+    result folder is written into a batch take's temporary folder). An ``.NAME.old-*``
+    folder is the previous ``NAME`` renamed aside by a swap: when ``NAME`` itself is
+    missing, the kill came between the swap's two renames, and the previous folder,
+    which is whole, is renamed back to ``NAME``; otherwise it is deleted.
+    """
     base = Path(folder)
-    for pattern in (f".{name}.*.tmp", f".{name}.new-*", f".{name}.old-*"):
+    target = base / name
+    for p in sorted(base.glob(f".{name}.old-*")):
+        kept = p / name
+        if not target.exists() and not target.is_symlink() and kept.is_dir():
+            os.replace(kept, target)
+        shutil.rmtree(p, ignore_errors=True)
+    for pattern in (f".{name}.*.tmp", f".{name}.new-*", f"..{name}.new-*"):
         for p in base.glob(pattern):
-            if p.is_dir():
+            if p.is_dir() and not p.is_symlink():
                 shutil.rmtree(p, ignore_errors=True)
             else:
                 p.unlink(missing_ok=True)

@@ -22,7 +22,12 @@ from mocapkit.ik.sdls import IKConfig, SDLSSolver
 from mocapkit.io.lab_frame import LabFrame, detect_lab_frame, to_world
 from mocapkit.io.markers import MarkerData
 from mocapkit.io.motion import Motion
-from mocapkit.pipelines.run import RunResult, run_tracker, write_run_folder
+from mocapkit.pipelines.run import (
+    RunResult,
+    check_result_folder,
+    run_tracker,
+    write_run_folder,
+)
 from mocapkit.skeleton.limbs import arm, head_joint, spine_dofs
 from mocapkit.skeleton.model import PRISMATIC, Skeleton
 from mocapkit.skeleton.presets import load_preset
@@ -449,6 +454,8 @@ def track_hybrid_marker_arrays(
     -------
     skeleton, q (T, D), poses
     """
+    if out_dir is not None:
+        check_result_folder(out_dir)  # before the work, not after it
     t = np.asarray(time_s, dtype=float)
     if t.ndim != 1 or t.size == 0:
         raise ShapeError(f"time_s: expected a non-empty 1-D array of times (s), found {t.shape}")
@@ -628,6 +635,8 @@ def track_hybrid_marker_file(
     from mocapkit.io.marker_sets import estimate_height_mm, evaluate_marker_sets, parse_marker_sets
     from mocapkit.io.markers import check_plausible_markers
 
+    if out_dir is not None:
+        check_result_folder(out_dir)  # before the work, not after it
     check_plausible_markers(markers)
     sets = parse_marker_sets(list(marker_sets))
     names = [s.name for s in sets]

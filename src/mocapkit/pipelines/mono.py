@@ -23,7 +23,7 @@ from mocapkit.errors import ConfigError, SessionError
 from mocapkit.io.motion import Motion
 from mocapkit.io.session import Session, load_session
 from mocapkit.io.session_csv import Keypoints, read_keypoints_csv
-from mocapkit.pipelines.run import run_tracker
+from mocapkit.pipelines.run import check_result_folder, run_tracker
 from mocapkit.progress import Progress
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
 from mocapkit.skeleton.presets import load_preset
@@ -427,6 +427,8 @@ def track_mono(
         With video lengths and the perspective model: track this many times, each pass
         measuring the lengths again from the previous pass's poses (`refined_lengths`).
     """
+    if out_dir is not None:
+        check_result_folder(out_dir)  # before the work (the length passes), not after it
     session = load_session(session_path)
     cam_name = (
         camera

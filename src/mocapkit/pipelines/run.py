@@ -4,8 +4,8 @@
 calls a live feed would make), collects its `FrameResult` objects and writes the result
 folder: ``motion.npz``, ``joints.csv``, ``motion.bvh``
 (`mocapkit.io.motion_files.write_result_folder`) and
-``fit.csv`` (per frame: status of each effector or limb and the fit-quality figures),
-each atomically. Method pipelines (`mocapkit.pipelines.hybrid`) only build the tracker and
+``fit.csv`` (per frame: status of each effector or limb and the fit-quality figures).
+The folder is built beside ``--out`` and swapped in whole (`write_run_folder`). Method pipelines (`mocapkit.pipelines.hybrid`) only build the tracker and
 its sample stream.
 """
 
@@ -22,8 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from mocapkit.errors import ShapeError, unknown_name
-from mocapkit.io.atomic import atomic_write
+from mocapkit.errors import ConfigError, ShapeError, unknown_name
+from mocapkit.io.atomic import atomic_folder, atomic_write, remove_stale_temporaries
 from mocapkit.io.motion import Motion
 from mocapkit.io.motion_files import write_result_folder
 from mocapkit.progress import Progress
@@ -103,7 +103,12 @@ def run_tracker(
     ------
     ShapeError
         When ``samples`` is empty.
+    ConfigError
+        ``out_dir`` is not a folder a run may replace (`check_result_folder`), found
+        before the work starts.
     """
+    if out_dir is not None:
+        check_result_folder(out_dir)  # before the work, not after it
     sk = tracker.skeleton if skeleton is None else skeleton
     results: list[FrameResult] = []
     delayed = tracker if isinstance(tracker, DelayedTracker) else None
@@ -216,15 +221,59 @@ def find_gaps(results: Sequence[FrameResult]) -> list[Gap]:
     return sorted(gaps, key=lambda g: (g.start_s, g.name))
 
 
+#: The file whose presence marks an existing folder as a result folder that a run may
+#: replace (`check_result_folder`).
+RESULT_MARKER_FILE = "motion.npz"
+
+
+def check_result_folder(out_dir: str | os.PathLike[str]) -> Path:
+    """Refuse an ``--out`` that a run must not replace; call it before the work.
+
+    A run replaces its result folder whole (`write_run_folder`), so an existing ``--out``
+    must be empty or a previous result folder (one holding ``motion.npz``); any other
+    folder with files in it (a session, a home folder) is refused rather than deleted.
+
+    Raises
+    ------
+    ConfigError
+        ``out_dir`` is a file, or a folder with files but no ``motion.npz``.
+    """
+    out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"{out}: expected a result folder, found an existing file")
+    if out.is_dir() and not (out / RESULT_MARKER_FILE).is_file():
+        found = sorted(p.name for p in out.iterdir())
+        if found:
+            shown = ", ".join(found[:5]) + (", ..." if len(found) > 5 else "")
+            raise ConfigError(
+                f"{out}: a run replaces its result folder whole, but this folder is not a "
+                f"result folder (no {RESULT_MARKER_FILE}; it holds {shown}); give a new or "
+                "empty folder, or a previous result folder"
+            )
+    return out
+
+
 def write_run_folder(
     out_dir: str | os.PathLike[str], motion: Motion, results: Sequence[FrameResult]
 ) -> Path:
-    """Write a result folder: ``motion.npz``, ``joints.csv``, ``motion.bvh``
-    (`mocapkit.io.motion_files.write_result_folder`) and ``fit.csv`` (`write_fit_csv`),
-    each atomically. Shared by `run_tracker` and the trackers that need the whole
-    sequence before their motion exists (the offline mono tracker); returns the folder."""
-    out = write_result_folder(out_dir, motion)
-    write_fit_csv(out / FIT_FILE, results)
+    """Write a result folder whole: ``motion.npz``, ``joints.csv``, ``motion.bvh``
+    (`mocapkit.io.motion_files.write_result_folder`) and ``fit.csv`` (`write_fit_csv`).
+
+    The folder is built under a temporary name beside ``out_dir`` and swapped in when
+    complete (`mocapkit.io.atomic.atomic_folder`): a kill or an error mid-write leaves
+    the previous folder as it was, never a mix of old and new files. An existing result
+    folder is replaced whole, so what else it held (the ``report/`` of ``mocapkit
+    view``, which described the old result) is gone; a folder that is not a result
+    folder is refused (`check_result_folder`). What a killed earlier run left beside it
+    (``.NAME.new-*``, ``.NAME.old-*``) is cleared first
+    (`mocapkit.io.atomic.remove_stale_temporaries`). Shared by `run_tracker` and the
+    trackers that need the whole sequence before their motion exists; returns the folder.
+    """
+    out = check_result_folder(out_dir)
+    remove_stale_temporaries(out.parent, out.name)
+    with atomic_folder(out) as tmp:
+        write_result_folder(tmp, motion)
+        write_fit_csv(tmp / FIT_FILE, results)
     return out
 
 
@@ -287,8 +336,10 @@ def read_fit_csv(path: str | os.PathLike[str]) -> tuple[list[dict[str, str]], di
 
 __all__ = [
     "FIT_FILE",
+    "RESULT_MARKER_FILE",
     "Gap",
     "RunResult",
+    "check_result_folder",
     "find_gaps",
     "read_fit_csv",
     "run_tracker",
