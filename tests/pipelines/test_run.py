@@ -157,6 +157,8 @@ def test_run_tracker_drains_a_delayed_tracker_and_takes_its_joints(tmp_path) -> 
     np.testing.assert_array_equal(run.motion.q, q)
     assert run.motion.joint_names == names
     want = canonical_positions(sk, q, names)
+    # ReplayTracker reports left_arm "missing" from 0.05 s: its wrist is NaN there
+    want[t >= 0.05, names.index("left_wrist")] = np.nan
     np.testing.assert_allclose(run.motion.joints_mm, want, atol=1e-9)
     _rows, numeric = read_fit_csv(tmp_path / "res" / FIT_FILE)
     np.testing.assert_allclose(numeric["time_s"], t, atol=1e-9)

@@ -66,6 +66,7 @@ def add_mono_parser(methods: Any) -> None:
 
 def _run_mono(args: argparse.Namespace) -> int:
     from mocapkit.pipelines.mono import track_mono
+    from mocapkit.pipelines.run import find_gaps
     from mocapkit.tracking.mono.tracker import MonoConfig
 
     cfg = MonoConfig(legs=args.legs, camera_model=args.camera_model, cost=args.cost, lag=args.lag)
@@ -79,6 +80,9 @@ def _run_mono(args: argparse.Namespace) -> int:
         skin=args.skin,
     )
     summary = run.summary()
+    if not args.json:  # limbs unseen past the bridge: NaN joints, status in fit.csv
+        for gap in find_gaps(run.results):
+            print(f"gap: {gap}")
     if args.json:
         print(json.dumps(summary, indent=2))
     else:

@@ -60,6 +60,7 @@ def _run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from mocapkit.errors import ConfigError
+    from mocapkit.pipelines.run import find_gaps
     from mocapkit.pipelines.stereo import evaluate_stereo, track_stereo_session
     from mocapkit.tracking.stereo.tracker import StereoConfig
 
@@ -78,6 +79,10 @@ def _run(args: argparse.Namespace) -> int:
         n_particles=args.particles,
         config=cfg,
     )
+    # frames where the head or a hand was not measured past the bridge have no joints of
+    # its limb (NaN in joints.csv, the status in fit.csv): say where, as track hybrid does
+    for gap in find_gaps(run.results):
+        print(f"gap: {gap}")
     fps = run.motion.n_frames / max(run.seconds, 1e-9)
     print(f"tracked {run.motion.n_frames} frames in {run.seconds:.1f} s ({fps:.1f} frames/s)")
     print(f"wrote {args.out}")

@@ -71,8 +71,8 @@ def atomic_folder(path: str | os.PathLike[str]) -> Iterator[Path]:
     """Build a folder under a temporary name beside ``path``; on success swap it in.
 
     Yields the temporary folder to write into. When the block ends without an
-    exception, an existing ``path`` is renamed aside, the new folder renamed to
-    ``path`` and the old one deleted; on any exception (Ctrl-C included) the temporary
+    exception, an existing ``path`` is renamed aside (an empty one removed), the new
+    folder renamed to ``path`` and the old one deleted; on any exception (Ctrl-C included) the temporary
     folder is deleted and ``path`` is left as it was. The swap is two renames on one
     file system: a kill between them leaves the old folder whole under its aside name
     (``.NAME.old-*``) and no half-written ``path``; `remove_stale_temporaries` renames it
@@ -89,7 +89,9 @@ def atomic_folder(path: str | os.PathLike[str]) -> Iterator[Path]:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     old: Path | None = None
-    if target.exists():
+    if target.is_dir() and not target.is_symlink() and not any(target.iterdir()):
+        os.rmdir(target)  # an empty folder (a fresh --out, a caller's own temporary): no copy
+    elif target.exists():
         old = Path(tempfile.mkdtemp(prefix=f".{target.name}.old-", dir=target.parent))
         os.replace(target, old / target.name)
     os.replace(tmp, target)

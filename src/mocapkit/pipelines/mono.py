@@ -11,6 +11,7 @@ the neck's depth.
 
 from __future__ import annotations
 
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,7 +29,7 @@ from mocapkit.progress import Progress
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
 from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments
-from mocapkit.tracking.base import FrameResult
+from mocapkit.tracking.base import BRIDGE_S, FrameResult, unobserved_part
 from mocapkit.tracking.mono.lengths import estimate_link_lengths, pixels_per_mm
 from mocapkit.tracking.mono.pose_fit import fit_stick_pose
 from mocapkit.tracking.mono.smoother import smooth_keypoints
@@ -286,14 +287,18 @@ MONO_LIMBS: dict[str, str] = {
 class MonoResult(FrameResult):
     """A `FrameResult` of the mono tracker, keeping its `MonoFrame`.
 
-    ``status`` per limb of `MONO_LIMBS` the stick has: ``seen`` (its end joint in this
-    frame's 2-D points and the frame posed), ``bridged`` (posed, the end joint read off
-    the smoother over a gap), ``released`` (no pose for it after having one),
-    ``missing`` (never posed yet). ``fit``: ``residual_px`` (mean 2-D distance of the
-    chosen pose's projection to the input points), ``candidates`` and ``survivors``
-    (poses before and after pruning), ``all_pruned`` (1 where every pose was pruned and
-    the unpruned set kept), ``depth_mm`` (neck depth; NaN orthographic) and ``flips``
-    (the chosen flip code, -1 without a pose).
+    ``status`` per limb of `MONO_LIMBS` the stick has, from the joints that the limb
+    alone places (`mocapkit.tracking.base.unobserved_part`: elbow and wrist of an arm,
+    knee and ankle of a leg, the head): ``seen`` (all of them in this frame's 2-D points
+    and posed), ``bridged`` (posed, one of them read off the smoother over a gap of at
+    most ``bridge_s`` since the limb was last seen whole), ``released`` (no pose for them
+    after having one, or unseen for longer than ``bridge_s``), ``missing`` (never posed
+    yet). The runner sets the joints of a released or missing limb to NaN, as for every
+    tracker (`mocapkit.pipelines.run.unobserved_to_nan`). ``fit``: ``residual_px`` (mean
+    2-D distance of the chosen pose's projection to the input points), ``candidates``
+    and ``survivors`` (poses before and after pruning), ``all_pruned`` (1 where every
+    pose was pruned and the unpruned set kept), ``depth_mm`` (neck depth; NaN
+    orthographic) and ``flips`` (the chosen flip code, -1 without a pose).
     """
 
     frame: MonoFrame | None = None
@@ -315,10 +320,18 @@ class MonoStream:
     camera : Camera or None
     px_per_mm : float
         Image scale (orthographic model; NaN otherwise).
+    bridge_s : float
+        Longest gap (s) in a limb's 2-D points that its status calls ``bridged``
+        (`mocapkit.tracking.base.BRIDGE_S`, as the hybrid and stereo trackers).
     """
 
     def __init__(
-        self, tracker: MonoTracker, skeleton: Skeleton, camera: Camera | None, px_per_mm: float
+        self,
+        tracker: MonoTracker,
+        skeleton: Skeleton,
+        camera: Camera | None,
+        px_per_mm: float,
+        bridge_s: float = BRIDGE_S,
     ) -> None:
         self.tracker = tracker
         self.skeleton = skeleton
@@ -328,17 +341,22 @@ class MonoStream:
         self.joint_names = tuple(n for n in CANONICAL_JOINTS if n in model.joint_names)
         self._order = [model.joint_names.index(n) for n in self.joint_names]
         self._rows = [CANONICAL_JOINTS.index(n) for n in self.joint_names]
-        self._limbs = {
-            limb: model.joint_names.index(j)
-            for limb, j in MONO_LIMBS.items()
-            if j in model.joint_names
-        }
+        self._limbs: dict[str, list[int]] = {}
+        for limb, end in MONO_LIMBS.items():
+            part = unobserved_part(limb)
+            if end in model.joint_names and part is not None:
+                self._limbs[limb] = [
+                    model.joint_names.index(j) for j in part[1] if j in model.joint_names
+                ]
+        self.bridge_s = bridge_s
         self._raw: list[FloatArray] = []
+        self._times: list[float] = []
         self._posed: set[str] = set()
 
     def push(self, sample: MonoSample) -> list[FrameResult]:
         """Track one frame; returns the results it makes final."""
         self._raw.append(np.asarray(sample.points_px, dtype=float))
+        self._times.append(float(sample.time_s))
         return [self._result(f) for f in self.tracker.push(sample.time_s, sample.points_px)]
 
     def finish(self) -> list[FrameResult]:
@@ -352,12 +370,18 @@ class MonoStream:
         q = fit_stick_pose(self.skeleton, self.joint_names, joints[None])[0]
         canonical = np.full((len(CANONICAL_JOINTS), 3), np.nan)
         canonical[self._rows] = joints
-        raw = self._raw[f.index]
         status = {}
-        for limb, j in self._limbs.items():
-            if f.code >= 0 and np.all(np.isfinite(world[j])):
+        for limb, js in self._limbs.items():
+            if f.code >= 0 and np.all(np.isfinite(world[js])):
                 self._posed.add(limb)
-                status[limb] = "seen" if np.all(np.isfinite(raw[j])) else "bridged"
+                unseen_s = self._unseen_s(f.index, js)
+                status[limb] = (
+                    "seen"
+                    if unseen_s == 0.0
+                    else "bridged"
+                    if unseen_s <= self.bridge_s
+                    else "released"
+                )
             else:
                 status[limb] = "released" if limb in self._posed else "missing"
         fit = {
@@ -369,6 +393,16 @@ class MonoStream:
             "flips": float(f.code),
         }
         return MonoResult(f.time_s, q, canonical, status, fit, "", frame=f)
+
+    def _unseen_s(self, k: int, joints: list[int]) -> float:
+        """Time (s) since frame ``k``'s limb ``joints`` were last all in the 2-D points
+        (0 when they are in frame k's; inf when never before)."""
+        i = k
+        while i >= 0 and not np.all(np.isfinite(self._raw[i][joints])):
+            if self._times[k] - self._times[i] > self.bridge_s:
+                return math.inf
+            i -= 1
+        return math.inf if i < 0 else self._times[k] - self._times[i]
 
 
 def refined_lengths(frames: list[MonoFrame], model: StickModel, lengths: FloatArray) -> FloatArray:

@@ -5,8 +5,11 @@ calls a live feed would make), collects its `FrameResult` objects and writes the
 folder: ``motion.npz``, ``joints.csv``, ``motion.bvh``
 (`mocapkit.io.motion_files.write_result_folder`) and
 ``fit.csv`` (per frame: status of each effector or limb and the fit-quality figures).
-The folder is built beside ``--out`` and swapped in whole (`write_run_folder`). Method pipelines (`mocapkit.pipelines.hybrid`) only build the tracker and
-its sample stream.
+The folder is built beside ``--out`` and swapped in whole (`write_run_folder`).
+Every tracker's result follows one rule for what was not observed: the joints of a
+released or missing effector or limb are NaN (`unobserved_to_nan`) and the BVH holds
+that part at its last observed pose (`motion_for_bvh`). Method pipelines
+(`mocapkit.pipelines.hybrid`) only build the tracker and its sample stream.
 """
 
 from __future__ import annotations
@@ -21,15 +24,23 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from mocapkit.errors import ConfigError, ShapeError, unknown_name
 from mocapkit.io.atomic import atomic_folder, atomic_write, remove_stale_temporaries
 from mocapkit.io.motion import Motion
 from mocapkit.io.motion_files import write_result_folder
 from mocapkit.progress import Progress
+from mocapkit.skeleton.limbs import has_limb, head_dofs, limb
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
 from mocapkit.timing import NULL_TIMER, StageTimer
-from mocapkit.tracking.base import DelayedTracker, FrameResult, Tracker
+from mocapkit.tracking.base import (
+    UNOBSERVED,
+    DelayedTracker,
+    FrameResult,
+    Tracker,
+    unobserved_part,
+)
 
 #: Name of the per-frame fit and status file in a result folder.
 FIT_FILE = "fit.csv"
@@ -136,7 +147,7 @@ def run_tracker(
     t = np.array([r.time_s for r in results])
     q = np.stack([r.q for r in results])
     if joint_names is None:
-        motion = _without_unobserved_joints(Motion.from_q(sk, t, q, source=source), results)
+        motion = Motion.from_q(sk, t, q, source=source)
     else:
         names = tuple(joint_names)
         unknown = [n for n in names if n not in CANONICAL_JOINTS]
@@ -145,6 +156,7 @@ def run_tracker(
         rows = [CANONICAL_JOINTS.index(n) for n in names]
         joints = np.stack([r.joints_mm[rows] for r in results])
         motion = Motion(sk, t, q, names, joints, source)
+    motion = unobserved_to_nan(motion, results)
     out = None
     if out_dir is not None:
         with timer.stage("write"):
@@ -152,24 +164,90 @@ def run_tracker(
     return RunResult(motion, results, out)
 
 
-def _without_unobserved_joints(motion: Motion, results: Sequence[FrameResult]) -> Motion:
-    """``motion`` with NaN joints wherever a tracker's `FrameResult.joints_mm` has NaN
-    (a released limb): ``joints.csv`` and ``motion.npz`` then hold no made-up joints,
-    while ``q`` (and so the BVH, which cannot hold NaN) keeps the tracker's pose."""
+def unobserved_to_nan(motion: Motion, results: Sequence[FrameResult]) -> Motion:
+    """``motion`` with NaN joints wherever they were not observed: the one rule of every
+    tracker's result folder.
+
+    A frame's joints are NaN (1) where its `FrameResult.joints_mm` has NaN, and (2) for
+    each effector or limb whose status is ``released`` or ``missing``, the joints that it
+    alone places (`mocapkit.tracking.base.unobserved_part`: the head; elbow and wrist
+    for a hand or arm; knee and ankle for a foot or leg). So ``joints.csv`` and
+    ``motion.npz`` hold no made-up joints, whatever a tracker did with the limb's pose,
+    while ``q`` keeps the tracker's pose (see `motion_for_bvh` for the BVH). Results of
+    another count than the motion's frames are not applied.
+    """
+    if len(results) != motion.n_frames:
+        return motion
     joints = np.array(motion.joints_mm, copy=True)
-    changed = False
+    col = {n: k for k, n in enumerate(motion.joint_names)}
+    rows = [CANONICAL_JOINTS.index(n) if n in CANONICAL_JOINTS else -1 for n in motion.joint_names]
     for i, r in enumerate(results):
         rj = np.asarray(r.joints_mm, dtype=float)
-        if rj.shape != (len(CANONICAL_JOINTS), 3):
-            continue
-        for k, name in enumerate(motion.joint_names):
-            if np.isnan(rj[CANONICAL_JOINTS.index(name)]).any():
-                joints[i, k] = np.nan
-                changed = True
-    if not changed:
+        if rj.shape == (len(CANONICAL_JOINTS), 3):
+            for k, row in enumerate(rows):
+                if row >= 0 and np.isnan(rj[row]).any():
+                    joints[i, k] = np.nan
+        for name, st in r.status.items():
+            part = unobserved_part(name) if st in UNOBSERVED else None
+            for joint in part[1] if part is not None else ():
+                if joint in col:
+                    joints[i, col[joint]] = np.nan
+    if np.array_equal(joints, motion.joints_mm, equal_nan=True):
         return motion
     return Motion(
         motion.skeleton, motion.time_s, motion.q, motion.joint_names, joints, motion.source
+    )
+
+
+def _part_dofs(skeleton: Skeleton, part: str) -> NDArray[np.int64]:
+    """DoFs that pose a body part of `unobserved_part` (empty where the skeleton lacks it)."""
+    if part == "head":
+        return head_dofs(skeleton)
+    if not has_limb(skeleton, part):
+        return np.zeros(0, dtype=np.int64)
+    lmb = limb(skeleton, part)
+    return np.concatenate([lmb.dofs, lmb.translation_dofs]).astype(np.int64)
+
+
+def motion_for_bvh(motion: Motion, results: Sequence[FrameResult]) -> Motion:
+    """``motion`` with each released or missing part held at its last observed pose: what
+    the BVH, which cannot hold NaN, is written from.
+
+    On the frames where an effector or limb is ``released`` or ``missing``, the DoFs that
+    pose its part (`mocapkit.skeleton.limbs.limb` DoFs of an arm or leg,
+    `mocapkit.skeleton.limbs.head_dofs` of the head) keep their values of the last frame
+    where it was ``seen`` or ``bridged`` (of the first such frame, before it was ever
+    seen); the rest of the pose is the tracker's. A part never observed keeps the
+    tracker's pose. ``fit.csv`` holds the status that says so. Frames without any pose
+    (NaN ``q``) are left to `mocapkit.io.bvh.write_bvh`, which holds the previous pose.
+    """
+    if len(results) != motion.n_frames:
+        return motion
+    q = np.array(motion.q, dtype=float, copy=True)
+    unobserved: dict[str, NDArray[np.bool_]] = {}
+    for i, r in enumerate(results):
+        for name, st in r.status.items():
+            part = unobserved_part(name)
+            if part is None:
+                continue
+            flags = unobserved.setdefault(part[0], np.zeros(motion.n_frames, dtype=bool))
+            flags[i] |= st in UNOBSERVED
+    for part_name, flags in unobserved.items():
+        dofs = _part_dofs(motion.skeleton, part_name)
+        if dofs.size == 0 or not flags.any():
+            continue
+        good = ~flags & np.isfinite(q[:, dofs]).all(axis=1)
+        if not good.any():
+            continue
+        src = np.where(good, np.arange(motion.n_frames), -1)
+        src = np.maximum.accumulate(src)
+        src[src < 0] = np.flatnonzero(good)[0]
+        held = np.flatnonzero(flags)
+        q[np.ix_(held, dofs)] = q[np.ix_(src[held], dofs)]
+    if np.array_equal(q, motion.q, equal_nan=True):
+        return motion
+    return Motion(
+        motion.skeleton, motion.time_s, q, motion.joint_names, motion.joints_mm, motion.source
     )
 
 
@@ -270,9 +348,11 @@ def write_run_folder(
     trackers that need the whole sequence before their motion exists; returns the folder.
     """
     out = check_result_folder(out_dir)
+    motion = unobserved_to_nan(motion, results)
+    bvh = motion_for_bvh(motion, results)
     remove_stale_temporaries(out.parent, out.name)
     with atomic_folder(out) as tmp:
-        write_result_folder(tmp, motion)
+        write_result_folder(tmp, motion, bvh_motion=bvh)
         write_fit_csv(tmp / FIT_FILE, results)
     return out
 
@@ -341,8 +421,10 @@ __all__ = [
     "RunResult",
     "check_result_folder",
     "find_gaps",
+    "motion_for_bvh",
     "read_fit_csv",
     "run_tracker",
+    "unobserved_to_nan",
     "write_fit_csv",
     "write_run_folder",
 ]

@@ -163,6 +163,29 @@ def head_joint(skeleton: Skeleton) -> int:
     return _canonical_joint(skeleton, "head", "head")
 
 
+def head_dofs(skeleton: Skeleton) -> IntArray:
+    """DoFs that turn the head and nothing of the arms: those of the joints from the
+    canonical neck down to the head joint, less the joints the arms also hang from.
+
+    For ``zhang21`` these are the neck joint's flexion, lateral bend (and rotation, as an
+    option); ``azad14``'s canonical neck is its rigid torso, which carries the arms, and
+    its head has no DoF of its own: none. Empty where the skeleton has no canonical neck
+    or head.
+    """
+    if "neck" not in skeleton.canonical or "head" not in skeleton.canonical:
+        return np.zeros(0, dtype=np.int64)
+    neck = _canonical_joint(skeleton, "neck", "head")
+    path = _path(skeleton.parents, neck, head_joint(skeleton))
+    carriers: set[int] = set()
+    for lmb in limbs_present(skeleton, "arm"):
+        j = lmb.root
+        while j >= 0:
+            carriers.add(j)
+            j = int(skeleton.parents[j])
+    joints = [j for j in path.tolist() if j not in carriers]
+    return np.flatnonzero(np.isin(skeleton.dof_joint, joints)).astype(np.int64)
+
+
 def spine_joints(skeleton: Skeleton) -> IntArray:
     """Joints strictly between the canonical pelvis and neck, pelvis to neck order.
 

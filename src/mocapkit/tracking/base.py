@@ -27,6 +27,34 @@ FloatArray = NDArray[np.float64]
 #: short gap; dropped from the task after a long gap; never observed yet.
 STATUSES: tuple[str, ...] = ("seen", "bridged", "released", "missing")
 
+#: Statuses under which an effector or limb has no observation behind its pose.
+UNOBSERVED: tuple[str, ...] = ("released", "missing")
+
+#: Longest gap (s) in an effector's or limb's observations that trackers bridge by
+#: default (status ``bridged``); longer gaps are ``released``.
+BRIDGE_S = 0.25
+
+
+def unobserved_part(name: str) -> tuple[str, tuple[str, ...]] | None:
+    """The body part an effector or limb status ``name`` stands for, and the canonical
+    joints that it alone places, which are made up while it is released or missing.
+
+    ``"head"`` -> ``("head", ("head",))``; ``"left_hand"`` or ``"left_arm"`` ->
+    ``("left_arm", ("left_elbow", "left_wrist"))``; ``"left_foot"`` or ``"left_leg"`` ->
+    ``("left_leg", ("left_knee", "left_ankle"))``; None for any other name (a fit term,
+    a marker-set member). The shoulder or hip stays: the trunk places it.
+    """
+    if name == "head":
+        return "head", ("head",)
+    side, _, part = name.partition("_")
+    if side not in ("left", "right"):
+        return None
+    if part in ("hand", "arm"):
+        return f"{side}_arm", (f"{side}_elbow", f"{side}_wrist")
+    if part in ("foot", "leg"):
+        return f"{side}_leg", (f"{side}_knee", f"{side}_ankle")
+    return None
+
 
 @dataclass
 class FrameResult:
@@ -135,10 +163,13 @@ def fit_summary(distances_mm: Mapping[str, float]) -> tuple[dict[str, float], st
 
 
 __all__ = [
+    "BRIDGE_S",
     "STATUSES",
+    "UNOBSERVED",
     "DelayedTracker",
     "FrameResult",
     "Tracker",
     "canonical_joints_mm",
     "fit_summary",
+    "unobserved_part",
 ]

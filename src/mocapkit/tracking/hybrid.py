@@ -52,19 +52,19 @@ from mocapkit.tracking.balance import (
     calibrate_balance,
     support_points,
 )
-from mocapkit.tracking.base import FrameResult, canonical_joints_mm, fit_summary
+from mocapkit.tracking.base import (
+    BRIDGE_S,
+    FrameResult,
+    canonical_joints_mm,
+    fit_summary,
+    unobserved_part,
+)
 
 FloatArray = NDArray[np.float64]
 
 #: Marker-set names the hybrid tracker drives, and their default effectors on ``zhang21``.
 MARKER_SETS: tuple[str, ...] = ("head", "left_hand", "right_hand")
 FEET: tuple[str, ...] = ("left_foot", "right_foot")
-#: Canonical joints that only a marker set places: NaN in the output while it is released.
-RELEASED_JOINTS: dict[str, tuple[str, ...]] = {
-    "head": ("head",),
-    "left_hand": ("left_elbow", "left_wrist"),
-    "right_hand": ("right_elbow", "right_wrist"),
-}
 
 Refiner = Callable[..., FloatArray]
 
@@ -196,7 +196,7 @@ class HybridConfig:
     ik: IKConfig = field(default_factory=IKConfig)
     paper: bool = False
     use_video: bool = True
-    gap_limit_s: float = 0.25
+    gap_limit_s: float = BRIDGE_S
     balance: BalanceConfig | None = None
     smoothing_min_cutoff_hz: float = 3.0
     smoothing_beta: float = 0.5
@@ -936,7 +936,8 @@ class HybridTracker:
 
         A released set's effector is out of the IK task, so its limb hangs in the
         relaxed pose the secondary task pulls it to: made up, not measured. The joints
-        it alone places (`RELEASED_JOINTS`) are NaN; with every set released, all are.
+        it alone places (`mocapkit.tracking.base.unobserved_part`, the rule the runner
+        applies to every tracker) are NaN; with every set released, all are.
         ``q`` keeps the pose (BVH cannot hold NaN) and the status says ``released``.
         """
         out = joints_mm.copy()
@@ -944,7 +945,8 @@ class HybridTracker:
             out[:] = np.nan
             return out
         for name in released:
-            for joint in RELEASED_JOINTS.get(name, ()):
+            part = unobserved_part(name)
+            for joint in part[1] if part is not None else ():
                 out[CANONICAL_JOINTS.index(joint)] = np.nan
         return out
 

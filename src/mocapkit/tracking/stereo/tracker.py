@@ -60,7 +60,14 @@ from mocapkit.geometry.rotations import rotvec_from_matrix
 from mocapkit.skeleton.kinematics import canonical_positions, joint_positions
 from mocapkit.skeleton.limbs import arm
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
-from mocapkit.tracking.base import FrameResult, canonical_joints_mm, fit_summary
+from mocapkit.tracking.base import (
+    BRIDGE_S,
+    UNOBSERVED,
+    FrameResult,
+    canonical_joints_mm,
+    fit_summary,
+    unobserved_part,
+)
 from mocapkit.tracking.stereo.arm_filter import (
     ArmEstimate,
     ArmFilterConfig,
@@ -119,7 +126,7 @@ class StereoConfig:
     yaw_gain: float = 0.6
     torso: str = "shoulders"
     reach_pad_mm: float = 80.0
-    gap_limit_s: float = 0.25
+    gap_limit_s: float = BRIDGE_S
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -507,13 +514,10 @@ class StereoTracker:
             q[limb.dofs] = ests[s].state[:4]
         joints = canonical_joints_mm(sk, canonical_positions(sk, q))
         status = self._status(time_s, meas)
-        lost = ("released", "missing")
-        if status["head"] in lost:
-            joints[CANONICAL_JOINTS.index("head")] = np.nan
-        for s in SIDES:
-            if status[f"{s}_hand"] in lost:
-                for j in ("elbow", "wrist"):
-                    joints[CANONICAL_JOINTS.index(f"{s}_{j}")] = np.nan
+        for name, st in status.items():
+            part = unobserved_part(name) if st in UNOBSERVED else None
+            for joint in part[1] if part is not None else ():
+                joints[CANONICAL_JOINTS.index(joint)] = np.nan
         dist = {
             f"{s}_hand": ests[s].dist_mm if np.all(np.isfinite(meas[1 + i])) else math.nan
             for i, s in enumerate(SIDES)

@@ -1,0 +1,209 @@
+"""One rule for what was not observed, in every tracker's result folder (issue 14): the
+joints of a released or missing effector or limb are NaN in joints.csv and motion.npz,
+the BVH holds that part at its last observed pose, and the CLI lists the gaps."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mocapkit.cli.main import main
+from mocapkit.io.bvh import parse_bvh
+from mocapkit.io.joints_csv import read_joints_csv
+from mocapkit.io.motion_npz import load_motion_npz
+from mocapkit.io.session_csv import read_keypoints_csv, write_keypoints_csv
+from mocapkit.pipelines.run import FIT_FILE, find_gaps, read_fit_csv, run_tracker
+from mocapkit.skeleton import load_preset
+from mocapkit.skeleton.limbs import arm
+from mocapkit.tracking.base import BRIDGE_S, unobserved_part
+from mocapkit.tracking.hybrid import HybridConfig, HybridSample, HybridTracker
+
+
+def _bvh_channels(path: Path, joints: list[str]) -> np.ndarray:
+    """The BVH's channel values (T, C) of the named joints, in file order."""
+    data = parse_bvh(path)
+    cols, start = [], 0
+    for j in data.joints:
+        n = len(j.channels)
+        if j.name in joints:
+            cols += list(range(start, start + n))
+        start += n
+    assert cols, f"none of {joints} in {path}"
+    return data.values[:, cols]
+
+
+def test_unobserved_part_names_the_joints_each_status_stands_for() -> None:
+    assert unobserved_part("head") == ("head", ("head",))
+    assert unobserved_part("left_hand") == ("left_arm", ("left_elbow", "left_wrist"))
+    assert unobserved_part("right_arm") == ("right_arm", ("right_elbow", "right_wrist"))
+    assert unobserved_part("left_foot") == ("left_leg", ("left_knee", "left_ankle"))
+    assert unobserved_part("rms_mm") is None and unobserved_part("left_hand_tip") is None
+
+
+def test_hybrid_released_hand_nan_joints_and_bvh_holds_the_last_bridged_arm(tmp_path) -> None:
+    """A right hand set unseen for 0.4 s (past the 0.25 s bridge): its elbow and wrist are
+    NaN in joints.csv and motion.npz while released, and the BVH's right-arm channels
+    hold those of the last bridged frame, where the tracker's own pose lets the arm hang."""
+    sk = load_preset("zhang21")
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False))
+    q0 = tracker.solver.secondary.omega.copy()
+    pos = tracker.solver.effector_positions(q0)[:3]
+    lift = np.array([0.0, -150.0, 250.0])  # the right hand held up and forward
+    n, dt = 40, 0.02
+    gone = range(10, 30)  # 0.20 .. 0.58 s
+    samples = [
+        HybridSample(
+            dt * i,
+            {"head": pos[0], "left_hand": pos[1]}
+            | ({} if i in gone else {"right_hand": pos[2] + lift}),
+        )
+        for i in range(n)
+    ]
+    out = tmp_path / "res"
+    run = run_tracker(tracker, samples, n, out)
+    rows, _ = read_fit_csv(out / FIT_FILE)
+    status = [r["right_hand_status"] for r in rows]
+    released = np.array([s == "released" for s in status])
+    bridged = [i for i, s in enumerate(status) if s == "bridged"]
+    assert released.sum() >= 5 and bridged and max(bridged) < np.flatnonzero(released)[0]
+    assert all(s == "seen" for i, s in enumerate(status) if i not in gone)
+    _t, names, joints = read_joints_csv(out / "joints.csv")
+    for j in ("right_elbow", "right_wrist"):
+        col = joints[:, names.index(j)]
+        assert np.all(np.isnan(col[released])) and np.all(np.isfinite(col[~released]))
+    assert np.all(np.isfinite(joints[:, names.index("left_wrist")]))
+    npz = load_motion_npz(out / "motion.npz")
+    assert np.all(np.isnan(npz.joints_mm[released, npz.joint_names.index("right_wrist")]))
+    # the BVH: right-arm channels of every released frame = those of the last bridged one
+    right = arm(sk, "right")
+    chain = [sk.joint_names[j] for j in right.chain]
+    ch = _bvh_channels(out / "motion.bvh", chain)
+    last = max(bridged)
+    np.testing.assert_allclose(ch[released], np.tile(ch[last], (released.sum(), 1)), atol=1e-7)
+    # ... where the tracker's own pose (kept in motion.npz's q) let the arm drop
+    drop = np.abs(npz.q[released][:, right.dofs] - npz.q[last, right.dofs]).max()
+    assert np.degrees(drop) > 5.0
+    # nothing else is held: the BVH's other channels are those of the tracker's own pose
+    from mocapkit.io.motion import Motion
+    from mocapkit.io.motion_files import write_motion
+
+    write_motion(tmp_path / "own.bvh", Motion.from_q(sk, npz.time_s, npz.q))
+    others = [n for n in sk.joint_names if n not in chain]
+    np.testing.assert_allclose(
+        _bvh_channels(out / "motion.bvh", others),
+        _bvh_channels(tmp_path / "own.bvh", others),
+        atol=1e-7,
+    )
+    assert [str(g) for g in run.gaps] == [str(g) for g in find_gaps(run.results)]
+    assert any(g.name == "right_hand" and g.status == "released" for g in run.gaps)
+
+
+# ------------------------------------------------------------------- stereo and mono
+
+
+@pytest.fixture(scope="module")
+def blackout_session(tmp_path_factory):
+    """builtin:wave, stereo rig, 1.2 s at 320x240, every view blank 0.3-0.8 s."""
+    from mocapkit.synth.realism import RealismOptions
+    from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+
+    out = tmp_path_factory.mktemp("blackout") / "wave"
+    synthesize_session(
+        "builtin:wave",
+        out,
+        SynthOptions(
+            rig="stereo",
+            seconds=1.2,
+            image_size=(320, 240),
+            video_format="png",
+            blackout_s=(0.3, 0.5),
+            realism=RealismOptions(blur=0.0),
+        ),
+    )
+    return out
+
+
+def _released_rows(out: Path, name: str) -> np.ndarray:
+    rows, _ = read_fit_csv(out / FIT_FILE)
+    return np.array([r[f"{name}_status"] == "released" for r in rows])
+
+
+def test_stereo_blackout_gives_nan_joints_a_held_bvh_and_printed_gaps(
+    blackout_session, tmp_path, capsys
+) -> None:
+    out = tmp_path / "st"
+    argv = ["track", "stereo", str(blackout_session), "--out", str(out), "--keypoints"]
+    assert main([*argv, "--particles", "30"]) == 0
+    text = capsys.readouterr().out
+    rows, _ = read_fit_csv(out / FIT_FILE)
+    t = np.array([float(r["time_s"]) for r in rows])
+    blank = (t >= 0.3) & (t < 0.8)
+    for name in ("head", "left_hand", "right_hand"):
+        st = [r[f"{name}_status"] for r in rows]
+        assert all(s == "seen" for s, b in zip(st, blank) if not b)
+        # blank frames never report a pose as seen: bridged up to the bridge, then released
+        assert all(s in ("bridged", "released") for s, b in zip(st, blank) if b)
+        last_seen = t[~blank & (t < 0.3)].max()
+        for s, ti in zip(st, t):
+            if blank[t == ti][0]:
+                assert s == ("bridged" if ti - last_seen <= BRIDGE_S else "released")
+        assert f"gap: {name} released " in text
+    released = _released_rows(out, "left_hand")
+    assert released.any()
+    _t, names, joints = read_joints_csv(out / "joints.csv")
+    for j in ("head", "left_elbow", "left_wrist", "right_elbow", "right_wrist"):
+        assert np.all(np.isnan(joints[released, names.index(j)]))
+        assert np.all(np.isfinite(joints[~released, names.index(j)]))
+    sk = load_motion_npz(out / "motion.npz").skeleton
+    chain = [sk.joint_names[j] for j in arm(sk, "left").chain]
+    ch = _bvh_channels(out / "motion.bvh", chain)
+    last = np.flatnonzero(~released & (t < 0.8)).max()
+    np.testing.assert_allclose(ch[released], np.tile(ch[last], (released.sum(), 1)), atol=1e-7)
+
+
+def _mono_session_with_a_hidden_elbow(folder: Path) -> tuple[Path, np.ndarray]:
+    from tests.pipelines.test_mono import _session
+
+    session = _session(folder, lengths=True)
+    kp = read_keypoints_csv(session / "keypoints" / "mono.csv")
+    px = np.array(kp.pixels, copy=True)
+    hidden = (kp.time_s >= 0.3) & (kp.time_s < 0.8)  # left elbow only; its wrist is seen
+    px[hidden, list(kp.joint_names).index("left_elbow")] = np.nan
+    write_keypoints_csv(session / "keypoints" / "mono.csv", kp.time_s, kp.joint_names, px)
+    return session, np.asarray(kp.time_s)
+
+
+def test_mono_limb_unseen_past_the_bridge_is_released_with_nan_joints(tmp_path, capsys) -> None:
+    """Mono: the left elbow's 2-D point missing for 0.5 s (its wrist seen throughout):
+    the left arm is bridged while the gap is within both the 0.25 s bridge and the
+    smoother's ``max_gap`` (5 frames, 0.167 s at 30 fps, which ends first here), then
+    released; its elbow and wrist are NaN in joints.csv on those frames, and the CLI
+    prints the gap."""
+    from mocapkit.tracking.mono.tracker import MonoConfig
+
+    session, t = _mono_session_with_a_hidden_elbow(tmp_path / "s")
+    out = tmp_path / "r"
+    argv = ["track", "mono", str(session), "--out", str(out), "--session-lengths"]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    rows, _ = read_fit_csv(out / FIT_FILE)
+    st = [r["left_arm_status"] for r in rows]
+    last_seen = t[t < 0.3].max()
+    bridge_s = min(BRIDGE_S, MonoConfig().max_gap / 30.0)
+    for s, ti in zip(st, t):
+        if 0.3 <= ti < 0.8:
+            assert s == ("bridged" if ti - last_seen <= bridge_s + 1e-9 else "released"), ti
+        else:
+            assert s == "seen", ti
+    assert all(r["right_arm_status"] == "seen" for r in rows)
+    released = np.array([s == "released" for s in st])
+    assert released.sum() >= 5
+    _t, names, joints = read_joints_csv(out / "joints.csv")
+    for j in ("left_elbow", "left_wrist"):
+        assert np.all(np.isnan(joints[released, names.index(j)]))
+        assert np.all(np.isfinite(joints[~released, names.index(j)]))
+    assert np.all(np.isfinite(joints[:, names.index("right_wrist")]))
+    gap = [line for line in text.splitlines() if line.startswith("gap: left_arm released")]
+    assert len(gap) == 1 and f"({released.sum()} frames)" in gap[0]
