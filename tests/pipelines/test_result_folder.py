@@ -133,7 +133,8 @@ def test_a_folder_that_is_not_a_result_is_refused_before_the_work(tmp_path) -> N
             drawn.append(s)
             yield s
 
-    with pytest.raises(ConfigError, match=r"mine: .*not a result folder \(no motion.npz; it holds notes.txt\)"):
+    refused = r"mine: .*not a result folder \(no motion.npz; it holds notes.txt\)"
+    with pytest.raises(ConfigError, match=refused):
         run_tracker(Replay(sk), samples(), len(t), out)
     assert drawn == []  # refused before any sample was tracked
     assert (out / "notes.txt").read_text() == "keep me"
