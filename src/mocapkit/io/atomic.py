@@ -76,8 +76,9 @@ def atomic_folder(path: str | os.PathLike[str]) -> Iterator[Path]:
     included) the temporary folder is deleted and ``path`` is left as it was. The swap
     is two renames on one file system: a kill between them leaves the old folder whole
     under its aside name (``.NAME.old-*``) and no half-written ``path``;
-    `remove_stale_temporaries` renames it back. Callers decide beforehand whether ``path`` may be replaced, and call
-    `remove_stale_temporaries` first to clear what a killed earlier build left.
+    `remove_stale_temporaries` renames it back. Callers decide beforehand whether
+    ``path`` may be replaced, and call `remove_stale_temporaries` first to clear what a
+    killed earlier build left.
     """
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
