@@ -206,3 +206,21 @@ def test_board_smaller_than_the_one_in_the_images_is_refused(shared_data: Path) 
 def test_max_rms_must_be_positive() -> None:
     with pytest.raises(CalibrationError, match="max_rms_px: expected a positive number"):
         calibrate_from_images(["unused"], parse_board("9x6", 25.0), max_rms_px=0.0)
+
+
+def test_out_naming_a_folder_is_refused_before_the_work(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """`calibrate --out DIR` used to fail after the calibration, naming an internal
+    ``.DIR.xxxx.tmp`` file (issue 14): refused while parsing, by its own name."""
+    from mocapkit.cli.main import main
+
+    folder = tmp_path / "calib_out"
+    folder.mkdir()
+    argv = ["calibrate", "--board", "9x6", "--square-mm", "25", "--out", str(folder), "x*.jpg"]
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    err = capsys.readouterr().err
+    assert exc.value.code == 2
+    assert f"argument --out: {folder}: expected a file to write, found a folder" in err
+    assert ".tmp" not in err

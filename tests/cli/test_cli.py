@@ -161,3 +161,11 @@ def test_os_errors_are_reported_by_path_not_as_none(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2
     assert "None" not in err and "nope.c3d" in err
+    # a folder given as a marker file is called a folder, not "not found" (issue 14)
+    folder = tmp_path / "take.c3d"
+    folder.mkdir()
+    argv = ["track", "hybrid", "--markers", str(folder), "--marker-set", "head=A"]
+    code = main([*argv, "--marker-set", "left_hand=B", "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err
+    assert code == 2 and "take.c3d: expected a marker file, found a folder" in err
+    assert "not found" not in err

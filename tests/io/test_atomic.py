@@ -129,3 +129,14 @@ def test_stale_temporaries_are_cleared_and_a_folder_caught_mid_swap_restored(
     remove_stale_temporaries(tmp_path, "res")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["other", "res"]
     assert (tmp_path / "res" / "joints.csv").read_text() == "old result"
+
+
+def test_writing_a_file_over_a_folder_names_the_folder(tmp_path: Path) -> None:
+    """Not the internal temporary's name (issue 14: calibrate --out DIR)."""
+    target = tmp_path / "cameras.json"
+    target.mkdir()
+    with pytest.raises(IsADirectoryError, match="expected a file to write, found a folder") as e:
+        with atomic_write(target) as fh:
+            fh.write("{}")
+    assert e.value.filename == str(target)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cameras.json"]

@@ -58,3 +58,12 @@ def test_truncated_npz_is_a_format_error(tmp_path, reader):
     path.write_bytes(json.dumps({"not": "a zip"}).encode())
     with pytest.raises(FormatError, match=r"cut.npz: cannot read as .npz"):
         reader(path)
+    # garbage that np.load would take for a pickle: no allow_pickle advice (issue 14)
+    path.write_bytes(np.random.default_rng(4).bytes(3000))
+    with pytest.raises(FormatError, match=r"cut.npz: cannot read as .npz \(expected a ") as exc:
+        reader(path)
+    assert "pickle" not in str(exc.value)
+    folder = tmp_path / "folder.npz"
+    folder.mkdir()
+    with pytest.raises(FormatError, match=r"folder.npz: expected a .*, found a folder"):
+        reader(folder)

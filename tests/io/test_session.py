@@ -215,6 +215,14 @@ def test_bad_subject_measurements_rejected(copy):
     (copy / "session.json").write_text(json.dumps(info))
     with pytest.raises(FormatError, match="unknown segment 'arm'"):
         load_session(copy)
+    # a bad length is named by its key, not by dumping the whole table (issue 14)
+    info["subject"]["bone_lengths_mm"] = {"left_upper_arm": 300, "left_forearm": -5}
+    (copy / "session.json").write_text(json.dumps(info))
+    with pytest.raises(
+        FormatError, match=r"bone_lengths_mm.left_forearm: expected a positive"
+    ) as exc:
+        load_session(copy)
+    assert "left_upper_arm" not in str(exc.value)
     info["subject"]["bone_lengths_mm"] = {}
     info["subject"]["segment_vectors_mm"] = {"left_forearm": [0, 0, -200]}
     (copy / "session.json").write_text(json.dumps(info))

@@ -141,6 +141,21 @@ def output_folder(text: str) -> str:
     return text
 
 
+def output_file(text: str) -> str:
+    """A ``type=`` for ``--out`` files (``calibrate``'s cameras.json): checked before the
+    work. Refuses an existing folder (it used to fail only at the end, naming an internal
+    temporary file) and a place where nothing can be written (as `output_folder`)."""
+    from pathlib import Path
+
+    p = Path(text).expanduser()
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a file, found an empty path")
+    if p.is_dir():
+        raise argparse.ArgumentTypeError(f"{text}: expected a file to write, found a folder")
+    output_folder(str(p.parent))  # the folder it goes in: creatable and writable
+    return text
+
+
 def _can_make_folder_in(folder: object) -> bool:
     """Whether a folder can be made in ``folder`` (made and removed at once)."""
     import os

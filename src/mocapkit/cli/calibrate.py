@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from mocapkit.camera.calibration import parse_board
-from mocapkit.cli.args import checked_by, number
+from mocapkit.cli.args import checked_by, number, output_file
 from mocapkit.io.cameras import write_cameras
 from mocapkit.pipelines.calibrate import (
     DEFAULT_MAX_RMS_PX,
@@ -43,7 +43,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         help="inner corners as COLUMNSxROWS, e.g. 9x6",
     )
     p.add_argument("--square-mm", type=number(above=0.0), required=True, help="square side in mm")
-    p.add_argument("--out", required=True, help="output cameras.json")
+    p.add_argument("--out", required=True, type=output_file, help="output cameras.json")
     p.add_argument("--board-pose", default=None, help="JSON file with the board's world pose")
     p.add_argument(
         "--names",

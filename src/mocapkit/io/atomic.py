@@ -7,6 +7,7 @@ truncated file or a folder that mixes old and new files.
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import shutil
 import tempfile
@@ -33,6 +34,10 @@ def atomic_write(
     if mode not in ("w", "wb"):
         raise ValueError(f"atomic_write: mode must be 'w' or 'wb', found {mode!r}")
     target = Path(path)
+    if target.is_dir():  # refused before writing, by its own name (not the temporary's)
+        raise IsADirectoryError(
+            errno.EISDIR, "expected a file to write, found a folder", str(target)
+        )
     target.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
     if mode == "w":

@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from mocapkit.errors import FormatError
+from mocapkit.io.files import require_file
 from mocapkit.io.markers import MarkerData
 
 #: Length units a C3D ``POINT:UNITS`` may hold, with their size in mm.
@@ -125,8 +126,7 @@ def read_c3d(path: str | os.PathLike[str]) -> MarkerData:
 
     p = Path(path)
     where = str(p)
-    if not p.is_file():
-        raise FileNotFoundError(f"{where}: C3D file not found")
+    require_file(p, "C3D file", missing=FileNotFoundError)
     try:
         c3d = ezc3d.c3d(where)
     except (RuntimeError, OSError, ValueError, IndexError, MemoryError) as exc:

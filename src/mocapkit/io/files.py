@@ -18,6 +18,30 @@ from numpy.typing import NDArray
 from mocapkit.errors import FormatError
 
 
+def require_file(
+    path: str | os.PathLike[str], what: str = "file", missing: type[Exception] = FormatError
+) -> Path:
+    """``path`` as a `Path` when it is a regular file; otherwise refused, saying what it is.
+
+    A missing path raises ``missing`` (`FormatError`, or `FileNotFoundError` where a
+    caller's contract says so) with ``"PATH: WHAT not found"``; a folder or any other
+    non-file raises `FormatError` (``"PATH: expected a WHAT, found a folder"``), never
+    "not found" for a path that exists.
+    """
+    p = Path(path)
+    if p.is_file():
+        return p
+    if p.is_dir():
+        raise FormatError(f"{p}: expected a {what}, found a folder")
+    if p.exists():
+        raise FormatError(f"{p}: expected a {what}, found something that is not a regular file")
+    raise missing(f"{p}: {what} not found")
+
+
+#: The first bytes of a zip archive (an ``.npz``: local file header, or an empty archive).
+_ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")
+
+
 def read_text(path: str | os.PathLike[str], what: str = "file", encoding: str = "utf-8") -> str:
     """The whole text of ``path`` (universal newlines; a UTF-8 byte-order mark is dropped).
 
@@ -33,7 +57,7 @@ def read_text(path: str | os.PathLike[str], what: str = "file", encoding: str = 
     FormatError
         The file is missing or unreadable, or is not text in ``encoding``.
     """
-    p = Path(path)
+    p = require_file(path, what)
     try:
         with open(p, encoding=encoding, newline=None) as fh:
             text = fh.read()
@@ -58,7 +82,18 @@ def load_npz(path: str | os.PathLike[str], what: str = ".npz archive") -> dict[s
         The file is missing, unreadable, not a zip archive, truncated, or holds an
         array that does not load.
     """
-    p = Path(path)
+    p = require_file(path, what)
+    try:
+        with p.open("rb") as fh:
+            head = fh.read(6)
+    except OSError as exc:
+        raise FormatError(f"{p}: cannot read the {what} ({exc.strerror or exc})") from None
+    if not head.startswith(_ZIP_MAGIC) and not head.startswith(b"\x93NUMPY"):
+        # np.load would take it for a pickle and advise allow_pickle, which is wrong here
+        raise FormatError(
+            f"{p}: cannot read as .npz (expected a {what}, a zip archive; found a file that "
+            f"starts with {head!r})"
+        )
     try:
         with np.load(p, allow_pickle=False) as data:
             return {k: np.asarray(data[k]) for k in data.files}

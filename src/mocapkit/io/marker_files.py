@@ -8,6 +8,7 @@ from typing import Any
 
 from mocapkit.errors import FormatError
 from mocapkit.io.c3d import read_c3d
+from mocapkit.io.files import require_file
 from mocapkit.io.marker_csv import read_markers_csv, write_markers_csv
 from mocapkit.io.markers import MarkerData, check_plausible_markers
 from mocapkit.io.trc import read_trc, write_trc
@@ -46,8 +47,7 @@ def read_markers(path: str | os.PathLike[str]) -> MarkerData:
             f"{p}: unsupported marker file extension {p.suffix!r}; expected one of "
             f"{', '.join(SUPPORTED_MARKER_EXTENSIONS)}"
         )
-    if not p.is_file():
-        raise FileNotFoundError(f"{p}: marker file not found")
+    require_file(p, "marker file", missing=FileNotFoundError)
     if ext == ".c3d":
         markers = read_c3d(p)  # ezc3d itself is imported only when a C3D is read
     elif ext == ".trc":

@@ -17,6 +17,7 @@ from pathlib import Path
 from mocapkit.errors import FormatError
 from mocapkit.io.asf_amc import read_amc
 from mocapkit.io.bvh import read_bvh, write_bvh
+from mocapkit.io.files import require_file
 from mocapkit.io.joints_csv import write_joints_csv
 from mocapkit.io.motion import Motion
 from mocapkit.io.motion_npz import load_motion_npz, save_motion_npz
@@ -47,8 +48,7 @@ def read_motion(
     """
     p = Path(path)
     ext = p.suffix.lower()
-    if not p.is_file():
-        raise FormatError(f"{p}: motion file not found")
+    require_file(p, "motion file")
     if asf is not None and ext != ".amc":
         raise FormatError(
             f"{p}: an ASF skeleton is only used with .amc files, found a {ext or 'no'} extension"

@@ -173,13 +173,17 @@ class Session:
             )
         self.height_mm: float | None = None if h is None else float(h)
         bones = subject.get("bone_lengths_mm", {})
-        if not isinstance(bones, dict) or not all(
-            isinstance(v, int | float) and v > 0 for v in bones.values()
-        ):
+        if not isinstance(bones, dict):
             raise FormatError(
-                f"{info_path}: subject.bone_lengths_mm: expected segment name -> positive "
-                f"length (mm), found {bones!r}"
+                f"{info_path}: subject.bone_lengths_mm: expected an object of segment name -> "
+                f"positive length (mm), found {type(bones).__name__}"
             )
+        for k, v in bones.items():  # the one bad entry named, not the whole table
+            if isinstance(v, bool) or not isinstance(v, int | float) or not v > 0:
+                raise FormatError(
+                    f"{info_path}: subject.bone_lengths_mm.{k}: expected a positive length "
+                    f"(mm), found {v!r}"
+                )
         for k in bones:
             if k not in CANONICAL_SEGMENTS:
                 raise FormatError(
