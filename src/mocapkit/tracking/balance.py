@@ -303,7 +303,8 @@ def _secant_lean(
     """Total lean (rad) whose restored pose puts the CoG at ``goal_mm`` (secant search).
 
     Returns the lean, the restored pose and residuals at that lean (already solved),
-    and the slope of the CoG offset per radian of lean seen on the way (None if none).
+    and the slope of the CoG offset per radian of lean (least squares through the leans
+    tried that kept the markers; the given slope where fewer than two did).
     Where the spine's range cannot reach the goal, the end nearest to it is returned,
     as `_bisect_lean` does.
     """
@@ -349,6 +350,15 @@ def _secant_lean(
     ok = [x for x in tried if np.nanmax(tried[x][2], initial=0.0) <= limit]
     best = min(ok, key=lambda x: abs(tried[x][0]))
     _value, q_best, resid_best = tried[best]
+    if len(ok) >= 2:
+        # The hint for the next frame is the least-squares slope through every lean that
+        # kept the markers, not the last secant: near the goal the last two leans lie
+        # within the restore's tolerance of each other, and the CoG's round-off between
+        # them (which differs with the BLAS kernel) can even flip the last secant's sign.
+        leans = np.array(ok)
+        values = np.array([tried[x][0] for x in ok])
+        if np.ptp(leans) > 0.0:
+            slope = float(np.polyfit(leans, values, 1)[0])
     return best, (q_best, resid_best), slope
 
 
