@@ -142,3 +142,29 @@ def test_a_folder_that_is_not_a_result_is_refused_before_the_work(tmp_path) -> N
     empty.mkdir()
     run_tracker(Replay(sk), zip(t, q), len(t), empty)
     assert {p.name for p in empty.iterdir()} == RESULT_FILES
+
+
+def test_ctrl_c_during_track_exits_130_and_keeps_the_earlier_result(
+    tmp_path, monkeypatch, capsys
+) -> None:
+    """`mocapkit track mono` interrupted while writing: "interrupted", exit 130, the
+    earlier result byte-identical and no temporaries (issue 14, "fine as it is")."""
+    import mocapkit.io.motion_files as motion_files
+    from mocapkit.cli.main import main
+    from tests.pipelines.test_mono import _session
+
+    session = _session(tmp_path / "s", lengths=True)
+    out = tmp_path / "r"
+    argv = ["track", "mono", str(session), "--out", str(out), "--session-lengths"]
+    assert main(argv) == 0
+    before = _snapshot(out)
+    capsys.readouterr()
+
+    def ctrl_c(*_args, **_kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(motion_files, "write_bvh", ctrl_c)
+    assert main([*argv, "--lag", "3"]) == 130
+    assert "mocapkit track: interrupted" in capsys.readouterr().err
+    assert _snapshot(out) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r", "s"]
