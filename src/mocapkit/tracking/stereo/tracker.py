@@ -60,6 +60,7 @@ from mocapkit.geometry.rotations import rotvec_from_matrix
 from mocapkit.skeleton.kinematics import canonical_positions, joint_positions
 from mocapkit.skeleton.limbs import arm
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
+from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.base import FrameResult, canonical_joints_mm, fit_summary
 from mocapkit.tracking.stereo.arm_filter import (
     ArmEstimate,
@@ -217,6 +218,9 @@ class StereoTracker:
     config : StereoConfig, optional
     keypoint_names : sequence of str, optional
         Joint names of the keypoint rows (needed with ``use_keypoints``).
+    timer : StageTimer, optional
+        Times the stages of `update` (``skin``, ``head_hands``, ``gradients``, ``arms``);
+        attribute ``timer``. The default records nothing.
     """
 
     def __init__(
@@ -225,7 +229,9 @@ class StereoTracker:
         cameras: Sequence[Camera],
         config: StereoConfig | None = None,
         keypoint_names: Sequence[str] | None = None,
+        timer: StageTimer = NULL_TIMER,
     ) -> None:
+        self.timer = timer
         self.config = cfg = config or StereoConfig()
         if len(cameras) < 2:
             raise ConfigError(f"the stereo tracker needs two or more cameras, found {len(cameras)}")
@@ -277,6 +283,14 @@ class StereoTracker:
         # gradient maps, written in place every frame (no per-frame stacking copies)
         self._gx = np.zeros((len(self.cameras), h, w), np.float32)
         self._gy = np.zeros((len(self.cameras), h, w), np.float32)
+
+    def reset_arms(self) -> None:
+        """Forget both arms' filter states (particles back to the initial hanging arm,
+        shoulder offsets 0): a wrong start for a subject whose arms are elsewhere, used to
+        measure how fast each variant converges (`mocapkit.pipelines.stereo`)."""
+        self.filters = {
+            s: ArmParticleFilter(s, self.config.arm, self.filters[s].rng) for s in SIDES
+        }
 
     # ------------------------------------------------------------------ helpers
     def _facing_yaw(self, at: FloatArray) -> float:
@@ -405,80 +419,94 @@ class StereoTracker:
         # ---------------------------------------------------------- head and hands
         skins: list[NDArray[np.uint8]] = []
         if images and (not cfg.use_keypoints or cfg.figure_ground):
-            skins = [skin_mask(img, roi=r) for img, r in zip(images, rois)]
-        if cfg.use_keypoints:
-            kps = []
-            for c in self.cameras:
-                kp = sample.keypoints_px.get(c.name)
-                kps.append(
-                    np.full((len(self.keypoint_names), 2), np.nan) if kp is None else np.asarray(kp)
-                )
-            meas = keypoint_targets(self.cameras, kps, self.keypoint_names)
-            head_pt = meas[0]
-            if cfg.torso == "keypoints":
-                torso_kp = self._torso_from_keypoints(kps)
-                if torso_kp is not None:
-                    rb, torso_root = torso_kp
-                    self.yaw = math.atan2(rb[1, 0], rb[0, 0])
-        else:
-            self.hands.set_right_axis(rb[:, 0])
-            meas = (
-                self.hands.update(sample.time_s, skins, rois) if skins else np.full((3, 3), np.nan)
-            )
-            head_pt = meas[0] - rb @ np.asarray(cfg.face_offset_mm)
-        if np.all(np.isfinite(head_pt)):
-            if self.head_mm is None and cfg.torso == "shoulders":
-                self.yaw = self._facing_yaw(head_pt)
-                rb = yaw_matrix(self.yaw)
-            self.head_mm = head_pt
-        head = self.head_mm
-        if head is None:
-            head = np.array([0.0, 0.0, 1600.0])  # nothing seen yet: a standing adult
-        if torso_root is None:
-            torso_root = head - rb @ self.head_off
-        # ---------------------------------------------------------- gradient maps
-        if images:
-            if cfg.figure_ground and self.shirt is None and self.head_mm is not None:
-                self._fit_shirt(images, head, rb)
-            hands_now = {"left": meas[1], "right": meas[2]}
-            rois = self._arm_rois(torso_root, rb, hands_now) if self.head_mm is not None else rois
-            grads = self._gx
-            grads_y = self._gy if cfg.arm.oriented_edges else None
-            for i, (img, r) in enumerate(zip(images, rois)):
-                fig = None
-                if cfg.figure_ground and self.shirt is not None:
-                    fig = self._figure(img, skins[i], r)
-                if cfg.arm.oriented_edges:
-                    gradient_vector_map(
-                        img, roi=r, figure=fig, config=cfg.gradient, out=(grads[i], self._gy[i])
+            with self.timer.stage("skin"):
+                skins = [skin_mask(img, roi=r) for img, r in zip(images, rois)]
+        with self.timer.stage("head_hands"):
+            if cfg.use_keypoints:
+                kps = []
+                for c in self.cameras:
+                    kp = sample.keypoints_px.get(c.name)
+                    kps.append(
+                        np.full((len(self.keypoint_names), 2), np.nan)
+                        if kp is None
+                        else np.asarray(kp)
                     )
-                else:
-                    gradient_map(img, roi=r, figure=fig, config=cfg.gradient, out=grads[i])
-        else:
-            grads = self._gx
-            grads.fill(0.0)
-            grads_y = None
-            if cfg.arm.oriented_edges:
-                grads_y = self._gy
-                grads_y.fill(0.0)
-        views = view_stack(self.cameras, grads, grads_y)
+                meas = keypoint_targets(self.cameras, kps, self.keypoint_names)
+                head_pt = meas[0]
+                if cfg.torso == "keypoints":
+                    torso_kp = self._torso_from_keypoints(kps)
+                    if torso_kp is not None:
+                        rb, torso_root = torso_kp
+                        self.yaw = math.atan2(rb[1, 0], rb[0, 0])
+            else:
+                self.hands.set_right_axis(rb[:, 0])
+                meas = (
+                    self.hands.update(sample.time_s, skins, rois)
+                    if skins
+                    else np.full((3, 3), np.nan)
+                )
+                head_pt = meas[0] - rb @ np.asarray(cfg.face_offset_mm)
+            if np.all(np.isfinite(head_pt)):
+                if self.head_mm is None and cfg.torso == "shoulders":
+                    self.yaw = self._facing_yaw(head_pt)
+                    rb = yaw_matrix(self.yaw)
+                self.head_mm = head_pt
+            head = self.head_mm
+            if head is None:
+                head = np.array([0.0, 0.0, 1600.0])  # nothing seen yet: a standing adult
+            if torso_root is None:
+                torso_root = head - rb @ self.head_off
+        # ---------------------------------------------------------- gradient maps
+        with self.timer.stage("gradients"):
+            if images:
+                if cfg.figure_ground and self.shirt is None and self.head_mm is not None:
+                    self._fit_shirt(images, head, rb)
+                hands_now = {"left": meas[1], "right": meas[2]}
+                rois = (
+                    self._arm_rois(torso_root, rb, hands_now) if self.head_mm is not None else rois
+                )
+                grads = self._gx
+                grads_y = self._gy if cfg.arm.oriented_edges else None
+                for i, (img, r) in enumerate(zip(images, rois)):
+                    fig = None
+                    if cfg.figure_ground and self.shirt is not None:
+                        fig = self._figure(img, skins[i], r)
+                    if cfg.arm.oriented_edges:
+                        gradient_vector_map(
+                            img, roi=r, figure=fig, config=cfg.gradient, out=(grads[i], self._gy[i])
+                        )
+                    else:
+                        gradient_map(img, roi=r, figure=fig, config=cfg.gradient, out=grads[i])
+            else:
+                grads = self._gx
+                grads.fill(0.0)
+                grads_y = None
+                if cfg.arm.oriented_edges:
+                    grads_y = self._gy
+                    grads_y.fill(0.0)
+            views = view_stack(self.cameras, grads, grads_y)
         # ---------------------------------------------------------- arms
-        hands = {"left": meas[1], "right": meas[2]}
-        ests: dict[str, ArmEstimate] = {}
-        sampling = np.array(
-            [cfg.arm.step_px, float(cfg.arm.max_samples_per_line), float(cfg.arm.oriented_edges)]
-        )
-        for s in SIDES:
-            a, b = self.lengths[s]
-            model = ArmModel(
-                rb,
-                torso_root + rb @ (self.shoulder_off[s] + self.head_off),
-                np.array([a, b, cfg.hand_offset]),
-                self.radii[s],
-                np.asarray(hands[s], dtype=float),
-                sampling,
+        with self.timer.stage("arms"):
+            hands = {"left": meas[1], "right": meas[2]}
+            ests: dict[str, ArmEstimate] = {}
+            sampling = np.array(
+                [
+                    cfg.arm.step_px,
+                    float(cfg.arm.max_samples_per_line),
+                    float(cfg.arm.oriented_edges),
+                ]
             )
-            ests[s] = self.filters[s].step(model, views)
+            for s in SIDES:
+                a, b = self.lengths[s]
+                model = ArmModel(
+                    rb,
+                    torso_root + rb @ (self.shoulder_off[s] + self.head_off),
+                    np.array([a, b, cfg.hand_offset]),
+                    self.radii[s],
+                    np.asarray(hands[s], dtype=float),
+                    sampling,
+                )
+                ests[s] = self.filters[s].step(model, views)
         # ---------------------------------------------------------- torso yaw
         if cfg.yaw_gain > 0 and cfg.torso == "shoulders":
             right = ests["right"].points_mm[0] - ests["left"].points_mm[0]
