@@ -16,7 +16,9 @@ videos of 100 frames and their Qualisys calibration, read by
    e.g. from `examples/mediapipe_openpose_json.py`), converts them into the session's
    ``keypoints/<camera>.csv`` (`mocapkit.io.openpose.read_openpose_folder`) and tracks
    a second time with head, hands and torso from the keypoints (``--keypoints --torso
-   keypoints``: the accuracy study's ``keypoints+torso`` mode) into ``OUT/result_kp``;
+   keypoints``: the accuracy study's ``keypoints+torso`` mode) into ``OUT/result_kp``,
+   after writing the subject's arm lengths and shoulder and head vectors, measured from
+   the triangulated keypoints, into ``session.json`` (`subject_from_keypoints`);
 4. draws the tracked model (limb silhouettes, `mocapkit.viz.overlay.draw_body`, and the
    canonical sticks, `draw_sticks`) and the measured head and hands (dots) over each view
    at a few frames and writes the montage PNG (256 colours, to stay small).
@@ -35,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 import sys
 from pathlib import Path
 
@@ -47,7 +50,8 @@ from mocapkit.io.openpose import read_openpose_folder
 from mocapkit.io.session import load_session, write_session_json
 from mocapkit.io.session_csv import write_keypoints_csv
 from mocapkit.pipelines.demo import find_shared_data
-from mocapkit.pipelines.stereo import StereoRun, track_stereo_session
+from mocapkit.pipelines.stereo import ARM_JOINTS, StereoRun, track_stereo_session
+from mocapkit.tracking.stereo.hands import keypoint_targets
 from mocapkit.tracking.stereo.tracker import StereoConfig, azad_skeleton
 from mocapkit.viz.overlay import draw_body, draw_sticks
 
@@ -180,6 +184,9 @@ def main(argv: list[str] | None = None) -> int:
     if not (session / "cameras.json").is_file():
         build_session(args.data, session, args.first, args.frames, args.scale)
     cameras = ",".join(c.name for c in load_cameras(session / "cameras.json"))
+    info = json.loads((session / "session.json").read_text())
+    if info.pop("subject", None) is not None:  # the skin run takes the model's own sizes
+        write_session_json(session / "session.json", info)
     run = track_stereo_session(
         session,
         args.out / "result",
@@ -195,6 +202,9 @@ def main(argv: list[str] | None = None) -> int:
             write_keypoints_csv(
                 session / "keypoints" / f"{cam}.csv", kp.time_s, kp.joint_names, kp.pixels
             )
+        info["subject"] = subject_from_keypoints(session)
+        print(f"subject from the keypoints: {json.dumps(info['subject'])}")
+        write_session_json(session / "session.json", info)
         run_kp = track_stereo_session(
             session,
             args.out / "result_kp",
@@ -206,6 +216,88 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def subject_from_keypoints(session_dir: Path) -> dict[str, dict[str, object]]:
+    """The subject's arm lengths and trunk vectors from the keypoints, triangulated over
+    every view (`keypoint_targets`): medians over the frames of the upper arm and forearm
+    lengths, and of the neck-to-shoulder and neck-to-head vectors in the torso frame (x
+    from the left to the right shoulder, z along pelvis-neck made orthogonal to x, y
+    forward), as ``session.json``'s ``subject`` fields. The model's own (``azad14``)
+    shoulders sit 40 mm below its neck, while a detector's neck (mapped from the shoulder
+    and hip midpoints) lies below the shoulders: without these the shoulders are placed
+    about 100 mm too low."""
+    session = load_session(session_dir)
+    names = list(session.video_cameras)
+    cams = [session.camera(c) for c in names]
+    kps = [session.keypoints[c] for c in names]
+    wanted = ("neck", "pelvis", "head", "left_shoulder", "right_shoulder")
+    wanted += ("left_elbow", "right_elbow", "left_wrist", "right_wrist")
+    pts = np.array(
+        [
+            keypoint_targets(cams, [kp.pixels[k] for kp in kps], kps[0].joint_names, wanted)
+            for k in range(kps[0].time_s.shape[0])
+        ]
+    )
+    p = {n: pts[:, i] for i, n in enumerate(wanted)}
+    x = p["right_shoulder"] - p["left_shoulder"]
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    up = p["neck"] - p["pelvis"]
+    z = up - np.sum(up * x, axis=1, keepdims=True) * x
+    z /= np.linalg.norm(z, axis=1, keepdims=True)
+    y = np.cross(z, x)
+
+    def local(v: np.ndarray) -> list[float]:
+        loc = np.stack([np.sum(v * x, 1), np.sum(v * y, 1), np.sum(v * z, 1)], axis=1)
+        return [round(float(c), 1) for c in np.nanmedian(loc, axis=0)]
+
+    def length(a: str, b: str) -> float:
+        return round(float(np.nanmedian(np.linalg.norm(p[a] - p[b], axis=1))), 1)
+
+    return {
+        "bone_lengths_mm": {
+            f"{s}_{seg}": length(f"{s}_{a}", f"{s}_{b}")
+            for s in ("left", "right")
+            for seg, a, b in (("upper_arm", "shoulder", "elbow"), ("forearm", "elbow", "wrist"))
+        },
+        "segment_vectors_mm": {
+            "left_clavicle": local(p["left_shoulder"] - p["neck"]),
+            "right_clavicle": local(p["right_shoulder"] - p["neck"]),
+            "head": local(p["head"] - p["neck"]),
+        },
+    }
+
+
+def joints_vs_keypoints(run: StereoRun, session_dir: Path) -> None:
+    """Median distance (mm) of the tracked arm joints from the keypoints triangulated over
+    every view, and the keypoints' median reprojection residual (px). The tracker takes
+    the wrists (and with a keypoint torso the shoulders' line and the neck), never the
+    elbows: the elbows are a check against an independent detection, itself a few px off
+    and from cameras whose frames are not exactly synchronous."""
+    session = load_session(session_dir)
+    names = list(session.video_cameras)
+    if any(c not in session.keypoints for c in names):
+        return
+    cams = [session.camera(c) for c in names]
+    kps = [session.keypoints[c] for c in names]
+    kn = list(kps[0].joint_names)
+    m = run.motion
+    for joint in ARM_JOINTS:
+        dist, resid = [], []
+        for k in range(m.n_frames):
+            px = [kp.pixels[k] for kp in kps]
+            p = keypoint_targets(cams, px, kn, (joint,))[0]
+            if not np.all(np.isfinite(p)):
+                continue
+            dist.append(np.linalg.norm(m.joints_mm[k, m.joint_names.index(joint)] - p))
+            r = [
+                np.linalg.norm(c.project(p[None])[0] - q[kn.index(joint)]) for c, q in zip(cams, px)
+            ]
+            resid.append(np.nanmean(r))
+        print(
+            f"{joint}: {np.nanmedian(dist):.1f} mm (median) from the keypoints triangulated "
+            f"({len(dist)} frames; their reprojection residual {np.median(resid):.1f} px)"
+        )
+
+
 def report(run: StereoRun, path: Path | None, session: Path, args: argparse.Namespace) -> None:
     """Print how often head and hands were measured; write the montage when asked."""
     status = np.array(
@@ -215,6 +307,7 @@ def report(run: StereoRun, path: Path | None, session: Path, args: argparse.Name
         seen = float(np.mean(status[:, i] == "seen"))
         print(f"{k}: seen on {100 * seen:.0f} % of {len(status)} frames")
     print(f"tracked {run.motion.n_frames} frames, {run.motion.n_frames / run.seconds:.1f} frames/s")
+    joints_vs_keypoints(run, session)
     if path is not None:
         frames = [int(x) for x in args.show.split(",") if x.strip()]
         frames = [f for f in frames if f < run.motion.n_frames]

@@ -27,6 +27,7 @@ from mocapkit.synth.session_writer import SynthOptions, synthesize_session
 from mocapkit.timing import StageTimer
 from mocapkit.tracking.base import STATUSES, FrameResult
 from mocapkit.tracking.stereo.arm_filter import ArmFilterConfig
+from mocapkit.tracking.stereo.hands import keypoint_targets
 from mocapkit.tracking.stereo.tracker import (
     StereoConfig,
     StereoSample,
@@ -305,3 +306,35 @@ def test_reset_arms_returns_both_filters_to_the_hanging_start(session):
     for side, f in tracker.filters.items():
         np.testing.assert_array_equal(f.particles, start[side])
         assert f.prev_elbow is None
+
+
+@pytest.mark.parametrize("anchor", ["neck", "shoulders"])
+def test_torso_anchor_places_the_model_on_its_keypoints(session, anchor):
+    """With fixed shoulders the model's neck (anchor "neck") or its shoulders' midpoint
+    (anchor "shoulders") is the triangulated keypoint's."""
+    s = load_session(session)
+    names = ["stereo_left", "stereo_right"]
+    cams = [s.camera(c) for c in names]
+    arm_cfg = ArmFilterConfig(n_particles=20, adaptive_shoulder=False)
+    cfg = StereoConfig(arm=arm_cfg, use_keypoints=True, torso="keypoints", torso_anchor=anchor)
+    kp_names = s.keypoints["stereo_left"].joint_names
+    sk = azad_skeleton(s.bone_lengths_mm, s.segment_vectors_mm)
+    tracker = StereoTracker(sk, cams, cfg, kp_names)
+    for k, smp in enumerate(s.samples(names)):
+        if k == 2:
+            break
+        pose = tracker.update(StereoSample(smp.time_s, {}, smp.keypoints_px))
+        kps = [np.asarray(smp.keypoints_px[c]) for c in names]
+        want = ("neck",) if anchor == "neck" else ("left_shoulder", "right_shoulder")
+        measured = keypoint_targets(cams, kps, kp_names, want).mean(axis=0)
+        model = np.mean([pose.joints_mm[CANONICAL_JOINTS.index(j)] for j in want], axis=0)
+        np.testing.assert_allclose(model, measured, atol=1e-6)
+
+
+def test_torso_anchor_refusals(session, tmp_path, capsys):
+    with pytest.raises(ConfigError, match="torso_anchor: expected 'shoulders' or 'neck'"):
+        StereoConfig(torso_anchor="hips")
+    out = str(tmp_path / "r")
+    rc = main(["track", "stereo", str(session), "--out", out, "--torso-anchor", "shoulders"])
+    assert rc == 2
+    assert "--torso-anchor needs --torso keypoints" in capsys.readouterr().err

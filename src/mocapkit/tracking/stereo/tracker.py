@@ -102,6 +102,17 @@ class StereoConfig:
         ``use_keypoints``, the torso keypoints triangulated over the views each frame
         (rotation from the shoulder line and the pelvis-neck line, the arms hanging
         from the neck keypoint).
+    torso_anchor : {"neck", "shoulders"}
+        With ``torso="keypoints"``: where the arms hang from. ``"neck"`` (default): the
+        model's neck on the neck keypoint, the shoulders at the subject's
+        ``segment_vectors_mm`` from it. ``"shoulders"``: the model's shoulders centred on
+        the midpoint of the triangulated shoulder keypoints. A detector's neck (mapped
+        from the shoulder and hip midpoints, `mocapkit.io.openpose`) lies below the
+        shoulders, while the ``azad14`` shoulders sit 40 mm below its neck: on a session
+        without the subject's vectors the ``"neck"`` anchor puts the shoulders about 100
+        mm too low (Pose2Sim demo: shoulders 153/142 mm from the triangulated keypoints,
+        41.6/38.8 mm with ``"shoulders"``, docs/stereo.md). On the synthetic accuracy
+        clips, whose sessions carry the exact vectors, both are alike (32.3 and 32.1 mm).
     reach_pad_mm : float
         Margin of the arms' reach box.
     gap_limit_s : float
@@ -119,6 +130,7 @@ class StereoConfig:
     figure_ground: bool = True
     yaw_gain: float = 0.6
     torso: str = "shoulders"
+    torso_anchor: str = "neck"
     reach_pad_mm: float = 80.0
     gap_limit_s: float = 0.25
     seed: int = 0
@@ -126,6 +138,10 @@ class StereoConfig:
     def __post_init__(self) -> None:
         if self.torso not in ("shoulders", "keypoints"):
             raise ConfigError(f"torso: expected 'shoulders' or 'keypoints', found {self.torso!r}")
+        if self.torso_anchor not in ("shoulders", "neck"):
+            raise ConfigError(
+                f"torso_anchor: expected 'shoulders' or 'neck', found {self.torso_anchor!r}"
+            )
         if self.torso == "keypoints" and not self.use_keypoints:
             raise ConfigError("torso='keypoints' needs use_keypoints (the session's 2-D keypoints)")
         if not 0.0 <= self.yaw_gain <= 1.0:
@@ -366,9 +382,12 @@ class StereoTracker:
         if samples:
             self.shirt = ColourModel.fit(np.concatenate(samples), radius=3.0, luma_margin=40.0)
 
-    def _torso_from_keypoints(self, kps: list[FloatArray]) -> tuple[FloatArray, FloatArray] | None:
-        """Torso rotation (x: left to right shoulder, z: pelvis to neck, orthogonalised) and
-        the neck, triangulated from the keypoints; None without both shoulders and the neck."""
+    def _torso_from_keypoints(
+        self, kps: list[FloatArray]
+    ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+        """Torso rotation (x: left to right shoulder, z: pelvis to neck, orthogonalised), the
+        neck and the shoulders' midpoint, triangulated from the keypoints; None without
+        both shoulders and the neck."""
         names = ("left_shoulder", "right_shoulder", "neck", "pelvis")
         p = keypoint_targets(self.cameras, kps, self.keypoint_names, names)
         if not np.all(np.isfinite(p[:3])):
@@ -382,7 +401,13 @@ class StereoTracker:
             return None
         z = z / nz
         rb = np.stack([x, np.cross(z, x), z], axis=1)
-        return rb, p[2]
+        return rb, p[2], 0.5 * (p[0] + p[1])
+
+    def _root_under(self, mid_shoulders: FloatArray, rb: FloatArray) -> FloatArray:
+        """The torso root that centres the model's two shoulders on ``mid_shoulders``
+        (`StereoConfig.torso_anchor`)."""
+        mid_model = 0.5 * (self.shoulder_off["left"] + self.shoulder_off["right"]) + self.head_off
+        return np.asarray(mid_shoulders - rb @ mid_model, dtype=float)
 
     def _figure(
         self, img: NDArray[np.uint8], skin: NDArray[np.uint8], roi: Roi | None
@@ -436,7 +461,9 @@ class StereoTracker:
                 if cfg.torso == "keypoints":
                     torso_kp = self._torso_from_keypoints(kps)
                     if torso_kp is not None:
-                        rb, torso_root = torso_kp
+                        rb, torso_root, mid_shoulders = torso_kp
+                        if cfg.torso_anchor == "shoulders":
+                            torso_root = self._root_under(mid_shoulders, rb)
                         self.yaw = math.atan2(rb[1, 0], rb[0, 0])
             else:
                 self.hands.set_right_axis(rb[:, 0])
