@@ -29,6 +29,7 @@ from mocapkit.tracking.base import STATUSES, FrameResult
 from mocapkit.tracking.stereo.arm_filter import ArmFilterConfig
 from mocapkit.tracking.stereo.hands import keypoint_targets
 from mocapkit.tracking.stereo.tracker import (
+    KEYPOINT_TORSO_SHOULDER_BOX_MM,
     StereoConfig,
     StereoSample,
     StereoTracker,
@@ -338,3 +339,32 @@ def test_torso_anchor_refusals(session, tmp_path, capsys):
     rc = main(["track", "stereo", str(session), "--out", out, "--torso-anchor", "shoulders"])
     assert rc == 2
     assert "--torso-anchor needs --torso keypoints" in capsys.readouterr().err
+
+
+def test_a_keypoint_torso_confines_the_shoulder_offsets(session):
+    s = load_session(session)
+    names = ["stereo_left", "stereo_right"]
+    cams = [s.camera(c) for c in names]
+    kp_names = s.keypoints["stereo_left"].joint_names
+
+    def tracker(torso, box=None):
+        arm_cfg = ArmFilterConfig(n_particles=30, shoulder_box_mm=box)
+        cfg = StereoConfig(arm=arm_cfg, use_keypoints=True, torso=torso)
+        return StereoTracker(azad_skeleton(), cams, cfg, kp_names)
+
+    assert tracker("shoulders").arm_config.shoulder_box_mm is None  # recipe A's 50 mm
+    assert tracker("shoulders", 35.0).arm_config.shoulder_box_mm == 35.0
+    assert tracker("keypoints", 35.0).arm_config.shoulder_box_mm == 35.0
+    t = tracker("keypoints")
+    assert t.arm_config.shoulder_box_mm == KEYPOINT_TORSO_SHOULDER_BOX_MM
+    for k, smp in enumerate(s.samples(names)):
+        if k == 4:
+            break
+        t.update(StereoSample(smp.time_s, {c: smp.image(c) for c in names}, smp.keypoints_px))
+        for f in t.filters.values():
+            assert np.abs(f.particles[:, 4:]).max() <= KEYPOINT_TORSO_SHOULDER_BOX_MM
+    t.reset_arms()  # the reset keeps the resolved settings
+    for f in t.filters.values():
+        assert f.config.shoulder_box_mm == KEYPOINT_TORSO_SHOULDER_BOX_MM
+    with pytest.raises(ConfigError, match="shoulder_box_mm: expected >= 0 mm"):
+        ArmFilterConfig(shoulder_box_mm=-1.0)
