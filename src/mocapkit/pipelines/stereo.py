@@ -19,7 +19,7 @@ import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import cv2
 import numpy as np
@@ -38,6 +38,9 @@ from mocapkit.tracking.stereo.tracker import (
     StereoTracker,
     azad_skeleton,
 )
+
+if TYPE_CHECKING:
+    from mocapkit.io.session import Session
 
 FloatArray = NDArray[np.float64]
 
@@ -80,6 +83,40 @@ def parse_cameras(text: str | None, available: Sequence[str]) -> list[str]:
     return cams
 
 
+def _open_session(
+    session_dir: str | os.PathLike[str], cameras: str | Sequence[str] | None, cfg: StereoConfig
+) -> tuple[Session, list[str], StereoTracker]:
+    """The session, its camera names (``--cameras``) and a `StereoTracker` on them, fitted
+    to the subject; refuses keypoint mode without every camera's keypoints."""
+    from mocapkit.io.session import load_session
+
+    session = load_session(session_dir)
+    names = (
+        parse_cameras(cameras, session.video_cameras)
+        if cameras is None or isinstance(cameras, str)
+        else parse_cameras(",".join(cameras), session.video_cameras)
+    )
+    kp_names: tuple[str, ...] = ()
+    if cfg.use_keypoints:
+        missing = [c for c in names if c not in session.keypoints]
+        if missing:
+            raise SessionError(
+                f"{session.path}: --keypoints needs keypoints/<camera>.csv for {missing}"
+            )
+        kp_names = tuple(session.keypoints[names[0]].joint_names)
+    sk = azad_skeleton(session.bone_lengths_mm, session.segment_vectors_mm)
+    cams = [session.camera(c) for c in names]
+    return session, names, StereoTracker(sk, cams, cfg, keypoint_names=kp_names)
+
+
+def _samples(session: Session, names: Sequence[str], n: int) -> Iterator[StereoSample]:
+    """The first ``n`` frames of the named cameras as `StereoSample` (images, keypoints)."""
+    for k, s in enumerate(session.samples(list(names))):
+        if k >= n:
+            break
+        yield StereoSample(s.time_s, {c: s.image(c) for c in names}, dict(s.keypoints_px))
+
+
 def track_stereo_session(
     session_dir: str | os.PathLike[str],
     out_dir: str | os.PathLike[str] | None = None,
@@ -109,45 +146,22 @@ def track_stereo_session(
     max_frames : int, optional
         Stop after this many frames.
     """
-    from mocapkit.io.session import load_session
 
-    session = load_session(session_dir)
-    names = (
-        parse_cameras(cameras, session.video_cameras)
-        if cameras is None or isinstance(cameras, str)
-        else parse_cameras(",".join(cameras), session.video_cameras)
-    )
     cfg = config or StereoConfig()
     if use_keypoints:
         cfg = replace(cfg, use_keypoints=True)
     if n_particles is not None:
         cfg = replace(cfg, arm=replace(cfg.arm, n_particles=int(n_particles)))
-    kp_names: tuple[str, ...] = ()
-    if cfg.use_keypoints:
-        missing = [c for c in names if c not in session.keypoints]
-        if missing:
-            raise SessionError(
-                f"{session.path}: --keypoints needs keypoints/<camera>.csv for {missing}"
-            )
-        kp_names = tuple(session.keypoints[names[0]].joint_names)
-    sk = azad_skeleton(session.bone_lengths_mm, session.segment_vectors_mm)
-    cams = [session.camera(c) for c in names]
-    tracker = StereoTracker(sk, cams, cfg, keypoint_names=kp_names)
+    session, names, tracker = _open_session(session_dir, cameras, cfg)
     n = session.video(names[0]).n_frames
     if max_frames is not None:
         n = min(n, int(max_frames))
-
-    def samples() -> Iterator[StereoSample]:
-        for k, s in enumerate(session.samples(names)):
-            if k >= n:
-                break
-            yield StereoSample(s.time_s, {c: s.image(c) for c in names}, dict(s.keypoints_px))
-
+    samples = _samples(session, names, n)
     mode = "keypoints" if cfg.use_keypoints else "skin blobs"
     timer = StageTimer()
     run = run_tracker(
         tracker,
-        samples(),
+        samples,
         n,
         out_dir,
         label=f"track stereo {Path(session_dir).name}",
@@ -440,21 +454,13 @@ def _track_with_reset(
 ) -> tuple[FloatArray, FloatArray, Any]:
     """Stream a session through a `StereoTracker`, resetting its arms before frame
     ``reset_frame``; returns times (T,), the 15 canonical joints (T, 15, 3) and the truth."""
-    from mocapkit.io.session import load_session
-
-    session = load_session(session_dir)
+    session, names, tracker = _open_session(session_dir, cameras, cfg)
     session.require(truth=True)
-    names = parse_cameras(cameras, session.video_cameras)
-    kp_names = tuple(session.keypoints[names[0]].joint_names) if cfg.use_keypoints else ()
-    sk = azad_skeleton(session.bone_lengths_mm, session.segment_vectors_mm)
-    tracker = StereoTracker(sk, [session.camera(c) for c in names], cfg, keypoint_names=kp_names)
     times, joints = [], []
-    for k, s in enumerate(session.samples(names)):
+    for k, sample in enumerate(_samples(session, names, session.video(names[0]).n_frames)):
         if k == reset_frame:
             tracker.reset_arms()
-        pose = tracker.update(
-            StereoSample(s.time_s, {c: s.image(c) for c in names}, dict(s.keypoints_px))
-        )
+        pose = tracker.update(sample)
         times.append(pose.time_s)
         joints.append(pose.joints_mm)
     return np.array(times), np.array(joints), session.truth
