@@ -29,6 +29,13 @@ def register_method(methods: Any) -> None:
         default="stereo_left,stereo_right",
         help="views (the sessions have stereo_left, stereo_right, mono)",
     )
+    p.add_argument("--seed", type=int, default=0, help="the filters' random seed (default 0)")
+    p.add_argument(
+        "--particles",
+        type=int,
+        default=None,
+        help="particles per arm and run (default 150; not with --ablations)",
+    )
     p.add_argument(
         "--ablations",
         action="store_true",
@@ -49,8 +56,11 @@ def register_method(methods: Any) -> None:
 
 def _run(args: argparse.Namespace) -> int:
     from mocapkit.cli.args import mocap_folder
+    from mocapkit.errors import ConfigError
     from mocapkit.pipelines.stereo import accuracy_header, stereo_accuracy
 
+    if args.particles is not None and args.particles < 2:
+        raise ConfigError(f"--particles: expected at least 2, found {args.particles}")
     mocap = mocap_folder(args.mocap)
     if args.ablations:
         return _ablations(args, mocap)
@@ -62,6 +72,8 @@ def _run(args: argparse.Namespace) -> int:
         modes=[m.strip() for m in args.modes.split(",") if m.strip()],
         cameras=args.cameras,
         say=None if args.json else print,
+        seed=args.seed,
+        n_particles=args.particles,
     )
     if args.json:
         print(json.dumps(rows, indent=2))
@@ -84,6 +96,7 @@ def _ablations(args: argparse.Namespace, mocap: Any) -> int:
         variants=variants,
         cameras=args.cameras,
         say=None if args.json else print,
+        seed=args.seed,
     )
     if args.json:
         print(json.dumps(rows, indent=2))

@@ -356,8 +356,14 @@ def stereo_accuracy(
     cameras: str | None = "stereo_left,stereo_right",
     seconds: float = 4.0,
     say: Any = None,
+    seed: int = 0,
+    n_particles: int | None = None,
 ) -> list[dict[str, Any]]:
     """Render each excerpt (``--rig all``, long sleeves) once, track it in each mode.
+
+    ``seed`` (the filters' random generator, `StereoConfig.seed`) and ``n_particles``
+    (default 150) change every mode's settings, to measure the spread between seeds and
+    the effect of the particle count.
 
     Returns one row per clip and mode: ``clip``, ``mode``, ``cameras`` and the figures
     of `evaluate_stereo` plus ``frames_per_s``.
@@ -380,7 +386,10 @@ def stereo_accuracy(
                 ),
             )
         for m in modes:
-            run = track_stereo_session(session, None, cameras=cameras, config=ACCURACY_MODES[m])
+            cfg = replace(ACCURACY_MODES[m], seed=int(seed))
+            run = track_stereo_session(
+                session, None, cameras=cameras, config=cfg, n_particles=n_particles
+            )
             ev = evaluate_stereo(run, session)
             row = {"clip": clip, "start_s": start, "mode": m, "cameras": cameras or "all", **ev}
             row["frames_per_s"] = run.motion.n_frames / max(run.seconds, 1e-9)
@@ -477,8 +486,10 @@ def stereo_ablations(
     limit: int = 30,
     seconds: float = 4.0,
     say: Any = None,
+    seed: int = 0,
 ) -> list[dict[str, Any]]:
-    """Mean arm error and frames to converge from a wrong start, per variant and clip.
+    """Mean arm error and frames to converge from a wrong start, per variant and clip
+    (``seed``: `StereoConfig.seed` of every variant).
 
     Each clip (rendered as in `stereo_accuracy`) is tracked twice per variant: once
     undisturbed (its arm mean error is the figure) and once with both arm filters reset
@@ -508,7 +519,7 @@ def stereo_ablations(
                 ),
             )
         for v in variants:
-            cfg = ABLATIONS[v]
+            cfg = replace(ABLATIONS[v], seed=int(seed))
             t, joints, truth = _track_with_reset(session, cameras, cfg, None)
             free = arm_errors_per_frame(t, CANONICAL_JOINTS, joints, truth)
             reset_frame = int(np.searchsorted(t, t[0] + reset_s))

@@ -368,3 +368,9 @@ def test_a_keypoint_torso_confines_the_shoulder_offsets(session):
         assert f.config.shoulder_box_mm == KEYPOINT_TORSO_SHOULDER_BOX_MM
     with pytest.raises(ConfigError, match="shoulder_box_mm: expected >= 0 mm"):
         ArmFilterConfig(shoulder_box_mm=-1.0)
+
+
+def test_cli_accuracy_stereo_refuses_too_few_particles(capsys):
+    rc = main(["accuracy", "stereo", "--particles", "1"])
+    assert rc == 2
+    assert "--particles: expected at least 2, found 1" in capsys.readouterr().err
