@@ -29,15 +29,41 @@ def register_method(methods: Any) -> None:
         default="stereo_left,stereo_right",
         help="views (the sessions have stereo_left, stereo_right, mono)",
     )
+    p.add_argument("--seed", type=int, default=0, help="the filters' random seed (default 0)")
+    p.add_argument(
+        "--particles",
+        type=int,
+        default=None,
+        help="particles per arm and run (default 150; not with --ablations)",
+    )
+    p.add_argument(
+        "--ablations",
+        action="store_true",
+        help="instead of the modes: the ablation study (keypoints+torso variants on four "
+        "clips): arm mean error and frames to converge after both arms are reset to a "
+        "hanging arm at 1 s",
+    )
+    p.add_argument(
+        "--variants",
+        default=None,
+        help="with --ablations: comma-separated variants (default all: default, no IK "
+        "sampling, constant noise, static shoulders, conventional fusion, eq. (1) edges, "
+        "weighted mean estimate, no shoulder pull)",
+    )
     p.add_argument("--json", action="store_true", help="print JSON rows instead of a table")
     p.set_defaults(func=_run)
 
 
 def _run(args: argparse.Namespace) -> int:
     from mocapkit.cli.args import mocap_folder
+    from mocapkit.errors import ConfigError
     from mocapkit.pipelines.stereo import accuracy_header, stereo_accuracy
 
+    if args.particles is not None and args.particles < 2:
+        raise ConfigError(f"--particles: expected at least 2, found {args.particles}")
     mocap = mocap_folder(args.mocap)
+    if args.ablations:
+        return _ablations(args, mocap)
     if not args.json:
         print(accuracy_header())
     rows = stereo_accuracy(
@@ -46,7 +72,39 @@ def _run(args: argparse.Namespace) -> int:
         modes=[m.strip() for m in args.modes.split(",") if m.strip()],
         cameras=args.cameras,
         say=None if args.json else print,
+        seed=args.seed,
+        n_particles=args.particles,
     )
     if args.json:
         print(json.dumps(rows, indent=2))
+    return 0
+
+
+def _ablations(args: argparse.Namespace, mocap: Any) -> int:
+    from mocapkit.pipelines.stereo import ABLATIONS, stereo_ablations
+
+    variants = (
+        [v.strip() for v in args.variants.split(",") if v.strip()]
+        if args.variants
+        else list(ABLATIONS)
+    )
+    if not args.json:
+        print(f"{'clip':<16}{'variant':<24}{'mean':>7}{'frames':>7}{'at reset':>9}")
+    rows = stereo_ablations(
+        mocap,
+        args.work,
+        variants=variants,
+        cameras=args.cameras,
+        say=None if args.json else print,
+        seed=args.seed,
+    )
+    if args.json:
+        print(json.dumps(rows, indent=2))
+        return 0
+    print(f"{'variant':<24}{'mean mm':>8}{'frames to converge (per clip)':>32}")
+    for v in variants:
+        mine = [r for r in rows if r["variant"] == v]
+        mean = sum(r["arm_mean_mm"] for r in mine) / len(mine)
+        frames = ", ".join(str(r["frames_to_converge"]) for r in mine)
+        print(f"{v:<24}{mean:8.1f}  {frames}")
     return 0

@@ -47,6 +47,14 @@ def register_method(methods: Any) -> None:
         "from the shoulder/neck/pelvis keypoints (with --keypoints)",
     )
     p.add_argument(
+        "--torso-anchor",
+        choices=("neck", "shoulders"),
+        default="neck",
+        help="with --torso keypoints: hang the arms from the neck keypoint (default; give "
+        "the subject's segment_vectors_mm in session.json) or centre the shoulders on the "
+        "shoulder keypoints (real detections without the subject's measurements)",
+    )
+    p.add_argument(
         "--fixed-shoulders",
         action="store_true",
         help="4 DoF per arm: no adaptive shoulder offsets (best with --torso keypoints)",
@@ -68,7 +76,11 @@ def _run(args: argparse.Namespace) -> int:
         raise ConfigError("--torso keypoints needs --keypoints")
     if args.particles is not None and args.particles < 2:
         raise ConfigError(f"--particles: expected at least 2, found {args.particles}")
-    cfg = StereoConfig(use_keypoints=args.keypoints, torso=args.torso)
+    if args.torso_anchor != "neck" and args.torso != "keypoints":
+        raise ConfigError("--torso-anchor needs --torso keypoints")
+    cfg = StereoConfig(
+        use_keypoints=args.keypoints, torso=args.torso, torso_anchor=args.torso_anchor
+    )
     if args.fixed_shoulders:
         cfg = replace(cfg, arm=replace(cfg.arm, adaptive_shoulder=False))
     run = track_stereo_session(

@@ -19,7 +19,7 @@ import time
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
 import cv2
 import numpy as np
@@ -30,6 +30,7 @@ from mocapkit.io.motion import Motion
 from mocapkit.pipelines.run import run_tracker
 from mocapkit.timing import StageTimer
 from mocapkit.tracking.stereo.arm_filter import ArmFilterConfig
+from mocapkit.tracking.stereo.fusion import default_fusion
 from mocapkit.tracking.stereo.tracker import (
     StereoConfig,
     StereoPose,
@@ -37,6 +38,9 @@ from mocapkit.tracking.stereo.tracker import (
     StereoTracker,
     azad_skeleton,
 )
+
+if TYPE_CHECKING:
+    from mocapkit.io.session import Session
 
 FloatArray = NDArray[np.float64]
 
@@ -79,6 +83,40 @@ def parse_cameras(text: str | None, available: Sequence[str]) -> list[str]:
     return cams
 
 
+def _open_session(
+    session_dir: str | os.PathLike[str], cameras: str | Sequence[str] | None, cfg: StereoConfig
+) -> tuple[Session, list[str], StereoTracker]:
+    """The session, its camera names (``--cameras``) and a `StereoTracker` on them, fitted
+    to the subject; refuses keypoint mode without every camera's keypoints."""
+    from mocapkit.io.session import load_session
+
+    session = load_session(session_dir)
+    names = (
+        parse_cameras(cameras, session.video_cameras)
+        if cameras is None or isinstance(cameras, str)
+        else parse_cameras(",".join(cameras), session.video_cameras)
+    )
+    kp_names: tuple[str, ...] = ()
+    if cfg.use_keypoints:
+        missing = [c for c in names if c not in session.keypoints]
+        if missing:
+            raise SessionError(
+                f"{session.path}: --keypoints needs keypoints/<camera>.csv for {missing}"
+            )
+        kp_names = tuple(session.keypoints[names[0]].joint_names)
+    sk = azad_skeleton(session.bone_lengths_mm, session.segment_vectors_mm)
+    cams = [session.camera(c) for c in names]
+    return session, names, StereoTracker(sk, cams, cfg, keypoint_names=kp_names)
+
+
+def _samples(session: Session, names: Sequence[str], n: int) -> Iterator[StereoSample]:
+    """The first ``n`` frames of the named cameras as `StereoSample` (images, keypoints)."""
+    for k, s in enumerate(session.samples(list(names))):
+        if k >= n:
+            break
+        yield StereoSample(s.time_s, {c: s.image(c) for c in names}, dict(s.keypoints_px))
+
+
 def track_stereo_session(
     session_dir: str | os.PathLike[str],
     out_dir: str | os.PathLike[str] | None = None,
@@ -108,45 +146,22 @@ def track_stereo_session(
     max_frames : int, optional
         Stop after this many frames.
     """
-    from mocapkit.io.session import load_session
 
-    session = load_session(session_dir)
-    names = (
-        parse_cameras(cameras, session.video_cameras)
-        if cameras is None or isinstance(cameras, str)
-        else parse_cameras(",".join(cameras), session.video_cameras)
-    )
     cfg = config or StereoConfig()
     if use_keypoints:
         cfg = replace(cfg, use_keypoints=True)
     if n_particles is not None:
         cfg = replace(cfg, arm=replace(cfg.arm, n_particles=int(n_particles)))
-    kp_names: tuple[str, ...] = ()
-    if cfg.use_keypoints:
-        missing = [c for c in names if c not in session.keypoints]
-        if missing:
-            raise SessionError(
-                f"{session.path}: --keypoints needs keypoints/<camera>.csv for {missing}"
-            )
-        kp_names = tuple(session.keypoints[names[0]].joint_names)
-    sk = azad_skeleton(session.bone_lengths_mm, session.segment_vectors_mm)
-    cams = [session.camera(c) for c in names]
-    tracker = StereoTracker(sk, cams, cfg, keypoint_names=kp_names)
+    session, names, tracker = _open_session(session_dir, cameras, cfg)
     n = session.video(names[0]).n_frames
     if max_frames is not None:
         n = min(n, int(max_frames))
-
-    def samples() -> Iterator[StereoSample]:
-        for k, s in enumerate(session.samples(names)):
-            if k >= n:
-                break
-            yield StereoSample(s.time_s, {c: s.image(c) for c in names}, dict(s.keypoints_px))
-
+    samples = _samples(session, names, n)
     mode = "keypoints" if cfg.use_keypoints else "skin blobs"
     timer = StageTimer()
     run = run_tracker(
         tracker,
-        samples(),
+        samples,
         n,
         out_dir,
         label=f"track stereo {Path(session_dir).name}",
@@ -213,16 +228,31 @@ def bench_stereo(
     n_frames: int = 60,
     repeats: int = 3,
     n_particles: int = 150,
+    more_particles: int | None = 1500,
 ) -> dict[str, Any]:
-    """Frames per second of the whole per-frame pipeline (images in memory).
+    """Frames per CPU second of the whole per-frame pipeline (images in memory).
 
     Renders (or reads) a 640x480 stereo session, decodes its frames once, then times
-    `StereoTracker.update` over them after a warm-up; median over ``repeats``.
+    `StereoTracker.update` over them after a warm-up pass; medians over ``repeats``.
+    The time is the process's CPU time (`time.process_time`; OpenCV on one thread,
+    Numba single-threaded), so the figure is one core's and a shared machine's load
+    does not enter it; ``fps_wall`` gives the wall-clock rate beside it.
+
+    Returns
+    -------
+    dict
+        ``fps`` (frames per CPU second, median), ``fps_runs``, ``fps_wall``,
+        ``ms_per_frame``, ``stages_ms`` (CPU ms a frame per stage of
+        `StereoTracker.update`: ``skin``, ``head_hands``, ``gradients``, ``arms``, and
+        ``other``: the rest of the frame), ``particles``, ``runs_per_frame``,
+        ``image_size``, ``views``, ``n_frames``; with ``more_particles``, also
+        ``fps_<N>_particles`` and ``arms_ms_<N>_particles`` for N = ``more_particles``.
     """
     import tempfile
 
     from mocapkit.io.session import load_session
     from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+    from mocapkit.timing import StageTimer
 
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(session_dir) if session_dir is not None else Path(tmp) / "bench"
@@ -241,30 +271,55 @@ def bench_stereo(
             frames.append(StereoSample(s.time_s, {c: s.image(c) for c in names}))
         sk = azad_skeleton(session.bone_lengths_mm, session.segment_vectors_mm)
         cams = [session.camera(c) for c in names]
-    cfg = StereoConfig(arm=ArmFilterConfig(n_particles=n_particles))
-    rates = []
+
+    def timed(particles: int) -> tuple[list[float], list[float], dict[str, float]]:
+        cfg = StereoConfig(arm=ArmFilterConfig(n_particles=particles))
+        cpu_rates, wall_rates = [], []
+        stage_runs: list[dict[str, float]] = []
+        for r in range(repeats + 1):
+            timer = StageTimer(time.process_time)
+            tracker = StereoTracker(sk, cams, cfg, timer=timer)
+            c0, t0 = time.process_time(), time.perf_counter()
+            for f in frames:
+                tracker.update(f)
+            cpu, wall = time.process_time() - c0, time.perf_counter() - t0
+            if r > 0:  # the first pass compiles and warms up
+                cpu_rates.append(len(frames) / max(cpu, 1e-9))
+                wall_rates.append(len(frames) / max(wall, 1e-9))
+                ms = {k: 1e3 * v / len(frames) for k, v in timer.totals_s().items()}
+                ms["other"] = 1e3 * cpu / len(frames) - sum(ms.values())
+                stage_runs.append(ms)
+        med = int(np.argsort(cpu_rates)[len(cpu_rates) // 2])
+        return cpu_rates, wall_rates, stage_runs[med]
+
     threads = cv2.getNumThreads()
     cv2.setNumThreads(1)  # figures for one core, as the other benchmarks
     try:
-        for r in range(repeats + 1):
-            tracker = StereoTracker(sk, cams, cfg)
-            t0 = time.perf_counter()
-            for f in frames:
-                tracker.update(f)
-            dt = time.perf_counter() - t0
-            if r > 0:  # the first pass compiles and warms up
-                rates.append(len(frames) / dt)
+        cpu_rates, wall_rates, stages = timed(n_particles)
+        out: dict[str, Any] = {
+            "fps": float(np.median(cpu_rates)),
+            "fps_runs": [round(x, 1) for x in cpu_rates],
+            "fps_wall": float(np.median(wall_rates)),
+            "ms_per_frame": 1e3 / float(np.median(cpu_rates)),
+            "stages_ms": {k: round(v, 3) for k, v in stages.items()},
+            "particles": n_particles,
+        }
+        if more_particles is not None:
+            more_rates, _wall, more_stages = timed(int(more_particles))
+            out[f"fps_{int(more_particles)}_particles"] = float(np.median(more_rates))
+            out[f"arms_ms_{int(more_particles)}_particles"] = round(more_stages["arms"], 3)
     finally:
         cv2.setNumThreads(threads)
-    return {
-        "frames_per_s": float(np.median(rates)),
-        "frames_per_s_runs": [round(x, 1) for x in rates],
-        "n_frames": len(frames),
-        "particles": n_particles,
-        "runs_per_frame": cfg.arm.n_runs,
-        "image_size": list(cams[0].image_size),
-        "views": len(cams),
-    }
+    out.update(
+        {
+            "runs_per_frame": StereoConfig().arm.n_runs,
+            "image_size": f"{cams[0].image_size[0]}x{cams[0].image_size[1]}",
+            "views": len(cams),
+            "n_frames": len(frames),
+            "clock": "CPU time of the process (OpenCV on one thread)",
+        }
+    )
+    return out
 
 
 #: Excerpts (clip, start s) where the subject stays in front of a fixed stereo rig, the
@@ -301,8 +356,14 @@ def stereo_accuracy(
     cameras: str | None = "stereo_left,stereo_right",
     seconds: float = 4.0,
     say: Any = None,
+    seed: int = 0,
+    n_particles: int | None = None,
 ) -> list[dict[str, Any]]:
     """Render each excerpt (``--rig all``, long sleeves) once, track it in each mode.
+
+    ``seed`` (the filters' random generator, `StereoConfig.seed`) and ``n_particles``
+    (default 150) change every mode's settings, to measure the spread between seeds and
+    the effect of the particle count.
 
     Returns one row per clip and mode: ``clip``, ``mode``, ``cameras`` and the figures
     of `evaluate_stereo` plus ``frames_per_s``.
@@ -325,13 +386,158 @@ def stereo_accuracy(
                 ),
             )
         for m in modes:
-            run = track_stereo_session(session, None, cameras=cameras, config=ACCURACY_MODES[m])
+            cfg = replace(ACCURACY_MODES[m], seed=int(seed))
+            run = track_stereo_session(
+                session, None, cameras=cameras, config=cfg, n_particles=n_particles
+            )
             ev = evaluate_stereo(run, session)
             row = {"clip": clip, "start_s": start, "mode": m, "cameras": cameras or "all", **ev}
             row["frames_per_s"] = run.motion.n_frames / max(run.seconds, 1e-9)
             rows.append(row)
             if say is not None:
                 say(format_accuracy_row(row))
+    return rows
+
+
+#: Variants of the ablation study (the paper's Figs. 2, 3, 5 and 8 as numbers), each a
+#: change of the ``keypoints+torso`` mode.
+_BASE = ACCURACY_MODES["keypoints+torso"]
+ABLATIONS: dict[str, StereoConfig] = {
+    "default": _BASE,
+    "no IK sampling": replace(_BASE, arm=replace(_BASE.arm, use_ik=False)),
+    "constant noise": replace(_BASE, arm=replace(_BASE.arm, adaptive_noise=False)),
+    "static shoulders": replace(_BASE, arm=replace(_BASE.arm, adaptive_shoulder=False)),
+    "conventional fusion": replace(_BASE, arm=replace(_BASE.arm, fusion=default_fusion(True))),
+    "eq. (1) edges": replace(_BASE, arm=replace(_BASE.arm, oriented_edges=False)),
+    "weighted mean estimate": replace(_BASE, arm=replace(_BASE.arm, estimate="mean")),
+    "no shoulder pull": replace(_BASE, arm=replace(_BASE.arm, shoulder_pull=0.0)),
+}
+
+#: Clips of the ablation study (a subset of `STEREO_CLIPS`).
+ABLATION_CLIPS: tuple[tuple[str, float], ...] = (
+    ("13_26.bvh", 7.5),
+    ("01_09.amc", 7.5),
+    ("01_12.amc", 5.0),
+    ("charleston1.amc", 0.0),
+)
+
+
+def arm_errors_per_frame(
+    time_s: FloatArray, joint_names: Sequence[str], joints_mm: FloatArray, truth: Any
+) -> FloatArray:
+    """Mean error (T,) mm of the six `ARM_JOINTS` per frame against a `Truth` (frames matched
+    by time: the truth sample at or after each time); NaN joints are left out, a frame
+    with none is NaN."""
+    idx = np.clip(np.searchsorted(truth.time_s, time_s), 0, len(truth.time_s) - 1)
+    tn, mn = list(truth.joint_names), list(joint_names)
+    err = np.stack(
+        [
+            np.linalg.norm(joints_mm[:, mn.index(j)] - truth.joints_mm[idx, tn.index(j)], axis=1)
+            for j in ARM_JOINTS
+        ],
+        axis=1,
+    )
+    out = np.full(err.shape[0], math.nan)
+    seen = np.any(np.isfinite(err), axis=1)
+    out[seen] = np.nanmean(err[seen], axis=1)
+    return out
+
+
+def frames_to_converge(
+    err_reset: FloatArray, err_free: FloatArray, start: int, tol_mm: float, limit: int
+) -> int:
+    """Frames from a reset at ``start`` until the reset run's error is within ``tol_mm`` of
+    the undisturbed run's (1: already on the reset frame); ``limit + 1`` when not within
+    ``limit`` frames. Frames where either error is NaN do not count as converged."""
+    for k in range(limit):
+        f = start + k
+        if f >= err_reset.shape[0]:
+            break
+        if err_reset[f] <= err_free[f] + tol_mm:  # NaN compares False
+            return k + 1
+    return limit + 1
+
+
+def _track_with_reset(
+    session_dir: Path, cameras: str | None, cfg: StereoConfig, reset_frame: int | None
+) -> tuple[FloatArray, FloatArray, Any]:
+    """Stream a session through a `StereoTracker`, resetting its arms before frame
+    ``reset_frame``; returns times (T,), the 15 canonical joints (T, 15, 3) and the truth."""
+    session, names, tracker = _open_session(session_dir, cameras, cfg)
+    session.require(truth=True)
+    times, joints = [], []
+    for k, sample in enumerate(_samples(session, names, session.video(names[0]).n_frames)):
+        if k == reset_frame:
+            tracker.reset_arms()
+        pose = tracker.update(sample)
+        times.append(pose.time_s)
+        joints.append(pose.joints_mm)
+    return np.array(times), np.array(joints), session.truth
+
+
+def stereo_ablations(
+    mocap_dir: str | os.PathLike[str],
+    work_dir: str | os.PathLike[str],
+    variants: Sequence[str] = tuple(ABLATIONS),
+    clips: Sequence[tuple[str, float]] = ABLATION_CLIPS,
+    cameras: str | None = "stereo_left,stereo_right",
+    reset_s: float = 1.0,
+    tol_mm: float = 10.0,
+    limit: int = 30,
+    seconds: float = 4.0,
+    say: Any = None,
+    seed: int = 0,
+) -> list[dict[str, Any]]:
+    """Mean arm error and frames to converge from a wrong start, per variant and clip
+    (``seed``: `StereoConfig.seed` of every variant).
+
+    Each clip (rendered as in `stereo_accuracy`) is tracked twice per variant: once
+    undisturbed (its arm mean error is the figure) and once with both arm filters reset
+    to the initial hanging arm at ``reset_s`` (`StereoTracker.reset_arms`); the frames
+    to converge are those until the reset run's error is back within ``tol_mm`` of the
+    undisturbed run's (`frames_to_converge`, at most ``limit``; ``limit + 1``: not back).
+
+    Returns one row per clip and variant: ``clip``, ``variant``, ``arm_mean_mm``,
+    ``frames_to_converge``, ``error_at_reset_mm`` (the reset run's error on the reset
+    frame).
+    """
+    from mocapkit.skeleton.model import CANONICAL_JOINTS
+    from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+
+    for v in variants:
+        if v not in ABLATIONS:
+            raise unknown_name("ablation variant", v, ABLATIONS, "--variants")
+    rows = []
+    for clip, start in clips:
+        session = Path(work_dir) / f"{Path(clip).stem}_{start:g}s"
+        if not (session / "truth.npz").is_file():
+            synthesize_session(
+                str(Path(mocap_dir) / clip),
+                session,
+                SynthOptions(
+                    rig="all", start_s=start, seconds=seconds, sleeve="long", overwrite=True
+                ),
+            )
+        for v in variants:
+            cfg = replace(ABLATIONS[v], seed=int(seed))
+            t, joints, truth = _track_with_reset(session, cameras, cfg, None)
+            free = arm_errors_per_frame(t, CANONICAL_JOINTS, joints, truth)
+            reset_frame = int(np.searchsorted(t, t[0] + reset_s))
+            t2, joints2, _ = _track_with_reset(session, cameras, cfg, reset_frame)
+            reset = arm_errors_per_frame(t2, CANONICAL_JOINTS, joints2, truth)
+            row = {
+                "clip": clip,
+                "variant": v,
+                "arm_mean_mm": float(np.nanmean(free)),
+                "frames_to_converge": frames_to_converge(reset, free, reset_frame, tol_mm, limit),
+                "error_at_reset_mm": float(reset[reset_frame]),
+            }
+            rows.append(row)
+            if say is not None:
+                say(
+                    f"{clip:<16}{v:<24}{row['arm_mean_mm']:7.1f}{row['frames_to_converge']:7d}"
+                    f"{row['error_at_reset_mm']:9.1f}"
+                )
     return rows
 
 
@@ -352,15 +558,20 @@ def accuracy_header() -> str:
 
 
 __all__ = [
+    "ABLATIONS",
+    "ABLATION_CLIPS",
     "ACCURACY_MODES",
     "ARM_JOINTS",
     "STEREO_CLIPS",
     "StereoRun",
     "accuracy_header",
+    "arm_errors_per_frame",
     "bench_stereo",
     "evaluate_stereo",
     "format_accuracy_row",
+    "frames_to_converge",
     "parse_cameras",
+    "stereo_ablations",
     "stereo_accuracy",
     "track_stereo_session",
     "truth_yaw_rad",

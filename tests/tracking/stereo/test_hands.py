@@ -6,8 +6,10 @@ import math
 
 import cv2
 import numpy as np
+import pytest
 
 from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
+from mocapkit.errors import ConfigError
 from mocapkit.tracking.stereo.hands import (
     BlobConfig,
     HeadHandTracker,
@@ -100,3 +102,27 @@ def test_a_target_lost_for_long_is_reinitialised_on_its_side():
     new_left = left + np.array([0.0, 0.0, 400.0])  # reappears far from where it was lost
     out = tracker.update_candidates(0.2, np.array([head, new_left, right]))
     np.testing.assert_allclose(out[1], new_left)
+
+
+def test_an_unseen_head_is_held_slowing_down_then_released():
+    cams = _stereo()
+    cfg = BlobConfig(head_coast_frames=15)
+    tracker = HeadHandTracker(cams, cfg, np.array([1.0, 0.0, 0.0]))
+    left = np.array([-300.0, 200.0, 1100.0])
+    right = np.array([300.0, 200.0, 1100.0])
+    dt = 1.0 / 30.0
+    for k in range(5):  # the head walks at 300 mm/s (10 mm a frame)
+        head = np.array([10.0 * k, 0.0, 1600.0])
+        tracker.update_candidates(k * dt, np.array([head, left, right]))
+    last = head.copy()
+    for k in range(5, 5 + 15):  # face turned away: only the hands
+        out = tracker.update_candidates(k * dt, np.array([left, right]))
+        assert np.all(np.isnan(out[0]))  # held, not measured
+        held = tracker.predicted()[0]
+        # velocity halves every frame: at most 10 * (1/2 + 1/4 + ...) = 10 mm beyond
+        assert np.linalg.norm(held - last) <= 10.0 + 1e-9
+    assert np.all(np.isfinite(tracker.predicted()[0]))
+    tracker.update_candidates(20 * dt, np.array([left, right]))  # the 16th unseen frame
+    assert np.all(np.isnan(tracker.predicted()[0]))
+    with pytest.raises(ConfigError, match="head_coast_frames: expected >= 0, found -1"):
+        BlobConfig(head_coast_frames=-1)

@@ -3,6 +3,8 @@ a blackout, the CLI."""
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 
@@ -12,16 +14,27 @@ from mocapkit.io.session import load_session
 from mocapkit.pipelines.run import FIT_FILE, read_fit_csv
 from mocapkit.pipelines.stereo import (
     ARM_JOINTS,
+    arm_errors_per_frame,
+    bench_stereo,
     evaluate_stereo,
+    frames_to_converge,
     parse_cameras,
     track_stereo_session,
 )
 from mocapkit.skeleton.model import CANONICAL_JOINTS
 from mocapkit.synth.realism import RealismOptions
 from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+from mocapkit.timing import StageTimer
 from mocapkit.tracking.base import STATUSES, FrameResult
 from mocapkit.tracking.stereo.arm_filter import ArmFilterConfig
-from mocapkit.tracking.stereo.tracker import StereoConfig, azad_skeleton
+from mocapkit.tracking.stereo.hands import keypoint_targets
+from mocapkit.tracking.stereo.tracker import (
+    KEYPOINT_TORSO_SHOULDER_BOX_MM,
+    StereoConfig,
+    StereoSample,
+    StereoTracker,
+    azad_skeleton,
+)
 
 
 @pytest.fixture(scope="module")
@@ -223,3 +236,141 @@ def test_cli_refuses_a_keypoint_torso_without_keypoints(session, tmp_path, capsy
     )
     assert rc == 2
     assert "--torso keypoints needs --keypoints" in capsys.readouterr().err
+
+
+def test_stage_timer_times_every_stage_of_each_frame(session):
+    s = load_session(session)
+    names = ["stereo_left", "stereo_right"]
+    cams = [s.camera(c) for c in names]
+    timer = StageTimer(time.process_time)
+    tracker = StereoTracker(azad_skeleton(), cams, SMALL, timer=timer)
+    n = 4
+    for k, smp in enumerate(s.samples(names)):
+        if k == n:
+            break
+        tracker.update(StereoSample(smp.time_s, {c: smp.image(c) for c in names}))
+    assert timer.calls() == {"skin": n, "head_hands": n, "gradients": n, "arms": n}
+    assert all(v >= 0.0 for v in timer.totals_s().values())
+
+
+def test_bench_reports_fps_and_per_stage_ms_at_two_particle_counts(session):
+    out = bench_stereo(session, n_frames=3, repeats=1, n_particles=20, more_particles=40)
+    assert out["fps"] > 0 and out["fps_40_particles"] > 0 and out["particles"] == 20
+    assert set(out["stages_ms"]) == {"skin", "head_hands", "gradients", "arms", "other"}
+    # the stages and the rest add up to the frame's CPU time (one run: the median is it)
+    assert sum(out["stages_ms"].values()) == pytest.approx(1e3 / out["fps"], rel=1e-2)
+    assert out["views"] == 2 and out["image_size"] == "320x240"
+
+
+def test_frames_to_converge_known_values():
+    free = np.array([20.0, 20.0, 20.0, 20.0, 20.0, 20.0])
+    reset = np.array([20.0, 20.0, 200.0, 90.0, 29.0, 20.0])
+    assert frames_to_converge(reset, free, 2, 10.0, 10) == 3  # frames 2, 3, 4: 29 <= 30
+    assert frames_to_converge(reset, free, 2, 5.0, 10) == 4
+    assert frames_to_converge(reset, free, 0, 10.0, 10) == 1  # on the reset frame already
+    assert frames_to_converge(reset, free, 2, 5.0, 2) == 3  # not within the limit
+    nan_free = free.copy()
+    nan_free[4] = np.nan
+    assert frames_to_converge(reset, nan_free, 2, 10.0, 10) == 4  # a NaN frame is not converged
+
+
+def test_arm_errors_per_frame_leave_nan_joints_out(session):
+    truth = load_session(session).truth
+    names = list(truth.joint_names)
+    joints = truth.joints_mm.copy()
+    shift = np.zeros(3)
+    shift[0] = 30.0
+    joints[:, names.index("left_elbow")] += shift  # one of six joints 30 mm off
+    err = arm_errors_per_frame(truth.time_s, names, joints, truth)
+    np.testing.assert_allclose(err, 5.0, atol=1e-9)
+    joints[:, names.index("left_wrist")] = np.nan  # left out: 30 / 5 joints
+    err = arm_errors_per_frame(truth.time_s, names, joints, truth)
+    np.testing.assert_allclose(err, 6.0, atol=1e-9)
+    for j in ARM_JOINTS:
+        joints[:3, names.index(j)] = np.nan
+    assert np.all(np.isnan(arm_errors_per_frame(truth.time_s, names, joints, truth)[:3]))
+
+
+def test_reset_arms_returns_both_filters_to_the_hanging_start(session):
+    s = load_session(session)
+    names = ["stereo_left", "stereo_right"]
+    cfg = StereoConfig(arm=SMALL.arm, use_keypoints=True, torso="keypoints")
+    kp_names = s.keypoints["stereo_left"].joint_names
+    tracker = StereoTracker(azad_skeleton(), [s.camera(c) for c in names], cfg, kp_names)
+    start = {side: f.particles.copy() for side, f in tracker.filters.items()}
+    for k, smp in enumerate(s.samples(names)):
+        if k == 3:
+            break
+        tracker.update(StereoSample(smp.time_s, {c: smp.image(c) for c in names}, smp.keypoints_px))
+    assert not np.array_equal(tracker.filters["left"].particles, start["left"])
+    tracker.reset_arms()
+    for side, f in tracker.filters.items():
+        np.testing.assert_array_equal(f.particles, start[side])
+        assert f.prev_elbow is None
+
+
+@pytest.mark.parametrize("anchor", ["neck", "shoulders"])
+def test_torso_anchor_places_the_model_on_its_keypoints(session, anchor):
+    """With fixed shoulders the model's neck (anchor "neck") or its shoulders' midpoint
+    (anchor "shoulders") is the triangulated keypoint's."""
+    s = load_session(session)
+    names = ["stereo_left", "stereo_right"]
+    cams = [s.camera(c) for c in names]
+    arm_cfg = ArmFilterConfig(n_particles=20, adaptive_shoulder=False)
+    cfg = StereoConfig(arm=arm_cfg, use_keypoints=True, torso="keypoints", torso_anchor=anchor)
+    kp_names = s.keypoints["stereo_left"].joint_names
+    sk = azad_skeleton(s.bone_lengths_mm, s.segment_vectors_mm)
+    tracker = StereoTracker(sk, cams, cfg, kp_names)
+    for k, smp in enumerate(s.samples(names)):
+        if k == 2:
+            break
+        pose = tracker.update(StereoSample(smp.time_s, {}, smp.keypoints_px))
+        kps = [np.asarray(smp.keypoints_px[c]) for c in names]
+        want = ("neck",) if anchor == "neck" else ("left_shoulder", "right_shoulder")
+        measured = keypoint_targets(cams, kps, kp_names, want).mean(axis=0)
+        model = np.mean([pose.joints_mm[CANONICAL_JOINTS.index(j)] for j in want], axis=0)
+        np.testing.assert_allclose(model, measured, atol=1e-6)
+
+
+def test_torso_anchor_refusals(session, tmp_path, capsys):
+    with pytest.raises(ConfigError, match="torso_anchor: expected 'shoulders' or 'neck'"):
+        StereoConfig(torso_anchor="hips")
+    out = str(tmp_path / "r")
+    rc = main(["track", "stereo", str(session), "--out", out, "--torso-anchor", "shoulders"])
+    assert rc == 2
+    assert "--torso-anchor needs --torso keypoints" in capsys.readouterr().err
+
+
+def test_a_keypoint_torso_confines_the_shoulder_offsets(session):
+    s = load_session(session)
+    names = ["stereo_left", "stereo_right"]
+    cams = [s.camera(c) for c in names]
+    kp_names = s.keypoints["stereo_left"].joint_names
+
+    def tracker(torso, box=None):
+        arm_cfg = ArmFilterConfig(n_particles=30, shoulder_box_mm=box)
+        cfg = StereoConfig(arm=arm_cfg, use_keypoints=True, torso=torso)
+        return StereoTracker(azad_skeleton(), cams, cfg, kp_names)
+
+    assert tracker("shoulders").arm_config.shoulder_box_mm is None  # recipe A's 50 mm
+    assert tracker("shoulders", 35.0).arm_config.shoulder_box_mm == 35.0
+    assert tracker("keypoints", 35.0).arm_config.shoulder_box_mm == 35.0
+    t = tracker("keypoints")
+    assert t.arm_config.shoulder_box_mm == KEYPOINT_TORSO_SHOULDER_BOX_MM
+    for k, smp in enumerate(s.samples(names)):
+        if k == 4:
+            break
+        t.update(StereoSample(smp.time_s, {c: smp.image(c) for c in names}, smp.keypoints_px))
+        for f in t.filters.values():
+            assert np.abs(f.particles[:, 4:]).max() <= KEYPOINT_TORSO_SHOULDER_BOX_MM
+    t.reset_arms()  # the reset keeps the resolved settings
+    for f in t.filters.values():
+        assert f.config.shoulder_box_mm == KEYPOINT_TORSO_SHOULDER_BOX_MM
+    with pytest.raises(ConfigError, match="shoulder_box_mm: expected >= 0 mm"):
+        ArmFilterConfig(shoulder_box_mm=-1.0)
+
+
+def test_cli_accuracy_stereo_refuses_too_few_particles(capsys):
+    rc = main(["accuracy", "stereo", "--particles", "1"])
+    assert rc == 2
+    assert "--particles: expected at least 2, found 1" in capsys.readouterr().err

@@ -297,6 +297,10 @@ def _elbows_nb(particles: FloatArray, model: ArmModel, out: FloatArray) -> None:
 # ------------------------------------------------------------------ the filter
 
 
+#: Recipe A's half-size of the shoulder offset cuboid (mm), `ArmFilterConfig.shoulder_box_mm`.
+SHOULDER_BOX_MM = 50.0
+
+
 @dataclass(frozen=True)
 class ArmFilterConfig:
     """Settings of one arm's particle filter (paper values by default; recipe A).
@@ -321,8 +325,13 @@ class ArmFilterConfig:
         Floors of the adaptive noise (recipe A: 0.01 rad, 2 mm).
     constant_noise_rad, constant_noise_mm : float
         Noise without adaptive noise.
-    shoulder_box_mm : float
-        Half-size of the shoulder offset cuboid (recipe A: 50 mm).
+    shoulder_box_mm : float, optional
+        Half-size of the shoulder offset cuboid. None (default): recipe A's 50 mm, except
+        where `mocapkit.tracking.stereo.tracker.StereoTracker` measures the torso from
+        keypoints, which confines the offsets to
+        ``tracker.KEYPOINT_TORSO_SHOULDER_BOX_MM`` (20 mm): the shoulders are then
+        measured, and recipe A's cuboid, meant for an unmeasured torso, lets the weakly
+        observed offsets wander and spreads the particles over three loose DoF.
     shoulder_pull : float
         Share by which every perturbation pulls the shoulder offsets back towards 0 (not
         in the paper, which only bounds them; 0 = paper). Measured on the 13_26 and 01_09
@@ -363,7 +372,7 @@ class ArmFilterConfig:
     min_noise_mm: float = 2.0
     constant_noise_rad: float = 0.08
     constant_noise_mm: float = 15.0
-    shoulder_box_mm: float = 50.0
+    shoulder_box_mm: float | None = None
     shoulder_pull: float = 0.1
     step_px: float = 5.0
     max_samples_per_line: int = 48
@@ -383,6 +392,10 @@ class ArmFilterConfig:
             raise ConfigError(f"ik_fraction: expected a share in [0, 1], found {self.ik_fraction}")
         if self.estimate not in ("mode", "mean"):
             raise ConfigError(f"estimate: expected 'mode' or 'mean', found {self.estimate!r}")
+        if self.shoulder_box_mm is not None and not self.shoulder_box_mm >= 0:
+            raise ConfigError(
+                f"shoulder_box_mm: expected >= 0 mm (or None), found {self.shoulder_box_mm}"
+            )
         if not (self.step_px > 0 and self.max_samples_per_line >= 2):
             raise ConfigError(
                 f"step_px/max_samples_per_line: expected > 0 and >= 2, found {self.step_px} "
@@ -461,7 +474,8 @@ class ArmParticleFilter:
             if c.shoulder_pull > 0:  # weakly seen offsets drift: pull them home a little
                 p[:, 4:] *= 1.0 - c.shoulder_pull
             p[:, 4:] += self.rng.normal(0.0, s_mm, size=(n, 3))
-            np.clip(p[:, 4:], -c.shoulder_box_mm, c.shoulder_box_mm, out=p[:, 4:])
+            box = SHOULDER_BOX_MM if c.shoulder_box_mm is None else c.shoulder_box_mm
+            np.clip(p[:, 4:], -box, box, out=p[:, 4:])
         else:
             p[:, 4:] = 0.0
 

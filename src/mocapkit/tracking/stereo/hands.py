@@ -13,16 +13,30 @@ explicit blob matching, which is deterministic and cheap:
 3. the three targets (head, left hand, right hand) are assigned to candidates by
    minimum total distance to their constant-velocity predictions (Hungarian
    assignment, gated at ``gate_mm``), so that the hands keep their identity through
-   crossings; a target without a candidate coasts on its prediction for up to
+   crossings; a hand without a candidate coasts on its prediction for up to
    ``coast_frames`` frames and is then reported lost (NaN); when the two hands' blobs
    merge (a crossing: one candidate is the nearest to both predictions) both coast
-   through it, since the merged centroid is neither hand;
+   through it, since the merged centroid is neither hand; an unseen head is held
+   differently (below);
 4. initialisation (and re-initialisation of a lost target): the head is the largest
    candidate (a face is the largest skin blob; the highest candidate can be a ghost
    from a wrong pair), taken only when no other candidate lies more than 100 mm above
    it (a subject turned away shows no face); the hands the others farther than
    `HAND_HEAD_MIN_MM` from the head, left/right by their side of the head in the
    torso frame (x to the subject's right).
+
+The unseen head (a gap in the paper, which tracks the head by its skin blob alone and
+does not say what happens when there is none). When the subject turns the face away,
+the skin blobs give only the hands, for as long as the subject looks away (often
+longer than a hand is hidden). A constant-velocity coast would carry the head off
+along the velocity it had when it turned (a turning head's centroid moves sideways
+as the face leaves the view), and releasing it after ``coast_frames`` opens the way
+for `_initialise` to take the next largest blob, a hand, for the head. So the head is
+held instead: its velocity is halved every unseen frame (the held point moves at most
+one frame's motion beyond where it was last seen: v dt (1/2 + 1/4 + ...) <= v dt),
+it keeps its gate, so the face is taken back where it reappears, and it is released
+(NaN) only after ``head_coast_frames`` unseen frames. While held it is not a
+measurement: `HeadHandTracker.update` reports NaN for it, as for a coasting hand.
 """
 
 from __future__ import annotations
@@ -51,13 +65,38 @@ TARGETS = ("head", "left_hand", "right_hand")
 
 @dataclass(frozen=True)
 class BlobConfig:
-    """Settings of `skin_blobs` and `HeadHandTracker` (areas in full-resolution pixels)."""
+    """Settings of `skin_blobs` and `HeadHandTracker` (areas in full-resolution pixels).
+
+    Parameters
+    ----------
+    min_area_px : int
+        Smallest skin component taken as a blob (px, full resolution).
+    max_blobs : int
+        Largest components kept per view.
+    max_reproj_px : float
+        Largest reprojection error of a candidate 3-D point in each view (px).
+    gate_mm : float
+        Largest distance (mm) of a candidate from a target's prediction for a match.
+    coast_frames : int
+        Unseen frames a hand coasts on its constant-velocity prediction before it is
+        released (NaN).
+    head_coast_frames : int
+        Unseen frames the head is held (its velocity halved every frame) before it is
+        released (module notes: the unseen head); 15 = 0.5 s at 30 frames/s.
+    max_speed_mm_s : float
+        Cap on a target's velocity estimate (mm/s).
+    downsample : int
+        Blobs are found on every ``downsample``-th pixel.
+    max_area_ratio : float
+        Largest area ratio of two blobs paired across views.
+    """
 
     min_area_px: int = 25
     max_blobs: int = 6
     max_reproj_px: float = 12.0
     gate_mm: float = 250.0
     coast_frames: int = 10
+    head_coast_frames: int = 15
     max_speed_mm_s: float = 6000.0
     downsample: int = 2
     max_area_ratio: float = 2.5
@@ -70,6 +109,10 @@ class BlobConfig:
             )
         if not (self.max_reproj_px > 0 and self.gate_mm > 0 and self.coast_frames >= 0):
             raise ConfigError("BlobConfig: max_reproj_px, gate_mm must be > 0, coast_frames >= 0")
+        if not self.head_coast_frames >= 0:
+            raise ConfigError(
+                f"BlobConfig: head_coast_frames: expected >= 0, found {self.head_coast_frames}"
+            )
 
 
 def skin_blobs(mask: NDArray[np.uint8], config: BlobConfig) -> tuple[FloatArray, FloatArray]:
@@ -274,8 +317,15 @@ class HeadHandTracker:
         for k in range(3):
             if not measured[k] and live[k]:
                 self.missed[k] += 1
-                self.pos[k] = pred[k]
-                if self.missed[k] > c.coast_frames:
+                if k == 0:
+                    # the head is held: its velocity halves every unseen frame (module notes)
+                    self.vel[0] *= 0.5
+                    self.pos[0] = self.pos[0] + self.vel[0] * dt
+                    limit = c.head_coast_frames
+                else:
+                    self.pos[k] = pred[k]
+                    limit = c.coast_frames
+                if self.missed[k] > limit:
                     self.pos[k] = np.nan
                     self.vel[k] = 0.0
         lost = [k for k in range(3) if not np.all(np.isfinite(self.pos[k]))]

@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -60,6 +60,7 @@ from mocapkit.geometry.rotations import rotvec_from_matrix
 from mocapkit.skeleton.kinematics import canonical_positions, joint_positions
 from mocapkit.skeleton.limbs import arm
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
+from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.base import (
     BRIDGE_S,
     UNOBSERVED,
@@ -79,6 +80,12 @@ from mocapkit.tracking.stereo.hands import BlobConfig, HeadHandTracker, keypoint
 
 FloatArray = NDArray[np.float64]
 SIDES = ("left", "right")
+
+#: Half-size (mm) of the shoulder offset cuboid with a keypoint torso
+#: (`ArmFilterConfig.shoulder_box_mm` None). Measured with ``keypoints+torso`` on the six
+#: accuracy clips, seeds 0 and 1: arm mean 32.3 and 34.0 mm at recipe A's 50 mm (5 and 4
+#: of 6 clips within 40 mm), 22.4 and 24.6 mm at 20 mm (6 of 6 both).
+KEYPOINT_TORSO_SHOULDER_BOX_MM = 20.0
 
 
 @dataclass(frozen=True)
@@ -108,6 +115,17 @@ class StereoConfig:
         ``use_keypoints``, the torso keypoints triangulated over the views each frame
         (rotation from the shoulder line and the pelvis-neck line, the arms hanging
         from the neck keypoint).
+    torso_anchor : {"neck", "shoulders"}
+        With ``torso="keypoints"``: where the arms hang from. ``"neck"`` (default): the
+        model's neck on the neck keypoint, the shoulders at the subject's
+        ``segment_vectors_mm`` from it. ``"shoulders"``: the model's shoulders centred on
+        the midpoint of the triangulated shoulder keypoints. A detector's neck (mapped
+        from the shoulder and hip midpoints, `mocapkit.io.openpose`) lies below the
+        shoulders, while the ``azad14`` shoulders sit 40 mm below its neck: on a session
+        without the subject's vectors the ``"neck"`` anchor puts the shoulders about 100
+        mm too low (Pose2Sim demo: shoulders 153/142 mm from the triangulated keypoints,
+        41.6/38.8 mm with ``"shoulders"``, docs/stereo.md). On the synthetic accuracy
+        clips, whose sessions carry the exact vectors, both are alike (32.3 and 32.1 mm).
     reach_pad_mm : float
         Margin of the arms' reach box.
     gap_limit_s : float
@@ -125,6 +143,7 @@ class StereoConfig:
     figure_ground: bool = True
     yaw_gain: float = 0.6
     torso: str = "shoulders"
+    torso_anchor: str = "neck"
     reach_pad_mm: float = 80.0
     gap_limit_s: float = BRIDGE_S
     seed: int = 0
@@ -132,6 +151,10 @@ class StereoConfig:
     def __post_init__(self) -> None:
         if self.torso not in ("shoulders", "keypoints"):
             raise ConfigError(f"torso: expected 'shoulders' or 'keypoints', found {self.torso!r}")
+        if self.torso_anchor not in ("shoulders", "neck"):
+            raise ConfigError(
+                f"torso_anchor: expected 'shoulders' or 'neck', found {self.torso_anchor!r}"
+            )
         if self.torso == "keypoints" and not self.use_keypoints:
             raise ConfigError("torso='keypoints' needs use_keypoints (the session's 2-D keypoints)")
         if not 0.0 <= self.yaw_gain <= 1.0:
@@ -224,6 +247,9 @@ class StereoTracker:
     config : StereoConfig, optional
     keypoint_names : sequence of str, optional
         Joint names of the keypoint rows (needed with ``use_keypoints``).
+    timer : StageTimer, optional
+        Times the stages of `update` (``skin``, ``head_hands``, ``gradients``, ``arms``);
+        attribute ``timer``. The default records nothing.
     """
 
     def __init__(
@@ -232,7 +258,9 @@ class StereoTracker:
         cameras: Sequence[Camera],
         config: StereoConfig | None = None,
         keypoint_names: Sequence[str] | None = None,
+        timer: StageTimer = NULL_TIMER,
     ) -> None:
+        self.timer = timer
         self.config = cfg = config or StereoConfig()
         if len(cameras) < 2:
             raise ConfigError(f"the stereo tracker needs two or more cameras, found {len(cameras)}")
@@ -272,7 +300,11 @@ class StereoTracker:
             for s in SIDES
         }
         rng = np.random.default_rng(cfg.seed)
-        self.filters = {s: ArmParticleFilter(s, cfg.arm, rng) for s in SIDES}
+        #: the arm filters' settings (`ArmFilterConfig.shoulder_box_mm` resolved)
+        self.arm_config = cfg.arm
+        if cfg.arm.shoulder_box_mm is None and cfg.torso == "keypoints":
+            self.arm_config = replace(cfg.arm, shoulder_box_mm=KEYPOINT_TORSO_SHOULDER_BOX_MM)
+        self.filters = {s: ArmParticleFilter(s, self.arm_config, rng) for s in SIDES}
         self.yaw = self._facing_yaw(np.zeros(3))
         self.hands = HeadHandTracker(self.cameras, cfg.blobs, yaw_matrix(self.yaw)[:, 0])
         self.shirt: ColourModel | None = None
@@ -284,6 +316,14 @@ class StereoTracker:
         # gradient maps, written in place every frame (no per-frame stacking copies)
         self._gx = np.zeros((len(self.cameras), h, w), np.float32)
         self._gy = np.zeros((len(self.cameras), h, w), np.float32)
+
+    def reset_arms(self) -> None:
+        """Forget both arms' filter states (particles back to the initial hanging arm,
+        shoulder offsets 0): a wrong start for a subject whose arms are elsewhere, used to
+        measure how fast each variant converges (`mocapkit.pipelines.stereo`)."""
+        self.filters = {
+            s: ArmParticleFilter(s, self.arm_config, self.filters[s].rng) for s in SIDES
+        }
 
     # ------------------------------------------------------------------ helpers
     def _facing_yaw(self, at: FloatArray) -> float:
@@ -359,9 +399,12 @@ class StereoTracker:
         if samples:
             self.shirt = ColourModel.fit(np.concatenate(samples), radius=3.0, luma_margin=40.0)
 
-    def _torso_from_keypoints(self, kps: list[FloatArray]) -> tuple[FloatArray, FloatArray] | None:
-        """Torso rotation (x: left to right shoulder, z: pelvis to neck, orthogonalised) and
-        the neck, triangulated from the keypoints; None without both shoulders and the neck."""
+    def _torso_from_keypoints(
+        self, kps: list[FloatArray]
+    ) -> tuple[FloatArray, FloatArray, FloatArray] | None:
+        """Torso rotation (x: left to right shoulder, z: pelvis to neck, orthogonalised), the
+        neck and the shoulders' midpoint, triangulated from the keypoints; None without
+        both shoulders and the neck."""
         names = ("left_shoulder", "right_shoulder", "neck", "pelvis")
         p = keypoint_targets(self.cameras, kps, self.keypoint_names, names)
         if not np.all(np.isfinite(p[:3])):
@@ -375,7 +418,13 @@ class StereoTracker:
             return None
         z = z / nz
         rb = np.stack([x, np.cross(z, x), z], axis=1)
-        return rb, p[2]
+        return rb, p[2], 0.5 * (p[0] + p[1])
+
+    def _root_under(self, mid_shoulders: FloatArray, rb: FloatArray) -> FloatArray:
+        """The torso root that centres the model's two shoulders on ``mid_shoulders``
+        (`StereoConfig.torso_anchor`)."""
+        mid_model = 0.5 * (self.shoulder_off["left"] + self.shoulder_off["right"]) + self.head_off
+        return np.asarray(mid_shoulders - rb @ mid_model, dtype=float)
 
     def _figure(
         self, img: NDArray[np.uint8], skin: NDArray[np.uint8], roi: Roi | None
@@ -412,80 +461,96 @@ class StereoTracker:
         # ---------------------------------------------------------- head and hands
         skins: list[NDArray[np.uint8]] = []
         if images and (not cfg.use_keypoints or cfg.figure_ground):
-            skins = [skin_mask(img, roi=r) for img, r in zip(images, rois)]
-        if cfg.use_keypoints:
-            kps = []
-            for c in self.cameras:
-                kp = sample.keypoints_px.get(c.name)
-                kps.append(
-                    np.full((len(self.keypoint_names), 2), np.nan) if kp is None else np.asarray(kp)
-                )
-            meas = keypoint_targets(self.cameras, kps, self.keypoint_names)
-            head_pt = meas[0]
-            if cfg.torso == "keypoints":
-                torso_kp = self._torso_from_keypoints(kps)
-                if torso_kp is not None:
-                    rb, torso_root = torso_kp
-                    self.yaw = math.atan2(rb[1, 0], rb[0, 0])
-        else:
-            self.hands.set_right_axis(rb[:, 0])
-            meas = (
-                self.hands.update(sample.time_s, skins, rois) if skins else np.full((3, 3), np.nan)
-            )
-            head_pt = meas[0] - rb @ np.asarray(cfg.face_offset_mm)
-        if np.all(np.isfinite(head_pt)):
-            if self.head_mm is None and cfg.torso == "shoulders":
-                self.yaw = self._facing_yaw(head_pt)
-                rb = yaw_matrix(self.yaw)
-            self.head_mm = head_pt
-        head = self.head_mm
-        if head is None:
-            head = np.array([0.0, 0.0, 1600.0])  # nothing seen yet: a standing adult
-        if torso_root is None:
-            torso_root = head - rb @ self.head_off
-        # ---------------------------------------------------------- gradient maps
-        if images:
-            if cfg.figure_ground and self.shirt is None and self.head_mm is not None:
-                self._fit_shirt(images, head, rb)
-            hands_now = {"left": meas[1], "right": meas[2]}
-            rois = self._arm_rois(torso_root, rb, hands_now) if self.head_mm is not None else rois
-            grads = self._gx
-            grads_y = self._gy if cfg.arm.oriented_edges else None
-            for i, (img, r) in enumerate(zip(images, rois)):
-                fig = None
-                if cfg.figure_ground and self.shirt is not None:
-                    fig = self._figure(img, skins[i], r)
-                if cfg.arm.oriented_edges:
-                    gradient_vector_map(
-                        img, roi=r, figure=fig, config=cfg.gradient, out=(grads[i], self._gy[i])
+            with self.timer.stage("skin"):
+                skins = [skin_mask(img, roi=r) for img, r in zip(images, rois)]
+        with self.timer.stage("head_hands"):
+            if cfg.use_keypoints:
+                kps = []
+                for c in self.cameras:
+                    kp = sample.keypoints_px.get(c.name)
+                    kps.append(
+                        np.full((len(self.keypoint_names), 2), np.nan)
+                        if kp is None
+                        else np.asarray(kp)
                     )
-                else:
-                    gradient_map(img, roi=r, figure=fig, config=cfg.gradient, out=grads[i])
-        else:
-            grads = self._gx
-            grads.fill(0.0)
-            grads_y = None
-            if cfg.arm.oriented_edges:
-                grads_y = self._gy
-                grads_y.fill(0.0)
-        views = view_stack(self.cameras, grads, grads_y)
+                meas = keypoint_targets(self.cameras, kps, self.keypoint_names)
+                head_pt = meas[0]
+                if cfg.torso == "keypoints":
+                    torso_kp = self._torso_from_keypoints(kps)
+                    if torso_kp is not None:
+                        rb, torso_root, mid_shoulders = torso_kp
+                        if cfg.torso_anchor == "shoulders":
+                            torso_root = self._root_under(mid_shoulders, rb)
+                        self.yaw = math.atan2(rb[1, 0], rb[0, 0])
+            else:
+                self.hands.set_right_axis(rb[:, 0])
+                meas = (
+                    self.hands.update(sample.time_s, skins, rois)
+                    if skins
+                    else np.full((3, 3), np.nan)
+                )
+                head_pt = meas[0] - rb @ np.asarray(cfg.face_offset_mm)
+            if np.all(np.isfinite(head_pt)):
+                if self.head_mm is None and cfg.torso == "shoulders":
+                    self.yaw = self._facing_yaw(head_pt)
+                    rb = yaw_matrix(self.yaw)
+                self.head_mm = head_pt
+            head = self.head_mm
+            if head is None:
+                head = np.array([0.0, 0.0, 1600.0])  # nothing seen yet: a standing adult
+            if torso_root is None:
+                torso_root = head - rb @ self.head_off
+        # ---------------------------------------------------------- gradient maps
+        with self.timer.stage("gradients"):
+            if images:
+                if cfg.figure_ground and self.shirt is None and self.head_mm is not None:
+                    self._fit_shirt(images, head, rb)
+                hands_now = {"left": meas[1], "right": meas[2]}
+                rois = (
+                    self._arm_rois(torso_root, rb, hands_now) if self.head_mm is not None else rois
+                )
+                grads = self._gx
+                grads_y = self._gy if cfg.arm.oriented_edges else None
+                for i, (img, r) in enumerate(zip(images, rois)):
+                    fig = None
+                    if cfg.figure_ground and self.shirt is not None:
+                        fig = self._figure(img, skins[i], r)
+                    if cfg.arm.oriented_edges:
+                        gradient_vector_map(
+                            img, roi=r, figure=fig, config=cfg.gradient, out=(grads[i], self._gy[i])
+                        )
+                    else:
+                        gradient_map(img, roi=r, figure=fig, config=cfg.gradient, out=grads[i])
+            else:
+                grads = self._gx
+                grads.fill(0.0)
+                grads_y = None
+                if cfg.arm.oriented_edges:
+                    grads_y = self._gy
+                    grads_y.fill(0.0)
+            views = view_stack(self.cameras, grads, grads_y)
         # ---------------------------------------------------------- arms
-        hands = {"left": meas[1], "right": meas[2]}
-        ests: dict[str, ArmEstimate] = {}
-        sampling = np.array(
-            [cfg.arm.step_px, float(cfg.arm.max_samples_per_line), float(cfg.arm.oriented_edges)]
-        )
-        for s in SIDES:
-            a, b = self.lengths[s]
-            model = ArmModel(
-                rb,
-                torso_root + rb @ (self.shoulder_off[s] + self.head_off),
-                np.array([a, b, cfg.hand_offset]),
-                self.radii[s],
-                np.asarray(hands[s], dtype=float),
-                sampling,
+        with self.timer.stage("arms"):
+            hands = {"left": meas[1], "right": meas[2]}
+            ests: dict[str, ArmEstimate] = {}
+            sampling = np.array(
+                [
+                    cfg.arm.step_px,
+                    float(cfg.arm.max_samples_per_line),
+                    float(cfg.arm.oriented_edges),
+                ]
             )
-            ests[s] = self.filters[s].step(model, views)
+            for s in SIDES:
+                a, b = self.lengths[s]
+                model = ArmModel(
+                    rb,
+                    torso_root + rb @ (self.shoulder_off[s] + self.head_off),
+                    np.array([a, b, cfg.hand_offset]),
+                    self.radii[s],
+                    np.asarray(hands[s], dtype=float),
+                    sampling,
+                )
+                ests[s] = self.filters[s].step(model, views)
         # ---------------------------------------------------------- torso yaw
         if cfg.yaw_gain > 0 and cfg.torso == "shoulders":
             right = ests["right"].points_mm[0] - ests["left"].points_mm[0]
