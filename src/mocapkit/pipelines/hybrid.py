@@ -809,16 +809,19 @@ def track_hybrid_marker_file(
             height_mm = stature
             skeleton, choice = _seat(hybrid_skeleton(height_mm), head_pos[:, 2], choice)
     assert height_mm is not None
+    if skeleton is None:
+        skeleton = hybrid_skeleton(height_mm)
     cfg = config or HybridConfig(
         use_video=False,
         plant_feet=plant_feet,
         start_upright=False,
         replant_mm=RAW_MARKERS_REPLANT_MM,
+        marker_offsets_mm=(
+            {"head": head_band_offset_mm(skeleton)} if choice.posture == "standing" else {}
+        ),
     )
     if cfg.posture != choice.posture:
         cfg = replace(cfg, posture=choice.posture)
-    if skeleton is None:
-        skeleton = hybrid_skeleton(height_mm)
     calibration, note = None, "off (positions only)"
     members: dict[str, FloatArray] = {}
     if static_calibration and not cfg.member_offsets_mm:
@@ -861,6 +864,30 @@ def track_hybrid_marker_file(
         with timer.stage("write"):
             write_run_folder(out_dir, motion, poses)
     return MarkerFileRun(motion, frame, list(poses), choice, calibration, note)
+
+
+def head_band_offset_mm(skeleton: Skeleton) -> tuple[float, float, float]:
+    """Offset (mm, head joint frame) of a raw head set's centre from the model's head point.
+
+    The stature of a raw file is estimated with the head set `HEAD_TOP_OFFSET_MM` below
+    the top of the head (`mocapkit.io.marker_sets.estimate_height_mm`), but ``zhang21``'s
+    head point sits at 0.97 of the stature, about 50 mm higher at 1731 mm: without this
+    offset a model standing on the floor reaches down to the head set by flexing its neck
+    to the 45 deg limit and bending the trunk (the tennis serve's static start: neck
+    flexion 45 deg with the offset 0, 6-9 deg with it). The offset lowers the head point
+    to where the head set sits on a standing model (straight down, at q = 0).
+    """
+    from mocapkit.io.marker_sets import HEAD_TOP_OFFSET_MM
+    from mocapkit.skeleton.kinematics import forward_kinematics
+
+    eff = default_marker_effectors(skeleton)["head"]
+    q0 = np.clip(skeleton.zero_pose(), skeleton.lower, skeleton.upper)
+    head = forward_kinematics(skeleton, q0)[skeleton.joint_index(eff.joint)]
+    point = head[:3, :3] @ np.asarray(eff.point_mm, dtype=float) + head[:3, 3]
+    # at q = 0 the model stands on z = 0, so heights are above the floor
+    lower_by = np.array([0.0, 0.0, standing_height_mm(skeleton) - HEAD_TOP_OFFSET_MM - point[2]])
+    local = head[:3, :3].T @ lower_by
+    return (float(local[0]), float(local[1]), float(local[2]))
 
 
 def _calibrate_static(

@@ -190,6 +190,7 @@ def calibrate_member_offsets(
         replant_mm=config.replant_mm,
         posture=config.posture,
         paper=config.paper,
+        marker_offsets_mm=config.marker_offsets_mm,
     )
     effectors = default_marker_effectors(skeleton)
     arrays = {n: np.asarray(a, dtype=float)[rows] for n, a in sets_mm.items()}
