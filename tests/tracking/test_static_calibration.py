@@ -9,6 +9,7 @@ from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.io.markers import MarkerData
 from mocapkit.pipelines.hybrid import (
     RAW_MARKERS_REPLANT_MM,
+    head_band_offset_mm,
     hybrid_skeleton,
     track_hybrid_marker_file,
 )
@@ -48,15 +49,17 @@ def _raw_config() -> HybridConfig:
     return HybridConfig(use_video=False, start_upright=False, replant_mm=RAW_MARKERS_REPLANT_MM)
 
 
-def _members_from_poses(sk, q, rng, noise_mm=0.5):
-    """Member trajectories (name -> (T, 3)) of poses ``q`` with the true offsets."""
+def _members_from_poses(sk, q, rng, noise_mm=0.5, set_offsets_mm=None):
+    """Member trajectories (name -> (T, 3)) of poses ``q`` with the true offsets (plus
+    ``set_offsets_mm[set]``, where the set's centre sits from the effector point)."""
     world = forward_kinematics(sk, q)
     eff = default_marker_effectors(sk)
     out = {}
     for name, members in TRUE_MEMBERS.items():
         j = sk.joint_index(eff[name].joint)
+        shift = np.asarray((set_offsets_mm or {}).get(name, (0.0, 0.0, 0.0)))
         for m, off in members.items():
-            local = np.asarray(eff[name].point_mm) + off
+            local = np.asarray(eff[name].point_mm) + shift + off
             p = np.einsum("nij,j->ni", world[:, j, :3, :3], local) + world[:, j, :3, 3]
             out[m] = p + rng.normal(0.0, noise_mm, p.shape)
     return out
@@ -126,7 +129,9 @@ def test_marker_file_calibrates_members_and_reports_them(tmp_path):
     sk = hybrid_skeleton(1700.0)
     rng = np.random.default_rng(4)
     q = _take(sk, 60, 40)
-    members = _members_from_poses(sk, q, rng)
+    # a raw head set sits where a head band does on a standing model
+    band = np.asarray(head_band_offset_mm(sk))
+    members = _members_from_poses(sk, q, rng, set_offsets_mm={"head": band})
     # ankle markers: the floor is found from the lowest markers
     ankles = canonical_positions(sk, q, ["left_ankle", "right_ankle"])
     members.update({"LANK": ankles[:, 0], "RANK": ankles[:, 1]})
@@ -139,7 +144,8 @@ def test_marker_file_calibrates_members_and_reports_them(tmp_path):
     assert run.calibration is not None and "calibrated on the take" in run.calibration_note
     for name, ms in TRUE_MEMBERS.items():
         got = np.array([run.calibration.offsets_mm[name][m] for m in ms])
-        assert np.abs(got - np.array(list(ms.values()))).max() < 5.0
+        want = np.array(list(ms.values())) + (band if name == "head" else 0.0)
+        assert np.abs(got - want).max() < 5.0
     rows, fit = read_fit_csv(tmp_path / "fit.csv")
     assert {"LFHD_mm", "LWRA_mm", "rms_mm", "max_mm"} <= set(fit)
     assert rows[-1]["worst"] in {n for n in fit} | {k.removesuffix("_mm") for k in fit}
