@@ -18,6 +18,7 @@ from mocapkit.tracking.hybrid import (
 from mocapkit.tracking.posture import (
     SEATED_HEAD_RATIO,
     SEATED_LEFT_OUT,
+    SEATED_NECK_FLEXION_RAD,
     check_posture,
     choose_posture,
     estimate_seat_height_mm,
@@ -51,6 +52,9 @@ def test_seat_skeleton_holds_pelvis_and_legs():
     assert abs(lknee[2] - lhip[2]) < 1.0
     assert np.linalg.norm(lknee[:2] - lankle[:2]) < 1.0
     assert lankle[2] < lknee[2] - 300.0
+    neck = sk.dof_index("neck_flexion")
+    assert sk.upper[neck] == pytest.approx(SEATED_NECK_FLEXION_RAD)
+    assert sk.lower[neck] == pytest.approx(-SEATED_NECK_FLEXION_RAD)
     with pytest.raises(ConfigError, match="seat height: expected a height > 0 mm"):
         seat_skeleton(hybrid_skeleton(1600.0), -20.0)
 

@@ -46,6 +46,12 @@ POSTURES: tuple[str, ...] = ("standing", "seated", "auto")
 #: Hip and knee flexion (rad) of the held sitting legs: thighs forward, shanks down.
 SEATED_HIP_FLEXION_RAD = math.pi / 2
 SEATED_KNEE_FLEXION_RAD = math.pi / 2
+#: Largest neck flexion (rad, either way) of a seated model. With the pelvis held on the
+#: seat, the IK lowered a leaning athlete's head by bowing the neck to its 45 deg limit
+#: with the trunk upright, putting the shoulders 100 mm ahead of the acromion marker
+#: (basket sprint, frames 1600-2200: elbow 199 / 178 mm mean / median at 45 deg, 148 / 128
+#: at 20 deg; freeing the pelvis' tilt instead gave 195 / 142, both 185 / 130).
+SEATED_NECK_FLEXION_RAD = math.radians(20.0)
 #: Percentile of the head set's height taken as its height when most upright.
 UPRIGHT_PERCENTILE = 95.0
 #: Percentile of the head-to-hand distance taken as the hanging arm's reach.
@@ -188,7 +194,8 @@ def seat_skeleton(skeleton: Skeleton, seat_height_mm: float) -> Skeleton:
     """``skeleton`` sitting on a seat: the pelvis (canonical joint) held at
     ``seat_height_mm`` above the floor and the legs held in the sitting pose
     (`sitting_pose`), by setting those DoFs' lower and upper limits equal, so the IK
-    leaves them where they are."""
+    leaves them where they are; the neck's flexion is limited to
+    `SEATED_NECK_FLEXION_RAD` so that a lower head is a leaning trunk."""
     if not math.isfinite(seat_height_mm) or seat_height_mm <= 0:
         raise ConfigError(
             f"seat height: expected a height > 0 mm above the floor, found {seat_height_mm}"
@@ -197,6 +204,10 @@ def seat_skeleton(skeleton: Skeleton, seat_height_mm: float) -> Skeleton:
     lower, upper = skeleton.lower.copy(), skeleton.upper.copy()
     for lmb in limbs_present(skeleton, "leg"):
         lower[lmb.dofs] = upper[lmb.dofs] = sit[lmb.dofs]
+    if "neck_flexion" in skeleton.dof_names:
+        i = skeleton.dof_index("neck_flexion")
+        lower[i] = max(lower[i], -SEATED_NECK_FLEXION_RAD)
+        upper[i] = min(upper[i], SEATED_NECK_FLEXION_RAD)
     tz = vertical_root_dof(skeleton)
     # the root translation is added to the rest pose's pelvis height
     q0 = np.clip(skeleton.zero_pose(), skeleton.lower, skeleton.upper)
@@ -250,6 +261,7 @@ __all__ = [
     "POSTURES",
     "SEATED_HEAD_RATIO",
     "SEATED_LEFT_OUT",
+    "SEATED_NECK_FLEXION_RAD",
     "PostureChoice",
     "check_posture",
     "choose_posture",
