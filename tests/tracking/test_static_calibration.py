@@ -155,3 +155,26 @@ def test_marker_file_calibrates_members_and_reports_them(tmp_path):
     )
     assert off.calibration is None and "positions only" in off.calibration_note
     assert not any("LFHD_mm" in r.fit for r in off.results)
+
+
+def test_separate_static_trial():
+    """``static=``: the offsets come from a separate still trial, not the moving take."""
+    sk = hybrid_skeleton(1700.0)
+    rng = np.random.default_rng(5)
+    q = _take(sk, 60, 40)
+    band = np.asarray(head_band_offset_mm(sk))
+    members = _members_from_poses(sk, q, rng, set_offsets_mm={"head": band})
+    ankles = canonical_positions(sk, q, ["left_ankle", "right_ankle"])
+    members.update({"LANK": ankles[:, 0], "RANK": ankles[:, 1]})
+    names = list(members)
+    t = np.arange(q.shape[0]) / RATE_HZ
+    pos = np.stack([members[n] for n in names], axis=1)
+    static = MarkerData(t[:60], names, pos[:60], RATE_HZ, "static.c3d")
+    take = MarkerData(t[60:], names, pos[60:], RATE_HZ, "take.c3d")
+    alone = track_hybrid_marker_file(take, SPECS, height_mm=1700.0, up="z")
+    assert alone.calibration is None and "no window of 1 s in the take" in alone.calibration_note
+    run = track_hybrid_marker_file(take, SPECS, height_mm=1700.0, up="z", static=static)
+    assert run.calibration is not None and "static trial static.c3d" in run.calibration_note
+    got = np.array([run.calibration.offsets_mm["left_hand"][m] for m in ("LWRA", "LWRB")])
+    want = np.array(list(TRUE_MEMBERS["left_hand"].values()))
+    assert np.abs(got - want).max() < 5.0
