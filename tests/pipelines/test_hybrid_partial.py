@@ -8,6 +8,7 @@ import pytest
 from mocapkit.cli.main import main
 from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.io.joints_csv import read_joints_csv
+from mocapkit.io.marker_sets import evaluate_marker_sets
 from mocapkit.pipelines.hybrid import (
     hybrid_skeleton,
     track_hybrid_marker_arrays,
@@ -15,7 +16,7 @@ from mocapkit.pipelines.hybrid import (
 )
 from mocapkit.pipelines.run import read_fit_csv
 from mocapkit.skeleton import canonical_positions
-from mocapkit.tracking.hybrid import HybridConfig
+from mocapkit.tracking.hybrid import HybridConfig, default_marker_effectors
 
 #: Vicon Z-up to OpenSim Y-up (x kept, file y = Vicon z, file z = -Vicon y).
 YUP_FROM_ZUP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -102,3 +103,69 @@ def test_cli_lab_frame_options(tmp_path, capsys):
     assert "--warn-fraction: expected a share in [0, 1]" in capsys.readouterr().err
     assert main(["track", "hybrid", str(tmp_path), "--up", "z", "--out", str(tmp_path)]) == 2
     assert "--up apply to --markers" in capsys.readouterr().err
+
+
+def test_basket_sprint_seated_auto_z_up_and_y_up(shared_data):
+    """The wheelchair sprint is taken as seated by ``auto`` (head low for the stature from
+    the reach), the same way stored Z-up and Y-up: same seat, same left elbow within
+    1 mm, legs NaN, no feet planted."""
+    from mocapkit.io.lab_frame import detect_lab_frame
+    from mocapkit.io.marker_files import read_markers
+    from mocapkit.io.marker_sets import evaluate_marker_sets
+    from mocapkit.io.markers import MarkerData
+
+    m = read_markers(shared_data / "c3d" / "kinematics_basket_sprint.c3d")
+    part = slice(1650, 1800)
+    runs = []
+    for lab_from_orig in (np.eye(3), YUP_FROM_ZUP):
+        whole = MarkerData(m.time_s, m.names, m.positions_mm @ lab_from_orig.T, m.rate_hz)
+        up = detect_lab_frame(whole, evaluate_marker_sets(whole, BASKET_SETS[0])[:, 0]).up
+        lab = MarkerData(m.time_s[part], m.names, whole.positions_mm[part], m.rate_hz, m.source)
+        runs.append(track_hybrid_marker_file(lab, BASKET_SETS, up=up, posture="auto"))
+    z_run, y_run = runs
+    for run in runs:
+        assert run.posture is not None and run.posture.posture == "seated"
+        assert "auto:" in run.posture.reason and "head-to-hand reach" in run.posture.reason
+    assert y_run.posture.seat_height_mm == pytest.approx(z_run.posture.seat_height_mm, abs=1.0)
+    assert y_run.posture.height_mm == pytest.approx(z_run.posture.height_mm, abs=1.0)
+    np.testing.assert_allclose(
+        y_run.motion.joint("left_elbow") @ YUP_FROM_ZUP, z_run.motion.joint("left_elbow"), atol=1.0
+    )
+    for j in ("left_knee", "right_ankle", "left_hip"):
+        assert np.isnan(z_run.motion.joint(j)).all()
+    assert all(np.isnan(r.fit["left_foot_mm"]) for r in z_run.results)
+    assert max(r.fit["head_mm"] for r in z_run.results) < 30.0
+
+
+def test_seated_as_asked_with_given_stature(shared_data):
+    """``seated`` as asked, with the stature given: the seat comes from the head set at
+    that stature; an unknown posture is refused."""
+    from mocapkit.io.marker_files import read_markers
+    from mocapkit.io.markers import MarkerData
+    from mocapkit.tracking.posture import UPRIGHT_PERCENTILE, pelvis_to_head_mm
+
+    m = read_markers(shared_data / "c3d" / "kinematics_basket_sprint.c3d")
+    part = slice(1650, 1700)
+    lab = MarkerData(m.time_s[part], m.names, m.positions_mm[part], m.rate_hz, m.source)
+    run = track_hybrid_marker_file(lab, BASKET_SETS, height_mm=1600.0, up="z", posture="seated")
+    assert run.posture is not None and run.posture.reason.startswith("as asked")
+    assert "(given)" in run.posture.reason and run.posture.height_mm == 1600.0
+    sk = hybrid_skeleton(1600.0)
+    head = evaluate_marker_sets(lab, BASKET_SETS[0])[:, 0, 2]
+    point = default_marker_effectors(sk)["head"].point_mm
+    want = np.nanpercentile(head, UPRIGHT_PERCENTILE) - pelvis_to_head_mm(sk, point)
+    assert run.posture.seat_height_mm == pytest.approx(want, abs=1e-6)
+    with pytest.raises(ConfigError, match="--posture: expected one of standing, seated, auto"):
+        track_hybrid_marker_file(lab, BASKET_SETS, up="z", posture="lying")
+
+
+def test_cli_posture_and_static_options(tmp_path, capsys):
+    args = ["track", "hybrid", "--markers", str(tmp_path / "none.c3d"), "--out", str(tmp_path)]
+    with pytest.raises(SystemExit) as exited:
+        main([*args, "--posture", "lying"])
+    assert exited.value.code == 2
+    assert "invalid choice: 'lying'" in capsys.readouterr().err
+    assert (
+        main(["track", "hybrid", str(tmp_path), "--static", "x.c3d", "--out", str(tmp_path)]) == 2
+    )
+    assert "--static apply to --markers" in capsys.readouterr().err

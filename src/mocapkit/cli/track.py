@@ -83,6 +83,28 @@ def register(subparsers: Any) -> None:
         "of the file's frame",
     )
     hyb.add_argument(
+        "--posture",
+        choices=("standing", "seated", "auto"),
+        default="auto",
+        help="standing, seated (pelvis on a seat whose height is estimated from the head "
+        "set, legs held bent and left out: NaN, no feet planted, no balance step) or auto "
+        "(default: seated when the head set's upright height is below 0.88 of the "
+        "stature; prints which and why)",
+    )
+    hyb.add_argument(
+        "--static",
+        default=None,
+        metavar="FILE",
+        help="with --markers: a separate static trial (same lab, same marker names) to "
+        "calibrate the marker sets' member offsets on (default: the stillest 1 s of the "
+        "take's first 5 s)",
+    )
+    hyb.add_argument(
+        "--no-static-calibration",
+        action="store_true",
+        help="with --markers: do not calibrate member offsets; use the sets' positions only",
+    )
+    hyb.add_argument(
         "--warn-mm",
         type=float,
         default=None,
@@ -154,8 +176,14 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             plant_feet=not args.free_feet,
             up=args.up,
             world_output=args.world_frame,
+            posture=args.posture,
+            static_calibration=not args.no_static_calibration,
+            static=None if args.static is None else read_markers(args.static),
         )
         print(run.frame.summary())
+        if run.posture is not None:
+            print(_posture_line(run.posture))
+        print(f"static calibration: {run.calibration_note}")
         if not run.frame.sure:
             print(
                 f"WARNING: the up axis {run.frame.up!r} of {args.markers} is a guess; "
@@ -176,6 +204,8 @@ def _run_hybrid(args: argparse.Namespace) -> int:
                 ("--free-feet", args.free_feet),
                 ("--up", args.up is not None),
                 ("--world-frame", args.world_frame),
+                ("--static", args.static is not None),
+                ("--no-static-calibration", args.no_static_calibration),
             )
             if on
         ]
@@ -204,6 +234,8 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             paper=args.paper,
             oriented_sets=() if args.positions_only else oriented,
             max_elbow_speed_mm_per_s=args.max_elbow_speed,
+            posture=args.posture,
+            on_posture=lambda choice: print(_posture_line(choice)),
         )
         motion, results = session_run.motion, session_run.results
     # frames where a marker set was not observed have no joints of its limb (NaN in
@@ -216,3 +248,13 @@ def _run_hybrid(args: argparse.Namespace) -> int:
     for line in report.warnings():
         print(line, file=sys.stderr)
     return 0
+
+
+def _posture_line(choice: Any) -> str:
+    """The terminal line saying which posture a run used and why."""
+    seat = (
+        f", pelvis on a seat at {choice.seat_height_mm:.0f} mm above the floor"
+        if choice.posture == "seated"
+        else ""
+    )
+    return f"posture: {choice.posture}{seat} ({choice.reason})"

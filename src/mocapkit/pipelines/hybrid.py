@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +20,7 @@ from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import ConfigError, SessionError, ShapeError, unknown_name
 from mocapkit.ik.sdls import IKConfig, SDLSSolver
 from mocapkit.io.lab_frame import LabFrame, detect_lab_frame, to_world
+from mocapkit.io.marker_sets import MarkerSet
 from mocapkit.io.markers import MarkerData
 from mocapkit.io.motion import Motion
 from mocapkit.pipelines.run import (
@@ -31,7 +32,7 @@ from mocapkit.pipelines.run import (
 from mocapkit.skeleton.limbs import arm, head_joint, spine_dofs
 from mocapkit.skeleton.model import PRISMATIC, Skeleton
 from mocapkit.skeleton.presets import load_preset
-from mocapkit.skeleton.scaling import fit_segments, scale_skeleton
+from mocapkit.skeleton.scaling import fit_segments, scale_skeleton, standing_height_mm
 from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.arm_refinement import RefineConfig
 from mocapkit.tracking.base import FrameResult
@@ -42,6 +43,24 @@ from mocapkit.tracking.hybrid import (
     HybridSample,
     HybridTracker,
     default_marker_effectors,
+)
+from mocapkit.tracking.posture import (
+    SEATED_LEFT_OUT,
+    UPRIGHT_PERCENTILE,
+    PostureChoice,
+    check_posture,
+    choose_posture,
+    estimate_seat_height_mm,
+    seat_skeleton,
+    stature_from_reach_mm,
+)
+from mocapkit.tracking.static_calibration import (
+    MAX_STATIC_RMS_MM,
+    STATIC_SEARCH_S,
+    STATIC_WINDOW_S,
+    MemberCalibration,
+    calibrate_member_offsets,
+    find_static_interval,
 )
 
 FloatArray = NDArray[np.float64]
@@ -315,9 +334,19 @@ def track_hybrid_session_run(
     twist: bool | None = None,
     max_elbow_speed_mm_per_s: float | None = None,
     timer: StageTimer = NULL_TIMER,
+    posture: str = "standing",
+    on_posture: Callable[[PostureChoice], None] | None = None,
 ) -> RunResult:
     """`track_hybrid_session`, returning the runner's whole result (motion and the
-    per-frame `HybridPose` results)."""
+    per-frame `HybridPose` results).
+
+    ``posture`` (`mocapkit.tracking.posture.POSTURES`): ``seated`` sits the model on a
+    seat whose height is estimated from the head set
+    (`mocapkit.tracking.posture.estimate_seat_height_mm`, with the stature of
+    ``session.json``); ``auto`` chooses from the head set's height against that stature
+    (`mocapkit.tracking.posture.choose_posture`). The choice is in the motion's source
+    and, when given, passed to ``on_posture`` before the run.
+    """
     from mocapkit.io.session import load_session
 
     with timer.stage("load"):
@@ -368,6 +397,22 @@ def track_hybrid_session_run(
         clavicle=not cfg.paper if clavicle is None else clavicle,
         twist=(not cfg.paper and "head" in cfg.member_offsets_mm) if twist is None else twist,
     )
+    check_posture(posture)
+    if posture != "standing":
+        head_z = positions[:, MARKER_SETS.index("head"), 2]
+        choice = choose_posture(
+            posture,
+            float(np.nanpercentile(head_z, UPRIGHT_PERCENTILE)),
+            standing_height_mm(sk),
+            "session.json",
+        )
+        if choice.posture == "seated":
+            sk, choice = _seat(sk, head_z, choice)
+            cfg = replace(cfg, posture="seated")
+    else:
+        choice = PostureChoice("standing", "as asked", standing_height_mm(sk))
+    if on_posture is not None:
+        on_posture(choice)
     cams = session.video_cameras
     if not cams:
         raise SessionError(
@@ -398,6 +443,9 @@ def track_hybrid_session_run(
             )
 
     mode = "paper" if cfg.paper else "default"
+    seated = (
+        "" if choice.posture != "seated" else f", seated: pelvis at {choice.seat_height_mm:.0f} mm"
+    )
     return run_tracker(
         tracker,
         stream(),
@@ -405,8 +453,34 @@ def track_hybrid_session_run(
         out_dir,
         "track hybrid",
         source=f"hybrid tracker ({mode}, video="
-        f"{'on' if cfg.use_video else 'off'}) on {session.path}",
+        f"{'on' if cfg.use_video else 'off'}{seated}) on {session.path}",
         timer=timer,
+    )
+
+
+def _seat(
+    sk: Skeleton, head_z_mm: ArrayLike, choice: PostureChoice
+) -> tuple[Skeleton, PostureChoice]:
+    """``sk`` sat on the seat estimated from the head set's heights, and the choice
+    with that seat's height."""
+    head_point = default_marker_effectors(sk)["head"].point_mm
+    seat_mm = estimate_seat_height_mm(sk, head_point, head_z_mm)
+    if not seat_mm > 0:
+        raise ConfigError(
+            f"seated posture: the seat estimated from the head set lies {seat_mm:.0f} mm "
+            f"above the floor at a stature of {choice.height_mm:.0f} mm; expected above the "
+            "floor: check --height-mm and the lab axes"
+        )
+    return seat_skeleton(sk, seat_mm), replace(choice, seat_height_mm=seat_mm)
+
+
+def _leave_out_legs(motion: Motion) -> Motion:
+    """``motion`` with a seated subject's leg joints (`SEATED_LEFT_OUT`) NaN."""
+    joints = motion.joints_mm.copy()
+    cols = [motion.joint_names.index(j) for j in SEATED_LEFT_OUT if j in motion.joint_names]
+    joints[:, cols] = np.nan
+    return Motion(
+        motion.skeleton, motion.time_s, motion.q, motion.joint_names, joints, motion.source
     )
 
 
@@ -427,6 +501,8 @@ def track_hybrid_marker_arrays(
     out_dir: str | os.PathLike[str] | None = None,
     source: str = "",
     timer: StageTimer = NULL_TIMER,
+    skeleton: Skeleton | None = None,
+    members_mm: Mapping[str, ArrayLike] | None = None,
 ) -> tuple[Skeleton, FloatArray, list[HybridPose]]:
     """Run the hybrid tracker (IK only) on marker-set trajectories.
 
@@ -449,6 +525,12 @@ def track_hybrid_marker_arrays(
     source : str
         Stored in the written motion.
     timer : StageTimer, optional
+    skeleton : Skeleton, optional
+        The model to use instead of `hybrid_skeleton` at ``height_mm`` (e.g. one sat on
+        a seat, `mocapkit.tracking.posture.seat_skeleton`).
+    members_mm : mapping of str to array_like (T, 3), optional
+        Member markers' trajectories by the names ``config.member_offsets_mm`` gives them
+        (their sets' orientation then drives the IK too).
 
     Returns
     -------
@@ -468,13 +550,22 @@ def track_hybrid_marker_arrays(
     cfg = config or HybridConfig(
         use_video=False, start_upright=False, replant_mm=RAW_MARKERS_REPLANT_MM
     )
-    sk = hybrid_skeleton(height_mm)
+    sk = hybrid_skeleton(height_mm) if skeleton is None else skeleton
     effectors = default_marker_effectors(sk)
     tracker = HybridTracker(
         sk, None, cfg, timer=timer, marker_effectors={n: effectors[n] for n in arrays}
     )
+    members = {k: np.asarray(v, dtype=float) for k, v in (members_mm or {}).items()}
+    for k, v in members.items():
+        if v.shape != (t.size, 3):
+            raise ShapeError(f"members_mm[{k!r}]: expected shape ({t.size}, 3), found {v.shape}")
     samples = (
-        HybridSample(float(t[i]), {k: v[i] for k, v in arrays.items()}) for i in range(t.size)
+        HybridSample(
+            float(t[i]),
+            {k: v[i] for k, v in arrays.items()},
+            members_mm={k: v[i] for k, v in members.items()},
+        )
+        for i in range(t.size)
     )
     run = run_tracker(tracker, samples, t.size, None, label, source=source, timer=timer)
     poses = [p for p in run.results if isinstance(p, HybridPose)]
@@ -557,11 +648,20 @@ class MarkerFileRun:
         The file's up axis and floor used.
     results : list of FrameResult
         The tracker's per-frame results (fit figures in ``fit``).
+    posture : PostureChoice
+        The posture used and why, the stature and (seated) the seat's height.
+    calibration : MemberCalibration or None
+        The member offsets calibrated on a static interval, when that ran.
+    calibration_note : str
+        What the static calibration did, or why it did not run.
     """
 
     motion: Motion
     frame: LabFrame
     results: list[FrameResult]
+    posture: PostureChoice | None = None
+    calibration: MemberCalibration | None = None
+    calibration_note: str = ""
 
 
 def track_hybrid_markers(
@@ -594,6 +694,9 @@ def track_hybrid_marker_file(
     timer: StageTimer = NULL_TIMER,
     up: str | None = None,
     world_output: bool = False,
+    posture: str = "standing",
+    static_calibration: bool = True,
+    static: MarkerData | None = None,
 ) -> MarkerFileRun:
     """Run the hybrid tracker's IK on raw marker data (C3D, TRC, CSV) without a session.
 
@@ -624,6 +727,25 @@ def track_hybrid_marker_file(
         markers when omitted (`mocapkit.io.lab_frame.detect_lab_frame`).
     world_output : bool
         Give joints in the library's Z-up world (floor at z = 0) instead of the file's frame.
+    posture : str
+        ``standing`` (default), ``seated`` or ``auto`` (`mocapkit.tracking.posture`).
+        Seated: the pelvis sits at the seat's height estimated from the head set, the
+        legs are held bent, out of the IK and NaN in the joints, no feet are planted and
+        no balance step runs; without ``height_mm`` the stature comes from the
+        head-to-hand reach (`mocapkit.tracking.posture.stature_from_reach_mm`), which
+        does not assume standing. ``auto`` compares the head set's upright height with
+        the stature (given, or from the reach) and takes standing or seated
+        (`mocapkit.tracking.posture.choose_posture`); a standing subject's stature is
+        then estimated as before (from the head over standing frames).
+    static_calibration : bool
+        Calibrate the member offsets of the sets with two or more members on a static
+        interval (`mocapkit.tracking.static_calibration`), so their orientation drives the
+        IK too (the glasses' turn, the wrist bar's direction); False: set positions only.
+        Not done when ``config`` already gives ``member_offsets_mm``.
+    static : MarkerData, optional
+        A separate static trial (same lab and marker names) to calibrate on; its stillest
+        window anywhere is used. Default: the stillest window in the take's first
+        `mocapkit.tracking.static_calibration.STATIC_SEARCH_S` seconds.
 
     Notes
     -----
@@ -655,14 +777,71 @@ def track_hybrid_marker_file(
     world = to_world(markers, frame)
     pos = evaluate_marker_sets(world, sets)
     require_observed_sets({n: pos[:, i] for i, n in enumerate(names)}, markers.source, ConfigError)
-    if height_mm is None:
-        height_mm = float(estimate_height_mm(world, head=head))
+    check_posture(posture)
+    head_pos = pos[:, names.index("head")]
+    skeleton = None
+    if posture == "standing":
+        given = height_mm is not None
+        if height_mm is None:
+            height_mm = float(estimate_height_mm(world, head=head))
+        choice = PostureChoice(
+            "standing",
+            f"as asked; stature {height_mm:.0f} mm "
+            f"({'given' if given else 'from the head set over standing frames'})",
+            height_mm,
+        )
+    else:
+        probe = hybrid_skeleton(height_mm)
+        head_point = default_marker_effectors(probe)["head"].point_mm
+        if height_mm is None:
+            stature = stature_from_reach_mm(
+                probe,
+                head_point,
+                head_pos,
+                [pos[:, i] for i, n in enumerate(names) if n != "head"],
+                str(markers.source),
+            )
+            how = "from the head-to-hand reach"
+        else:
+            stature, how = float(height_mm), "given"
+        upright = float(np.nanpercentile(head_pos[:, 2], UPRIGHT_PERCENTILE))
+        choice = choose_posture(posture, upright, stature, how)
+        if choice.posture == "standing" and height_mm is None:
+            height_mm = float(estimate_height_mm(world, head=head))
+            choice = replace(
+                choice,
+                height_mm=height_mm,
+                reason=f"{choice.reason}; stature for standing {height_mm:.0f} mm "
+                "(from the head set over standing frames)",
+            )
+        elif choice.posture == "seated":
+            height_mm = stature
+            skeleton, choice = _seat(hybrid_skeleton(height_mm), head_pos[:, 2], choice)
+    assert height_mm is not None
+    if skeleton is None:
+        skeleton = hybrid_skeleton(height_mm)
     cfg = config or HybridConfig(
         use_video=False,
         plant_feet=plant_feet,
         start_upright=False,
         replant_mm=RAW_MARKERS_REPLANT_MM,
+        marker_offsets_mm=(
+            {"head": head_band_offset_mm(skeleton)} if choice.posture == "standing" else {}
+        ),
     )
+    if cfg.posture != choice.posture:
+        cfg = replace(cfg, posture=choice.posture)
+    calibration, note = None, "off (positions only)"
+    members: dict[str, FloatArray] = {}
+    if static_calibration and not cfg.member_offsets_mm:
+        calibration, note = _calibrate_static(skeleton, cfg, sets, world, static, frame)
+        if calibration is not None:
+            cfg = replace(cfg, member_offsets_mm=calibration.offsets_mm)
+    elif cfg.member_offsets_mm:
+        note = "member offsets given"
+    for set_members in cfg.member_offsets_mm.values():
+        for m in set_members:
+            members[m] = world.positions_mm[:, world.index(m)]
     where = "the Z-up world" if world_output else "the file's frame"
     source = (
         f"hybrid tracker IK on {Path(markers.source).name} (file up = {frame.up}, floor "
@@ -675,8 +854,12 @@ def track_hybrid_marker_file(
         cfg,
         source=source,
         timer=timer,
+        skeleton=skeleton,
+        members_mm=members,
     )
     motion = drop_unobserved_arms(Motion.from_q(sk, world.time_s, q, source=source), names, poses)
+    if choice.posture == "seated":
+        motion = _leave_out_legs(motion)
     if not world_output:
         motion = Motion(
             sk,
@@ -689,7 +872,76 @@ def track_hybrid_marker_file(
     if out_dir is not None:
         with timer.stage("write"):
             write_run_folder(out_dir, motion, poses)
-    return MarkerFileRun(motion, frame, list(poses))
+    return MarkerFileRun(motion, frame, list(poses), choice, calibration, note)
+
+
+def head_band_offset_mm(skeleton: Skeleton) -> tuple[float, float, float]:
+    """Offset (mm, head joint frame) of a raw head set's centre from the model's head point.
+
+    The stature of a raw file is estimated with the head set `HEAD_TOP_OFFSET_MM` below
+    the top of the head (`mocapkit.io.marker_sets.estimate_height_mm`), but ``zhang21``'s
+    head point sits at 0.97 of the stature, about 50 mm higher at 1731 mm: without this
+    offset a model standing on the floor reaches down to the head set by flexing its neck
+    to the 45 deg limit and bending the trunk (the tennis serve's static start: neck
+    flexion 45 deg with the offset 0, 6-9 deg with it). The offset lowers the head point
+    to where the head set sits on a standing model (straight down, at q = 0).
+    """
+    from mocapkit.io.marker_sets import HEAD_TOP_OFFSET_MM
+    from mocapkit.skeleton.kinematics import forward_kinematics
+
+    eff = default_marker_effectors(skeleton)["head"]
+    q0 = np.clip(skeleton.zero_pose(), skeleton.lower, skeleton.upper)
+    head = forward_kinematics(skeleton, q0)[skeleton.joint_index(eff.joint)]
+    point = head[:3, :3] @ np.asarray(eff.point_mm, dtype=float) + head[:3, 3]
+    # at q = 0 the model stands on z = 0, so heights are above the floor
+    lower_by = np.array([0.0, 0.0, standing_height_mm(skeleton) - HEAD_TOP_OFFSET_MM - point[2]])
+    local = head[:3, :3].T @ lower_by
+    return (float(local[0]), float(local[1]), float(local[2]))
+
+
+def _calibrate_static(
+    sk: Skeleton,
+    cfg: HybridConfig,
+    sets: Sequence[MarkerSet],
+    world: MarkerData,
+    static: MarkerData | None,
+    frame: LabFrame,
+) -> tuple[MemberCalibration | None, str]:
+    """Member offsets of the sets with two or more members, from the stillest window of
+    ``static`` (whole trial) or of ``world``'s first seconds; None and why when none."""
+    from mocapkit.io.marker_sets import evaluate_marker_sets
+
+    multi = [s for s in sets if len(s.members) >= 2]
+    if not multi:
+        return None, "no marker set has two or more members: positions only"
+    source = world if static is None else to_world(static, frame)
+    where = "the take" if static is None else f"static trial {Path(static.source).name}"
+    pos = evaluate_marker_sets(source, sets)
+    span = STATIC_SEARCH_S if static is None else float(source.time_s[-1] - source.time_s[0]) + 1.0
+    interval = find_static_interval(source.time_s, pos, search_s=span)
+    if interval is None:
+        first = f" (first {STATIC_SEARCH_S:g} s)" if static is None else ""
+        return None, (
+            f"no window of {STATIC_WINDOW_S:g} s in {where}{first} sees every marker set "
+            f"and moves less than {MAX_STATIC_RMS_MM:g} mm RMS; member offsets not "
+            "calibrated (positions only)"
+        )
+    members = {
+        s.name: {m: source.positions_mm[:, source.index(m)] for m in s.members} for s in multi
+    }
+    calib = calibrate_member_offsets(
+        sk,
+        cfg,
+        source.time_s,
+        {s.name: pos[:, i] for i, s in enumerate(sets)},
+        members,
+        interval,
+    )
+    spread = ", ".join(f"{n} {v:.1f} mm" for n, v in calib.spread_mm.items())
+    return calib, (
+        f"member offsets of {', '.join(calib.offsets_mm)} calibrated on {where} over "
+        f"{interval.summary()}; spread {spread}"
+    )
 
 
 def bench_ik(n_frames: int = 2000, repeats: int = 5, rate_hz: float = 50.0) -> dict[str, float]:

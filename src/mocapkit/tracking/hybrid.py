@@ -59,6 +59,7 @@ from mocapkit.tracking.base import (
     fit_summary,
     unobserved_part,
 )
+from mocapkit.tracking.posture import SEATED_LEFT_OUT
 
 FloatArray = NDArray[np.float64]
 
@@ -191,6 +192,14 @@ class HybridConfig:
         Hold the feet at their initial positions (the paper's assumption). Set False
         for takes where the subject walks; the feet are then free (no foot effector)
         and the balance step is skipped (no base of support).
+    posture : str
+        ``"standing"`` (default) or ``"seated"``. Seated: no foot is planted or
+        re-planted, no balance step runs (the seat, not the feet, carries the body),
+        and the leg joints (`mocapkit.tracking.posture.SEATED_LEFT_OUT`) are NaN in the
+        results. The skeleton must sit already
+        (`mocapkit.tracking.posture.seat_skeleton`: pelvis held at the seat's height,
+        legs held bent); ``auto`` is resolved before the tracker
+        (`mocapkit.tracking.posture.choose_posture`).
     """
 
     ik: IKConfig = field(default_factory=IKConfig)
@@ -209,8 +218,14 @@ class HybridConfig:
     replant_mm: float = 8.0
     member_offsets_mm: Mapping[str, Mapping[str, Sequence[float]]] = field(default_factory=dict)
     start_upright: bool = True
+    posture: str = "standing"
 
     def __post_init__(self) -> None:
+        if self.posture not in ("standing", "seated"):
+            raise ConfigError(
+                "HybridConfig.posture: expected 'standing' or 'seated' ('auto' is "
+                f"resolved before the tracker), found {self.posture!r}"
+            )
         if not self.gap_limit_s >= 0:
             raise ConfigError(
                 f"HybridConfig.gap_limit_s: expected >= 0 s, found {self.gap_limit_s}"
@@ -222,9 +237,14 @@ class HybridConfig:
             )
 
     @property
+    def feet_planted(self) -> bool:
+        """Whether feet are planted: ``plant_feet`` for a standing subject, never seated."""
+        return self.plant_feet and self.posture == "standing"
+
+    @property
     def balance_config(self) -> BalanceConfig:
         """The balance settings in effect."""
-        if not self.plant_feet:
+        if not self.feet_planted:
             return BalanceConfig(mode="off")
         if self.balance is not None:
             return self.balance
@@ -810,7 +830,7 @@ class HybridTracker:
                     np.clip(sk.zero_pose(), sk.lower, sk.upper)
                 )
                 self._floor_z_mm = float(min(feet[:, 2].min(), standing[n : n + 2, 2].min()))
-                targets[n : n + 2] = feet if self.config.plant_feet else np.nan
+                targets[n : n + 2] = feet if self.config.feet_planted else np.nan
                 for _ in range(max(self.config.init_iterations, 1)):
                     res = self.solver.solve(q, targets)
                     q = res.q
@@ -819,11 +839,15 @@ class HybridTracker:
                     self._balance_model = calibrate_balance(self.solver, q)
             else:
                 assert self._feet is not None
-                targets[n : n + 2] = self._feet if self.config.plant_feet else np.nan
+                targets[n : n + 2] = self._feet if self.config.feet_planted else np.nan
                 res = self.solver.solve(self._q, targets)
                 q = res.q
                 iterations += res.iterations
-                if self.config.plant_feet and self.config.replant_mm > 0 and not self.config.paper:
+                if (
+                    self.config.feet_planted
+                    and self.config.replant_mm > 0
+                    and not self.config.paper
+                ):
                     q, extra = self._replant_if_stepped(q, targets, res.residual_mm[:n], sample)
                     iterations += extra
         refined = False
@@ -938,12 +962,17 @@ class HybridTracker:
         relaxed pose the secondary task pulls it to: made up, not measured. The joints
         it alone places (`mocapkit.tracking.base.unobserved_part`, the rule the runner
         applies to every tracker) are NaN; with every set released, all are.
+        A seated subject's legs (`SEATED_LEFT_OUT`) are NaN on every frame.
         ``q`` keeps the pose (BVH cannot hold NaN) and the status says ``released``.
         """
         out = joints_mm.copy()
         if released and all(name in released for name in self.marker_sets):
             out[:] = np.nan
             return out
+        if self.config.posture == "seated":
+            # the legs are held bent under a seat: no marker sees them
+            for joint in SEATED_LEFT_OUT:
+                out[CANONICAL_JOINTS.index(joint)] = np.nan
         for name in released:
             part = unobserved_part(name)
             for joint in part[1] if part is not None else ():

@@ -1,0 +1,274 @@
+"""Standing or seated subjects for the hybrid tracker: the seat, the stature, the choice.
+
+A seated subject (wheelchair sport, desk VR, driving) sits with the pelvis on a seat; the
+hybrid tracker then holds the legs in a sitting pose and the pelvis at the seat's height
+(`seat_skeleton`), plants no feet and runs no balance step
+(``HybridConfig.posture = "seated"``), and reports no leg joints.
+
+What is estimated from the markers, and how:
+
+* **Stature without assuming standing** (`stature_from_reach_mm`): the head set's greatest
+  distance to a hand set (99th percentile over the frames where both are seen) is taken
+  as the model's head-to-wrist distance with the arm hanging straight down beside the
+  trunk, which scales with the stature (``zhang21``: 0.506 of it). The assumption is that
+  the take holds the hand about as far from the head as a hanging arm for at least 1 % of
+  its frames (a wheelchair push ends with the arm straight down at the rim); a take that
+  keeps the hands near the head underestimates, one that reaches straight overhead or
+  out overestimates by up to the head-to-shoulder distance. ``--height-mm`` overrides it.
+* **Seat** (`estimate_seat_height_mm`): the pelvis (root) height is the head set's height
+  when the subject sits most upright (95th percentile over the take) less the model's
+  pelvis-to-head distance when sitting upright. The head set's centre is taken as the
+  model's head point (its offset on the head is not known in a raw file).
+* **Posture** (`choose_posture`): seated when the head set's upright height above the
+  floor is below `SEATED_HEAD_RATIO` of the stature (standing, the head point sits at
+  0.97 of it; seated on a chair or a wheelchair, at 0.7-0.8).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mocapkit.errors import ConfigError
+from mocapkit.skeleton.kinematics import canonical_positions
+from mocapkit.skeleton.limbs import arm, limbs_present, vertical_root_dof
+from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
+from mocapkit.skeleton.scaling import standing_height_mm
+
+FloatArray = NDArray[np.float64]
+
+#: Postures the hybrid tracker takes (``auto`` chooses one of the first two).
+POSTURES: tuple[str, ...] = ("standing", "seated", "auto")
+#: Hip and knee flexion (rad) of the held sitting legs: thighs forward, shanks down.
+SEATED_HIP_FLEXION_RAD = math.pi / 2
+SEATED_KNEE_FLEXION_RAD = math.pi / 2
+#: Largest neck flexion (rad, either way) of a seated model. With the pelvis held on the
+#: seat, the IK lowered a leaning athlete's head by bowing the neck to its 45 deg limit
+#: with the trunk upright, putting the shoulders 100 mm ahead of the acromion marker
+#: (basket sprint, frames 1600-2200: elbow 199 / 178 mm mean / median at 45 deg, 148 / 128
+#: at 20 deg; freeing the pelvis' tilt instead gave 195 / 142, both 185 / 130).
+SEATED_NECK_FLEXION_RAD = math.radians(20.0)
+#: Percentile of the head set's height taken as its height when most upright.
+UPRIGHT_PERCENTILE = 95.0
+#: Percentile of the head-to-hand distance taken as the hanging arm's reach.
+REACH_PERCENTILE = 99.0
+#: Fewest frames with head and a hand seen together for `stature_from_reach_mm`.
+MIN_REACH_FRAMES = 20
+#: Upright head height over stature below which ``auto`` takes the subject as seated.
+SEATED_HEAD_RATIO = 0.88
+#: Canonical joints left out of a seated subject's outputs (NaN): the legs.
+SEATED_LEFT_OUT: tuple[str, ...] = (
+    "left_hip",
+    "left_knee",
+    "left_ankle",
+    "right_hip",
+    "right_knee",
+    "right_ankle",
+)
+
+
+def check_posture(posture: str, where: str = "--posture") -> str:
+    """Return ``posture`` if it is one of `POSTURES`, else raise `ConfigError`."""
+    if posture not in POSTURES:
+        raise ConfigError(f"{where}: expected one of {', '.join(POSTURES)}, found {posture!r}")
+    return posture
+
+
+def sitting_pose(skeleton: Skeleton, q: ArrayLike) -> FloatArray:
+    """``q`` with both legs in the sitting pose (hips and knees flexed 90 deg, the rest 0).
+
+    The legs' flexion DoFs are found by name (``<l|r>_hip_flexion``, ``<l|r>_knee_flexion``
+    of ``zhang21``); a skeleton without legs is returned unchanged.
+    """
+    out = np.array(q, dtype=float, copy=True)
+    for lmb in limbs_present(skeleton, "leg"):
+        out[lmb.dofs] = 0.0
+    for prefix in ("l", "r"):
+        for name, value in (
+            (f"{prefix}_hip_flexion", SEATED_HIP_FLEXION_RAD),
+            (f"{prefix}_knee_flexion", SEATED_KNEE_FLEXION_RAD),
+        ):
+            if name in skeleton.dof_names:
+                out[skeleton.dof_index(name)] = value
+    return out
+
+
+def pelvis_to_head_mm(skeleton: Skeleton, head_point_mm: ArrayLike) -> float:
+    """Height (mm) of a point on the head (in the head joint's frame, e.g. the head
+    effector's point) above the pelvis (root) when the trunk is upright (q = 0)."""
+    from mocapkit.skeleton.kinematics import forward_kinematics
+    from mocapkit.skeleton.limbs import head_joint
+
+    q = np.clip(skeleton.zero_pose(), skeleton.lower, skeleton.upper)
+    world = forward_kinematics(skeleton, q)
+    h = world[head_joint(skeleton)]
+    p = h[:3, :3] @ np.asarray(head_point_mm, dtype=float) + h[:3, 3]
+    root = canonical_positions(skeleton, q)[CANONICAL_JOINTS.index("pelvis")]
+    return float(p[2] - root[2])
+
+
+def hanging_reach_ratio(skeleton: Skeleton, head_point_mm: ArrayLike) -> float:
+    """The model's head-point-to-wrist distance with the arms hanging (q = 0), over its
+    stature (`mocapkit.skeleton.scaling.standing_height_mm`)."""
+    from mocapkit.skeleton.kinematics import forward_kinematics
+    from mocapkit.skeleton.limbs import head_joint
+
+    q = np.clip(skeleton.zero_pose(), skeleton.lower, skeleton.upper)
+    world = forward_kinematics(skeleton, q)
+    h = world[head_joint(skeleton)]
+    p = h[:3, :3] @ np.asarray(head_point_mm, dtype=float) + h[:3, 3]
+    wrists = [world[arm(skeleton, s).end, :3, 3] for s in ("left", "right")]
+    reach = float(np.mean([np.linalg.norm(p - w) for w in wrists]))
+    return reach / standing_height_mm(skeleton)
+
+
+def stature_from_reach_mm(
+    skeleton: Skeleton,
+    head_point_mm: ArrayLike,
+    head_mm: ArrayLike,
+    hands_mm: Sequence[ArrayLike],
+    where: str = "markers",
+) -> float:
+    """Stature (mm) from the head-to-hand reach, without assuming a standing subject.
+
+    The `REACH_PERCENTILE` of the distance from the head set to each hand set (frames
+    where both are seen; the larger over the hands) divided by the model's hanging-arm
+    reach ratio (`hanging_reach_ratio`; scale-free, so any stature of ``skeleton`` gives
+    the same ratio).
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        The model (any stature).
+    head_point_mm : array_like, shape (3,)
+        The head effector's point in the head joint's frame.
+    head_mm : array_like, shape (T, 3)
+        Head set positions (NaN where unseen).
+    hands_mm : sequence of array_like, shape (T, 3)
+        One or two hand sets.
+    where : str
+        The file, for the message.
+
+    Raises
+    ------
+    ConfigError
+        Fewer than `MIN_REACH_FRAMES` frames see the head and a hand together; give the
+        stature (``--height-mm``).
+    """
+    head = np.asarray(head_mm, dtype=float)
+    reaches = []
+    for hand in hands_mm:
+        d = np.linalg.norm(head - np.asarray(hand, dtype=float), axis=1)
+        d = d[np.isfinite(d)]
+        if d.size >= MIN_REACH_FRAMES:
+            reaches.append(float(np.percentile(d, REACH_PERCENTILE)))
+    if not reaches:
+        raise ConfigError(
+            f"{where}: cannot estimate the stature of a seated subject: expected at least "
+            f"{MIN_REACH_FRAMES} frames seeing the head set and a hand set together, found "
+            "fewer; give --height-mm"
+        )
+    return max(reaches) / hanging_reach_ratio(skeleton, head_point_mm)
+
+
+def estimate_seat_height_mm(
+    skeleton: Skeleton, head_point_mm: ArrayLike, head_z_mm: ArrayLike
+) -> float:
+    """Pelvis (root) height (mm above the floor, z = 0) of a seated subject.
+
+    The `UPRIGHT_PERCENTILE` of the head set's height less `pelvis_to_head_mm` of
+    ``skeleton`` (scaled to the subject).
+    """
+    z = np.asarray(head_z_mm, dtype=float)
+    z = z[np.isfinite(z)]
+    if z.size == 0:
+        raise ConfigError("head set: expected some frames with the head seen, found none")
+    return float(np.percentile(z, UPRIGHT_PERCENTILE)) - pelvis_to_head_mm(skeleton, head_point_mm)
+
+
+def seat_skeleton(skeleton: Skeleton, seat_height_mm: float) -> Skeleton:
+    """``skeleton`` sitting on a seat: the pelvis (canonical joint) held at
+    ``seat_height_mm`` above the floor and the legs held in the sitting pose
+    (`sitting_pose`), by setting those DoFs' lower and upper limits equal, so the IK
+    leaves them where they are; the neck's flexion is limited to
+    `SEATED_NECK_FLEXION_RAD` so that a lower head is a leaning trunk."""
+    if not math.isfinite(seat_height_mm) or seat_height_mm <= 0:
+        raise ConfigError(
+            f"seat height: expected a height > 0 mm above the floor, found {seat_height_mm}"
+        )
+    sit = sitting_pose(skeleton, np.zeros(skeleton.n_dofs))
+    lower, upper = skeleton.lower.copy(), skeleton.upper.copy()
+    for lmb in limbs_present(skeleton, "leg"):
+        lower[lmb.dofs] = upper[lmb.dofs] = sit[lmb.dofs]
+    if "neck_flexion" in skeleton.dof_names:
+        i = skeleton.dof_index("neck_flexion")
+        lower[i] = max(lower[i], -SEATED_NECK_FLEXION_RAD)
+        upper[i] = min(upper[i], SEATED_NECK_FLEXION_RAD)
+    tz = vertical_root_dof(skeleton)
+    # the root translation is added to the rest pose's pelvis height
+    q0 = np.clip(skeleton.zero_pose(), skeleton.lower, skeleton.upper)
+    q0[tz] = 0.0
+    rest_mm = float(canonical_positions(skeleton, q0)[CANONICAL_JOINTS.index("pelvis"), 2])
+    lower[tz] = upper[tz] = seat_height_mm - rest_mm
+    return skeleton.replace(lower=lower, upper=upper)
+
+
+@dataclass(frozen=True)
+class PostureChoice:
+    """The posture used, and why (printed by the CLI)."""
+
+    posture: str
+    reason: str
+    height_mm: float
+    seat_height_mm: float = math.nan
+
+
+def choose_posture(
+    posture: str, upright_head_mm: float, stature_mm: float, stature_source: str
+) -> PostureChoice:
+    """Resolve ``auto``: seated when the upright head height (`UPRIGHT_PERCENTILE` of the
+    head set's height above the floor) is below `SEATED_HEAD_RATIO` of the stature.
+
+    Parameters
+    ----------
+    posture : str
+        One of `POSTURES`.
+    upright_head_mm : float
+        The head set's upright height above the floor.
+    stature_mm : float
+        The subject's stature, not assuming a posture (given, or from the reach).
+    stature_source : str
+        How the stature was found, for the reason.
+    """
+    check_posture(posture)
+    ratio = upright_head_mm / stature_mm
+    why = (
+        f"head set at {upright_head_mm:.0f} mm above the floor when most upright = "
+        f"{ratio:.2f} of the stature {stature_mm:.0f} mm ({stature_source}); "
+        f"seated below {SEATED_HEAD_RATIO:g}"
+    )
+    if posture != "auto":
+        return PostureChoice(posture, f"as asked; {why}", stature_mm)
+    chosen = "seated" if ratio < SEATED_HEAD_RATIO else "standing"
+    return PostureChoice(chosen, f"auto: {why}", stature_mm)
+
+
+__all__ = [
+    "POSTURES",
+    "SEATED_HEAD_RATIO",
+    "SEATED_LEFT_OUT",
+    "SEATED_NECK_FLEXION_RAD",
+    "PostureChoice",
+    "check_posture",
+    "choose_posture",
+    "estimate_seat_height_mm",
+    "hanging_reach_ratio",
+    "pelvis_to_head_mm",
+    "seat_skeleton",
+    "sitting_pose",
+    "stature_from_reach_mm",
+]
