@@ -16,14 +16,14 @@ The default path is ``../shared/data/c3d/kinematics_tennis_serve.c3d`` from the 
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from mocapkit.ik.sdls import IKConfig
 from mocapkit.io.marker_files import read_markers
 from mocapkit.pipelines.hybrid import RAW_MARKERS_REPLANT_MM, track_hybrid_markers
-from mocapkit.tracking.hybrid import HybridConfig
+from mocapkit.tracking.hybrid import TRACKING_IK, HybridConfig
 
 MARKER_SETS = ["head=LFHD+RFHD+LBHD+RBHD", "left_hand=LWRA+LWRB", "right_hand=RWRA+RWRB"]
 
@@ -40,7 +40,7 @@ def main(path: Path) -> None:
                 plant_feet=plant_feet,
                 start_upright=False,
                 replant_mm=RAW_MARKERS_REPLANT_MM,
-                ik=IKConfig(secondary_gain=gain),
+                ik=replace(TRACKING_IK, secondary_gain=gain),
             )
             motion = track_hybrid_markers(path, MARKER_SETS, config=config)
             elbows_mm = np.stack([motion.joint("left_elbow"), motion.joint("right_elbow")], axis=1)

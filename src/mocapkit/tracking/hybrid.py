@@ -101,6 +101,14 @@ def foot_effectors(skeleton: Skeleton) -> list[Effector]:
     return [Effector(f"{side}_foot", names[leg(skeleton, side).end]) for side in ("left", "right")]
 
 
+#: The tracker's IK settings: each iteration does the work of three of the paper's
+#: (`IKConfig.term_clamp_scale`, `IKConfig.relax_substeps`), 30 iterations a solve instead
+#: of 100 (see `HybridConfig.ik`).
+TRACKING_IK = IKConfig(max_iterations=30, term_clamp_scale=3.0, relax_substeps=3)
+#: Bisection steps of the balance lean (`BalanceConfig.bisection_steps`) in ``"solve"`` mode.
+TRACKING_BISECTION_STEPS = 6
+
+
 class _CountedSolver(SDLSSolver):
     """`SDLSSolver` that counts its solves and iterations on a `StageTimer`
     (``"ik_solves"``, ``"ik_iterations"``), wherever it is called from (balance too)."""
@@ -129,13 +137,20 @@ class HybridConfig:
     Parameters
     ----------
     ik : IKConfig
-        The solver's defaults run each solve to ``max_iterations`` (100) once marker
-        noise keeps the error above ``tol_mm`` (with member markers it settles near
-        5 mm after 3-5 iterations); the later iterations still relax the redundant DoFs
-        (the secondary task), and the accuracy depends on it. Measured on lambada
-        (accuracy clip, oriented sets, IK only): stopping when the error stalls (4
-        iterations, 1 %) gave elbow 38.1 mm and MPJPE 43.8 mm against 20.4 and 33.1;
-        at least 50 iterations, 21.4 and 35.3 mm.
+        Default `TRACKING_IK` (also with ``paper=True``; ``IKConfig()`` is the paper's
+        iteration). Marker noise keeps the largest error above ``tol_mm`` (with member
+        markers it settles near 5 mm after 3-5 iterations), so each solve runs to
+        ``max_iterations``, and the later iterations matter: they cross the flat valley
+        of the least-squares problem along terms of small singular value, which SDLS
+        bounds to a few milliradians per iteration (the same with the secondary task
+        off; `IKConfig.term_clamp_scale`). Measured on lambada (accuracy clip, oriented
+        sets, IK only, the paper's iteration): stopping when the error stalls (4
+        iterations, 1 %) gave elbow 38.1 mm and MPJPE 43.8 mm against 20.4 and 33.1; at
+        least 50 iterations, 21.4 and 35.3 mm. `TRACKING_IK` does the work of three
+        iterations in one (30 a solve), which keeps the accuracy; ten in one (10 a
+        solve) was better on lambada and 01_09 (elbow 15.7 and 15.8 mm against 17.4 and
+        15.9) but let zombie's trunk turn 40 deg off in the flat valley and flip the
+        left arm (MPJPE 26.6 -> 39.5 mm), and five in one did the same (38.6 mm).
     paper : bool
         Follow the paper literally: no temporal smoothing, proportional balance rule.
     use_video : bool
@@ -202,7 +217,7 @@ class HybridConfig:
         (`mocapkit.tracking.posture.choose_posture`).
     """
 
-    ik: IKConfig = field(default_factory=IKConfig)
+    ik: IKConfig = field(default_factory=lambda: TRACKING_IK)
     paper: bool = False
     use_video: bool = True
     gap_limit_s: float = BRIDGE_S
@@ -248,7 +263,9 @@ class HybridConfig:
             return BalanceConfig(mode="off")
         if self.balance is not None:
             return self.balance
-        return BalanceConfig(mode="proportional" if self.paper else "solve")
+        if self.paper:
+            return BalanceConfig(mode="proportional")
+        return BalanceConfig(mode="solve", bisection_steps=TRACKING_BISECTION_STEPS)
 
     @property
     def smoothing(self) -> bool:
