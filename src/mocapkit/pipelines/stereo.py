@@ -334,7 +334,29 @@ STEREO_CLIPS: tuple[tuple[str, float], ...] = (
     ("01_01.bvh", 7.5),
 )
 
+
 #: Tracker modes of the accuracy study.
+def _study_session(
+    work: Path, mocap_dir: str | os.PathLike[str], clip: str, start: float, seconds: float
+) -> Path:
+    """The session of one clip excerpt of a stereo study, rendered once into ``work``.
+
+    Rig ``all`` (the stereo pair and the mono camera), long sleeves, default realism;
+    a session already rendered there (it has its ``truth.npz``) is reused. The folder is
+    named by clip, start and length, so an excerpt of another length is not taken for it.
+    """
+    from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+
+    session = work / f"{Path(clip).stem}_{start:g}+{seconds:g}s"
+    if not (session / "truth.npz").is_file():
+        synthesize_session(
+            str(Path(mocap_dir) / clip),
+            session,
+            SynthOptions(rig="all", start_s=start, seconds=seconds, sleeve="long", overwrite=True),
+        )
+    return session
+
+
 ACCURACY_MODES: dict[str, StereoConfig] = {
     "keypoints+torso": StereoConfig(use_keypoints=True, torso="keypoints"),
     # with a measured torso the nominal shoulders are right: 4 DoF per arm
@@ -368,23 +390,13 @@ def stereo_accuracy(
     Returns one row per clip and mode: ``clip``, ``mode``, ``cameras`` and the figures
     of `evaluate_stereo` plus ``frames_per_s``.
     """
-    from mocapkit.synth.session_writer import SynthOptions, synthesize_session
-
     for m in modes:
         if m not in ACCURACY_MODES:
             raise unknown_name("accuracy mode", m, ACCURACY_MODES, "--modes")
     rows = []
     work = Path(work_dir)
     for clip, start in clips:
-        session = work / f"{Path(clip).stem}_{start:g}s"
-        if not (session / "truth.npz").is_file():
-            synthesize_session(
-                str(Path(mocap_dir) / clip),
-                session,
-                SynthOptions(
-                    rig="all", start_s=start, seconds=seconds, sleeve="long", overwrite=True
-                ),
-            )
+        session = _study_session(work, mocap_dir, clip, start, seconds)
         for m in modes:
             cfg = replace(ACCURACY_MODES[m], seed=int(seed))
             run = track_stereo_session(
@@ -502,22 +514,18 @@ def stereo_ablations(
     frame).
     """
     from mocapkit.skeleton.model import CANONICAL_JOINTS
-    from mocapkit.synth.session_writer import SynthOptions, synthesize_session
 
     for v in variants:
         if v not in ABLATIONS:
             raise unknown_name("ablation variant", v, ABLATIONS, "--variants")
+    if not 0.0 < reset_s < seconds:
+        raise ConfigError(
+            f"stereo ablations: expected the reset time within the excerpt (0 < reset_s < "
+            f"{seconds:g} s), found reset_s = {reset_s:g} s"
+        )
     rows = []
     for clip, start in clips:
-        session = Path(work_dir) / f"{Path(clip).stem}_{start:g}s"
-        if not (session / "truth.npz").is_file():
-            synthesize_session(
-                str(Path(mocap_dir) / clip),
-                session,
-                SynthOptions(
-                    rig="all", start_s=start, seconds=seconds, sleeve="long", overwrite=True
-                ),
-            )
+        session = _study_session(Path(work_dir), mocap_dir, clip, start, seconds)
         for v in variants:
             cfg = replace(ABLATIONS[v], seed=int(seed))
             t, joints, truth = _track_with_reset(session, cameras, cfg, None)
