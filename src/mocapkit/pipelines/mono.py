@@ -246,7 +246,7 @@ def _apply(camera: Camera, points_in_camera: FloatArray) -> FloatArray:
 
 def _run(
     lengths: FloatArray,
-    cam: Camera,
+    cam: Camera | None,
     dt: float,
     cfg: MonoConfig,
     model: StickModel,
