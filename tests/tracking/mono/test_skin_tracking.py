@@ -121,3 +121,27 @@ def test_a_foreground_mask_hides_static_skin() -> None:
     np.testing.assert_allclose(f.blobs["head"].centre, (320, 100), atol=1.5)
     with pytest.raises(ConfigError, match="foreground mask of shape"):
         SkinTracker().update(img, foreground=fg[:10])
+
+
+def test_mask_blobs_equal_ellipse_of_each_component() -> None:
+    """The one-pass moments of `mask_blobs` against `ellipse_of` on each component."""
+    rng = np.random.default_rng(3)
+    mask = (rng.random((120, 160)) < 0.35).astype(np.uint8)
+    cv2.ellipse(mask, (80, 60), (40, 12), 25, 0, 360, 1, -1)
+    blobs = mask_blobs(mask, min_area_px=4, close_px=0)
+    n, labels = cv2.connectedComponents(mask, connectivity=8)
+    want = []
+    for i in range(1, n):
+        ys, xs = np.nonzero(labels == i)
+        if xs.size >= 4:
+            want.append(ellipse_of(np.stack([xs, ys], axis=1)))
+    assert len(blobs) == len(want) > 10
+    by_centre = {tuple(np.round(b.centre, 6)): b for b in want}
+    for b in blobs:
+        w = by_centre[tuple(np.round(b.centre, 6))]
+        assert b.area == w.area
+        assert b.major == pytest.approx(w.major, abs=1e-9)
+        assert b.minor == pytest.approx(w.minor, abs=1e-9)
+        if w.major - w.minor > 1e-6:  # a round blob's axis is any direction
+            np.testing.assert_allclose(b.ends, w.ends, atol=1e-9)
+    assert [b.area for b in blobs] == sorted((b.area for b in blobs), reverse=True)
