@@ -112,8 +112,52 @@ def test_bench_mono_reports_its_figures() -> None:
 
     out = BENCHMARKS["mono"](repeats=1, n_frames=12)
     assert out["fps"] > 0 and out["first_order_fps"] > 0 and out["offline_fps"] > 0
+    assert out["image_fps"] > 0 and out["image_2d_fps"] > 0 and out["fps_wall"] > 0
     assert 0.0 <= float(out["pruned_share"]) <= 1.0
     assert float(out["survivors_mean"]) <= float(out["candidates_mean"])
+
+
+def test_bench_frames_are_read_back_by_skin_tracking() -> None:
+    """The image path of the benchmark: the drawn frames give the head, and each
+    forearm's two ends, back within 2 px. Which end is the elbow follows the paper's
+    rule (the end nearer the neck), which is wrong while a raised hand is nearer the
+    neck than its elbow: frames 0-21 of this sequence for the left arm."""
+    from mocapkit.pipelines.mono_bench import _camera, mono_sequence, skin_frames
+    from mocapkit.tracking.mono.skin_tracking import SKIN_JOINTS, SkinTracker
+
+    joints, _, model, _ = mono_sequence(20)
+    cam = _camera(+1.0)
+    px = cam.project(joints)
+    tr = SkinTracker(trunk_from_head=True)
+    got = np.stack([tr.update(im).joints_px for im in skin_frames(px, model)])
+
+    def col(names: tuple[str, ...], table: tuple[str, ...], pts: np.ndarray) -> np.ndarray:
+        return pts[:, [table.index(n) for n in names]]
+
+    head_err = np.linalg.norm(
+        col(("head",), SKIN_JOINTS, got) - col(("head",), model.joint_names, px), axis=-1
+    )
+    assert np.median(head_err) < 2.0
+    for side in ("left", "right"):
+        ends = (f"{side}_elbow", f"{side}_wrist")
+        g, t = col(ends, SKIN_JOINTS, got), col(ends, model.joint_names, px)
+        same = np.linalg.norm(g - t, axis=-1).max(axis=1)
+        swapped = np.linalg.norm(g - t[:, ::-1], axis=-1).max(axis=1)
+        assert np.median(np.minimum(same, swapped)) < 2.0, side
+    left = [model.joint_names.index(n) for n in ("neck", "left_elbow", "left_wrist")]
+    d_elbow = np.linalg.norm(px[:, left[1]] - px[:, left[0]], axis=-1)
+    d_wrist = np.linalg.norm(px[:, left[2]] - px[:, left[0]], axis=-1)
+    assert (d_wrist < d_elbow).all()  # the rule's failing case, all 20 frames
+
+
+def test_mono_scaling_rows() -> None:
+    from mocapkit.pipelines.mono_bench import mono_scaling
+
+    rows = mono_scaling(frame_counts=(15,), repeats=1)
+    assert [r["links"] for r in rows] == [8.0, 14.0]
+    for r in rows:
+        assert r["frames"] == 15 and r["online_ms"] > 0 and r["offline_ms"] > 0
+        assert 1 <= r["survivors"] <= r["candidates"] <= 2 ** r["links"]
 
 
 def test_refined_lengths_read_each_link_at_its_own_depth() -> None:

@@ -26,7 +26,13 @@ def add_mono_accuracy_parser(methods: Any) -> None:
     m.add_argument("--work", default="accuracy-output/mono", help="sessions and results")
     m.add_argument("--seed", type=int, default=0)
     m.add_argument("--noise-px", type=float, default=2.0, help="2-D noise sigma (px)")
-    m.add_argument("--openpose", action="store_true", help="track from OpenPose JSON")
+    src = m.add_mutually_exclusive_group()
+    src.add_argument("--openpose", action="store_true", help="track from OpenPose JSON")
+    src.add_argument(
+        "--skin",
+        action="store_true",
+        help="track from the rendered video by skin blobs (the trunk drawn from the head)",
+    )
     m.add_argument("--lag", type=int, default=None, help="online fixed lag (frames)")
     m.add_argument(
         "--cost", choices=("acceleration", "joint_acceleration", "rotation"),
@@ -51,6 +57,7 @@ def _run(args: argparse.Namespace) -> int:
         seed=args.seed,
         noise_px=args.noise_px,
         openpose=args.openpose,
+        skin=args.skin,
         config=MonoConfig(lag=args.lag, cost=args.cost),
         say=(lambda _line: None) if args.json else print,
     )
@@ -62,4 +69,8 @@ def _run(args: argparse.Namespace) -> int:
             f"flips right {100 * np.mean([r.flips_right for r in rows]):.1f} %, pruned "
             f"{100 * np.mean([r.pruned_share_mean for r in rows]):.1f} % of the poses per frame"
         )
+        if args.skin:
+            for r in rows:
+                per = ", ".join(f"{n} {v:.1f}" for n, v in r.input_px_by_joint.items())
+                print(f"{r.clip} 2-D input error per joint (median px): {per}")
     return 0

@@ -51,8 +51,9 @@ def add_mono_parser(methods: Any) -> None:
     p.add_argument(
         "--skin",
         action="store_true",
-        help="read the 2-D joints off the video by skin blobs (paper §3.3; needs a waist "
-        "cue such as the paper's golden belt for the trunk)",
+        help="read the 2-D joints off the video by skin blobs (paper §3.3); the trunk comes "
+        "from a waist blob (the paper's golden belt) or, without one, is drawn upright from "
+        "the head",
     )
     p.add_argument("--legs", action="store_true", help="track the legs too")
     p.add_argument(

@@ -54,6 +54,8 @@ class MonoRun:
         Image scale used to turn orthographic px into mm (NaN for the other models).
     results : list of MonoResult
         The last pass's per-frame results, as written to ``fit.csv``.
+    input_px : (T, K, 2) float
+        The 2-D joints of ``model`` the tracker was given (px), NaN where unseen.
     """
 
     motion: Motion
@@ -62,6 +64,7 @@ class MonoRun:
     model: StickModel
     px_per_mm: float
     results: list[MonoResult] = field(default_factory=list)
+    input_px: FloatArray = field(default_factory=lambda: np.zeros((0, 0, 2)))
 
     def summary(self) -> dict[str, float]:
         """Mean survivors, candidates, share pruned, residual (px) and frames with a pose."""
@@ -109,16 +112,18 @@ def load_keypoints(
     return read_keypoints_csv(p)
 
 
-def skin_keypoints(session: Session, camera: str) -> Keypoints:
+def skin_keypoints(session: Session, camera: str, trunk_from_head: bool = True) -> Keypoints:
     """2-D joints of the stick from the camera's video by skin blobs (paper §3.3).
 
-    `mocapkit.tracking.mono.skin_tracking.SkinTracker` on every frame; joints it cannot
-    read (no waist blob: no pelvis, no shoulders) are NaN.
+    `mocapkit.tracking.mono.skin_tracking.SkinTracker` on every frame. A waist blob (the
+    paper's belt) gives the pelvis and shoulders; without one, ``trunk_from_head`` draws
+    an upright trunk from the head ellipse (the synthetic sessions and the real videos
+    have no belt), else those joints are NaN.
     """
     from mocapkit.tracking.mono.skin_tracking import SKIN_JOINTS, SkinTracker
 
     video = session.video(camera)
-    tracker = SkinTracker()
+    tracker = SkinTracker(trunk_from_head=trunk_from_head)
     px = np.full((video.n_frames, len(SKIN_JOINTS), 2), np.nan)
     stream = video.open()
     try:
@@ -247,7 +252,7 @@ def _apply(camera: Camera, points_in_camera: FloatArray) -> FloatArray:
 
 def _run(
     lengths: FloatArray,
-    cam: Camera,
+    cam: Camera | None,
     dt: float,
     cfg: MonoConfig,
     model: StickModel,
@@ -520,4 +525,4 @@ def track_mono(
     )
     results = [r for r in run.results if isinstance(r, MonoResult)]
     frames = [r.frame for r in results if r.frame is not None]
-    return MonoRun(run.motion, frames, lengths, model, scale, results)
+    return MonoRun(run.motion, frames, lengths, model, scale, results, px)

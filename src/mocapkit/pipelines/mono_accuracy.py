@@ -3,10 +3,13 @@
 For each clip a mono session is rendered (`mocapkit synth --rig mono`), the true 2-D
 keypoints get seeded Gaussian noise (2 px per coordinate by default), and the session is
 tracked from them (or from OpenPose BODY_25 JSON written from those noisy keypoints with
-a second, smaller person added beside the subject). Reported per clip: the upper-body
+a second, smaller person added beside the subject, or from the rendered video by skin
+blobs, ``skin``). Reported per clip: the upper-body
 error after a per-frame similarity (Procrustes) alignment (``pa_mpjpe_mm``), MPJPE, the
 share of link-frames whose flip (towards or away from the camera) is right, the mean
-survivors and share pruned per frame.
+survivors and share pruned per frame, and the 2-D error of the tracker's input points
+against the true keypoints (``input_px_median``: median over the seen joint-frames,
+``input_seen``: the share of joint-frames seen; per joint in ``input_px_by_joint``).
 
 A link-frame counts for the flip figure when the true link leaves the image plane by at
 least ``FLIP_MIN_SINE`` (0.2, about 12 deg): nearer the plane both flips give nearly the
@@ -18,7 +21,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -62,6 +65,9 @@ class MonoClipAccuracy:
     all_pruned_frames: int
     residual_px_mean: float
     coverage: float
+    input_px_median: float = float("nan")
+    input_seen: float = float("nan")
+    input_px_by_joint: dict[str, float] = field(default_factory=dict)
 
 
 def flip_accuracy(run: MonoRun, truth_in_camera: FloatArray) -> tuple[float, FloatArray]:
@@ -82,6 +88,34 @@ def flip_accuracy(run: MonoRun, truth_in_camera: FloatArray) -> tuple[float, Flo
     right = counted & (np.sign(dz_true) == np.sign(dz_est))
     per_link = right.sum(axis=0) / np.maximum(counted.sum(axis=0), 1)
     return float(right.sum() / max(int(counted.sum()), 1)), per_link
+
+
+def input_error(run: MonoRun, true_px: FloatArray) -> tuple[float, float, dict[str, float]]:
+    """2-D error of the tracker's input against the true keypoints of its joints.
+
+    Parameters
+    ----------
+    run : MonoRun
+    true_px : (T, K, 2) float
+        True pixels of ``run.model.joint_names``.
+
+    Returns
+    -------
+    median_px : float
+        Median distance over the seen joint-frames (NaN when none is seen).
+    seen : float
+        Share of joint-frames with an input point.
+    by_joint : dict of str to float
+        Median distance per joint (NaN for a joint never seen).
+    """
+    d = np.linalg.norm(run.input_px - true_px, axis=-1)
+    ok = np.isfinite(d)
+    by_joint = {
+        n: float(np.median(d[ok[:, k], k])) if ok[:, k].any() else float("nan")
+        for k, n in enumerate(run.model.joint_names)
+    }
+    med = float(np.median(d[ok])) if ok.any() else float("nan")
+    return med, float(ok.mean()), by_joint
 
 
 def noisy_keypoints(session_path: Path, model: StickModel, noise_px: float, seed: int) -> tuple:
@@ -126,9 +160,16 @@ def mono_accuracy(
     config: MonoConfig | None = None,
     say: Callable[[str], None] = lambda _line: None,
     reuse: bool = True,
+    skin: bool = False,
 ) -> list[MonoClipAccuracy]:
-    """Render (or reuse), track from noisy true keypoints, and evaluate each clip."""
+    """Render (or reuse), track from noisy true keypoints (or OpenPose JSON, or the video
+    by skin blobs with ``skin``), and evaluate each clip."""
+    if skin and openpose:
+        from mocapkit.errors import ConfigError
+
+        raise ConfigError("mono_accuracy: give either skin or openpose, not both")
     cfg = config or MonoConfig()
+    source = "skin" if skin else "openpose" if openpose else "keypoints"
     rows = []
     for clip in clips or tuple(MONO_CLIPS):
         start, seconds = MONO_CLIPS.get(clip, (0.0, 6.0))
@@ -141,8 +182,10 @@ def mono_accuracy(
                 SynthOptions(rig="mono", start_s=start, seconds=seconds, seed=seed, overwrite=True),
             )
         s, cam, names, px = noisy_keypoints(session, _model(cfg), noise_px, seed)
-        out = base / ("openpose" if openpose else "keypoints")
-        if openpose:
+        out = base / source
+        if skin:
+            run = track_mono(session, out, camera=cam, config=cfg, skin=True)
+        elif openpose:
             folder = base / "openpose_json"
             write_openpose_with_bystander(folder, names, px, seed)
             run = track_mono(session, out, camera=cam, keypoints=folder, config=cfg)
@@ -154,10 +197,12 @@ def mono_accuracy(
         assert truth is not None
         tj = truth.joints_mm[:, [truth.joint_names.index(n) for n in run.model.joint_names]]
         flips, _ = flip_accuracy(run, s.camera(cam).to_camera(tj))
+        true_px = s.keypoints[cam].pixels[:, [names.index(n) for n in run.model.joint_names]]
+        med, seen, by_joint = input_error(run, true_px)
         summ = run.summary()
         row = MonoClipAccuracy(
             clip,
-            "openpose" if openpose else "keypoints",
+            source,
             rep.pa_mpjpe_mm,
             rep.mpjpe_mm,
             flips,
@@ -167,6 +212,9 @@ def mono_accuracy(
             int(summ["all_pruned_frames"]),
             summ["residual_px_mean"],
             rep.coverage,
+            med,
+            seen,
+            by_joint,
         )
         say(format_rows([row]).splitlines()[-1])
         rows.append(row)
@@ -183,14 +231,14 @@ def format_rows(rows: Sequence[MonoClipAccuracy]) -> str:
     """A table: one line per clip (the header alone for no rows)."""
     lines = [
         f"{'clip':<18}{'input':<10}{'PA mm':>8}{'MPJPE':>8}{'flips':>7}{'surv':>7}"
-        f"{'cand':>7}{'pruned':>8}{'allpr':>6}{'res px':>8}{'cover':>7}"
+        f"{'cand':>7}{'pruned':>8}{'allpr':>6}{'res px':>8}{'cover':>7}{'in px':>7}{'seen':>7}"
     ]
     for r in rows:
         lines.append(
             f"{r.clip:<18}{r.source:<10}{r.pa_mpjpe_mm:8.1f}{r.mpjpe_mm:8.1f}"
             f"{100 * r.flips_right:6.1f}%{r.survivors_mean:7.1f}{r.candidates_mean:7.1f}"
             f"{100 * r.pruned_share_mean:7.1f}%{r.all_pruned_frames:6d}{r.residual_px_mean:8.2f}"
-            f"{r.coverage:7.3f}"
+            f"{r.coverage:7.3f}{r.input_px_median:7.2f}{100 * r.input_seen:6.1f}%"
         )
     return "\n".join(lines)
 

@@ -8,6 +8,7 @@ import pytest
 from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.tracking.mono.motion_cost import (
     acceleration_cost,
+    acceleration_min,
     angular_velocity,
     angular_velocity_literal,
     joint_acceleration_cost,
@@ -128,6 +129,48 @@ def test_viterbi_and_pair_viterbi_equal_brute_force(t: int) -> None:
         assert _cost(path2, unary, pair, triple) == pytest.approx(cost2)
 
 
+def test_acceleration_min_equals_the_full_array_and_its_argmin() -> None:
+    """The fused, pruned pair-state step against ``min``/``argmin`` of eq. 3's array:
+    equal to the bit, ties (rounded omegas and costs) to the first i, unreachable (inf)
+    pair states included."""
+    rng = np.random.default_rng(50)
+    for trial in range(150):
+        ni, nj, nm = (int(v) for v in rng.integers(1, 10, 3))
+        nl = int(rng.integers(1, 9))
+        wa = rng.normal(size=(ni, nj, nl, 3))
+        wb = rng.normal(size=(nj, nm, nl, 3))
+        cost = 5.0 * rng.normal(size=(ni, nj))
+        if trial % 3 == 0:
+            wa, wb, cost = np.round(wa), np.round(wb), np.round(cost)
+        if trial % 5 == 0:
+            cost[rng.random(cost.shape) < 0.3] = np.inf
+        tot = cost[:, :, None] + acceleration_cost(wa, wb, 1 / 30)
+        best, back = acceleration_min(cost, wa, wb, 1 / 30)
+        np.testing.assert_array_equal(best, tot.min(axis=0))
+        np.testing.assert_array_equal(back, tot.argmin(axis=0))
+    with pytest.raises(ShapeError, match="acceleration_min: expected"):
+        acceleration_min(np.zeros((2, 3)), np.zeros((2, 2, 1, 3)), np.zeros((2, 2, 1, 3)), 0.1)
+
+
+def test_push_reduced_equals_push_with_the_triple() -> None:
+    rng = np.random.default_rng(41)
+    unary, pair, triple = _random_graph(rng, 7)
+    full, reduced = Decoder(2, lag=2), Decoder(2, lag=2)
+    for k, u in enumerate(unary):
+        if k < 2:
+            a = full.push(u, pair[k - 1] if k else None)
+            b = reduced.push(u, pair[k - 1] if k else None)
+        else:
+            tot = reduced.pair_costs()[:, :, None] + triple[k - 2]
+            a = full.push(u, pair[k - 1], triple[k - 2])
+            b = reduced.push_reduced(u, pair[k - 1], tot.min(axis=0), tot.argmin(axis=0))
+        assert a == b
+    np.testing.assert_array_equal(full.flush(), reduced.flush())
+    assert full.best_cost() == reduced.best_cost()
+    with pytest.raises(ShapeError, match="push_reduced: needs order 2"):
+        Decoder(1).push_reduced(np.zeros(1), np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)))
+
+
 def test_online_decoder_with_a_long_lag_equals_offline() -> None:
     rng = np.random.default_rng(40)
     unary, pair, triple = _random_graph(rng, 12)
@@ -155,3 +198,24 @@ def test_decoder_refuses_bad_input() -> None:
     dec.push(np.zeros(2))
     with pytest.raises(ShapeError, match="pairwise"):
         dec.push(np.zeros(3), np.zeros((3, 3)))
+
+
+@pytest.mark.parametrize("lag", [0, 1, 3])
+def test_online_decisions_are_those_of_the_full_backtrack(lag: int) -> None:
+    """Each online decision (a walk over the newest lag + 1 frames only) is the state
+    that the best path over all frames so far gives the decided frame."""
+    rng = np.random.default_rng(60 + lag)
+    unary, pair, triple = _random_graph(rng, 9)
+    for order in (1, 2):
+        on = Decoder(order, lag=lag)
+        for k, u in enumerate(unary):
+            tri = triple[k - 2] if (k >= 2 and order == 2) else None
+            decided = on.push(u, pair[k - 1] if k else None, tri)
+            full = Decoder(order)
+            for i in range(k + 1):
+                t2 = triple[i - 2] if (i >= 2 and order == 2) else None
+                full.push(unary[i], pair[i - 1] if i else None, t2)
+            if k >= lag:
+                assert decided == [(k - lag, int(full.flush()[k - lag]))]
+            else:
+                assert decided == []

@@ -88,3 +88,60 @@ def _skin(img: np.ndarray) -> np.ndarray:
     from mocapkit.cues.skin import skin_mask
 
     return skin_mask(img)
+
+
+def test_trunk_from_head_without_a_belt_follows_the_anthropometric_ratios() -> None:
+    from mocapkit.tracking.mono.lengths import ANTHROPOMETRIC_RATIOS as r
+
+    plain = SkinTracker().update(_figure(belt=False))
+    j = dict(zip(SKIN_JOINTS, plain.joints_px))
+    assert np.isnan(j["pelvis"]).all() and np.isnan(j["left_shoulder"]).all()
+    f = SkinTracker(trunk_from_head=True).update(_figure(belt=False))
+    j = dict(zip(SKIN_JOINTS, f.joints_px))
+    a = f.blobs["head"].major  # the drawn head's semi-axis is 38 px
+    assert a == pytest.approx(38, rel=0.03)
+    np.testing.assert_allclose(j["pelvis"], j["neck"] + (0, a * r["trunk"] / r["head"]))
+    half = a * r["left_clavicle"] / r["head"]
+    np.testing.assert_allclose(j["left_shoulder"], j["neck"] + (half, 0))
+    np.testing.assert_allclose(j["right_shoulder"], j["neck"] - (half, 0))
+    # with a belt the paper's heuristic is kept
+    belted = SkinTracker(trunk_from_head=True).update(_figure())
+    np.testing.assert_allclose(belted.joints_px[SKIN_JOINTS.index("pelvis")], (320, 330), atol=1.5)
+
+
+def test_a_foreground_mask_hides_static_skin() -> None:
+    img = _figure()
+    cv2.circle(img, (560, 60), 30, SKIN_BGR, -1)  # a skin-coloured lamp above the right
+    top = SkinTracker().update(img)
+    # the lamp is the topmost large blob: taken for the head
+    np.testing.assert_allclose(top.blobs["head"].centre, (560, 60), atol=1.5)
+    fg = np.full(img.shape[:2], 255, dtype=np.uint8)
+    fg[:, 500:] = 0
+    f = SkinTracker().update(img, foreground=fg)
+    np.testing.assert_allclose(f.blobs["head"].centre, (320, 100), atol=1.5)
+    with pytest.raises(ConfigError, match="foreground mask of shape"):
+        SkinTracker().update(img, foreground=fg[:10])
+
+
+def test_mask_blobs_equal_ellipse_of_each_component() -> None:
+    """The one-pass moments of `mask_blobs` against `ellipse_of` on each component."""
+    rng = np.random.default_rng(3)
+    mask = (rng.random((120, 160)) < 0.35).astype(np.uint8)
+    cv2.ellipse(mask, (80, 60), (40, 12), 25, 0, 360, 1, -1)
+    blobs = mask_blobs(mask, min_area_px=4, close_px=0)
+    n, labels = cv2.connectedComponents(mask, connectivity=8)
+    want = []
+    for i in range(1, n):
+        ys, xs = np.nonzero(labels == i)
+        if xs.size >= 4:
+            want.append(ellipse_of(np.stack([xs, ys], axis=1)))
+    assert len(blobs) == len(want) > 10
+    by_centre = {tuple(np.round(b.centre, 6)): b for b in want}
+    for b in blobs:
+        w = by_centre[tuple(np.round(b.centre, 6))]
+        assert b.area == w.area
+        assert b.major == pytest.approx(w.major, abs=1e-9)
+        assert b.minor == pytest.approx(w.minor, abs=1e-9)
+        if w.major - w.minor > 1e-6:  # a round blob's axis is any direction
+            np.testing.assert_allclose(b.ends, w.ends, atol=1e-9)
+    assert [b.area for b in blobs] == sorted((b.area for b in blobs), reverse=True)

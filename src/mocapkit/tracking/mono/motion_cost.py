@@ -209,6 +209,93 @@ def acceleration_cost(omegas_a: ArrayLike, omegas_b: ArrayLike, dt_s: float) -> 
     return np.asarray(_acc_cost(a, b, 1.0 / dt_s))
 
 
+@nb.njit(cache=True)
+def _acc_min(
+    cost: FloatArray, wa: FloatArray, wb: FloatArray, inv_dt: float
+) -> tuple[FloatArray, NDArray[np.int64]]:
+    ni, nj, nl = wa.shape[0], wa.shape[1], wa.shape[2]
+    nm = wb.shape[1]
+    best = np.full((nj, nm), np.inf)
+    back = np.zeros((nj, nm), dtype=np.int64)
+    wj = np.empty((ni, nl, 3))
+    for j in range(nj):
+        order = np.argsort(cost[:, j], kind="mergesort")  # cheapest first, ties by index
+        for i in range(ni):
+            wj[i] = wa[i, j]
+        for m in range(nm):
+            b = np.inf
+            arg = 0
+            for r in range(ni):
+                i = order[r]
+                c = cost[i, j]
+                if c > b or (c == b and i > arg):
+                    break  # sorted: every later i starts at least as high
+                acc = 0.0
+                lost = False
+                for k in range(nl):
+                    dx = wb[j, m, k, 0] - wj[i, k, 0]
+                    dy = wb[j, m, k, 1] - wj[i, k, 1]
+                    dz = wb[j, m, k, 2] - wj[i, k, 2]
+                    acc += np.sqrt(dx * dx + dy * dy + dz * dz)
+                    t = c + acc * inv_dt
+                    if t > b or (t == b and i > arg):
+                        lost = True  # the partial sum only grows: i cannot win
+                        break
+                if lost:
+                    continue
+                tot = c + acc * inv_dt
+                if tot < b or (tot == b and i < arg):
+                    b = tot
+                    arg = i
+            best[j, m] = b
+            back[j, m] = arg
+    return best, back
+
+
+def acceleration_min(
+    pair_cost: ArrayLike, omegas_a: ArrayLike, omegas_b: ArrayLike, dt_s: float
+) -> tuple[FloatArray, NDArray[np.int64]]:
+    """Minimum over i of ``pair_cost[i, j] + acceleration_cost(...)[i, j, m]`` and its argmin.
+
+    The pair-state Viterbi step over eq. 3 without the (Ni, Nj, Nm) array: for each
+    (j, m) the candidates i are scanned cheapest ``pair_cost[i, j]`` first; the scan
+    stops at the first i whose pair cost alone exceeds the best so far, and an i is
+    dropped as soon as its cost plus its partial sum over links exceeds it (the sum
+    only grows).
+    The result equals ``tot = pair_cost[:, :, None] + acceleration_cost(...)``,
+    ``tot.min(axis=0)``, ``tot.argmin(axis=0)`` exactly (same sums in the same order,
+    ties to the first i).
+
+    Parameters
+    ----------
+    pair_cost : (Ni, Nj) float
+        Best path cost ending in each pair state (i, j).
+    omegas_a, omegas_b, dt_s
+        As `acceleration_cost`.
+
+    Returns
+    -------
+    best : (Nj, Nm) float
+    back : (Nj, Nm) int
+    """
+    c = np.ascontiguousarray(pair_cost, dtype=float)
+    a = np.ascontiguousarray(omegas_a, dtype=float)
+    b = np.ascontiguousarray(omegas_b, dtype=float)
+    if (
+        a.ndim != 4
+        or b.ndim != 4
+        or a.shape[1] != b.shape[0]
+        or a.shape[2:] != b.shape[2:]
+        or c.shape != a.shape[:2]
+    ):
+        raise ShapeError(
+            f"acceleration_min: expected (Ni, Nj), (Ni, Nj, L, 3) and (Nj, Nm, L, 3), found "
+            f"{c.shape}, {a.shape}, {b.shape}"
+        )
+    best, back = _acc_min(c, a, b, 1.0 / dt_s)
+    return np.asarray(best), np.asarray(back)
+
+
 def joint_acceleration_cost(
     pos_a: ArrayLike, pos_b: ArrayLike, pos_c: ArrayLike, dt_s: float
 ) -> FloatArray:

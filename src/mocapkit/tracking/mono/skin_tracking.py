@@ -22,6 +22,18 @@ nearer the neck being the elbow (short sleeves leave the forearm bare); pelvis =
 waist ellipse's centre; shoulders by the paper's heuristic: "exactly above the waist
 region endpoints and in horizontal line with the lower end of the neck". Without a waist
 blob (no belt), pelvis and shoulders are unseen, and the 3-D tracker has no trunk.
+
+``trunk_from_head`` (off by default; not in the paper) stands in for the belt on footage
+without one: with no waist blob, an upright trunk is drawn from the head ellipse by the
+anthropometric ratios of `mocapkit.tracking.mono.lengths.ANTHROPOMETRIC_RATIOS` (the
+head link, neck to head centre, is the ellipse's semi-major axis a): the pelvis lies
+``a * trunk / head`` straight below the neck in the image and the shoulders
+``a * clavicle / head`` either side of it. The trunk then never leans or turns, which is
+wrong whenever the subject bends; it lets the 3-D step run on real video.
+
+Foreground (optional, `SkinTracker.update`): a mask of moving pixels
+(`mocapkit.cues.foreground`) that the skin mask is intersected with, for scenes whose
+background holds skin-coloured things.
 """
 
 from __future__ import annotations
@@ -35,6 +47,7 @@ from scipy.optimize import linear_sum_assignment
 from mocapkit.cues.blobs import Blob, mask_blobs
 from mocapkit.cues.skin import ColourModel, skin_mask
 from mocapkit.errors import ConfigError
+from mocapkit.tracking.mono.lengths import ANTHROPOMETRIC_RATIOS
 
 FloatArray = NDArray[np.float64]
 
@@ -84,6 +97,9 @@ class SkinTracker:
         Closing radius that reunites broken blobs.
     max_jump_px : float
         Largest centre motion between frames of one label.
+    trunk_from_head : bool
+        Without a waist blob, draw an upright trunk from the head ellipse (see the module
+        docstring).
     """
 
     def __init__(
@@ -92,6 +108,7 @@ class SkinTracker:
         min_area_px: int = 30,
         close_px: int = 2,
         max_jump_px: float = 60.0,
+        trunk_from_head: bool = False,
     ) -> None:
         if min_area_px < 1 or close_px < 0 or max_jump_px <= 0:
             raise ConfigError(
@@ -102,17 +119,27 @@ class SkinTracker:
         self.min_area_px = min_area_px
         self.close_px = close_px
         self.max_jump_px = max_jump_px
+        self.trunk_from_head = trunk_from_head
         self.previous: SkinFrame | None = None
 
-    def update(self, image_bgr: ArrayLike) -> SkinFrame:
-        """Track one frame (H, W, 3) BGR."""
+    def update(self, image_bgr: ArrayLike, foreground: ArrayLike | None = None) -> SkinFrame:
+        """Track one frame (H, W, 3) BGR; ``foreground`` (H, W), non-zero on the pixels
+        skin may lie on (default: everywhere)."""
         mask = skin_mask(image_bgr, self.model)
+        if foreground is not None:
+            fg = np.asarray(foreground)
+            if fg.shape != mask.shape:
+                raise ConfigError(
+                    f"SkinTracker.update: expected a foreground mask of shape {mask.shape}, "
+                    f"found {fg.shape}"
+                )
+            mask = np.where(fg != 0, mask, 0).astype(np.uint8)
         return self.update_blobs(mask_blobs(mask, self.min_area_px, self.close_px))
 
     def update_blobs(self, blobs: list[Blob]) -> SkinFrame:
         """Track one frame from its blobs (largest first)."""
         frame = self._first(blobs) if self.previous is None else self._follow(blobs)
-        frame.joints_px = joints_from_blobs(frame.blobs)
+        frame.joints_px = joints_from_blobs(frame.blobs, self.trunk_from_head)
         if frame.blobs:
             self.previous = frame
         return frame
@@ -171,8 +198,11 @@ class SkinTracker:
         return SkinFrame(labelled, merged)
 
 
-def joints_from_blobs(blobs: dict[str, Blob]) -> FloatArray:
-    """`SKIN_JOINTS` (9, 2) px read off labelled ellipses; see the module docstring."""
+def joints_from_blobs(blobs: dict[str, Blob], trunk_from_head: bool = False) -> FloatArray:
+    """`SKIN_JOINTS` (9, 2) px read off labelled ellipses; see the module docstring.
+
+    ``trunk_from_head``: without a waist blob, the upright trunk drawn from the head.
+    """
     out = np.full((len(SKIN_JOINTS), 2), np.nan)
     col = {n: i for i, n in enumerate(SKIN_JOINTS)}
     head = blobs.get("head")
@@ -196,4 +226,11 @@ def joints_from_blobs(blobs: dict[str, Blob]) -> FloatArray:
             xs = sorted(waist.ends[:, 0])
             out[col["right_shoulder"]] = (xs[0], neck[1])  # the subject's right: image left
             out[col["left_shoulder"]] = (xs[1], neck[1])
+    elif trunk_from_head and head is not None:
+        r = ANTHROPOMETRIC_RATIOS
+        a = head.major
+        out[col["pelvis"]] = neck + np.array([0.0, a * r["trunk"] / r["head"]])
+        half = a * r["left_clavicle"] / r["head"]
+        out[col["right_shoulder"]] = neck - np.array([half, 0.0])
+        out[col["left_shoulder"]] = neck + np.array([half, 0.0])
     return out

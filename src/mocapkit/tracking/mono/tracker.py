@@ -55,7 +55,7 @@ from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.tracking.mono.flips import enumerate_poses
 from mocapkit.tracking.mono.motion_cost import (
-    acceleration_cost,
+    acceleration_min,
     joint_acceleration_cost,
     pair_omegas_and_rotation,
 )
@@ -386,7 +386,9 @@ class MonoTracker:
         older = self._layers[-3]
         dt_mid = 0.5 * self._dt(older.index, layer.index)
         if cfg.cost == "acceleration":
-            triple = acceleration_cost(self._last_w, w_b, dt_mid)
+            best, back = acceleration_min(self._decoder.pair_costs(), self._last_w, w_b, dt_mid)
+            self._last_w = w_b
+            return self._decoder.push_reduced(u, pair, best, back)
         else:
             triple = joint_acceleration_cost(
                 older.positions[older.keep],

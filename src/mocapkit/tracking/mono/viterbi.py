@@ -112,17 +112,78 @@ class Decoder:
                 self._cost = tot[back, jj, mm] + p + u[None, :]
                 self._back.append(back.astype(np.int64))
         self._sizes.append(int(u.shape[0]))
+        return self._decide()
+
+    def pair_costs(self) -> FloatArray:
+        """Order 2: best cost of a path ending in each pair state (N_{k-1}, N_k) (a copy)."""
+        if self.order != 2 or self._cost is None or self._cost.ndim != 2:
+            raise ShapeError("Decoder.pair_costs: needs order 2 and at least two frames pushed")
+        return self._cost.copy()
+
+    def push_reduced(
+        self, unary: ArrayLike, pairwise: ArrayLike, best: ArrayLike, back: ArrayLike
+    ) -> list[tuple[int, int]]:
+        """Order 2, from the third frame on: `push` with the triple step done by the caller.
+
+        ``best[j, m]`` = min over i of ``pair_costs()[i, j] + triple[i, j, m]`` and
+        ``back[j, m]`` its argmin (e.g. `mocapkit.tracking.mono.motion_cost.acceleration_min`,
+        which never builds the (N_{k-2}, N_{k-1}, N_k) array). Same result as `push`.
+        """
+        u = np.asarray(unary, dtype=float)
+        p = np.asarray(pairwise, dtype=float)
+        bst = np.asarray(best, dtype=float)
+        bk = np.asarray(back, dtype=np.int64)
+        if self.order != 2 or self.n_frames < 2 or self._cost is None:
+            raise ShapeError("Decoder.push_reduced: needs order 2 and at least two frames pushed")
+        want = (self._sizes[-1], u.shape[0])
+        if u.ndim != 1 or p.shape != want or bst.shape != want or bk.shape != want:
+            raise ShapeError(
+                f"Decoder.push_reduced: expected unary ({want[1]},), pairwise, best and back "
+                f"{want}; found {u.shape}, {p.shape}, {bst.shape}, {bk.shape}"
+            )
+        self._cost = bst + p + u[None, :]
+        self._back.append(bk)
+        self._sizes.append(int(u.shape[0]))
+        return self._decide()
+
+    def _decide(self) -> list[tuple[int, int]]:
         if self.lag is None:
             return []
-        target = k - self.lag
+        target = self.n_frames - 1 - self.lag
         if target < 0 or target in self._decided:
             return []
-        path = self._backtrack()
-        self._decided[target] = int(path[target])
-        return [(target, int(path[target]))]
+        path = self._backtrack(self.lag + 1)
+        state = int(path[target - (self.n_frames - path.shape[0])])
+        self._decided[target] = state
+        return [(target, state)]
 
-    def _backtrack(self) -> IntArray:
-        """Best path over all frames pushed so far (ending in the best current state)."""
+    def _backtrack(self, depth: int | None = None) -> IntArray:
+        """Best path ending in the best current state: all frames, or the last ``depth``.
+
+        Online, only the ``lag + 1`` newest frames are walked for each decision, so a
+        decision costs O(lag), not O(frames so far).
+        """
+        n = self.n_frames
+        first = 0 if depth is None else max(n - depth, 0)
+        full = self._backtrack_all() if first == 0 else None
+        if full is not None:
+            return full
+        path = np.zeros(n - first, dtype=np.int64)
+        assert self._cost is not None
+        if self.order == 1:
+            path[-1] = int(np.argmin(self._cost))
+            for k in range(n - 1, first, -1):
+                path[k - 1 - first] = self._back[k - 1][path[k - first]]
+            return path
+        j, m = np.unravel_index(int(np.argmin(self._cost)), self._cost.shape)
+        path[-1] = int(m)
+        if n - first >= 2:
+            path[-2] = int(j)
+        for k in range(n - 1, first + 1, -1):
+            path[k - 2 - first] = self._back[k - 2][path[k - 1 - first], path[k - first]]
+        return path
+
+    def _backtrack_all(self) -> IntArray:
         n = self.n_frames
         path = np.zeros(n, dtype=np.int64)
         assert self._cost is not None
