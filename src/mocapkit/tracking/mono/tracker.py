@@ -55,9 +55,15 @@ from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.tracking.mono.flips import enumerate_poses
 from mocapkit.tracking.mono.motion_cost import (
+    acceleration_cost,
     acceleration_min,
     joint_acceleration_cost,
     pair_omegas_and_rotation,
+)
+from mocapkit.tracking.mono.priors import (
+    depth_velocity_cost,
+    elbow_flex_cost,
+    reprojection_cost,
 )
 from mocapkit.tracking.mono.smoother import KeypointSmoother
 from mocapkit.tracking.mono.stick import LimitConfig, StickModel, stick_model
@@ -97,6 +103,18 @@ class MonoConfig:
     max_pair_states : int
         Beam cap of pair-state decoding.
     limits : LimitConfig
+    residual_weight : float
+        Unary cost per px^2 of a pose's image residual
+        (`mocapkit.tracking.mono.priors.reprojection_cost`); 0: the paper's.
+    elbow_flex_weight : float
+        Unary cost per unit of `mocapkit.tracking.mono.priors.elbow_flex_cost`; 0: off.
+    depth_velocity_weight : float
+        Pair cost per mm^2/s^2 of `mocapkit.tracking.mono.priors.depth_velocity_cost`;
+        0: off.
+    joint_acceleration_weight : float
+        With ``cost="acceleration"``: the joint accelerations of eq. 4-5 (errata M4,
+        mm/s^2 summed over joints) added to eq. 3 with this weight (rad/s^2
+        per mm/s^2); 0: eq. 3 alone (exact fused step).
     """
 
     legs: bool = False
@@ -111,6 +129,10 @@ class MonoConfig:
     depth_margin_px: float = 1.5
     max_pair_states: int = 96
     limits: LimitConfig = field(default_factory=LimitConfig)
+    residual_weight: float = 0.0
+    elbow_flex_weight: float = 0.0
+    depth_velocity_weight: float = 0.0
+    joint_acceleration_weight: float = 0.0
 
     def __post_init__(self) -> None:
         if self.camera_model not in CAMERA_MODELS:
@@ -175,6 +197,7 @@ class _Layer:
     pruned_all: bool
     depth: float
     keep: IntArray  # indices of ``codes`` in the decoder's layer (beam)
+    unary: FloatArray  # (N,) soft costs of each pose (priors)
 
 
 class MonoTracker:
@@ -324,7 +347,8 @@ class MonoTracker:
             w_full, r_full = pair_omegas_and_rotation(
                 prev.vectors, vectors, self._dt(prev.index, k)
             )
-        keep = self._beam_select(vectors.shape[0], r_full)
+        unary = self._unary(positions, obs, depth)
+        keep = self._beam_select(unary, r_full)
         layer = _Layer(
             k,
             self._times[k],
@@ -336,6 +360,7 @@ class MonoTracker:
             pruned_all,
             depth,
             keep,
+            unary,
         )
         self._layers.append(layer)
         decided = self._push_decoder(layer, w_full, r_full)
@@ -349,18 +374,31 @@ class MonoTracker:
         d = self._times[b] - self._times[a]
         return d if d > 0 else self.dt_s
 
-    def _beam_select(self, n: int, rotation: FloatArray | None) -> IntArray:
+    def _unary(self, positions: FloatArray, obs: FloatArray, depth: float) -> FloatArray:
+        """Soft costs of each pose (zeros with the paper's settings)."""
+        cfg = self.config
+        u = np.zeros(positions.shape[0])
+        if cfg.residual_weight > 0:
+            f = 1.0 if self.camera is None else float(self.camera.K[0, 0])
+            model = cfg.camera_model if self.camera is not None else "orthographic"
+            u += cfg.residual_weight * reprojection_cost(positions, obs, model, f, depth)
+        if cfg.elbow_flex_weight > 0:
+            u += cfg.elbow_flex_weight * elbow_flex_cost(self.model, positions)
+        return u
+
+    def _beam_select(self, unary: FloatArray, rotation: FloatArray | None) -> IntArray:
         """States of this layer the pair-state decoder keeps (all of them under the cap).
 
         The beam runs a first-order (rotation) forward pass over the full layers and keeps
         the ``max_pair_states`` states of lowest forward cost.
         """
+        n = unary.shape[0]
         if self._decoder.order == 1:
             return np.arange(n)
         if rotation is None:
-            self._beam.push(np.zeros(n))
+            self._beam.push(unary)
         else:
-            self._beam.push(np.zeros(n), rotation)
+            self._beam.push(unary, rotation)
         if n <= self.config.max_pair_states:
             return np.arange(n)
         cost = self._beam.forward_costs()
@@ -371,20 +409,38 @@ class MonoTracker:
     ) -> list[tuple[int, int]]:
         cfg = self.config
         sel = layer.keep
-        u = np.zeros(sel.shape[0])
+        u = layer.unary[sel]
         if w_full is None or r_full is None:
             return self._decoder.push(u)
         prev = self._layers[-2]
         pick = np.ix_(prev.keep, sel)
-        if cfg.cost == "rotation":
-            return self._decoder.push(u, r_full[pick])
-        w_b = w_full[pick]
         pair = np.zeros((prev.keep.shape[0], sel.shape[0]))
+        if cfg.depth_velocity_weight > 0:
+            pair += cfg.depth_velocity_weight * depth_velocity_cost(
+                self.model,
+                prev.positions[prev.keep],
+                layer.positions[sel],
+                self._dt(prev.index, layer.index),
+            )
+        if cfg.cost == "rotation":
+            return self._decoder.push(u, r_full[pick] + pair)
+        w_b = w_full[pick]
         if len(self._layers) == 2:
             self._last_w = w_b
             return self._decoder.push(u, pair)
         older = self._layers[-3]
         dt_mid = 0.5 * self._dt(older.index, layer.index)
+        if cfg.cost == "acceleration" and cfg.joint_acceleration_weight > 0:
+            tot = self._decoder.pair_costs()[:, :, None] + acceleration_cost(
+                self._last_w, w_b, dt_mid
+            )
+            tot += cfg.joint_acceleration_weight * joint_acceleration_cost(
+                older.positions[older.keep], prev.positions[prev.keep], layer.positions[sel], dt_mid
+            )
+            back = np.argmin(tot, axis=0)
+            best = np.take_along_axis(tot, back[None], axis=0)[0]
+            self._last_w = w_b
+            return self._decoder.push_reduced(u, pair, best, back)
         if cfg.cost == "acceleration":
             best, back = acceleration_min(self._decoder.pair_costs(), self._last_w, w_b, dt_mid)
             self._last_w = w_b
