@@ -6,6 +6,7 @@ import pytest
 from mocapkit.errors import ShapeError
 from mocapkit.tracking.mono.flips import enumerate_poses
 from mocapkit.tracking.mono.priors import (
+    clavicle_forward_cost,
     depth_velocity_cost,
     elbow_flex_cost,
     reprojection_cost,
@@ -56,13 +57,19 @@ def test_reprojection_cost_zero_for_the_true_pose_among_perspective_flips() -> N
         assert cost[i] == pytest.approx(float(np.sum(((proj - n) * 1000.0) ** 2)), abs=1e-9)
 
 
-def _arm_pose(model, left_forearm, right_forearm) -> np.ndarray:  # type: ignore[no-untyped-def]
+def _arm_pose(  # type: ignore[no-untyped-def]
+    model,
+    left_forearm,
+    right_forearm,
+    left_clavicle=(1.0, 0.0, 0.0),
+    right_clavicle=(-1.0, 0.0, 0.0),
+) -> np.ndarray:
     """A subject facing the camera (forward is -z), upper arms hanging straight down."""
     d = {
         "trunk": (0.0, 1.0, 0.0),
         "head": (0.0, -1.0, 0.0),
-        "left_clavicle": (1.0, 0.0, 0.0),
-        "right_clavicle": (-1.0, 0.0, 0.0),
+        "left_clavicle": left_clavicle,
+        "right_clavicle": right_clavicle,
         "left_upper_arm": (0.0, 1.0, 0.0),
         "right_upper_arm": (0.0, 1.0, 0.0),
         "left_forearm": left_forearm,
@@ -108,3 +115,22 @@ def test_depth_velocity_cost_brute_force_and_root_invariance() -> None:
             assert got[i, j] == pytest.approx(s / dt**2)
     moved = a + np.array([10.0, -5.0, 400.0])  # the whole pose moved: no relative depth change
     np.testing.assert_allclose(np.diag(depth_velocity_cost(model, a, moved, dt)), 0.0, atol=1e-6)
+
+
+def test_clavicle_forward_cost_known_values() -> None:
+    model = stick_model()
+    down = (0.0, 1.0, 0.0)
+    s30 = (np.cos(np.radians(30.0)), 0.0, -np.sin(np.radians(30.0)))  # 30 deg forward
+    back = (-np.cos(np.radians(20.0)), 0.0, np.sin(np.radians(20.0)))  # 20 deg backward
+    poses = np.stack(
+        [
+            _arm_pose(model, down, down),  # straight sideways: 0
+            _arm_pose(model, down, down, s30, (-s30[0], 0.0, s30[2])),  # both forward
+            _arm_pose(model, down, down, (-back[0], 0.0, back[2]), back),  # both backward
+        ]
+    )
+    np.testing.assert_allclose(
+        clavicle_forward_cost(model, poses), [0.0, 2 * (0.5 - 0.05), 0.0], atol=1e-12
+    )
+    with pytest.raises(ShapeError, match="clavicle_forward_cost: expected positions"):
+        clavicle_forward_cost(model, poses[0])

@@ -61,6 +61,7 @@ from mocapkit.tracking.mono.motion_cost import (
     pair_omegas_and_rotation,
 )
 from mocapkit.tracking.mono.priors import (
+    clavicle_forward_cost,
     depth_velocity_cost,
     elbow_flex_cost,
     reprojection_cost,
@@ -115,6 +116,9 @@ class MonoConfig:
         With ``cost="acceleration"``: the joint accelerations of eq. 4-5 (errata M4,
         mm/s^2 summed over joints) added to eq. 3 with this weight (rad/s^2
         per mm/s^2); 0: eq. 3 alone (exact fused step).
+    clavicle_weight : float
+        Unary cost per unit of `mocapkit.tracking.mono.priors.clavicle_forward_cost`;
+        0: off.
     """
 
     legs: bool = False
@@ -133,6 +137,7 @@ class MonoConfig:
     elbow_flex_weight: float = 0.0
     depth_velocity_weight: float = 0.0
     joint_acceleration_weight: float = 0.0
+    clavicle_weight: float = 0.0
 
     def __post_init__(self) -> None:
         if self.camera_model not in CAMERA_MODELS:
@@ -384,6 +389,8 @@ class MonoTracker:
             u += cfg.residual_weight * reprojection_cost(positions, obs, model, f, depth)
         if cfg.elbow_flex_weight > 0:
             u += cfg.elbow_flex_weight * elbow_flex_cost(self.model, positions)
+        if cfg.clavicle_weight > 0:
+            u += cfg.clavicle_weight * clavicle_forward_cost(self.model, positions)
         return u
 
     def _beam_select(self, unary: FloatArray, rotation: FloatArray | None) -> IntArray:
