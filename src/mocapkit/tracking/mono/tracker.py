@@ -10,7 +10,10 @@ Per frame (streaming, `MonoTracker.push`):
 4. the survivors become a layer of the pose graph; edges are weighted by the corrected
    angular acceleration of eq. 3 over pair states (errata M1-M3, ``cost="acceleration"``),
    by joint accelerations (eq. 4-5 with errata M4, ``"joint_acceleration"``), or by the
-   first-order rotation (``"rotation"``, plain states);
+   first-order rotation (``"rotation"``, plain states).
+   Beyond the paper, each pose carries soft costs (`mocapkit.tracking.mono.priors`):
+   by default only the clavicle prior (``clavicle_weight``); the image residual, elbow
+   flex, depth velocity and joint-acceleration terms are off (measured in docs/mono.md);
 5. Viterbi picks the path (§4.3): offline (``lag=None``) exactly at the end, online with
    a fixed lag (`mocapkit.tracking.mono.viterbi.Decoder`). The online latency is
    ``smooth_lag + lag`` frames.
