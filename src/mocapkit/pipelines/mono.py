@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -465,6 +465,8 @@ def track_mono(
     length_passes : int
         With video lengths and the perspective model: track this many times, each pass
         measuring the lengths again from the previous pass's poses (`refined_lengths`).
+        Every pass but the last runs without the soft priors of `MonoConfig`
+        (`mocapkit.tracking.mono.priors`); the last one with them.
     """
     if out_dir is not None:
         check_result_folder(out_dir)  # before the work (the length passes), not after it
@@ -507,9 +509,20 @@ def track_mono(
         )
     refine = length_passes > 1 and not use_session_lengths and cfg.camera_model == "perspective"
     n_refine = length_passes - 1 if refine else 0
-    # every pass but the last runs here; the last one streams through the runner below
+    # every pass but the last runs here; the last one streams through the runner below.
+    # The length passes run the paper's graph (no soft priors): the refined lengths follow
+    # the first pass's poses, and with the clavicle prior there they changed enough to
+    # turn 01_09 from OpenPose JSON from 62 to 113 mm (docs/mono.md).
+    paper_cfg = replace(
+        cfg,
+        residual_weight=0.0,
+        elbow_flex_weight=0.0,
+        depth_velocity_weight=0.0,
+        joint_acceleration_weight=0.0,
+        clavicle_weight=0.0,
+    )
     for _ in range(n_refine):
-        frames = _run(lengths, cam, dt, cfg, model, t, px)
+        frames = _run(lengths, cam, dt, paper_cfg, model, t, px)
         lengths = refined_lengths(frames, model, lengths)
     lengths_mm = lengths / scale if ortho else lengths
     skeleton = output_skeleton(model, lengths_mm)
