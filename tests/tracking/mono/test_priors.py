@@ -134,3 +134,22 @@ def test_clavicle_forward_cost_known_values() -> None:
     )
     with pytest.raises(ShapeError, match="clavicle_forward_cost: expected positions"):
         clavicle_forward_cost(model, poses[0])
+
+
+def test_clavicle_forward_cost_equals_the_body_frame_definition_on_random_poses() -> None:
+    rng = np.random.default_rng(11)
+    model = stick_model()
+    poses = np.stack([random_pose(rng, model, 60.0)[0] for _ in range(40)])
+    v = model.link_vectors(poses)
+    up = -v[:, model.link_index("trunk")]
+    up /= np.linalg.norm(up, axis=-1, keepdims=True)
+    right = v[:, model.link_index("right_clavicle")] - v[:, model.link_index("left_clavicle")]
+    right -= np.sum(right * up, axis=-1, keepdims=True) * up
+    right /= np.linalg.norm(right, axis=-1, keepdims=True)
+    fwd = np.cross(up, right)
+    expect = np.zeros(len(poses))
+    for seg in ("left_clavicle", "right_clavicle"):
+        u = v[:, model.link_index(seg)]
+        expect += np.clip(np.sum(u * fwd, -1) / np.linalg.norm(u, axis=-1) - 0.05, 0.0, None)
+    assert (expect > 0).sum() >= 5  # some poses pay
+    np.testing.assert_allclose(clavicle_forward_cost(model, poses), expect, atol=1e-12)

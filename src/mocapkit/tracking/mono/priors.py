@@ -159,15 +159,18 @@ def clavicle_forward_cost(
         raise ShapeError(
             f"clavicle_forward_cost: expected positions (N, {model.n_joints}, 3), found {p.shape}"
         )
-    v = model.link_vectors(p)
-    _, fwd = _body_frame(model, v)
-    out = np.zeros(p.shape[0])
-    for seg in ("left_clavicle", "right_clavicle"):
-        u = v[:, model.link_index(seg)]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            s = np.sum(u * fwd, axis=-1) / np.linalg.norm(u, axis=-1)
-        out += np.nan_to_num(np.clip(s - margin, 0.0, None), nan=0.0)
-    return out
+    # forward = up x right / |up x right| with up = -trunk/|trunk| and right the clavicle
+    # difference (its part along up drops out of the cross product): (r x t) / |r x t|
+    idx = [model.link_index(n) for n in ("trunk", "left_clavicle", "right_clavicle")]
+    vec = p[:, model.child[idx]] - p[:, model.parent[idx]]  # (N, 3, 3)
+    fwd = np.cross(vec[:, 2] - vec[:, 1], vec[:, 0])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        s = np.einsum("nkc,nc->nk", vec[:, 1:], fwd) / (
+            np.sqrt(np.einsum("nkc,nkc->nk", vec[:, 1:], vec[:, 1:]))
+            * np.sqrt(np.einsum("nc,nc->n", fwd, fwd))[:, None]
+        )
+        c = np.clip(s - margin, 0.0, None)
+    return np.asarray(np.nan_to_num(c, nan=0.0).sum(axis=1), dtype=float)
 
 
 def depth_velocity_cost(
