@@ -107,6 +107,10 @@ def foot_effectors(skeleton: Skeleton) -> list[Effector]:
 TRACKING_IK = IKConfig(max_iterations=30, term_clamp_scale=3.0, relax_substeps=3)
 #: Bisection steps of the balance lean (`BalanceConfig.bisection_steps`) in ``"solve"`` mode.
 TRACKING_BISECTION_STEPS = 6
+#: The tracker's balance step (without paper mode): the lean solved each frame by Newton
+#: steps from the restored CoG's analytic slope, then secants (3 restore solves where a
+#: lean is needed, against the bisection's 9; see docs/hybrid.md, "Speed").
+TRACKING_BALANCE = BalanceConfig(mode="solve", search="newton", newton_steps=3)
 
 
 class _CountedSolver(SDLSSolver):
@@ -265,7 +269,7 @@ class HybridConfig:
             return self.balance
         if self.paper:
             return BalanceConfig(mode="proportional")
-        return BalanceConfig(mode="solve", bisection_steps=TRACKING_BISECTION_STEPS)
+        return TRACKING_BALANCE
 
     @property
     def smoothing(self) -> bool:
