@@ -83,6 +83,11 @@ class BalanceConfig:
         ``search="newton"``: restore solves of the Newton search (each a step on the
         lean from the analytic slope of the restored CoG; the first is usually within
         a few millimetres of the goal).
+    restore_when_balanced : bool
+        ``"solve"`` mode: where the centre of gravity is already inside the margin, still
+        run the restore solve (spine frozen) from the pose. When False that solve is
+        skipped if head and hands are within twice the IK tolerance of their markers,
+        and the pose is returned as it came.
     """
 
     mode: str = "proportional"
@@ -92,6 +97,7 @@ class BalanceConfig:
     cog_tol_mm: float = 0.5
     max_evaluations: int = 5
     newton_steps: int = 1
+    restore_when_balanced: bool = True
 
     def __post_init__(self) -> None:
         if self.mode not in _BALANCE_MODES:
@@ -586,6 +592,11 @@ def balance_pose(
         lo, hi = back + margin, front - margin
         if lo <= cog <= hi:
             taus = np.zeros(len(spine))
+            if not cfg.restore_when_balanced:
+                resid = _residuals(solver, qa, t, act)
+                if not np.nanmax(resid, initial=0.0) > 2.0 * solver.config.tol_mm:
+                    # balanced, head and hands on their markers: nothing to restore
+                    return BalanceResult(qa.copy(), taus, resid, slope)
         else:
             goal = lo if cog < lo else hi
             split = _spine_split(sk, spine)
@@ -642,17 +653,25 @@ def balance_pose(
     return BalanceResult(qn, taus, resid, slope)
 
 
+def _residuals(
+    solver: SDLSSolver, q: FloatArray, targets: FloatArray, active: NDArray[np.bool_] | None
+) -> FloatArray:
+    """Distance (mm) of each effector from its target at ``q``, shape (E,); NaN where
+    inactive (as `mocapkit.ik.sdls.IKResult.residual_mm`)."""
+    act = np.all(np.isfinite(targets), axis=1)
+    if active is not None:
+        act &= active
+    out = np.full(len(targets), np.nan)
+    if np.any(act):
+        out[act] = np.linalg.norm(solver.effector_positions(q)[act] - targets[act], axis=1)
+    return out
+
+
 def _max_residual(
     solver: SDLSSolver, q: FloatArray, targets: FloatArray, active: NDArray[np.bool_] | None
 ) -> float:
     """Largest distance (mm) of an active effector from its target at ``q`` (0 if none)."""
-    act = np.all(np.isfinite(targets), axis=1)
-    if active is not None:
-        act &= active
-    if not np.any(act):
-        return 0.0
-    d = np.linalg.norm(solver.effector_positions(q)[act] - targets[act], axis=1)
-    return float(d.max())
+    return float(np.nanmax(_residuals(solver, q, targets, active), initial=0.0))
 
 
 def _spine_mask(sk: Skeleton, spine: tuple[int, ...]) -> NDArray[np.bool_]:
