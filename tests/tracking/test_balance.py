@@ -228,7 +228,7 @@ def test_newton_search_reaches_the_margin_in_three_solves(setup):
         assert n_newton <= newton.newton_steps + 1 < n_bisect
 
 
-def test_balanced_pose_kept_without_a_restore_when_asked(setup):
+def test_pose_kept_without_a_restore_where_no_lean_is_applied_when_asked(setup):
     sk, _solver, _model = setup
     solver = _Counting(sk)
     q0 = solver.secondary.omega
@@ -237,7 +237,7 @@ def test_balanced_pose_kept_without_a_restore_when_asked(setup):
     cog, back, front = cog_offset_mm(sk, q, support)
     margin = 0.15 * (front - back)
     assert back + margin <= cog <= front - margin  # balanced already
-    skip = BalanceConfig(mode="solve", search="newton", restore_when_balanced=False)
+    skip = BalanceConfig(mode="solve", search="newton", restore_without_lean=False)
     _Counting.solves = 0
     res = balance_pose(solver, q, t, q0[2], support, None, skip)
     assert _Counting.solves == 0
@@ -245,17 +245,21 @@ def test_balanced_pose_kept_without_a_restore_when_asked(setup):
     np.testing.assert_array_equal(res.taus, 0.0)
     expected = np.linalg.norm(solver.effector_positions(q) - t, axis=1)
     np.testing.assert_allclose(res.residual_mm, expected, atol=1e-12)
-    # a hand off its marker (by more than twice the tolerance): the restore runs
-    t_off = t.copy()
-    t_off[1, 0] += 10.0 * solver.config.tol_mm
-    _Counting.solves = 0
-    res = balance_pose(solver, q, t_off, q0[2], support, None, skip)
-    assert _Counting.solves == 1
-    assert res.residual_mm[1] < expected[1] + 10.0 * solver.config.tol_mm
-    # the default still restores
     _Counting.solves = 0
     balance_pose(solver, q, t, q0[2], support, None, BalanceConfig(mode="solve"))
-    assert _Counting.solves == 1
+    assert _Counting.solves == 1  # the default restores
+    # a squat that needs a lean, with a hand far off its marker: no lean, no solve
+    (q, t), *_ = squat(solver, [-300.0])
+    t = t.copy()
+    t[1] += (0.0, 0.0, 400.0)
+    cog, back, front = cog_offset_mm(sk, q, support)
+    assert not back <= cog <= front  # the balance step had work to do
+    _Counting.solves = 0
+    res = balance_pose(solver, q, t, q0[2], support, None, skip)
+    assert _Counting.solves == 0
+    np.testing.assert_array_equal(res.q, q)
+    np.testing.assert_array_equal(res.taus, 0.0)
+    assert res.residual_mm[1] > 300.0
 
 
 def test_bad_search_config():

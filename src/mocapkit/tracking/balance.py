@@ -33,6 +33,16 @@ Modes
     the video refinement downstream (with its elbow-jump penalty) is sensitive to
     such differences: on the accuracy clip zombie with positions only the elbow error
     with video went from 41.0 to 76.8 mm.
+    With ``search="newton"`` (the tracker's default, `mocapkit.tracking.hybrid.TRACKING_BALANCE`)
+    the first lean is a Newton step from the analytic slope of the restored CoG
+    (`restored_lean_slope`: the CoG Jacobian along the lean with the restore's
+    linearised answer), and the next steps use the secant through the restores made:
+    ``newton_steps`` restore solves (3 in the tracker: within 2 mm of the goal on the
+    squat poses of the tests, where the analytic step alone lands 20-60 mm past it,
+    the restore following the lean less than its linearisation says). The markers are
+    checked on the pose itself (no restore at zero lean unless they are off by more
+    than twice the IK tolerance). ``restore_without_lean=False`` also skips the
+    restore wherever no lean is applied.
 ``"off"``
     No balance step.
 """
@@ -83,11 +93,12 @@ class BalanceConfig:
         ``search="newton"``: restore solves of the Newton search (each a step on the
         lean from the analytic slope of the restored CoG; the first is usually within
         a few millimetres of the goal).
-    restore_when_balanced : bool
-        ``"solve"`` mode: where the centre of gravity is already inside the margin, still
-        run the restore solve (spine frozen) from the pose. When False that solve is
-        skipped if head and hands are within twice the IK tolerance of their markers,
-        and the pose is returned as it came.
+    restore_without_lean : bool
+        ``"solve"`` mode: where no lean is applied (the centre of gravity already inside
+        the margin, or ``search="newton"`` and head and hands off their markers by more
+        than twice the IK tolerance at the pose itself), still run the restore solve
+        (spine frozen) from the pose. When False the pose is returned as it came, with
+        no solve (the tracker's smoothing polish solves after the balance step anyway).
     """
 
     mode: str = "proportional"
@@ -97,7 +108,7 @@ class BalanceConfig:
     cog_tol_mm: float = 0.5
     max_evaluations: int = 5
     newton_steps: int = 1
-    restore_when_balanced: bool = True
+    restore_without_lean: bool = True
 
     def __post_init__(self) -> None:
         if self.mode not in _BALANCE_MODES:
@@ -592,11 +603,9 @@ def balance_pose(
         lo, hi = back + margin, front - margin
         if lo <= cog <= hi:
             taus = np.zeros(len(spine))
-            if not cfg.restore_when_balanced:
-                resid = _residuals(solver, qa, t, act)
-                if not np.nanmax(resid, initial=0.0) > 2.0 * solver.config.tol_mm:
-                    # balanced, head and hands on their markers: nothing to restore
-                    return BalanceResult(qa.copy(), taus, resid, slope)
+            if not cfg.restore_without_lean:
+                # balanced: no lean, and no restore asked for
+                return BalanceResult(qa.copy(), taus, _residuals(solver, qa, t, act), slope)
         else:
             goal = lo if cog < lo else hi
             split = _spine_split(sk, spine)
@@ -604,6 +613,10 @@ def balance_pose(
                 limit = 2.0 * solver.config.tol_mm
                 base = qa
                 if _max_residual(solver, qa, t, act) > limit:
+                    if not cfg.restore_without_lean:
+                        # off the markers: no lean (markers first), and no restore
+                        resid0 = _residuals(solver, qa, t, act)
+                        return BalanceResult(qa.copy(), np.zeros(len(spine)), resid0, slope)
                     # restore first; no lean if head and hands stay off their markers
                     zero = apply_lean(solver, qa, np.zeros(len(spine)), t, act)
                     if np.nanmax(zero[1], initial=0.0) > limit:
