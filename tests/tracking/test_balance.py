@@ -248,18 +248,26 @@ def test_pose_kept_without_a_restore_where_no_lean_is_applied_when_asked(setup):
     _Counting.solves = 0
     balance_pose(solver, q, t, q0[2], support, None, BalanceConfig(mode="solve"))
     assert _Counting.solves == 1  # the default restores
-    # a squat that needs a lean, with a hand far off its marker: no lean, no solve
-    (q, t), *_ = squat(solver, [-300.0])
-    t = t.copy()
-    t[1] += (0.0, 0.0, 400.0)
+    # an effector farther than restore_above_mm from its target: the restore runs
+    t_far = t.copy()
+    t_far[1, 0] += 2.0 * skip.restore_above_mm
+    _Counting.solves = 0
+    res = balance_pose(solver, q, t_far, q0[2], support, None, skip)
+    assert _Counting.solves == 1
+    assert res.residual_mm[1] < 2.0 * skip.restore_above_mm
+    # a squat that needs a lean, with a hand a little off its marker (more than twice
+    # the IK tolerance, less than restore_above_mm): no lean, no solve
+    *_, (q, t) = squat(solver, np.linspace(-100.0, -300.0, 5))
     cog, back, front = cog_offset_mm(sk, q, support)
-    assert not back <= cog <= front  # the balance step had work to do
+    assert cog > front  # the balance step had work to do
+    t = solver.effector_positions(q)  # every target where its effector is ...
+    t[1, 0] += 4.0 * solver.config.tol_mm  # ... but the left hand's, moved off
     _Counting.solves = 0
     res = balance_pose(solver, q, t, q0[2], support, None, skip)
     assert _Counting.solves == 0
     np.testing.assert_array_equal(res.q, q)
     np.testing.assert_array_equal(res.taus, 0.0)
-    assert res.residual_mm[1] > 300.0
+    assert res.residual_mm[1] == pytest.approx(4.0 * solver.config.tol_mm)
 
 
 def test_bad_search_config():

@@ -98,7 +98,12 @@ class BalanceConfig:
         the margin, or ``search="newton"`` and head and hands off their markers by more
         than twice the IK tolerance at the pose itself), still run the restore solve
         (spine frozen) from the pose. When False the pose is returned as it came, with
-        no solve (the tracker's smoothing polish solves after the balance step anyway).
+        no solve (the tracker's smoothing polish solves after the balance step anyway),
+        unless an effector is more than ``restore_above_mm`` from its target.
+    restore_above_mm : float
+        ``restore_without_lean=False``: the restore still runs where an effector is
+        this far (mm) from its target (a foot just re-planted, a hand the refinement
+        moved); member-marker noise leaves about 5 mm.
     """
 
     mode: str = "proportional"
@@ -109,6 +114,7 @@ class BalanceConfig:
     max_evaluations: int = 5
     newton_steps: int = 1
     restore_without_lean: bool = True
+    restore_above_mm: float = 20.0
 
     def __post_init__(self) -> None:
         if self.mode not in _BALANCE_MODES:
@@ -604,8 +610,10 @@ def balance_pose(
         if lo <= cog <= hi:
             taus = np.zeros(len(spine))
             if not cfg.restore_without_lean:
-                # balanced: no lean, and no restore asked for
-                return BalanceResult(qa.copy(), taus, _residuals(solver, qa, t, act), slope)
+                resid = _residuals(solver, qa, t, act)
+                if not np.nanmax(resid, initial=0.0) > cfg.restore_above_mm:
+                    # balanced: no lean, and no restore asked for
+                    return BalanceResult(qa.copy(), taus, resid, slope)
         else:
             goal = lo if cog < lo else hi
             split = _spine_split(sk, spine)
@@ -613,9 +621,11 @@ def balance_pose(
                 limit = 2.0 * solver.config.tol_mm
                 base = qa
                 if _max_residual(solver, qa, t, act) > limit:
-                    if not cfg.restore_without_lean:
+                    resid0 = _residuals(solver, qa, t, act)
+                    if not cfg.restore_without_lean and not (
+                        np.nanmax(resid0, initial=0.0) > cfg.restore_above_mm
+                    ):
                         # off the markers: no lean (markers first), and no restore
-                        resid0 = _residuals(solver, qa, t, act)
                         return BalanceResult(qa.copy(), np.zeros(len(spine)), resid0, slope)
                     # restore first; no lean if head and hands stay off their markers
                     zero = apply_lean(solver, qa, np.zeros(len(spine)), t, act)
