@@ -10,9 +10,9 @@ from mocapkit.ik.sdls import SDLSSolver
 from mocapkit.skeleton import center_of_mass, load_preset
 from mocapkit.tracking.balance import (
     BalanceConfig,
+    apply_lean,
     balance_pose,
     calibrate_balance,
-    apply_lean,
     cog_offset_mm,
     forward_direction,
     restored_lean_slope,
