@@ -228,7 +228,8 @@ def test_newton_search_reaches_the_margin_in_three_solves(setup):
         assert n_newton <= newton.newton_steps + 1 < n_bisect
 
 
-def test_pose_kept_without_a_restore_where_no_lean_is_applied_when_asked(setup):
+@pytest.mark.parametrize("search", ["bisect", "newton"])
+def test_pose_kept_without_a_restore_where_no_lean_is_applied_when_asked(setup, search):
     sk, _solver, _model = setup
     solver = _Counting(sk)
     q0 = solver.secondary.omega
@@ -237,7 +238,7 @@ def test_pose_kept_without_a_restore_where_no_lean_is_applied_when_asked(setup):
     cog, back, front = cog_offset_mm(sk, q, support)
     margin = 0.15 * (front - back)
     assert back + margin <= cog <= front - margin  # balanced already
-    skip = BalanceConfig(mode="solve", search="newton", restore_without_lean=False)
+    skip = BalanceConfig(mode="solve", search=search, restore_without_lean=False)
     _Counting.solves = 0
     res = balance_pose(solver, q, t, q0[2], support, None, skip)
     assert _Counting.solves == 0

@@ -33,16 +33,20 @@ Modes
     the video refinement downstream (with its elbow-jump penalty) is sensitive to
     such differences: on the accuracy clip zombie with positions only the elbow error
     with video went from 41.0 to 76.8 mm.
-    With ``search="newton"`` (the tracker's default, `mocapkit.tracking.hybrid.TRACKING_BALANCE`)
-    the first lean is a Newton step from the analytic slope of the restored CoG
-    (`restored_lean_slope`: the CoG Jacobian along the lean with the restore's
+    With ``search="newton"`` the first lean is a Newton step from the analytic slope
+    of the restored CoG (`restored_lean_slope`: the CoG Jacobian along the lean with the restore's
     linearised answer), and the next steps use the secant through the restores made:
     ``newton_steps`` restore solves (3 in the tracker: within 2 mm of the goal on the
     squat poses of the tests, where the analytic step alone lands 20-60 mm past it,
     the restore following the lean less than its linearisation says). The markers are
     checked on the pose itself (no restore at zero lean unless they are off by more
-    than twice the IK tolerance). ``restore_without_lean=False`` also skips the
-    restore wherever no lean is applied.
+    than twice the IK tolerance). Not the tracker's default: its leans differ from
+    bisection's by a few millimetres of CoG, and the arm-refining configurations moved
+    by it (positions only, elbow with video 65.3 -> 85.6 mm; docs/hybrid.md, "Speed").
+    ``restore_without_lean=False`` (the tracker's default,
+    `mocapkit.tracking.hybrid.TRACKING_BALANCE`, with any search) skips the restore
+    solve wherever no lean is applied, unless an effector is more than
+    ``restore_above_mm`` off its target.
 ``"off"``
     No balance step.
 """
@@ -617,16 +621,16 @@ def balance_pose(
         else:
             goal = lo if cog < lo else hi
             split = _spine_split(sk, spine)
+            limit = 2.0 * solver.config.tol_mm
+            if not cfg.restore_without_lean:
+                resid0 = _residuals(solver, qa, t, act)
+                worst = float(np.nanmax(resid0, initial=0.0))
+                if limit < worst <= cfg.restore_above_mm:
+                    # off the markers: no lean (markers first), and no restore
+                    return BalanceResult(qa.copy(), np.zeros(len(spine)), resid0, slope)
             if cfg.search == "newton":
-                limit = 2.0 * solver.config.tol_mm
                 base = qa
                 if _max_residual(solver, qa, t, act) > limit:
-                    resid0 = _residuals(solver, qa, t, act)
-                    if not cfg.restore_without_lean and not (
-                        np.nanmax(resid0, initial=0.0) > cfg.restore_above_mm
-                    ):
-                        # off the markers: no lean (markers first), and no restore
-                        return BalanceResult(qa.copy(), np.zeros(len(spine)), resid0, slope)
                     # restore first; no lean if head and hands stay off their markers
                     zero = apply_lean(solver, qa, np.zeros(len(spine)), t, act)
                     if np.nanmax(zero[1], initial=0.0) > limit:

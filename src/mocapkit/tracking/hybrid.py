@@ -107,13 +107,14 @@ def foot_effectors(skeleton: Skeleton) -> list[Effector]:
 TRACKING_IK = IKConfig(max_iterations=30, term_clamp_scale=3.0, relax_substeps=3)
 #: Bisection steps of the balance lean (`BalanceConfig.bisection_steps`) in ``"solve"`` mode.
 TRACKING_BISECTION_STEPS = 6
-#: The tracker's balance step (without paper mode): the lean solved each frame by a Newton
-#: step from the restored CoG's analytic slope, then secants (3 restore solves where a
-#: lean is needed, against the bisection's 8-9), and no restore solve where no lean is
-#: applied (the smoothing polish solves next anyway): 0.8 ms a frame against 5.6-6.0 ms
-#: (see docs/hybrid.md, "Speed").
+#: The tracker's balance step (without paper mode): the lean bisected in
+#: `TRACKING_BISECTION_STEPS` where one is needed, and no restore solve where none is
+#: applied (the CoG inside the margin, or head and hands 2 x tol to
+#: `BalanceConfig.restore_above_mm` off their markers; the smoothing polish solves next
+#: anyway): 2.4 ms a frame against 6.0 (bench, same load). ``search="newton"`` is faster
+#: still (1.2 ms) but moves the arm-refining configurations (see docs/hybrid.md, "Speed").
 TRACKING_BALANCE = BalanceConfig(
-    mode="solve", search="newton", newton_steps=3, restore_without_lean=False
+    mode="solve", bisection_steps=TRACKING_BISECTION_STEPS, restore_without_lean=False
 )
 
 
