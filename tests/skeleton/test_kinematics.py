@@ -159,3 +159,28 @@ def test_kinematic_arrays_is_one_read_only_kernel_argument(name: str) -> None:
     world = np.empty((j, 4, 4))
     fk_pose_nb(q, kin, world, np.empty((d, 3)), np.empty((d, 3)))
     np.testing.assert_array_equal(world, forward_kinematics(sk, q))
+
+
+@pytest.mark.parametrize("name", ["zhang21", "azad14"])
+def test_center_of_mass_jacobian_matches_central_differences(name, rng) -> None:  # type: ignore[no-untyped-def]
+    from mocapkit.skeleton.kinematics import center_of_mass_jacobian
+
+    sk = load_preset(name)
+    q = _random_pose(sk, rng, ())
+    com, jac = center_of_mass_jacobian(sk, q)
+    np.testing.assert_allclose(com, center_of_mass(sk, q), atol=1e-9)
+    assert jac.shape == (3, sk.n_dofs)
+    eps = 1e-6
+    numeric = np.empty_like(jac)
+    for d in range(sk.n_dofs):
+        dq = np.zeros(sk.n_dofs)
+        dq[d] = eps
+        numeric[:, d] = (center_of_mass(sk, q + dq) - center_of_mass(sk, q - dq)) / (2 * eps)
+    scale = max(1.0, float(np.abs(numeric).max()))
+    np.testing.assert_allclose(jac, numeric, atol=1e-6 * scale)
+    # the root translations move the whole mass: identity columns
+    for axis, dof in enumerate(("root_tx", "root_ty", "root_tz")):
+        if dof in sk.dof_names:
+            np.testing.assert_allclose(jac[:, sk.dof_index(dof)], np.eye(3)[axis], atol=1e-12)
+    with pytest.raises(ShapeError, match="q: expected shape"):
+        center_of_mass_jacobian(sk, np.zeros(sk.n_dofs + 1))

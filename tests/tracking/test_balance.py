@@ -7,12 +7,16 @@ import pytest
 
 from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.ik.sdls import SDLSSolver
-from mocapkit.skeleton import load_preset
+from mocapkit.skeleton import center_of_mass, load_preset
 from mocapkit.tracking.balance import (
     BalanceConfig,
+    apply_lean,
     balance_pose,
     calibrate_balance,
     cog_offset_mm,
+    forward_direction,
+    restored_lean_slope,
+    spine_dof_indices,
     support_points,
 )
 
@@ -56,12 +60,14 @@ def test_tau_zero_at_rest_and_sign(setup):
     np.testing.assert_array_equal(res.taus, 0.0)
 
 
-@pytest.mark.parametrize("mode", ["proportional", "solve"])
-def test_squat_keeps_markers_and_improves_balance(setup, mode):
+@pytest.mark.parametrize(
+    ("mode", "search"), [("proportional", "bisect"), ("solve", "bisect"), ("solve", "newton")]
+)
+def test_squat_keeps_markers_and_improves_balance(setup, mode, search):
     sk, solver, model = setup
     q0 = solver.secondary.omega
     support = support_points(sk, q0)
-    cfg = BalanceConfig(mode=mode)
+    cfg = BalanceConfig(mode=mode, search=search, newton_steps=3)
     worst_off, worst_on, inside = 0.0, 0.0, 0
     depths = np.linspace(-20.0, -300.0, 12)
     for q, t in squat(solver, depths):
@@ -161,8 +167,114 @@ def test_no_lean_tried_when_markers_are_off_without_one(setup):
     assert _Counting.solves == 1  # the restore at zero lean, nothing else
 
 
+def test_restored_lean_slope_is_the_cog_derivative_along_the_restoring_direction(setup):
+    """The slope is that of the CoG along a lean with the free DoFs' correction that keeps
+    every active effector in place to first order (checked by central differences)."""
+    from mocapkit.tracking.balance import _SLOPE_RCOND, _spine_split
+
+    sk, solver, _model = setup
+    q0 = solver.secondary.omega
+    support = support_points(sk, q0)
+    *_, (q, t) = squat(solver, np.linspace(-50.0, -200.0, 4))
+    spine = list(spine_dof_indices(sk))
+    split = _spine_split(sk, tuple(spine))
+    # rebuild the restoring direction: the lean, and the free DoFs' weighted least-norm answer
+    _pts, jac, jw = solver.weighted_jacobian(q)
+    free = np.ones(sk.n_dofs, dtype=bool)
+    free[spine] = False
+    y = np.linalg.lstsq(jw[:, free], -(jac[:, spine] @ split), rcond=_SLOPE_RCOND)[0]
+    dq = np.zeros(sk.n_dofs)
+    dq[spine] = split
+    dq[free] = y / solver.mu[free]
+    moved = np.abs(jac[:, spine] @ split).max()  # the lean alone moves them this much
+    # the effectors stay put but for the cut singular directions (0.02 % of ``moved`` here)
+    np.testing.assert_allclose(jac @ dq, 0.0, atol=1e-3 * moved)
+    h = 1e-5
+    fwd = forward_direction(sk, q)  # the facing direction at q, held fixed
+    numeric = fwd @ (center_of_mass(sk, q + h * dq) - center_of_mass(sk, q - h * dq)) / (2 * h)
+    slope = restored_lean_slope(solver, q, t)
+    assert slope == pytest.approx(numeric, rel=1e-6)
+    assert slope < 0  # with the head pinned a forward bow moves the CoG backwards
+    # the restore itself moves the CoG the same way (its slope differs: it also relaxes)
+    a = apply_lean(solver, q, 0.05 * split, t)[0]
+    assert cog_offset_mm(sk, a, support)[0] < cog_offset_mm(sk, q, support)[0]
+
+
+def test_newton_search_reaches_the_margin_in_three_solves(setup):
+    sk, _solver, _model = setup
+    solver = _Counting(sk)
+    q0 = solver.secondary.omega
+    support = support_points(sk, q0)
+    newton = BalanceConfig(mode="solve", search="newton", newton_steps=3)
+    bisect = BalanceConfig(mode="solve", bisection_steps=6)
+    for q, t in squat(solver, np.linspace(-100.0, -300.0, 5)):
+        cog, back, front = cog_offset_mm(sk, q, support)
+        assert cog > front  # the squat leans forward out of the box: a bow is needed
+        margin = newton.margin_fraction * (front - back)
+        _Counting.solves = 0
+        a = balance_pose(solver, q, t, q0[2], support, None, newton)
+        n_newton = _Counting.solves
+        _Counting.solves = 0
+        balance_pose(solver, q, t, q0[2], support, None, bisect)
+        n_bisect = _Counting.solves
+        cog_a = cog_offset_mm(sk, a.q, support)[0]
+        # inside the box, within a fifth of the margin of the goal (front - margin); the
+        # bisection's 6 steps resolve the spine's range / 64 (about 0.02 rad, 1-2 mm here)
+        assert back <= cog_a <= front
+        assert abs(cog_a - (front - margin)) < 0.2 * margin
+        assert np.nanmax(a.residual_mm) <= 2.0 * solver.config.tol_mm
+        assert np.all(a.taus > 0)  # a forward bow
+        # a restore at zero lean first where the IK left the markers (by > 2 tol), then the steps
+        assert n_newton <= newton.newton_steps + 1 < n_bisect
+
+
+@pytest.mark.parametrize("search", ["bisect", "newton"])
+def test_pose_kept_without_a_restore_where_no_lean_is_applied_when_asked(setup, search):
+    sk, _solver, _model = setup
+    solver = _Counting(sk)
+    q0 = solver.secondary.omega
+    support = support_points(sk, q0)
+    (q, t), *_ = squat(solver, [-20.0])
+    cog, back, front = cog_offset_mm(sk, q, support)
+    margin = 0.15 * (front - back)
+    assert back + margin <= cog <= front - margin  # balanced already
+    skip = BalanceConfig(mode="solve", search=search, restore_without_lean=False)
+    _Counting.solves = 0
+    res = balance_pose(solver, q, t, q0[2], support, None, skip)
+    assert _Counting.solves == 0
+    np.testing.assert_array_equal(res.q, q)
+    np.testing.assert_array_equal(res.taus, 0.0)
+    expected = np.linalg.norm(solver.effector_positions(q) - t, axis=1)
+    np.testing.assert_allclose(res.residual_mm, expected, atol=1e-12)
+    _Counting.solves = 0
+    balance_pose(solver, q, t, q0[2], support, None, BalanceConfig(mode="solve"))
+    assert _Counting.solves == 1  # the default restores
+    # an effector farther than restore_above_mm from its target: the restore runs
+    t_far = t.copy()
+    t_far[1, 0] += 2.0 * skip.restore_above_mm
+    _Counting.solves = 0
+    res = balance_pose(solver, q, t_far, q0[2], support, None, skip)
+    assert _Counting.solves == 1
+    assert res.residual_mm[1] < 2.0 * skip.restore_above_mm
+    # a squat that needs a lean, with a hand a little off its marker (more than twice
+    # the IK tolerance, less than restore_above_mm): no lean, no solve
+    *_, (q, t) = squat(solver, np.linspace(-100.0, -300.0, 5))
+    cog, back, front = cog_offset_mm(sk, q, support)
+    assert cog > front  # the balance step had work to do
+    t = solver.effector_positions(q)  # every target where its effector is ...
+    t[1, 0] += 4.0 * solver.config.tol_mm  # ... but the left hand's, moved off
+    _Counting.solves = 0
+    res = balance_pose(solver, q, t, q0[2], support, None, skip)
+    assert _Counting.solves == 0
+    np.testing.assert_array_equal(res.q, q)
+    np.testing.assert_array_equal(res.taus, 0.0)
+    assert res.residual_mm[1] == pytest.approx(4.0 * solver.config.tol_mm)
+
+
 def test_bad_search_config():
     with pytest.raises(ConfigError, match="BalanceConfig.search"):
         BalanceConfig(search="golden")
     with pytest.raises(ConfigError, match="max_evaluations >= 2"):
         BalanceConfig(max_evaluations=1)
+    with pytest.raises(ConfigError, match="newton_steps: expected >= 1"):
+        BalanceConfig(newton_steps=0)

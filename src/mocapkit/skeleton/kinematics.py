@@ -464,6 +464,38 @@ def center_of_mass(skeleton: Skeleton, q: ArrayLike) -> FloatArray:
     return np.einsum("j,...jk->...k", m, segment_com(skeleton, q)) / m.sum()
 
 
+def center_of_mass_jacobian(skeleton: Skeleton, q: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """Whole-body centre of mass and its Jacobian with respect to the pose.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    q : array_like, shape (D,)
+
+    Returns
+    -------
+    com : ndarray, shape (3,)
+        Centre of mass (mm), as `center_of_mass`.
+    jacobian : ndarray, shape (3, D)
+        ``d com / d q``: the mass-weighted mean of the segment centres' position
+        Jacobians (mm per rad for rotations, mm per mm for translations).
+    """
+    m = skeleton.mass_kg
+    total = float(m.sum())
+    if total <= 0:
+        raise ShapeError(f"skeleton {skeleton.name!r} has no mass; centre of mass undefined")
+    qa = np.asarray(q, dtype=float)
+    if qa.shape != (skeleton.n_dofs,):
+        raise ShapeError(f"q: expected shape ({skeleton.n_dofs},), found {qa.shape}")
+    massive = np.flatnonzero(m > 0)
+    local = skeleton.bone_end_mm[massive] * skeleton.com_fraction[massive, None]
+    pts, jac = points_and_jacobian(skeleton, qa, massive, local)
+    w = m[massive] / total
+    com = w @ pts
+    jcog = np.einsum("k,kid->id", w, jac.reshape(len(massive), 3, skeleton.n_dofs))
+    return com, jcog
+
+
 def subtree_mass(skeleton: Skeleton) -> FloatArray:
     """Mass (kg) of each joint's segment plus all segments below it, shape (J,)."""
     out = skeleton.mass_kg.astype(float).copy()
@@ -496,6 +528,7 @@ __all__ = [
     "canonical_positions",
     "carried_mass",
     "center_of_mass",
+    "center_of_mass_jacobian",
     "fk_batch_nb",
     "fk_points_jacobian_pose_nb",
     "fk_pose_nb",

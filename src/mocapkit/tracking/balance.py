@@ -33,6 +33,20 @@ Modes
     the video refinement downstream (with its elbow-jump penalty) is sensitive to
     such differences: on the accuracy clip zombie with positions only the elbow error
     with video went from 41.0 to 76.8 mm.
+    With ``search="newton"`` the first lean is a Newton step from the analytic slope
+    of the restored CoG (`restored_lean_slope`: the CoG Jacobian along the lean with the restore's
+    linearised answer), and the next steps use the secant through the restores made:
+    ``newton_steps`` restore solves (3 in the tracker: within 2 mm of the goal on the
+    squat poses of the tests, where the analytic step alone lands 20-60 mm past it,
+    the restore following the lean less than its linearisation says). The markers are
+    checked on the pose itself (no restore at zero lean unless they are off by more
+    than twice the IK tolerance). Not the tracker's default: its leans differ from
+    bisection's by a few millimetres of CoG, and the arm-refining configurations moved
+    by it (positions only, elbow with video 65.3 -> 85.6 mm; docs/hybrid.md, "Speed").
+    ``restore_without_lean=False`` (the tracker's default,
+    `mocapkit.tracking.hybrid.TRACKING_BALANCE`, with any search) skips the restore
+    solve wherever no lean is applied, unless an effector is more than
+    ``restore_above_mm`` off its target.
 ``"off"``
     No balance step.
 """
@@ -46,13 +60,18 @@ from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.ik.sdls import SDLSSolver
-from mocapkit.skeleton.kinematics import center_of_mass, forward_kinematics
+from mocapkit.skeleton.kinematics import (
+    center_of_mass,
+    center_of_mass_jacobian,
+    forward_kinematics,
+)
 from mocapkit.skeleton.limbs import SIDES, foot_joints, has_limb, spine_dofs, vertical_root_dof
 from mocapkit.skeleton.model import Skeleton
 
 FloatArray = NDArray[np.float64]
 
 _BALANCE_MODES = ("proportional", "solve", "off")
+_SEARCHES = ("bisect", "secant", "newton")
 
 
 @dataclass(frozen=True)
@@ -68,12 +87,27 @@ class BalanceConfig:
     bisection_steps : int
         Bisection iterations on the lean angle (``search="bisect"`` and the
         calibration of the proportional rule).
-    search : {"bisect", "secant"}
+    search : {"bisect", "secant", "newton"}
         ``"solve"`` mode: how the lean is found (see the module docstring).
     cog_tol_mm : float
         ``search="secant"``: stop when the centre of gravity is this close to its goal.
     max_evaluations : int
         ``search="secant"``: most trial leans (restore solves) per frame.
+    newton_steps : int
+        ``search="newton"``: restore solves of the Newton search (each a step on the
+        lean from the analytic slope of the restored CoG; the first is usually within
+        a few millimetres of the goal).
+    restore_without_lean : bool
+        ``"solve"`` mode: where no lean is applied (the centre of gravity already inside
+        the margin, or ``search="newton"`` and head and hands off their markers by more
+        than twice the IK tolerance at the pose itself), still run the restore solve
+        (spine frozen) from the pose. When False the pose is returned as it came, with
+        no solve (the tracker's smoothing polish solves after the balance step anyway),
+        unless an effector is more than ``restore_above_mm`` from its target.
+    restore_above_mm : float
+        ``restore_without_lean=False``: the restore still runs where an effector is
+        this far (mm) from its target (a foot just re-planted, a hand the refinement
+        moved); member-marker noise leaves about 5 mm.
     """
 
     mode: str = "proportional"
@@ -82,6 +116,9 @@ class BalanceConfig:
     search: str = "bisect"
     cog_tol_mm: float = 0.5
     max_evaluations: int = 5
+    newton_steps: int = 1
+    restore_without_lean: bool = True
+    restore_above_mm: float = 20.0
 
     def __post_init__(self) -> None:
         if self.mode not in _BALANCE_MODES:
@@ -96,9 +133,13 @@ class BalanceConfig:
             raise ConfigError(
                 f"BalanceConfig.bisection_steps: expected >= 1, found {self.bisection_steps}"
             )
-        if self.search not in ("secant", "bisect"):
+        if self.search not in _SEARCHES:
             raise ConfigError(
-                f"BalanceConfig.search: expected 'secant' or 'bisect', found {self.search!r}"
+                f"BalanceConfig.search: expected one of {_SEARCHES}, found {self.search!r}"
+            )
+        if self.newton_steps < 1:
+            raise ConfigError(
+                f"BalanceConfig.newton_steps: expected >= 1, found {self.newton_steps}"
             )
         if not self.cog_tol_mm > 0 or self.max_evaluations < 2:
             raise ConfigError(
@@ -362,6 +403,105 @@ def _secant_lean(
     return best, (q_best, resid_best), slope
 
 
+#: Relative singular-value cut of the restore's linearisation in `restored_lean_slope`:
+#: near a stretched knee the free DoFs' Jacobian has singular values ~1e-10 of its
+#: largest, whose least-norm answers reach 1e11 rad (SDLS clamps such terms; the cut
+#: drops them). 1e-3 and 1e-4 give the same slopes on the squat poses of the tests.
+_SLOPE_RCOND = 1e-3
+
+
+def restored_lean_slope(
+    solver: SDLSSolver,
+    q: ArrayLike,
+    targets_mm: ArrayLike,
+    active: ArrayLike | None = None,
+) -> float:
+    """Derivative of the restored centre of gravity along the facing axis per radian of lean.
+
+    The restore (`apply_lean`) keeps the active effectors on their targets with the
+    spine frozen. Linearised at ``q``, a lean ``d lambda`` split over the spine as
+    `_spine_split` moves the effectors by ``J_s s d lambda``, and the restore answers
+    with the free DoFs' weighted least-norm correction ``dq_f = -W^-1 (J_f W^-1)^+
+    J_s s d lambda`` (``W = diag(mu)``, the solver's DoF weights, so the correction is
+    the limit of the SDLS step without damping; the secondary task moves only in the
+    null space and is left out; singular values below ``_SLOPE_RCOND`` of the largest
+    are cut). The slope is ``f . J_cog (s, dq_f)`` with ``J_cog``
+    from `mocapkit.skeleton.kinematics.center_of_mass_jacobian` and ``f`` the facing
+    direction (mm per rad; negative where a forward bow moves the CoG backwards, as
+    with the head pinned).
+
+    Parameters
+    ----------
+    solver : SDLSSolver
+        The restore's solver (its effectors and weights).
+    q : array_like, shape (D,)
+    targets_mm : array_like, shape (E, 3)
+        Only which rows are finite matters (the active effectors).
+    active : array_like of bool, shape (E,), optional
+    """
+    sk = solver.skeleton
+    qa = np.asarray(q, dtype=float)
+    t = np.asarray(targets_mm, dtype=float)
+    act = np.all(np.isfinite(t), axis=1)
+    if active is not None:
+        act &= np.asarray(active, dtype=bool)
+    spine = list(spine_dof_indices(sk))
+    split = _spine_split(sk, tuple(spine))
+    dq = np.zeros(sk.n_dofs)
+    dq[spine] = split
+    if np.any(act):
+        _pts, jac, jw = solver.weighted_jacobian(qa)
+        rows = np.repeat(act, 3)
+        free = ~_spine_mask(sk, tuple(spine))
+        moved = jac[rows][:, spine] @ split
+        y = np.linalg.lstsq(jw[rows][:, free], -moved, rcond=_SLOPE_RCOND)[0]
+        dq[free] = y / solver.mu[free]
+    _com, jcog = center_of_mass_jacobian(sk, qa)
+    return float(forward_direction(sk, qa) @ (jcog @ dq))
+
+
+def _newton_lean(
+    solver: SDLSSolver,
+    q: FloatArray,
+    targets: FloatArray,
+    active: NDArray[np.bool_] | None,
+    goal_mm: float,
+    support: FloatArray,
+    config: BalanceConfig,
+) -> tuple[float, tuple[FloatArray, FloatArray]]:
+    """Total lean (rad) that puts the restored CoG at ``goal_mm``: Newton steps from the
+    analytic slope (`restored_lean_slope` at ``q``), one restore solve each.
+
+    ``q`` is a pose whose effectors are on their targets (the linearisation point).
+    Returns the lean and the restored pose and residuals at it. A slope that is not
+    negative (the restore cannot move the CoG the usual way) gives no lean.
+    """
+    sk = solver.skeleton
+    split, lo, hi = _lean_range(sk, q)
+    f0 = cog_offset_mm(sk, q, support)[0] - goal_mm
+    slope = restored_lean_slope(solver, q, targets, active)
+    total = 0.0
+    solved: tuple[FloatArray, FloatArray] | None = None
+    f = f0
+    if slope < 0.0:
+        for _ in range(config.newton_steps):
+            if abs(f) < config.cog_tol_mm:
+                break
+            nxt = min(max(total - f / slope, lo), hi)
+            if nxt == total:
+                break
+            trial = apply_lean(solver, q, nxt * split, targets, active)
+            f_next = cog_offset_mm(sk, trial[0], support)[0] - goal_mm
+            secant = (f_next - f) / (nxt - total)
+            total, f, solved = nxt, f_next, trial
+            if secant < 0.0:  # the restored CoG's own slope for the next step
+                slope = secant
+    if solved is None:
+        total = 0.0
+        solved = apply_lean(solver, q, np.zeros(len(split)), targets, active)
+    return total, solved
+
+
 def calibrate_balance(
     solver: SDLSSolver,
     q_rest: ArrayLike | None = None,
@@ -473,24 +613,48 @@ def balance_pose(
         lo, hi = back + margin, front - margin
         if lo <= cog <= hi:
             taus = np.zeros(len(spine))
+            if not cfg.restore_without_lean:
+                resid = _residuals(solver, qa, t, act)
+                if not np.nanmax(resid, initial=0.0) > cfg.restore_above_mm:
+                    # balanced: no lean, and no restore asked for
+                    return BalanceResult(qa.copy(), taus, resid, slope)
         else:
             goal = lo if cog < lo else hi
             split = _spine_split(sk, spine)
-            zero = apply_lean(solver, qa, np.zeros(len(spine)), t, act)
-            if np.nanmax(zero[1], initial=0.0) > 2.0 * solver.config.tol_mm:
-                # head and hands are off their markers even without a lean: no lean (the
-                # markers-first rule below would halve any lean towards nothing)
-                return BalanceResult(zero[0], np.zeros(len(spine)), zero[1], slope)
-            if cfg.search == "secant":
-                total, solved, slope = _secant_lean(
-                    solver, qa, t, act, goal, support, cfg, slope_mm_per_rad, zero
-                )
+            limit = 2.0 * solver.config.tol_mm
+            if not cfg.restore_without_lean:
+                resid0 = _residuals(solver, qa, t, act)
+                worst = float(np.nanmax(resid0, initial=0.0))
+                if limit < worst <= cfg.restore_above_mm:
+                    # off the markers: no lean (markers first), and no restore
+                    return BalanceResult(qa.copy(), np.zeros(len(spine)), resid0, slope)
+            if cfg.search == "newton":
+                base = qa
+                if _max_residual(solver, qa, t, act) > limit:
+                    # restore first; no lean if head and hands stay off their markers
+                    zero = apply_lean(solver, qa, np.zeros(len(spine)), t, act)
+                    if np.nanmax(zero[1], initial=0.0) > limit:
+                        return BalanceResult(zero[0], np.zeros(len(spine)), zero[1], slope)
+                    base = zero[0]
+                total, solved = _newton_lean(solver, base, t, act, goal, support, cfg)
+                qa = base
+                taus = total * split
             else:
-                total = _bisect_lean(
-                    solver, qa, t, act, goal, cfg.bisection_steps, support, at_zero=zero
-                )
-                solved = zero if total == 0.0 else None
-            taus = total * split
+                zero = apply_lean(solver, qa, np.zeros(len(spine)), t, act)
+                if np.nanmax(zero[1], initial=0.0) > 2.0 * solver.config.tol_mm:
+                    # head and hands are off their markers even without a lean: no lean
+                    # (the markers-first rule below would halve any lean towards nothing)
+                    return BalanceResult(zero[0], np.zeros(len(spine)), zero[1], slope)
+                if cfg.search == "secant":
+                    total, solved, slope = _secant_lean(
+                        solver, qa, t, act, goal, support, cfg, slope_mm_per_rad, zero
+                    )
+                else:
+                    total = _bisect_lean(
+                        solver, qa, t, act, goal, cfg.bisection_steps, support, at_zero=zero
+                    )
+                    solved = zero if total == 0.0 else None
+                taus = total * split
     if not np.any(taus):
         if solved is not None:  # the search's own restore at zero lean
             return BalanceResult(solved[0], taus, solved[1], slope)
@@ -514,6 +678,27 @@ def balance_pose(
         )
         taus = np.zeros_like(taus)
     return BalanceResult(qn, taus, resid, slope)
+
+
+def _residuals(
+    solver: SDLSSolver, q: FloatArray, targets: FloatArray, active: NDArray[np.bool_] | None
+) -> FloatArray:
+    """Distance (mm) of each effector from its target at ``q``, shape (E,); NaN where
+    inactive (as `mocapkit.ik.sdls.IKResult.residual_mm`)."""
+    act = np.all(np.isfinite(targets), axis=1)
+    if active is not None:
+        act &= active
+    out = np.full(len(targets), np.nan)
+    if np.any(act):
+        out[act] = np.linalg.norm(solver.effector_positions(q)[act] - targets[act], axis=1)
+    return out
+
+
+def _max_residual(
+    solver: SDLSSolver, q: FloatArray, targets: FloatArray, active: NDArray[np.bool_] | None
+) -> float:
+    """Largest distance (mm) of an active effector from its target at ``q`` (0 if none)."""
+    return float(np.nanmax(_residuals(solver, q, targets, active), initial=0.0))
 
 
 def _spine_mask(sk: Skeleton, spine: tuple[int, ...]) -> NDArray[np.bool_]:

@@ -107,6 +107,15 @@ def foot_effectors(skeleton: Skeleton) -> list[Effector]:
 TRACKING_IK = IKConfig(max_iterations=30, term_clamp_scale=3.0, relax_substeps=3)
 #: Bisection steps of the balance lean (`BalanceConfig.bisection_steps`) in ``"solve"`` mode.
 TRACKING_BISECTION_STEPS = 6
+#: The tracker's balance step (without paper mode): the lean bisected in
+#: `TRACKING_BISECTION_STEPS` where one is needed, and no restore solve where none is
+#: applied (the CoG inside the margin, or head and hands 2 x tol to
+#: `BalanceConfig.restore_above_mm` off their markers; the smoothing polish solves next
+#: anyway): 2.4 ms a frame against 6.0 (bench, same load). ``search="newton"`` is faster
+#: still (1.2 ms) but moves the arm-refining configurations (see docs/hybrid.md, "Speed").
+TRACKING_BALANCE = BalanceConfig(
+    mode="solve", bisection_steps=TRACKING_BISECTION_STEPS, restore_without_lean=False
+)
 
 
 class _CountedSolver(SDLSSolver):
@@ -265,7 +274,7 @@ class HybridConfig:
             return self.balance
         if self.paper:
             return BalanceConfig(mode="proportional")
-        return BalanceConfig(mode="solve", bisection_steps=TRACKING_BISECTION_STEPS)
+        return TRACKING_BALANCE
 
     @property
     def smoothing(self) -> bool:
