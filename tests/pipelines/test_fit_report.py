@@ -48,6 +48,17 @@ def test_known_values_and_flags():
     assert len(summarize_fit(results, 30.0, 0.04).flagged) == 2
 
 
+def test_columns_align_with_long_member_names():
+    # member names longer than the 12-character column used to push their rows right
+    results = [_result(i, {"head": 5.0, "right_hand_side": 7.0}) for i in range(3)]
+    lines = summarize_fit(results, warn_mm=30.0, warn_fraction=0.05).lines()
+    header, head_row, member_row = lines[1], lines[2], lines[3]
+    ends = [line.index("frames") + len("frames") for line in (header,)]
+    ends += [line.index(" 3 ") + 2 for line in (head_row, member_row)]
+    assert len(set(ends)) == 1  # the frames counts end under the header's "frames"
+    assert member_row.startswith("  right_hand_side ")
+
+
 def test_bad_thresholds():
     with pytest.raises(ConfigError, match="--warn-mm: expected a distance > 0 mm, found 0"):
         summarize_fit([], warn_mm=0.0)

@@ -62,16 +62,17 @@ class FitReport:
         return tuple(s for s in self.sets if s.n_seen and s.fraction_over > self.warn_fraction)
 
     def lines(self) -> list[str]:
-        """The table for the terminal."""
+        """The table for the terminal (the name column as wide as the longest name)."""
+        width = max([len("effector"), 12, *(len(s.name) for s in self.sets)])
         out = [
             f"fit over {self.n_frames} frames (each effector's distance to its marker set "
             "or foot plant):",
-            f"  {'effector':12s} {'frames':>6s} {'mean mm':>8s} {'max mm':>8s}"
+            f"  {'effector':{width}s} {'frames':>6s} {'mean mm':>8s} {'max mm':>8s}"
             f"  > {self.warn_mm:g} mm",
         ]
         for s in self.sets:
             out.append(
-                f"  {s.name:12s} {s.n_seen:6d} {s.mean_mm:8.1f} {s.max_mm:8.1f}  "
+                f"  {s.name:{width}s} {s.n_seen:6d} {s.mean_mm:8.1f} {s.max_mm:8.1f}  "
                 f"{s.n_over} frames ({100 * s.fraction_over:.1f} %)"
             )
         return out
