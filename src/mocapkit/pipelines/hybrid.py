@@ -27,6 +27,7 @@ from mocapkit.pipelines.run import (
     RunResult,
     check_result_folder,
     run_tracker,
+    unobserved_to_nan,
     write_run_folder,
 )
 from mocapkit.skeleton.limbs import arm, head_joint, spine_dofs
@@ -45,7 +46,6 @@ from mocapkit.tracking.hybrid import (
     default_marker_effectors,
 )
 from mocapkit.tracking.posture import (
-    SEATED_LEFT_OUT,
     UPRIGHT_PERCENTILE,
     PostureChoice,
     check_posture,
@@ -474,16 +474,6 @@ def _seat(
     return seat_skeleton(sk, seat_mm), replace(choice, seat_height_mm=seat_mm)
 
 
-def _leave_out_legs(motion: Motion) -> Motion:
-    """``motion`` with a seated subject's leg joints (`SEATED_LEFT_OUT`) NaN."""
-    joints = motion.joints_mm.copy()
-    cols = [motion.joint_names.index(j) for j in SEATED_LEFT_OUT if j in motion.joint_names]
-    joints[:, cols] = np.nan
-    return Motion(
-        motion.skeleton, motion.time_s, motion.q, motion.joint_names, joints, motion.source
-    )
-
-
 #: Re-plant trigger (mm) for raw marker files. Their sets are centres of skin markers
 #: whose offsets from the joints are not declared, so the IK leaves residuals of several
 #: mm on frames where nothing moved: at the tracker's default (8 mm, tuned on sessions
@@ -858,8 +848,8 @@ def track_hybrid_marker_file(
         members_mm=members,
     )
     motion = drop_unobserved_arms(Motion.from_q(sk, world.time_s, q, source=source), names, poses)
-    if choice.posture == "seated":
-        motion = _leave_out_legs(motion)
+    # the runner's rule: NaN where the tracker reported none (a seated subject's legs)
+    motion = unobserved_to_nan(motion, poses)
     if not world_output:
         motion = Motion(
             sk,
