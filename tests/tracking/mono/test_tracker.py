@@ -140,3 +140,25 @@ def test_a_dominant_unary_prior_picks_each_frames_cheapest_pose() -> None:
         assert chosen == pytest.approx(costs.min(), abs=1e-9)
         varied += int(costs.max() > costs.min() + 1e-3)
     assert varied >= 3  # the prior had a choice to make
+
+
+def test_a_dominant_arm_prior_picks_each_frames_most_common_arms() -> None:
+    from mocapkit.tracking.mono.arm_prior import default_arm_prior
+
+    prior = default_arm_prior()
+    cfg = MonoConfig(arm_prior_weight=1e9, clavicle_weight=0.0, smooth_lag=0, noise_px=0.5)
+    joints, names, _ = stick_motion(12)
+    model = stick_model()
+    cam = camera()
+    world = joints[:, [names.index(n) for n in model.joint_names]]
+    lengths = np.linalg.norm(model.link_vectors(cam.to_camera(world[0])), axis=-1)
+    tracker = MonoTracker(lengths, cam, 1 / FPS, cfg, model)
+    for k in range(12):
+        tracker.push(k / FPS, cam.project(world[k]))
+    varied = 0
+    for f in tracker.finish():
+        layer = tracker._layers[f.index]
+        costs = prior.cost(model, layer.positions[layer.keep])
+        assert prior.cost(model, f.joints_in_camera[None])[0] == pytest.approx(costs.min())
+        varied += int(costs.max() > costs.min() + 1e-3)
+    assert varied >= 3  # the prior had a choice to make
