@@ -54,11 +54,21 @@ def fit_on(clips: Sequence[str], mocap: Path) -> tuple[ArmPrior, int]:
     )
 
 
+def _literal(a: object, indent: int, prefix: int) -> str:
+    """A nested list literal laid out as ``ruff format`` lays it out (100 columns)."""
+    if np.ndim(a) == 0:
+        return f"{float(a):.8g}"
+    items = [_literal(x, indent + 4, indent + 4) for x in a]
+    flat = "[" + ", ".join(items) + "]"
+    if "\n" not in flat and prefix + len(flat) <= 100:
+        return flat
+    pad = " " * (indent + 4)
+    return "[\n" + "".join(f"{pad}{x},\n" for x in items) + " " * indent + "]"
+
+
 def write_table(prior: ArmPrior, clips: Sequence[str], samples: int, out: Path) -> None:
-    def arr(a: np.ndarray) -> str:
-        return np.array2string(
-            np.asarray(a), separator=", ", precision=8, floatmode="maxprec", threshold=10**6
-        )
+    def arr(a: np.ndarray, name: str) -> str:
+        return _literal(np.asarray(a), 0, len(name) + 3)
 
     text = f'''"""Shipped parameters of the mono tracker's arm prior (generated; do not edit).
 
@@ -72,11 +82,11 @@ The data used here was obtained from mocap.cs.cmu.edu. The database was created 
 funding from NSF EIA-0196217.
 """
 
-WEIGHTS = {arr(prior.weights)}
+WEIGHTS = {arr(prior.weights, "WEIGHTS")}
 
-MEANS = {arr(prior.means)}
+MEANS = {arr(prior.means, "MEANS")}
 
-COVARIANCES = {arr(prior.covariances)}
+COVARIANCES = {arr(prior.covariances, "COVARIANCES")}
 
 CAP = {prior.cap!r}
 '''

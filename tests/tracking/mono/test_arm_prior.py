@@ -48,8 +48,10 @@ def test_arm_features_known_pose_mirrors_the_left_arm_and_ignore_rigid_motion() 
     # the mirror image of the pose swaps the arms' features
     mirrored = pos * np.array([-1.0, 1.0, 1.0])
     names = list(model.joint_names)
-    swap = [names.index(n.replace("left", "R").replace("right", "left").replace("R", "right"))
-            for n in names]
+    swap = [
+        names.index(n.replace("left", "R").replace("right", "left").replace("R", "right"))
+        for n in names
+    ]
     g = arm_features(model, mirrored[swap][None])[0]
     assert g[0] == pytest.approx(f[1], abs=1e-12)
     assert g[1] == pytest.approx(f[0], abs=1e-12)
