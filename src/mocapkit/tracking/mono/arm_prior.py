@@ -42,6 +42,18 @@ FloatArray = NDArray[np.float64]
 #: Feature size per arm: unit upper arm and unit forearm in the body frame.
 ARM_FEATURES = 6
 
+#: Joints the features read (canonical names; the links of `arm_features`' docstring).
+_ARM_JOINTS = (
+    "neck",
+    "pelvis",
+    "left_shoulder",
+    "right_shoulder",
+    "left_elbow",
+    "left_wrist",
+    "right_elbow",
+    "right_wrist",
+)
+
 
 def arm_features(model: StickModel, positions: ArrayLike) -> FloatArray:
     """Upper arm and forearm directions of both arms in the body frame (N, 2, 6).
@@ -49,8 +61,8 @@ def arm_features(model: StickModel, positions: ArrayLike) -> FloatArray:
     Parameters
     ----------
     model : StickModel
-        Needs the links ``trunk``, ``left_clavicle``, ``right_clavicle`` and per side
-        ``<side>_upper_arm``, ``<side>_forearm``.
+        Needs the joints of the links ``trunk``, ``left_clavicle``, ``right_clavicle``
+        and per side ``<side>_upper_arm``, ``<side>_forearm``.
     positions : (N, K, 3) float
         Poses (any right-handed frame; mm or px).
 
@@ -66,21 +78,24 @@ def arm_features(model: StickModel, positions: ArrayLike) -> FloatArray:
         raise ShapeError(
             f"arm_features: expected positions (N, {model.n_joints}, 3), found {p.shape}"
         )
-    v = model.link_vectors(p)  # (N, L, 3)
+    names = model.joint_names
+    j = [names.index(n) for n in _ARM_JOINTS]
+    neck, pelvis, ls, rs = (p[:, i] for i in j[:4])
     with np.errstate(invalid="ignore", divide="ignore"):
-        up = -v[:, model.link_index("trunk")]
-        up = up / np.linalg.norm(up, axis=-1, keepdims=True)
-        right = v[:, model.link_index("right_clavicle")] - v[:, model.link_index("left_clavicle")]
-        right = right - np.sum(right * up, axis=-1, keepdims=True) * up
-        right = right / np.linalg.norm(right, axis=-1, keepdims=True)
-        fwd = np.cross(up, right)
-        frame = np.stack([right, up, fwd], axis=1)  # (N, 3, 3): rows are the axes
-        out = np.empty((p.shape[0], 2, ARM_FEATURES))
-        for a, side in enumerate(("left", "right")):
-            for j, seg in enumerate(("upper_arm", "forearm")):
-                d = v[:, model.link_index(f"{side}_{seg}")]
-                d = d / np.linalg.norm(d, axis=-1, keepdims=True)
-                out[:, a, 3 * j : 3 * j + 3] = np.einsum("nac,nc->na", frame, d)
+        up = neck - pelvis
+        up /= np.sqrt(np.sum(up * up, axis=-1, keepdims=True))
+        right = rs - ls  # right clavicle minus left clavicle
+        right -= np.sum(right * up, axis=-1, keepdims=True) * up
+        right /= np.sqrt(np.sum(right * right, axis=-1, keepdims=True))
+        fwd = np.empty_like(up)  # up x right
+        fwd[:, 0] = up[:, 1] * right[:, 2] - up[:, 2] * right[:, 1]
+        fwd[:, 1] = up[:, 2] * right[:, 0] - up[:, 0] * right[:, 2]
+        fwd[:, 2] = up[:, 0] * right[:, 1] - up[:, 1] * right[:, 0]
+        frame = np.stack([right, up, fwd], axis=2)  # (N, 3, 3): columns are the axes
+        # upper arm, forearm of the left arm, then of the right arm
+        d = p[:, j[4:8]] - p[:, [j[2], j[4], j[3], j[6]]]  # (N, 4, 3)
+        d /= np.sqrt(np.sum(d * d, axis=-1, keepdims=True))
+        out = np.matmul(d, frame).reshape(p.shape[0], 2, ARM_FEATURES)
     out[:, 0, 0] *= -1.0
     out[:, 0, 3] *= -1.0
     return out
@@ -106,6 +121,8 @@ class ArmPrior:
     covariances: FloatArray
     cap: float = 10.0
     _chol_inv: FloatArray = field(init=False, repr=False)  # (M, 6, 6) inverse Cholesky factors
+    _whiten: FloatArray = field(init=False, repr=False)  # (6, 6 M): x @ W = all C_m^-1 x at once
+    _offset: FloatArray = field(init=False, repr=False)  # (6 M,): all C_m^-1 mu_m
     _log_norm: FloatArray = field(init=False, repr=False)  # (M,) log weight + Gaussian constant
     _log_peak: float = field(init=False, repr=False)  # largest log-density among the means
 
@@ -127,7 +144,10 @@ class ArmPrior:
         object.__setattr__(self, "weights", w)
         object.__setattr__(self, "means", mu)
         object.__setattr__(self, "covariances", cov)
-        object.__setattr__(self, "_chol_inv", np.linalg.inv(chol))
+        ci = np.linalg.inv(chol)
+        object.__setattr__(self, "_chol_inv", ci)
+        object.__setattr__(self, "_whiten", ci.reshape(-1, ARM_FEATURES).T.copy())
+        object.__setattr__(self, "_offset", np.einsum("mij,mj->mi", ci, mu).ravel())
         log_det = 2.0 * np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(axis=1)
         object.__setattr__(
             self, "_log_norm", np.log(w) - 0.5 * (ARM_FEATURES * np.log(2 * np.pi) + log_det)
@@ -139,15 +159,24 @@ class ArmPrior:
         x = np.asarray(features, dtype=float)
         if x.shape[-1] != ARM_FEATURES:
             raise ShapeError(f"ArmPrior.log_density: expected (..., 6), found {x.shape}")
-        d = x[..., None, :] - self.means  # (..., M, 6)
-        z = np.einsum("mij,...mj->...mi", self._chol_inv, d)
+        # C_m^-1 (x - mu_m) for every component in one product (the tracker calls this
+        # for every surviving pose of every frame)
+        z = (x @ self._whiten - self._offset).reshape(x.shape[:-1] + self.means.shape)
         comp = self._log_norm - 0.5 * np.sum(z * z, axis=-1)
         top = np.max(comp, axis=-1, keepdims=True)
         return np.asarray(top[..., 0] + np.log(np.sum(np.exp(comp - top), axis=-1)), dtype=float)
 
     def arm_cost(self, features: ArrayLike) -> FloatArray:
         """Nats below the densest point, clipped to ``[0, cap]`` (...,); NaN costs 0."""
-        c = self._log_peak - self.log_density(features)
+        x = np.asarray(features, dtype=float)
+        if x.shape[-1] != ARM_FEATURES:
+            raise ShapeError(f"ArmPrior.arm_cost: expected (..., 6), found {x.shape}")
+        # the density without log-sum-exp's shift: the terms are at most exp(max
+        # _log_norm) (no overflow), and where all underflow the cost is the cap anyway
+        z = (x @ self._whiten - self._offset).reshape(x.shape[:-1] + self.means.shape)
+        dens = np.exp(self._log_norm - 0.5 * np.einsum("...i,...i->...", z, z)).sum(axis=-1)
+        with np.errstate(divide="ignore"):
+            c = self._log_peak - np.log(dens)
         return np.asarray(np.nan_to_num(np.clip(c, 0.0, self.cap), nan=0.0), dtype=float)
 
     def cost(self, model: StickModel, positions: ArrayLike) -> FloatArray:

@@ -12,7 +12,8 @@ Per frame (streaming, `MonoTracker.push`):
    by joint accelerations (eq. 4-5 with errata M4, ``"joint_acceleration"``), or by the
    first-order rotation (``"rotation"``, plain states).
    Beyond the paper, each pose carries soft costs (`mocapkit.tracking.mono.priors`):
-   by default only the clavicle prior (``clavicle_weight``); the image residual, elbow
+   by default the clavicle prior (``clavicle_weight``) and the data-driven arm prior
+   (``arm_prior_weight``, `mocapkit.tracking.mono.arm_prior`); the image residual, elbow
    flex, depth velocity and joint-acceleration terms are off (measured in docs/mono.md);
 5. Viterbi picks the path (§4.3): offline (``lag=None``) exactly at the end, online with
    a fixed lag (`mocapkit.tracking.mono.viterbi.Decoder`). The online latency is
