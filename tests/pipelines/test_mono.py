@@ -243,3 +243,21 @@ def test_mono_stream_answers_with_the_stated_latency(lag: int | None) -> None:
         np.testing.assert_allclose(
             neck, to_world([r.frame], model, cam, cfg, float("nan"))[0, 0], atol=1e-9
         )
+
+
+def test_cli_arm_prior_weight_reaches_the_tracker(tmp_path: Path) -> None:
+    session = _session(tmp_path / "s")
+    for w, out in ((None, "default"), ("0", "off"), ("1e6", "strong")):
+        extra = [] if w is None else ["--arm-prior-weight", w]
+        assert main(["track", "mono", str(session), "--out", str(tmp_path / out)] + extra) == 0
+    for out, cfg in (
+        ("default", MonoConfig()),
+        ("off", MonoConfig(arm_prior_weight=0.0)),
+        ("strong", MonoConfig(arm_prior_weight=1e6)),
+    ):
+        run = track_mono(session, None, config=cfg)
+        got = np.load(tmp_path / out / "motion.npz")["joints_mm"]
+        assert np.allclose(got, run.motion.joints_mm, equal_nan=True)
+    a = np.load(tmp_path / "off" / "motion.npz")["joints_mm"]
+    b = np.load(tmp_path / "strong" / "motion.npz")["joints_mm"]
+    assert not np.allclose(a, b, equal_nan=True)  # the weight changed the chosen poses

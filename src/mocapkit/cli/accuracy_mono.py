@@ -38,6 +38,12 @@ def add_mono_accuracy_parser(methods: Any) -> None:
         "--cost", choices=("acceleration", "joint_acceleration", "rotation"),
         default="acceleration",
     )  # fmt: skip
+    m.add_argument(
+        "--arm-prior-weight",
+        type=float,
+        default=None,
+        help="weight of the data-driven arm prior per nat (default 30; 0: off)",
+    )
     m.add_argument("--json", action="store_true", help="print JSON instead of a table")
     m.set_defaults(func=_run)
 
@@ -48,6 +54,8 @@ def _run(args: argparse.Namespace) -> int:
     from mocapkit.tracking.mono.tracker import MonoConfig
 
     mocap = mocap_folder(args.mocap)
+    w = args.arm_prior_weight
+    prior = {} if w is None else {"arm_prior_weight": w}
     if not args.json:
         print(format_rows([]))
     rows = mono_accuracy(
@@ -58,7 +66,7 @@ def _run(args: argparse.Namespace) -> int:
         noise_px=args.noise_px,
         openpose=args.openpose,
         skin=args.skin,
-        config=MonoConfig(lag=args.lag, cost=args.cost),
+        config=MonoConfig(lag=args.lag, cost=args.cost, **prior),
         say=(lambda _line: None) if args.json else print,
     )
     if args.json:

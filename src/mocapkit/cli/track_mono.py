@@ -61,6 +61,12 @@ def add_mono_parser(methods: Any) -> None:
         action="store_true",
         help="take link lengths from session.json instead of the video",
     )
+    p.add_argument(
+        "--arm-prior-weight",
+        type=float,
+        default=None,
+        help="weight of the data-driven arm prior per nat (default 30; 0: off)",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=_run_mono)
 
@@ -70,7 +76,13 @@ def _run_mono(args: argparse.Namespace) -> int:
     from mocapkit.pipelines.run import find_gaps
     from mocapkit.tracking.mono.tracker import MonoConfig
 
-    cfg = MonoConfig(legs=args.legs, camera_model=args.camera_model, cost=args.cost, lag=args.lag)
+    cfg = MonoConfig(
+        legs=args.legs,
+        camera_model=args.camera_model,
+        cost=args.cost,
+        lag=args.lag,
+        **({} if args.arm_prior_weight is None else {"arm_prior_weight": args.arm_prior_weight}),
+    )
     run = track_mono(
         args.session,
         args.out,
