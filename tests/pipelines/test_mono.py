@@ -249,7 +249,7 @@ def test_cli_arm_prior_weight_reaches_the_tracker(tmp_path: Path) -> None:
     session = _session(tmp_path / "s")
     for w, out in ((None, "default"), ("0", "off"), ("1e6", "strong")):
         extra = [] if w is None else ["--arm-prior-weight", w]
-        assert main(["track", "mono", str(session), "--out", str(tmp_path / out)] + extra) == 0
+        assert main(["track", "mono", str(session), "--out", str(tmp_path / out), *extra]) == 0
     for out, cfg in (
         ("default", MonoConfig()),
         ("off", MonoConfig(arm_prior_weight=0.0)),
