@@ -516,6 +516,38 @@ def _seat(
 RAW_MARKERS_RESEED_MM = 50.0
 
 
+def raw_marker_skeleton(
+    height_mm: float, oriented: Iterable[str] = (), proportions: str = "anthropometric"
+) -> Skeleton:
+    """The model `track_hybrid_marker_file` tracks a raw file with (`hybrid_skeleton`).
+
+    Which DoFs beyond Table 1's it gets depends on the marker sets whose orientation
+    drives the IK (``oriented``: sets with member offsets, given or calibrated on a
+    static interval):
+
+    * a hand set (a wrist cluster): the forearm's turn (``forearm_rotation``), so that a
+      turning wrist bar turns the forearm rather than the whole arm, and the clavicles
+      (``clavicle``), so that the shoulder rises and moves forward when the arm reaches
+      (a serve's racket arm) where the oriented forearm puts the elbow;
+    * the head set and a hand set: the spine's and neck's twists (``spine_rotation``,
+      ``neck_rotation``), so that the head turns apart from the shoulders (a server looks
+      up at the ball while the trunk coils), the trunk's turn left to the hands.
+
+    With positions only (no set oriented) the model has Table 1's DoFs: those extra DoFs
+    would be left to the relaxed-pose task (tennis serve, positions only: elbows 115 /
+    127 mm mean without the clavicles, 110 / 183 with them).
+    """
+    names = set(oriented)
+    hands = bool(names & {"left_hand", "right_hand"})
+    return hybrid_skeleton(
+        height_mm,
+        proportions=proportions,
+        forearm_rotation=hands,
+        clavicle=hands,
+        twist=hands and "head" in names,
+    )
+
+
 #: Stature (mm) of the model that measures scale-free ratios before the subject's is known.
 NOMINAL_HEIGHT_MM = 1750.0
 
@@ -822,14 +854,16 @@ def track_hybrid_marker_file(
     check_posture(posture)
     head_pos = pos[:, names.index("head")]
     skeleton = None
-    # a hand set of two or more members turns with the forearm: give the model the
-    # forearm's turn (pronation) so that it follows without turning the whole arm
-    oriented_hands = static_calibration and any(
-        len(s.members) >= 2 for s in sets if s.name in ("left_hand", "right_hand")
+    # the sets whose orientation will drive the IK (members given, or calibrated)
+    given_members = frozenset(config.member_offsets_mm) if config is not None else frozenset()
+    oriented = given_members or (
+        frozenset(s.name for s in sets if len(s.members) >= 2)
+        if static_calibration
+        else frozenset()
     )
 
-    def model(stature_mm: float) -> Skeleton:
-        return hybrid_skeleton(stature_mm, proportions=proportions, forearm_rotation=oriented_hands)
+    def model(stature_mm: float, oriented: frozenset[str]) -> Skeleton:
+        return raw_marker_skeleton(stature_mm, oriented, proportions)
 
     if posture == "standing":
         given = height_mm is not None
@@ -843,7 +877,7 @@ def track_hybrid_marker_file(
         )
     else:
         # the reach ratio is scale-free: any stature serves until the subject's is known
-        probe = model(NOMINAL_HEIGHT_MM if height_mm is None else height_mm)
+        probe = model(NOMINAL_HEIGHT_MM if height_mm is None else height_mm, oriented)
         head_point = default_marker_effectors(probe)["head"].point_mm
         if height_mm is None:
             stature = stature_from_reach_mm(
@@ -868,10 +902,10 @@ def track_hybrid_marker_file(
             )
         elif choice.posture == "seated":
             height_mm = stature
-            skeleton, choice = _seat(model(height_mm), head_pos[:, 2], choice)
+            skeleton, choice = _seat(model(height_mm, oriented), head_pos[:, 2], choice)
     assert height_mm is not None
     if skeleton is None:
-        skeleton = model(height_mm)
+        skeleton = model(height_mm, oriented)
     cfg = config or HybridConfig(
         use_video=False,
         plant_feet=plant_feet,
@@ -890,6 +924,12 @@ def track_hybrid_marker_file(
         calibration, note = _calibrate_static(skeleton, cfg, sets, world, static, frame)
         if calibration is not None:
             cfg = replace(cfg, member_offsets_mm=calibration.offsets_mm)
+        elif oriented:
+            # no orientation after all: the model without the DoFs it would have driven
+            # (the same rest geometry, so the seat and the head-set offset stand)
+            skeleton = model(height_mm, frozenset())
+            if choice.posture == "seated":
+                skeleton = _seat(skeleton, head_pos[:, 2], choice)[0]
     elif cfg.member_offsets_mm:
         note = "member offsets given"
     for set_members in cfg.member_offsets_mm.values():
