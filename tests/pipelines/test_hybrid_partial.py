@@ -150,7 +150,7 @@ def test_seated_as_asked_with_given_stature(shared_data):
     run = track_hybrid_marker_file(lab, BASKET_SETS, height_mm=1600.0, up="z", posture="seated")
     assert run.posture is not None and run.posture.reason.startswith("as asked")
     assert "(given)" in run.posture.reason and run.posture.height_mm == 1600.0
-    sk = hybrid_skeleton(1600.0)
+    sk = hybrid_skeleton(1600.0, proportions="anthropometric")  # the raw path's model
     head = evaluate_marker_sets(lab, BASKET_SETS[0])[:, 0, 2]
     point = default_marker_effectors(sk)["head"].point_mm
     want = np.nanpercentile(head, UPRIGHT_PERCENTILE) - pelvis_to_head_mm(sk, point)

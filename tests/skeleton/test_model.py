@@ -11,11 +11,18 @@ from mocapkit.skeleton import (
     PRISMATIC,
     REVOLUTE,
     canonical_positions,
+    forward_kinematics,
     load_preset,
     preset_names,
     preset_options,
     scale_skeleton,
     standing_height_mm,
+)
+from mocapkit.skeleton.scaling import (
+    ANTHROPOMETRIC_HEIGHT_FRACTIONS,
+    fit_anthropometric,
+    segment_lengths_mm,
+    segment_vectors_mm,
 )
 
 TABLE1 = {  # Zhang et al. 2011 Table 1: bone -> (length mm, mass g, DoFs)
@@ -203,3 +210,56 @@ def test_clavicle_option_lifts_and_protracts_the_shoulders() -> None:
         q = sk.zero_pose()
         q[sk.dof_index(f"{prefix}_clavicle_protraction")] = 0.3
         assert canonical_positions(sk, q, [f"{side}_shoulder"])[0][1] > rest[1] + 50
+
+
+def test_forearm_rotation_option_turns_the_hand_about_the_forearm() -> None:
+    """Pronation turns the hand's frame about the forearm's axis: elbow and wrist stay,
+    a point in front of the wrist (the thumb side, arm hanging) turns medially."""
+    sk = load_preset("zhang21", ["forearm_rotation"])
+    assert sk.n_dofs == load_preset("zhang21").n_dofs + 2
+    for side, prefix, medial in (("left", "l", 1.0), ("right", "r", -1.0)):
+        d = sk.dof_index(f"{prefix}_forearm_rotation")
+        assert np.degrees(sk.lower[d]) == pytest.approx(-80.0)
+        assert np.degrees(sk.upper[d]) == pytest.approx(80.0)
+        hand = sk.joint_index(sk.canonical[f"{side}_wrist"][0])
+        q = sk.zero_pose()
+        q[sk.dof_index(f"{prefix}_elbow_flexion")] = 0.5
+        turned = q.copy()
+        turned[d] = np.pi / 2
+        names = [f"{side}_elbow", f"{side}_wrist"]
+        np.testing.assert_allclose(
+            canonical_positions(sk, turned, names), canonical_positions(sk, q, names), atol=1e-9
+        )
+        thumb = np.array([0.0, 30.0, 0.0])  # in front of the wrist, in the hand's frame
+        before = forward_kinematics(sk, q)[hand]
+        after = forward_kinematics(sk, turned)[hand]
+        p0 = before[:3, :3] @ thumb + before[:3, 3]
+        p1 = after[:3, :3] @ thumb + after[:3, 3]
+        # a quarter turn of pronation takes the thumb side from the front to the middle
+        assert medial * (p1[0] - p0[0]) == pytest.approx(30.0, abs=1e-6)
+
+
+def test_fit_anthropometric_puts_the_joints_at_their_heights() -> None:
+    """Known values: at 1731 mm the joints sit at Winter's fractions of the stature, the
+    forearm is 0.145 of it (Table 1's scaled: 359 mm), and the stature is kept."""
+    sk0 = load_preset("zhang21", ["root_rotation"])
+    assert segment_lengths_mm(scale_skeleton(sk0, height_mm=1731.0))[
+        "left_forearm"
+    ] == pytest.approx(358.6, abs=0.5)
+    sk = fit_anthropometric(sk0, 1731.0)
+    assert standing_height_mm(sk) == pytest.approx(1731.0, abs=1e-6)
+    rest = dict(zip(sk.canonical_names, canonical_positions(sk, sk.zero_pose()), strict=True))
+    for joint, frac in ANTHROPOMETRIC_HEIGHT_FRACTIONS.items():
+        for side in ("left", "right"):
+            assert rest[f"{side}_{joint}"][2] == pytest.approx(frac * 1731.0, abs=1e-6)
+    lengths = segment_lengths_mm(sk)
+    assert lengths["left_forearm"] == pytest.approx(0.145 * 1731.0, abs=1e-6)
+    assert lengths["right_upper_arm"] == pytest.approx(0.188 * 1731.0, abs=1e-6)
+    # widths and the short trunk offsets are the scaled model's
+    scaled = scale_skeleton(sk0, height_mm=1731.0)
+    for seg in ("left_clavicle", "right_pelvis"):
+        np.testing.assert_allclose(
+            segment_vectors_mm(sk)[seg], segment_vectors_mm(scaled)[seg], atol=1e-6
+        )
+    with pytest.raises(UnknownNameError, match="anthropometric fit of 'upper_stick'"):
+        fit_anthropometric(load_preset("upper_stick"), 1731.0)

@@ -424,3 +424,45 @@ def test_released_hand_has_nan_arm_joints(truth):
     nan = [n for n in CANONICAL_JOINTS if np.isnan(pose.joints_mm[CANONICAL_JOINTS.index(n)]).any()]
     assert {"left_elbow", "left_wrist"} <= set(nan)
     assert "right_wrist" not in nan and "head" not in nan
+
+
+def test_lost_arm_is_started_again_from_the_relaxed_pose():
+    """``reseed_arm_mm``: an arm folded into its limits (a racket drop beyond the
+    shoulder's range) with its hand set far off is solved again from the relaxed pose,
+    which reaches the set; a hand set nearer than the trigger is left as it is."""
+    from mocapkit.pipelines.hybrid import hybrid_skeleton
+
+    sk = hybrid_skeleton(1750.0, forearm_rotation=True)
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False, reseed_arm_mm=50.0))
+    omega = tracker.solver.secondary.omega
+    folded = omega.copy()
+    for name, deg in (
+        ("r_shoulder_flexion", -60.0),
+        ("r_shoulder_abduction", -30.0),
+        ("r_shoulder_rotation", -90.0),
+        ("r_elbow_flexion", 150.0),
+        ("r_forearm_rotation", -80.0),
+    ):
+        folded[sk.dof_index(name)] = np.radians(deg)
+    goal = omega.copy()
+    goal[sk.dof_index("r_shoulder_flexion")] = np.radians(90.0)
+    goal[sk.dof_index("r_elbow_flexion")] = np.radians(30.0)
+    targets = tracker.solver.effector_positions(goal)
+    targets[3:5] = np.nan  # no planted feet
+    hand = tracker.marker_sets.index("right_hand")
+    before = np.linalg.norm(tracker.solver.effector_positions(folded)[hand] - targets[hand])
+    assert before > 300.0
+    q, iterations = tracker._reseed_lost_arms(folded, targets)
+    assert iterations > 0
+    assert np.linalg.norm(tracker.solver.effector_positions(q)[hand] - targets[hand]) < 5.0
+    # the frame is solved whole: head and the other hand stay on their sets
+    off = np.linalg.norm(tracker.solver.effector_positions(q)[:3] - targets[:3], axis=1)
+    assert off.max() < 5.0
+    near = tracker.solver.effector_positions(folded)
+    near[hand] += [0.0, 0.0, 40.0]
+    near[3:5] = np.nan
+    same, none = tracker._reseed_lost_arms(folded, near)
+    assert none == 0
+    np.testing.assert_array_equal(same, folded)
+    with pytest.raises(ConfigError, match="reseed_arm_mm: expected >= 0 mm"):
+        HybridConfig(reseed_arm_mm=-1.0)

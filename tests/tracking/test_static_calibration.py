@@ -123,10 +123,16 @@ def test_member_offsets_recovered_from_static_interval():
         )
 
 
+def _raw_model():
+    """The model the raw-marker path builds for `SPECS` at 1700 mm: a population's
+    proportions, and the forearm's turn since the hand sets are wrist bars."""
+    return hybrid_skeleton(1700.0, proportions="anthropometric", forearm_rotation=True)
+
+
 def test_marker_file_calibrates_members_and_reports_them(tmp_path):
     """Through the raw-marker path: offsets calibrated on the still start, members in the
     IK and in fit.csv (each member's distance, the RMS, the largest and its name)."""
-    sk = hybrid_skeleton(1700.0)
+    sk = _raw_model()
     rng = np.random.default_rng(4)
     q = _take(sk, 60, 40)
     # a raw head set sits where a head band does on a standing model
@@ -159,7 +165,7 @@ def test_marker_file_calibrates_members_and_reports_them(tmp_path):
 
 def test_separate_static_trial():
     """``static=``: the offsets come from a separate still trial, not the moving take."""
-    sk = hybrid_skeleton(1700.0)
+    sk = _raw_model()
     rng = np.random.default_rng(5)
     q = _take(sk, 60, 40)
     band = np.asarray(head_band_offset_mm(sk))

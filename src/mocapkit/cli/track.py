@@ -105,6 +105,14 @@ def register(subparsers: Any) -> None:
         help="with --markers: do not calibrate member offsets; use the sets' positions only",
     )
     hyb.add_argument(
+        "--proportions",
+        choices=("anthropometric", "preset"),
+        default="anthropometric",
+        help="with --markers: the body model's proportions: a population's scaled to the "
+        "stature (default; Drillis & Contini via Winter) or the preset's (zhang21, Table 1) "
+        "scaled by the stature alone",
+    )
+    hyb.add_argument(
         "--warn-mm",
         type=float,
         default=None,
@@ -179,6 +187,7 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             posture=args.posture,
             static_calibration=not args.no_static_calibration,
             static=None if args.static is None else read_markers(args.static),
+            proportions=args.proportions,
         )
         print(run.frame.summary())
         if run.posture is not None:

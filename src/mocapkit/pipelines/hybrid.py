@@ -33,7 +33,12 @@ from mocapkit.pipelines.run import (
 from mocapkit.skeleton.limbs import arm, head_joint, spine_dofs
 from mocapkit.skeleton.model import PRISMATIC, Skeleton
 from mocapkit.skeleton.presets import load_preset
-from mocapkit.skeleton.scaling import fit_segments, scale_skeleton, standing_height_mm
+from mocapkit.skeleton.scaling import (
+    fit_anthropometric,
+    fit_segments,
+    scale_skeleton,
+    standing_height_mm,
+)
 from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.arm_refinement import RefineConfig
 from mocapkit.tracking.base import FrameResult
@@ -66,6 +71,11 @@ from mocapkit.tracking.static_calibration import (
 FloatArray = NDArray[np.float64]
 
 
+#: Body proportions `hybrid_skeleton` gives its model: Table 1's scaled by stature, or a
+#: population's (`mocapkit.skeleton.scaling.fit_anthropometric`).
+PROPORTIONS: tuple[str, ...] = ("preset", "anthropometric")
+
+
 def hybrid_skeleton(
     height_mm: float | None = None,
     bone_lengths_mm: Mapping[str, float] | None = None,
@@ -73,6 +83,8 @@ def hybrid_skeleton(
     segment_vectors_mm: Mapping[str, ArrayLike] | None = None,
     clavicle: bool = False,
     twist: bool = False,
+    proportions: str = "preset",
+    forearm_rotation: bool = False,
 ) -> Skeleton:
     """``zhang21`` scaled to a subject, for the hybrid tracker.
 
@@ -91,14 +103,36 @@ def hybrid_skeleton(
     though subjects turn their heads by 16-34 deg (standard deviation) against their
     shoulders in the accuracy clips; with them, the trunk's turn is left to the hands'
     markers (and the video).
+
+    ``forearm_rotation`` turns each forearm about its long axis (pronation, option
+    ``forearm_rotation`` of ``zhang21``): without it a wrist cluster's orientation (two
+    or more members on the hand set) can be followed only by turning the whole arm.
+
+    ``proportions``: ``"preset"`` scales Table 1's model by the stature alone;
+    ``"anthropometric"`` (for subjects known by their stature only: raw marker files)
+    also gives it a population's proportions
+    (`mocapkit.skeleton.scaling.fit_anthropometric`), before any measured segments.
     """
+    if proportions not in PROPORTIONS:
+        raise ConfigError(
+            f"proportions: expected one of {', '.join(PROPORTIONS)}, found {proportions!r}"
+        )
+    if proportions == "anthropometric" and height_mm is None:
+        raise ConfigError(
+            "proportions 'anthropometric': expected a stature (height_mm), found None"
+        )
     options = (
         (("root_rotation",) if root_rotation else ())
         + (("clavicle",) if clavicle else ())
         + (("spine_rotation", "neck_rotation") if twist else ())
+        + (("forearm_rotation",) if forearm_rotation else ())
     )
     sk = load_preset("zhang21", options)
-    sk = scale_skeleton(sk, height_mm=height_mm)
+    if proportions == "anthropometric":
+        assert height_mm is not None
+        sk = fit_anthropometric(sk, height_mm)
+    else:
+        sk = scale_skeleton(sk, height_mm=height_mm)
     if bone_lengths_mm or segment_vectors_mm:
         sk = fit_segments(sk, bone_lengths_mm, segment_vectors_mm)
     if root_rotation:
@@ -474,6 +508,50 @@ def _seat(
     return seat_skeleton(sk, seat_mm), replace(choice, seat_height_mm=seat_mm)
 
 
+#: Arm re-seed trigger (mm) for raw marker files (`HybridConfig.reseed_arm_mm`). The
+#: tennis serve's racket arm ran into its shoulder limits at each racket drop and stayed
+#: folded there, its hand set 130 mm off on average; re-seeded beyond 30, 50 or 100 mm the
+#: elbow errors were 77 / 136, 74 / 134 and 75 / 135 mm (left / right, mean) against 80 /
+#: 210 without. The basket sprint's single hand marker was lost likewise (245 -> 140 mm).
+RAW_MARKERS_RESEED_MM = 50.0
+
+
+def raw_marker_skeleton(
+    height_mm: float, oriented: Iterable[str] = (), proportions: str = "anthropometric"
+) -> Skeleton:
+    """The model `track_hybrid_marker_file` tracks a raw file with (`hybrid_skeleton`).
+
+    Which DoFs beyond Table 1's it gets depends on the marker sets whose orientation
+    drives the IK (``oriented``: sets with member offsets, given or calibrated on a
+    static interval):
+
+    * a hand set (a wrist cluster): the forearm's turn (``forearm_rotation``), so that a
+      turning wrist bar turns the forearm rather than the whole arm, and the clavicles
+      (``clavicle``), so that the shoulder rises and moves forward when the arm reaches
+      (a serve's racket arm) where the oriented forearm puts the elbow;
+    * the head set and a hand set: the spine's and neck's twists (``spine_rotation``,
+      ``neck_rotation``), so that the head turns apart from the shoulders (a server looks
+      up at the ball while the trunk coils), the trunk's turn left to the hands.
+
+    With positions only (no set oriented) the model has Table 1's DoFs: those extra DoFs
+    would be left to the relaxed-pose task (tennis serve, positions only: elbows 115 /
+    127 mm mean without the clavicles, 110 / 183 with them).
+    """
+    names = set(oriented)
+    hands = bool(names & {"left_hand", "right_hand"})
+    return hybrid_skeleton(
+        height_mm,
+        proportions=proportions,
+        forearm_rotation=hands,
+        clavicle=hands,
+        twist=hands and "head" in names,
+    )
+
+
+#: Stature (mm) of the model that measures scale-free ratios before the subject's is known.
+NOMINAL_HEIGHT_MM = 1750.0
+
+
 #: Re-plant trigger (mm) for raw marker files. Their sets are centres of skin markers
 #: whose offsets from the joints are not declared, so the IK leaves residuals of several
 #: mm on frames where nothing moved: at the tracker's default (8 mm, tuned on sessions
@@ -687,6 +765,7 @@ def track_hybrid_marker_file(
     posture: str = "standing",
     static_calibration: bool = True,
     static: MarkerData | None = None,
+    proportions: str = "anthropometric",
 ) -> MarkerFileRun:
     """Run the hybrid tracker's IK on raw marker data (C3D, TRC, CSV) without a session.
 
@@ -736,6 +815,11 @@ def track_hybrid_marker_file(
         A separate static trial (same lab and marker names) to calibrate on; its stillest
         window anywhere is used. Default: the stillest window in the take's first
         `mocapkit.tracking.static_calibration.STATIC_SEARCH_S` seconds.
+    proportions : str
+        The model's proportions (`PROPORTIONS`): ``"anthropometric"`` (default: a raw
+        file gives no segment lengths, and Table 1's forearm is 0.207 of the stature
+        against a population's 0.146; `mocapkit.skeleton.scaling.fit_anthropometric`)
+        or ``"preset"`` (Table 1's, scaled by the stature).
 
     Notes
     -----
@@ -770,6 +854,17 @@ def track_hybrid_marker_file(
     check_posture(posture)
     head_pos = pos[:, names.index("head")]
     skeleton = None
+    # the sets whose orientation will drive the IK (members given, or calibrated)
+    given_members = frozenset(config.member_offsets_mm) if config is not None else frozenset()
+    oriented = given_members or (
+        frozenset(s.name for s in sets if len(s.members) >= 2)
+        if static_calibration
+        else frozenset()
+    )
+
+    def model(stature_mm: float, oriented: frozenset[str]) -> Skeleton:
+        return raw_marker_skeleton(stature_mm, oriented, proportions)
+
     if posture == "standing":
         given = height_mm is not None
         if height_mm is None:
@@ -781,7 +876,8 @@ def track_hybrid_marker_file(
             height_mm,
         )
     else:
-        probe = hybrid_skeleton(height_mm)
+        # the reach ratio is scale-free: any stature serves until the subject's is known
+        probe = model(NOMINAL_HEIGHT_MM if height_mm is None else height_mm, oriented)
         head_point = default_marker_effectors(probe)["head"].point_mm
         if height_mm is None:
             stature = stature_from_reach_mm(
@@ -806,15 +902,16 @@ def track_hybrid_marker_file(
             )
         elif choice.posture == "seated":
             height_mm = stature
-            skeleton, choice = _seat(hybrid_skeleton(height_mm), head_pos[:, 2], choice)
+            skeleton, choice = _seat(model(height_mm, oriented), head_pos[:, 2], choice)
     assert height_mm is not None
     if skeleton is None:
-        skeleton = hybrid_skeleton(height_mm)
+        skeleton = model(height_mm, oriented)
     cfg = config or HybridConfig(
         use_video=False,
         plant_feet=plant_feet,
         start_upright=False,
         replant_mm=RAW_MARKERS_REPLANT_MM,
+        reseed_arm_mm=RAW_MARKERS_RESEED_MM,
         marker_offsets_mm=(
             {"head": head_band_offset_mm(skeleton)} if choice.posture == "standing" else {}
         ),
@@ -827,6 +924,12 @@ def track_hybrid_marker_file(
         calibration, note = _calibrate_static(skeleton, cfg, sets, world, static, frame)
         if calibration is not None:
             cfg = replace(cfg, member_offsets_mm=calibration.offsets_mm)
+        elif oriented:
+            # no orientation after all: the model without the DoFs it would have driven
+            # (the same rest geometry, so the seat and the head-set offset stand)
+            skeleton = model(height_mm, frozenset())
+            if choice.posture == "seated":
+                skeleton = _seat(skeleton, head_pos[:, 2], choice)[0]
     elif cfg.member_offsets_mm:
         note = "member offsets given"
     for set_members in cfg.member_offsets_mm.values():

@@ -25,6 +25,7 @@ from mocapkit.skeleton.model import (
 )
 from mocapkit.skeleton.presets import load_preset, preset_names, preset_options
 from mocapkit.skeleton.scaling import (
+    fit_anthropometric,
     fit_segments,
     scale_skeleton,
     segment_lengths_mm,
@@ -44,6 +45,7 @@ __all__ = [
     "canonical_positions",
     "carried_mass",
     "center_of_mass",
+    "fit_anthropometric",
     "fit_segments",
     "forward_kinematics",
     "jacobian",

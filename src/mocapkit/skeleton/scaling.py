@@ -240,3 +240,102 @@ def fit_segments(
                     offsets[c] = ends[jb]
         sk = sk.replace(offsets_mm=offsets, bone_end_mm=ends, canonical=canonical)
     return sk
+
+
+#: Heights of joint centres above the floor as fractions of stature, standing upright with
+#: the arms hanging (Drillis & Contini 1966, as given by Winter, Biomechanics and Motor
+#: Control of Human Movement, 4th ed., Fig. 4.1): shoulder (glenohumeral) 0.818, elbow
+#: 0.630, wrist 0.485, hip (greater trochanter) 0.530, knee 0.285, ankle 0.039. The
+#: segment lengths follow: upper arm 0.188 (Winter: 0.186), forearm 0.145 (0.146), thigh
+#: 0.245, shank 0.246.
+ANTHROPOMETRIC_HEIGHT_FRACTIONS: dict[str, float] = {
+    "shoulder": 0.818,
+    "elbow": 0.630,
+    "wrist": 0.485,
+    "hip": 0.530,
+    "knee": 0.285,
+    "ankle": ANKLE_HEIGHT_FRACTION,
+}
+
+
+def fit_anthropometric(skeleton: Skeleton, height_mm: float) -> Skeleton:
+    """A body model scaled to a stature with a population's proportions.
+
+    For a subject of whom only the stature is known (a raw marker file): the model is
+    scaled to ``height_mm`` (`scale_skeleton`), then its canonical segments are fitted
+    (`fit_segments`) so that, standing at rest (q = 0, feet on z = 0), its shoulders,
+    elbows, wrists, hips, knees and ankles sit at `ANTHROPOMETRIC_HEIGHT_FRACTIONS` of the
+    stature, and the top of its head at the stature. The model's own widths and the short
+    offsets of the trunk (pelvis to hips, neck base to shoulders) are kept; the trunk
+    takes the length that puts the shoulders at their height, the head and neck the rest.
+
+    ``zhang21``'s Table 1 proportions differ from a population's where it matters for an
+    elbow: its forearm is 0.207 of the stature (elbow to wrist; a population's 0.146),
+    its hips sit at 0.576 (0.530) and its shoulders at 0.860 (0.818), so a model scaled
+    by stature alone has a forearm 100 mm too long at 1.73 m and its shoulders 70 mm high.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+        A standing model with canonical shoulders, elbows, wrists, hips, knees, ankles,
+        pelvis, neck and head (``zhang21``).
+    height_mm : float
+        Stature (mm).
+
+    Returns
+    -------
+    Skeleton
+        With ``standing_height_mm`` equal to ``height_mm``.
+    """
+    sk = scale_skeleton(skeleton, height_mm=height_mm)
+    h = float(height_mm)
+    frac = ANTHROPOMETRIC_HEIGHT_FRACTIONS
+    names = sk.canonical_names
+    missing = [
+        c
+        for c in (
+            "pelvis",
+            "neck",
+            "head",
+            *(f"{s}_{j}" for s in ("left", "right") for j in frac),
+        )
+        if c not in names
+    ]
+    if missing:
+        raise unknown_name(
+            "canonical joint", missing[0], names, f"anthropometric fit of {sk.name!r}"
+        )
+    rest = dict(zip(names, canonical_positions(sk, sk.zero_pose()), strict=True))
+
+    def mean_z(joint: str) -> float:
+        return 0.5 * float(rest[f"left_{joint}"][2] + rest[f"right_{joint}"][2])
+
+    hip_below_pelvis = float(rest["pelvis"][2]) - mean_z("hip")
+    shoulder_below_neck = float(rest["neck"][2]) - mean_z("shoulder")
+    lengths: dict[str, float] = {
+        "trunk": (frac["shoulder"] + shoulder_below_neck / h - frac["hip"]) * h - hip_below_pelvis,
+    }
+    for side in ("left", "right"):
+        lengths[f"{side}_upper_arm"] = (frac["shoulder"] - frac["elbow"]) * h
+        lengths[f"{side}_forearm"] = (frac["elbow"] - frac["wrist"]) * h
+        lengths[f"{side}_thigh"] = (frac["hip"] - frac["knee"]) * h
+        lengths[f"{side}_shank"] = (frac["knee"] - frac["ankle"]) * h
+    sk = fit_segments(sk, lengths)
+    # stand the model on z = 0 with its ankles at their height
+    rest = dict(zip(names, canonical_positions(sk, sk.zero_pose()), strict=True))
+    offsets = sk.offsets_mm.copy()
+    root = int(np.flatnonzero(sk.parents < 0)[0])
+    offsets[root, 2] += frac["ankle"] * h - mean_z("ankle")
+    sk = sk.replace(offsets_mm=offsets)
+    # the head and neck take what is left up to the stature: scale the head segment so
+    # the model's highest joint (the top of the head) lands at ``h``
+    z = joint_positions(sk, sk.zero_pose())[:, 2]
+    neck_z = float(canonical_positions(sk, sk.zero_pose(), ["neck"])[0, 2])
+    above = float(z.max()) - neck_z
+    if not above > 0:
+        raise ConfigError(
+            f"anthropometric fit of {sk.name!r}: expected the head above the neck, "
+            f"found the top {above:.0f} mm from it"
+        )
+    head_now = float(np.linalg.norm(segment_vectors_mm(sk)["head"]))
+    return fit_segments(sk, {"head": head_now * (h - neck_z) / above})

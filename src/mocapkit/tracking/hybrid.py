@@ -243,12 +243,17 @@ class HybridConfig:
     member_offsets_mm: Mapping[str, Mapping[str, Sequence[float]]] = field(default_factory=dict)
     start_upright: bool = True
     posture: str = "standing"
+    reseed_arm_mm: float = 0.0
 
     def __post_init__(self) -> None:
         if self.posture not in ("standing", "seated"):
             raise ConfigError(
                 "HybridConfig.posture: expected 'standing' or 'seated' ('auto' is "
                 f"resolved before the tracker), found {self.posture!r}"
+            )
+        if not self.reseed_arm_mm >= 0:
+            raise ConfigError(
+                f"HybridConfig.reseed_arm_mm: expected >= 0 mm, found {self.reseed_arm_mm}"
             )
         if not self.gap_limit_s >= 0:
             raise ConfigError(
@@ -758,6 +763,36 @@ class HybridTracker:
         q, extra = self._hold_feet(res.q, targets)
         return q, res_free.iterations + res.iterations + extra
 
+    def _reseed_lost_arms(self, q: FloatArray, targets: FloatArray) -> tuple[FloatArray, int]:
+        """Start an arm again from the relaxed pose where its hand set is lost.
+
+        The IK is local and warm-started: an arm driven into its joint limits (a tennis
+        serve's racket drop asks the shoulder for more lateral rotation than its range)
+        can stay folded there, its hand set hundreds of mm off, for seconds. Where a hand
+        set is further than ``reseed_arm_mm`` from the model after the solve, the frame
+        is solved again with that arm's DoFs set to the relaxed pose (the secondary
+        task's ``omega``), and that solve is kept if it brings the hand set closer.
+        Returns the pose and the extra iterations.
+        """
+        now = self.solver.effector_positions(q)
+        extra = 0
+        for i, name in enumerate(self.marker_sets):
+            side = name.removesuffix("_hand")
+            if side not in SIDES or not np.all(np.isfinite(targets[i])):
+                continue
+            off = float(np.linalg.norm(now[i] - targets[i]))
+            if not off > self.config.reseed_arm_mm:
+                continue
+            seed = q.copy()
+            dofs = self._arms[side].dofs
+            seed[dofs] = self.solver.secondary.omega[dofs]
+            res = self.solver.solve(seed, targets)
+            extra += res.iterations
+            if float(res.residual_mm[i]) < off:
+                q = res.q
+                now = self.solver.effector_positions(q)
+        return q, extra
+
     def _hold_feet(self, q: FloatArray, targets: FloatArray) -> tuple[FloatArray, int]:
         """Lift feet that the whole-body solve pulled below the floor, with the legs alone.
 
@@ -875,6 +910,9 @@ class HybridTracker:
                     and not self.config.paper
                 ):
                     q, extra = self._replant_if_stepped(q, targets, res.residual_mm[:n], sample)
+                    iterations += extra
+                if self.config.reseed_arm_mm > 0:
+                    q, extra = self._reseed_lost_arms(q, targets)
                     iterations += extra
         refined = False
         edge_fit: dict[str, float] = {}

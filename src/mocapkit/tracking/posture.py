@@ -10,11 +10,13 @@ What is estimated from the markers, and how:
 * **Stature without assuming standing** (`stature_from_reach_mm`): the head set's greatest
   distance to a hand set (99th percentile over the frames where both are seen) is taken
   as the model's head-to-wrist distance with the arm hanging straight down beside the
-  trunk, which scales with the stature (``zhang21``: 0.506 of it). The assumption is that
-  the take holds the hand about as far from the head as a hanging arm for at least 1 % of
-  its frames (a wheelchair push ends with the arm straight down at the rim); a take that
-  keeps the hands near the head underestimates, one that reaches straight overhead or
-  out overestimates by up to the head-to-shoulder distance. ``--height-mm`` overrides it.
+  trunk, which scales with the stature (``zhang21``: 0.506 of it; 0.487 with a
+  population's proportions, `mocapkit.skeleton.scaling.fit_anthropometric`, as raw marker
+  files get). The assumption is that the take holds the hand about as far from the head
+  as a hanging arm for at least 1 % of its frames (a wheelchair push ends with the arm
+  straight down at the rim); a take that keeps the hands near the head underestimates,
+  one that reaches straight overhead or out overestimates by up to the head-to-shoulder
+  distance. ``--height-mm`` overrides it.
 * **Seat** (`estimate_seat_height_mm`): the pelvis (root) height is the head set's height
   when the subject sits most upright (95th percentile over the take) less the model's
   pelvis-to-head distance when sitting upright. The head set's centre is taken as the
