@@ -255,6 +255,13 @@ def test_batch_option_errors(study, tmp_path, monkeypatch):
 # ---------------------------------------------------------------- killed and resumed
 
 
+def _swapped_in(out):
+    """Takes whose result folder is in place: a ``take.json`` still inside a folder being
+    built (``.NAME.new-*``, hidden) is not a finished take, and a kill then deletes it."""
+    found = (p.parent.relative_to(out) for p in out.glob(f"**/{TAKE_FILE}"))
+    return sorted(r.as_posix() for r in found if not any(s.startswith(".") for s in r.parts))
+
+
 def test_killed_run_resumes_without_redoing_or_mixing(study, tmp_path):
     from mocapkit.cli.main import main
 
@@ -271,7 +278,7 @@ def test_killed_run_resumes_without_redoing_or_mixing(study, tmp_path):
     )
     try:
         deadline = time.monotonic() + 300.0
-        while not list(out.glob(f"**/{TAKE_FILE}")):
+        while not _swapped_in(out):
             assert proc.poll() is None, "the batch ended before any take completed"
             assert time.monotonic() < deadline, "no take completed within 300 s"
             time.sleep(0.02)
@@ -279,7 +286,7 @@ def test_killed_run_resumes_without_redoing_or_mixing(study, tmp_path):
     finally:
         proc.wait()
     assert proc.returncode == -signal.SIGKILL
-    finished = sorted(p.parent.relative_to(out).as_posix() for p in out.glob(f"**/{TAKE_FILE}"))
+    finished = _swapped_in(out)
     assert 1 <= len(finished) < len(TAKES), "the kill came after the last take"
     table = {r["take"]: r["status"] for r in _read_csv(out / "study.csv")}
     assert set(table) == set(TAKES) and "pending" in table.values()
