@@ -53,6 +53,7 @@ Modes
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -230,10 +231,12 @@ class BalanceModel:
         return self.p_rad_per_mm * float(dh_mm)
 
 
+@functools.lru_cache(maxsize=64)
 def spine_dof_indices(skeleton: Skeleton) -> tuple[int, ...]:
     """Indices of the spine flexion DoFs: the spine's rotations
     (`mocapkit.skeleton.limbs.spine_dofs`) about the mediolateral (x) axis, the axis of
-    the paper's bow (§5.3); twists and side bends are left alone."""
+    the paper's bow (§5.3); twists and side bends are left alone. Cached per skeleton
+    (frozen, hashed by identity): the balance step asks for them several times a frame."""
     dofs = spine_dofs(skeleton)
     flexion = np.abs(skeleton.dof_axis[dofs, 0]) > 1.0 - 1e-9
     out = tuple(int(d) for d in dofs[flexion])

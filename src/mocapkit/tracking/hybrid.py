@@ -196,6 +196,11 @@ class HybridConfig:
         tolerance and half the polishes ran their 100 iterations for nothing. Measured
         (accuracy clips lambada and 01_09, oriented sets, IK only): elbow 20.4 and
         15.8 mm without the stop, 20.5 and 16.3 mm with it; 25 % less time per frame.
+        Default 3: of the polish's 14 iterations a frame (154 of 363 polishes on the
+        bench sessions ran to the 30-iteration cap, the error stalled above the
+        tolerance, the pose crawling along the redundant DoFs, i.e. undoing the
+        smoothing) 3.9 remain; smoothing 1.7 -> 0.55 ms a frame, the default
+        configuration's accuracy within 0.5 mm (docs/hybrid.md, "Speed").
     member_offsets_mm : mapping of str to mapping of str to (3,) array_like
         Per marker set, its member markers' offsets (mm) in the effector joint's frame,
         from the default effector point (as ``marker_offsets_mm``). Each member then
@@ -243,7 +248,7 @@ class HybridConfig:
     init_iterations: int = 3
     plant_feet: bool = True
     smoothing_polish_tol_mm: float = 5.0
-    smoothing_polish_stall_iterations: int = 0
+    smoothing_polish_stall_iterations: int = 3
     replant_mm: float = 8.0
     member_offsets_mm: Mapping[str, Mapping[str, Sequence[float]]] = field(default_factory=dict)
     start_upright: bool = True
