@@ -445,6 +445,7 @@ def _bisect_lean(
     at_zero: tuple[FloatArray, FloatArray] | None = None,
     guided: bool = True,
     slope_mm_per_rad: float | None = None,
+    made: list[tuple[FloatArray, FloatArray, FloatArray]] | None = None,
 ) -> tuple[float, float | None]:
     """Total lean (rad) whose restored pose puts the CoG at ``goal_mm`` along the facing axis.
 
@@ -453,7 +454,9 @@ def _bisect_lean(
     CoG decreases with the lean (`_monotone_bisection`), starting from
     ``slope_mm_per_rad`` (the previous search's) or else the analytic slope
     (`restored_lean_slope`); False runs every bisection step. Returns the lean and the
-    slope found near it (None when not known), the next search's start.
+    slope found near it (None when not known), the next search's start. ``made``: a list
+    that receives each restore solved, ``(taus, q, residual_mm)``, for the caller to
+    re-use where it restores the same lean (an unreachable goal's end of the range).
     """
     sk = solver.skeleton
     split, lo, hi = _lean_range(sk, q)
@@ -462,7 +465,10 @@ def _bisect_lean(
         if total == 0.0 and at_zero is not None:
             qq = at_zero[0]
         else:
-            qq, _ = apply_lean(solver, q, total * split, targets, active)
+            taus = total * split
+            qq, resid = apply_lean(solver, q, taus, targets, active)
+            if made is not None:
+                made.append((taus, qq, resid))
         return cog_offset_mm(sk, qq, support)[0] - goal_mm
 
     f0 = f(0.0)
@@ -760,6 +766,9 @@ def balance_pose(
     act = None if active is None else np.asarray(active, dtype=bool)
     solved: tuple[FloatArray, FloatArray] | None = None
     zero: tuple[FloatArray, FloatArray] | None = None
+    # restores the search made, (taus, q, residual): the same lean restored again (from
+    # the same pose) would give the same answer
+    made: list[tuple[FloatArray, FloatArray, FloatArray]] = []
     slope = slope_mm_per_rad
     if cfg.mode == "proportional":
         if model is None:
@@ -820,6 +829,7 @@ def balance_pose(
                         at_zero=zero,
                         guided=cfg.guided_bisection,
                         slope_mm_per_rad=slope_mm_per_rad,
+                        made=made,
                     )
                     solved = zero if total == 0.0 else None
                 taus = total * split
@@ -836,7 +846,10 @@ def balance_pose(
             qn, resid = solved
             solved = None
         else:
-            qn, resid = apply_lean(solver, qa, taus, t, act)
+            again = [m for m in made if np.array_equal(m[0], taus)]
+            qn, resid = (
+                (again[0][1], again[0][2]) if again else apply_lean(solver, qa, taus, t, act)
+            )
         if not np.nanmax(resid, initial=0.0) > tol:
             break
         taus = 0.5 * taus
