@@ -305,6 +305,7 @@ def test_guided_bisection_gives_the_plain_bisections_lean_with_fewer_evaluations
         lo, hi = -rng.uniform(0.3, 1.0), rng.uniform(0.5, 1.3)
         root = rng.uniform(1.2 * lo, 1.2 * hi)  # some beyond the range: its best end
         k, c = rng.uniform(40.0, 200.0), rng.uniform(0.0, 300.0)
+
         # decreasing, steeper away from zero (as the restored CoG against the lean)
         def f(x, root=root, k=k, c=c):
             return -k * (x - root) - c * (x * abs(x) - root * abs(root))

@@ -25,7 +25,8 @@ Modes
     their markers (by more than twice the IK tolerance) without any lean, no lean is
     tried: the markers-first rule would halve it towards nothing (with noisy member
     markers that is most frames, each of which the search and the halving spent 20
-    solves on). Otherwise the lean is bisected (14 solves), or, with
+    solves on). Otherwise the lean is bisected (14 solves; with ``guided_bisection``
+    the same lean from 3-5 where the restored CoG decreases with the lean), or, with
     ``search="secant"``, found by a secant search on the CoG offset, which is close to
     linear in the lean: from the previous frame's slope (or a small probe) to within
     ``cog_tol_mm``, in 2-5 solves, the last of which is kept. The secant is not the

@@ -112,7 +112,7 @@ TRACKING_BISECTION_STEPS = 6
 #: applied (the CoG inside the margin, or head and hands 2 x tol to
 #: `BalanceConfig.restore_above_mm` off their markers; the smoothing polish solves next
 #: anyway): 2.4 ms a frame against 6.0 (bench, same load). The bisection is guided
-#: (`BalanceConfig.guided_bisection`: the same leans from 73 restore solves instead of 107
+#: (`BalanceConfig.guided_bisection`: the same leans from 62 restore solves instead of 107
 #: on the bench sessions). ``search="newton"`` is faster still (1.2 ms) but moves the
 #: arm-refining configurations (see docs/hybrid.md, "Speed").
 TRACKING_BALANCE = BalanceConfig(
