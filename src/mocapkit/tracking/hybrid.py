@@ -199,8 +199,9 @@ class HybridConfig:
         Default 3: of the polish's 14 iterations a frame (154 of 363 polishes on the
         bench sessions ran to the 30-iteration cap, the error stalled above the
         tolerance, the pose crawling along the redundant DoFs, i.e. undoing the
-        smoothing) 3.9 remain; smoothing 1.7 -> 0.55 ms a frame, the default
-        configuration's accuracy within 0.5 mm (docs/hybrid.md, "Speed").
+        smoothing) 4.7 remain; smoothing 1.77 -> 0.67 ms a frame, the accuracy within
+        0.5 mm in the default configuration and 1 mm in the other two
+        (docs/hybrid.md, "Speed", third round).
     member_offsets_mm : mapping of str to mapping of str to (3,) array_like
         Per marker set, its member markers' offsets (mm) in the effector joint's frame,
         from the default effector point (as ``marker_offsets_mm``). Each member then
