@@ -10,6 +10,7 @@ from mocapkit.ik.sdls import SDLSSolver
 from mocapkit.skeleton import center_of_mass, load_preset
 from mocapkit.tracking.balance import (
     BalanceConfig,
+    _monotone_bisection,
     apply_lean,
     balance_pose,
     calibrate_balance,
@@ -278,3 +279,83 @@ def test_bad_search_config():
         BalanceConfig(max_evaluations=1)
     with pytest.raises(ConfigError, match="newton_steps: expected >= 1"):
         BalanceConfig(newton_steps=0)
+
+
+def _reference_bisection(f, lo, hi, steps):
+    """`_bisect_lean`'s plain bisection of ``f`` over ``[lo, hi]`` (as before the guided one)."""
+    f0 = f(0.0)
+    a, b = (0.0, hi) if f0 > 0 else (lo, 0.0)
+    fa, fb = (f0, f(hi)) if f0 > 0 else (f(lo), f0)
+    if np.sign(fa) == np.sign(fb):
+        return a if abs(fa) < abs(fb) else b
+    for _ in range(steps):
+        m = 0.5 * (a + b)
+        fm = f(m)
+        if np.sign(fm) == np.sign(fa):
+            a, fa = m, fm
+        else:
+            b, fb = m, fm
+    return 0.5 * (a + b)
+
+
+def test_guided_bisection_gives_the_plain_bisections_lean_with_fewer_evaluations():
+    rng = np.random.default_rng(7)
+    guided, plain = 0, 0
+    for trial in range(300):
+        lo, hi = -rng.uniform(0.3, 1.0), rng.uniform(0.5, 1.3)
+        root = rng.uniform(1.2 * lo, 1.2 * hi)  # some beyond the range: its best end
+        k, c = rng.uniform(40.0, 200.0), rng.uniform(0.0, 300.0)
+
+        # decreasing, steeper away from zero (as the restored CoG against the lean)
+        def f(x, root=root, k=k, c=c):
+            return -k * (x - root) - c * (x * abs(x) - root * abs(root))
+
+        calls = []
+
+        def counted(x, f=f, calls=calls):
+            calls.append(x)
+            return f(x)
+
+        expected = _reference_bisection(counted, lo, hi, 6)
+        plain += len(calls) - 1  # f(0) is known to both
+        calls.clear()
+        slope = None if trial % 3 == 0 else -k * rng.uniform(0.3, 3.0)
+        lean, found = _monotone_bisection(counted, f(0.0), lo, hi, 6, slope)
+        guided += len(calls)
+        assert lean == expected  # bit for bit
+        assert len(set(calls)) == len(calls)  # no point evaluated twice
+        assert found is None or found < 0
+    assert guided < 0.7 * plain
+
+
+def test_guided_bisection_keeps_the_plain_bisections_answer_where_f_is_not_decreasing():
+    # f rises between its crossing and the range's end: the inferred signs may not
+    # hold there, but the answer is still a sign change of f on the bisection's grid
+    def f(x):
+        return -100.0 * (x - 0.2) + (300.0 * (x - 0.6) ** 2 if x > 0.6 else 0.0)
+
+    lean, _ = _monotone_bisection(f, f(0.0), -0.5, 1.0, 6, -100.0)
+    assert lean == pytest.approx(0.2, abs=1.0 / 64)
+
+
+def test_guided_balance_gives_the_same_pose_with_fewer_restores(setup):
+    sk, _solver, _model = setup
+    solver = _Counting(sk)
+    q0 = solver.secondary.omega
+    support = support_points(sk, q0)
+    plain = BalanceConfig(mode="solve", bisection_steps=6)
+    guided = BalanceConfig(mode="solve", bisection_steps=6, guided_bisection=True)
+    n_plain, n_guided, slope = 0, 0, None
+    for q, t in squat(solver, np.linspace(-100.0, -300.0, 5)):
+        _Counting.solves = 0
+        a = balance_pose(solver, q, t, q0[2], support, None, plain)
+        n_plain += _Counting.solves
+        _Counting.solves = 0
+        b = balance_pose(solver, q, t, q0[2], support, None, guided, slope_mm_per_rad=slope)
+        n_guided += _Counting.solves
+        slope = b.slope_mm_per_rad
+        assert np.all(a.taus > 0)  # a forward bow was needed
+        np.testing.assert_array_equal(b.taus, a.taus)
+        np.testing.assert_array_equal(b.q, a.q)
+    assert slope is not None and slope < 0
+    assert n_guided < 0.7 * n_plain

@@ -326,6 +326,33 @@ def test_oriented_arms_are_not_refined(turned):
     assert calls[-1] == ["left_hand", "right_hand"]
 
 
+def test_lazy_image_is_decoded_only_for_frames_whose_arms_are_refined(turned):
+    """A callable image is called (the frame decoded) only where an arm is refined, and
+    the refiner gets the image it returns."""
+    sk, q, seq = turned
+    got, decoded = [], []
+
+    def refiner(skeleton, camera, q_in, image, hands, config):
+        got.append(image)
+        return q_in
+
+    frame = np.zeros((4, 4))
+
+    def load():
+        decoded.append(True)
+        return frame
+
+    cfg = HybridConfig(member_offsets_mm=MEMBERS)  # every set oriented: nothing refined
+    tracker = HybridTracker(sk, camera=object(), config=cfg, refiner=refiner, initial_q=q[0])
+    s = seq[0]
+    tracker.update(HybridSample(s.time_s, s.markers_mm, image=load, members_mm=s.members_mm))
+    assert decoded == [] and got == []
+    # the right hand's members lost: that arm is refined, so the frame is decoded once
+    gone = {m: v for m, v in s.members_mm.items() if not m.startswith("rh_")}
+    pose = tracker.update(HybridSample(s.time_s + 0.02, s.markers_mm, image=load, members_mm=gone))
+    assert decoded == [True] and len(got) == 1 and got[0] is frame and pose.refined
+
+
 def test_bad_member_inputs(turned):
     sk, _q, seq = turned
     with pytest.raises(UnknownNameError, match="marker set 'tail'.*member_offsets_mm"):

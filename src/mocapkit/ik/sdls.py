@@ -127,8 +127,10 @@ class IKConfig:
     max_iterations, min_iterations : int
         Iteration bounds per solve.
     stall_iterations, stall_fraction : int, float
-        Stop when the largest effector error has not dropped by the share
-        ``stall_fraction`` within ``stall_iterations`` steps. Off (0) by default: slow
+        Stop when neither the largest active effector error nor the sum of them has
+        dropped by the share ``stall_fraction`` within ``stall_iterations`` steps (the
+        largest alone would stop the others while one effector is out of reach, e.g.
+        planted feet on their way back to their plants). Off (0) by default: slow
         but steady progress (a restore solve with the spine frozen) also looks like a
         stall; 35 steps and 0.5 % suit a caller that only wants a settled answer fast.
     secondary_gain : float
@@ -319,8 +321,8 @@ class IKSettings(NamedTuple):
     max_iter, min_iter : int
         Iteration bounds.
     stall_iter : int
-        Stop when the largest error has not dropped by ``stall_fraction`` in this many
-        steps (0: off).
+        Stop when neither the largest error nor the sum of the errors has dropped by
+        ``stall_fraction`` in this many steps (0: off).
     stall_fraction : float
     substeps : int
         Gradient steps of the secondary task per iteration (`IKConfig.relax_substeps`).
@@ -474,6 +476,14 @@ def residuals_nb(targets: FloatArray, pts: FloatArray, residual: FloatArray) -> 
 
 
 @numba.njit(cache=True)
+def _sum_nb(x: FloatArray) -> float:
+    acc = 0.0
+    for v in x:
+        acc += v
+    return acc
+
+
+@numba.njit(cache=True)
 def solve_ik_nb(
     q: FloatArray,
     kin: KinematicArrays,
@@ -488,7 +498,8 @@ def solve_ik_nb(
     ``task`` lists the active effectors only (``K`` of them) and the ``frozen`` DoFs,
     which do not move. Writes the final distance of each effector to ``residual`` (K,)
     and per-iteration diagnostics to ``trace`` (max_iter, 4). Stops early when the
-    largest error has not dropped by the share ``stall_fraction`` in ``stall_iter``
+    largest error and the sum of the errors have not dropped by the share
+    ``stall_fraction`` in ``stall_iter``
     steps (an unreachable target has settled; more steps only cost time). Returns the
     number of steps taken.
     """
@@ -534,12 +545,18 @@ def solve_ik_nb(
     )
     err = residuals_nb(targets, pts, residual)
     it = 0
+    # the stall criterion watches the largest error and the sum of the errors: the
+    # largest alone stalls where one effector is out of reach while the others still
+    # converge (planted feet pulled back onto their plants), the sum alone where one
+    # error grows as the unreachable one shrinks
     best_err = err
     since_best = 0
+    best_sum = _sum_nb(residual)
+    since_best_sum = 0
     while it < max_iter and k_eff > 0:
         if err < tol and it >= min_iter:
             break
-        if stall_iter > 0 and since_best >= stall_iter and it >= min_iter:
+        if stall_iter > 0 and min(since_best, since_best_sum) >= stall_iter and it >= min_iter:
             break
         clamp_error_nb(pts, targets, dmax, e)
         for r in range(3 * k_eff):
@@ -624,6 +641,12 @@ def solve_ik_nb(
             since_best = 0
         else:
             since_best += 1
+        total = _sum_nb(residual)
+        if total < best_sum * (1.0 - stall_fraction):
+            best_sum = total
+            since_best_sum = 0
+        else:
+            since_best_sum += 1
         it += 1
     return it
 

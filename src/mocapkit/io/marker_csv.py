@@ -149,8 +149,13 @@ def read_markers_csv(path: str | os.PathLike[str]) -> MarkerData:
             raise FormatError(
                 f"{where} line {line} column 1 (time_s): expected a finite time, found {row[0]!r}"
             )
-        for c in range(1, n_cols):
-            values[r, c - 1] = _parse_cell(row[c], where, line, c + 1, header[c])
+        try:
+            # float() ignores surrounding blanks as _parse_cell's strip does; a cell it
+            # cannot read goes through _parse_cell, which names it
+            values[r] = [float(c) if c.strip() else math.nan for c in row[1:]]
+        except ValueError:
+            for c in range(1, n_cols):
+                values[r, c - 1] = _parse_cell(row[c], where, line, c + 1, header[c])
     if len(body) > 1 and np.any(np.diff(t) <= 0):
         k = int(np.flatnonzero(np.diff(t) <= 0)[0])
         raise FormatError(

@@ -181,9 +181,10 @@ def bench_hybrid(
         ``fps`` (frames of all sessions per CPU second, median), ``fps_min``,
         ``fps_wall`` (per wall-clock second), ``ms_per_frame`` (CPU);
         ``stages_ms``: CPU milliseconds per frame of each stage
-        (`HYBRID_STAGES`: ``load`` the session, ``input`` the marker samples and video
-        decoding, ``ik`` the solves and foot re-planting, ``edges`` the whole-frame
-        edge preparation, ``refinement`` both arms' RoI edge maps and searches,
+        (`HYBRID_STAGES`: ``load`` the session, ``input`` the marker samples and the
+        video frames' grab, ``ik`` the solves and foot re-planting, ``edges`` the frame's
+        decoding (lazy: only where an arm is refined) and whole-frame edge preparation,
+        ``refinement`` both arms' RoI edge maps and searches,
         ``balance``, ``smoothing`` with its IK polish, ``write`` the result folder),
         ``other`` (the rest of ``update``) and ``io`` (load + input + write);
         ``ik_solves_per_frame``, ``ik_iterations_per_solve``; ``ik_micro_solves_per_s``

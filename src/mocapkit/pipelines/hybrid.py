@@ -467,7 +467,8 @@ def track_hybrid_session_run(
                 if s.markers_mm is None
                 else {m: p for m, p in zip(s.marker_names, s.markers_mm) if m in wanted}
             )
-            image = s.image(cams[0]) if cfg.use_video else None
+            # decoded by the tracker only for a frame whose arms it refines
+            image = s.frames[cams[0]].load if cfg.use_video else None
             yield HybridSample(
                 s.time_s,
                 markers,

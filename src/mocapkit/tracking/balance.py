@@ -25,7 +25,8 @@ Modes
     their markers (by more than twice the IK tolerance) without any lean, no lean is
     tried: the markers-first rule would halve it towards nothing (with noisy member
     markers that is most frames, each of which the search and the halving spent 20
-    solves on). Otherwise the lean is bisected (14 solves), or, with
+    solves on). Otherwise the lean is bisected (14 solves; with ``guided_bisection``
+    the same lean from 3-5 where the restored CoG decreases with the lean), or, with
     ``search="secant"``, found by a secant search on the CoG offset, which is close to
     linear in the lean: from the previous frame's slope (or a small probe) to within
     ``cog_tol_mm``, in 2-5 solves, the last of which is kept. The secant is not the
@@ -53,6 +54,8 @@ Modes
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -108,6 +111,14 @@ class BalanceConfig:
         ``restore_without_lean=False``: the restore still runs where an effector is
         this far (mm) from its target (a foot just re-planted, a hand the refinement
         moved); member-marker noise leaves about 5 mm.
+    guided_bisection : bool
+        ``search="bisect"``: find the bisection's lean with fewer restore solves
+        (`_monotone_bisection`: regula falsi on the bisection's own midpoints, the
+        other midpoints' signs inferred where the restored CoG decreases with the lean,
+        as it does with the head pinned). The same lean as the plain bisection wherever
+        it decreases over the points involved (every frame of the benchmark and
+        accuracy sessions; `mocapkit.tracking.hybrid.TRACKING_BALANCE`). False evaluates
+        every bisection step.
     """
 
     mode: str = "proportional"
@@ -119,6 +130,7 @@ class BalanceConfig:
     newton_steps: int = 1
     restore_without_lean: bool = True
     restore_above_mm: float = 20.0
+    guided_bisection: bool = False
 
     def __post_init__(self) -> None:
         if self.mode not in _BALANCE_MODES:
@@ -220,10 +232,12 @@ class BalanceModel:
         return self.p_rad_per_mm * float(dh_mm)
 
 
+@functools.lru_cache(maxsize=64)
 def spine_dof_indices(skeleton: Skeleton) -> tuple[int, ...]:
     """Indices of the spine flexion DoFs: the spine's rotations
     (`mocapkit.skeleton.limbs.spine_dofs`) about the mediolateral (x) axis, the axis of
-    the paper's bow (§5.3); twists and side bends are left alone."""
+    the paper's bow (§5.3); twists and side bends are left alone. Cached per skeleton
+    (frozen, hashed by identity): the balance step asks for them several times a frame."""
     dofs = spine_dofs(skeleton)
     flexion = np.abs(skeleton.dof_axis[dofs, 0]) > 1.0 - 1e-9
     out = tuple(int(d) for d in dofs[flexion])
@@ -285,6 +299,142 @@ def apply_lean(
     return res.q, res.residual_mm
 
 
+def _bisection_cell(a: float, b: float, steps: int, x: float) -> tuple[float, float]:
+    """The cell ``[a_k, b_k]`` of ``steps`` bisections of ``[a, b]`` that holds ``x``, its
+    ends computed by the same floating-point operations as the bisection's midpoints."""
+    for _ in range(steps):
+        m = 0.5 * (a + b)
+        if m < x:
+            a = m
+        else:
+            b = m
+    return a, b
+
+
+def _monotone_bisection(
+    f: Callable[[float], float],
+    f0: float,
+    lo: float,
+    hi: float,
+    steps: int,
+    slope: float | None,
+) -> tuple[float, float | None]:
+    """The lean of `_bisect_lean`'s bisection of ``f`` (``f(0) = f0``) over ``[lo, hi]``,
+    with fewer evaluations of ``f`` where ``f`` decreases.
+
+    The bisection's result depends only on the signs of ``f`` at its midpoints. Where
+    ``f`` decreases (the restored CoG moves back as the lean grows), the sign at a
+    midpoint follows from any evaluated point beyond it (``f > 0`` at a larger lean,
+    ``f <= 0`` at a smaller one), and so does whether the range reaches the goal. So
+    the crossing is first narrowed down to one cell of the bisection by regula falsi on
+    the bisection's own midpoints (Illinois rule; the first guess from ``slope``, the
+    CoG's change per radian of lean, or the end of the range that the bisection
+    evaluates first), and the bisection then runs with the signs it infers, evaluating
+    only the others: the same lean as the plain bisection wherever ``f`` decreases over
+    the points involved, with fewer evaluations (restore solves) where the guesses are
+    good.
+
+    Returns the lean and the chord slope of ``f`` from zero lean to the bisection's
+    last cell (None where it is not known), a guess of ``slope`` for the next frame.
+    """
+    known: dict[float, float] = {0.0: f0}
+
+    def value(x: float) -> float:
+        if x not in known:
+            known[x] = f(x)
+        return known[x]
+
+    def positive_at(x: float) -> bool | None:
+        """Whether ``f(x) > 0``, where the known values imply it; else None."""
+        if x in known:
+            return known[x] > 0
+        if any(v > 0 for p, v in known.items() if p >= x):
+            return True
+        if any(not v > 0 for p, v in known.items() if p <= x):
+            return False
+        return None
+
+    # with the head pinned, a forward bow moves the pelvis (and the CoG) backwards
+    a, b = (0.0, hi) if f0 > 0 else (lo, 0.0)
+    end = b if f0 > 0 else a
+    last_side = 0
+    scale = {1: 1.0, -1: 1.0}  # Illinois: halve a side's value when it goes stale
+    for _ in range(steps + 2):
+        if end in known and np.sign(known[end]) == np.sign(f0):
+            break  # the range cannot reach the goal: settled below, as the plain one does
+        pos = [x for x, v in known.items() if v > 0]
+        neg = [x for x, v in known.items() if not v > 0]
+        if pos and neg:
+            p, n = max(pos), min(neg)
+            if p > n:
+                break  # not decreasing: left to the bisection
+            if _bisection_cell(a, b, steps, 0.5 * (p + n)) == (p, n):
+                break  # the crossing's cell is known
+            fp, fn = known[p] * scale[1], known[n] * scale[-1]
+            x = p + fp * (n - p) / (fp - fn)
+        elif slope is not None and slope < 0:
+            # one side known: extrapolate by the secant through that side's two points
+            # nearest the crossing where it is negative, else by the slope given
+            side_pts = sorted(pos)[-2:] if pos else sorted(neg)[:2]
+            near = side_pts[-1] if pos else side_pts[0]
+            step_slope = slope
+            if len(side_pts) == 2:
+                secant = (known[side_pts[1]] - known[side_pts[0]]) / (side_pts[1] - side_pts[0])
+                if secant < 0:
+                    step_slope = secant
+            x = min(max(near - known[near] / step_slope, a), b)
+        else:
+            x = end
+        ca, cb = _bisection_cell(a, b, steps, x)
+        todo = [c for c in (ca, cb) if c not in known]
+        if not todo:
+            break
+        pick = min(todo, key=lambda c: abs(c - x))
+        side = 1 if value(pick) > 0 else -1
+        if side == last_side:
+            scale[-side] *= 0.5
+        else:
+            scale = {1: 1.0, -1: 1.0}
+        last_side = side
+    # whether the range reaches the goal, as the plain bisection judges it
+    reach = positive_at(end)
+    if reach is None or reach == (f0 > 0):
+        fe = value(end)
+        if np.sign(fe) == np.sign(f0) or fe == 0.0:
+            fa, fb = (f0, fe) if f0 > 0 else (fe, f0)
+            if np.sign(fa) == np.sign(fb):  # the spine range cannot reach it: best end
+                return (a if abs(fa) < abs(fb) else b), None
+            return _plain_bisection(value, a, b, fa, steps), None
+    for _ in range(steps):
+        m = 0.5 * (a + b)
+        right = positive_at(m)
+        if right is None:
+            right = value(m) > 0
+        if right:
+            a = m
+        else:
+            b = m
+    # the chord from zero lean to the crossing's cell: the next frame's first step
+    # starts from zero lean too (a cell's own secant is too local and noisy for it)
+    far = a if abs(a) > abs(b) else b
+    chord = (known[far] - f0) / far if far in known and far != 0.0 else None
+    return 0.5 * (a + b), chord
+
+
+def _plain_bisection(
+    f: Callable[[float], float], a: float, b: float, fa: float, steps: int
+) -> float:
+    """``steps`` bisections of ``[a, b]`` keeping the sign change against ``f(a) = fa``."""
+    for _ in range(steps):
+        m = 0.5 * (a + b)
+        fm = f(m)
+        if np.sign(fm) == np.sign(fa):
+            a, fa = m, fm
+        else:
+            b = m
+    return 0.5 * (a + b)
+
+
 def _bisect_lean(
     solver: SDLSSolver,
     q: FloatArray,
@@ -294,10 +444,21 @@ def _bisect_lean(
     steps: int,
     support: FloatArray,
     at_zero: tuple[FloatArray, FloatArray] | None = None,
-) -> float:
+    guided: bool = True,
+    slope_mm_per_rad: float | None = None,
+    made: list[tuple[FloatArray, FloatArray, FloatArray]] | None = None,
+) -> tuple[float, float | None]:
     """Total lean (rad) whose restored pose puts the CoG at ``goal_mm`` along the facing axis.
 
-    ``at_zero``: the restore without lean (pose, residuals) when already solved."""
+    ``at_zero``: the restore without lean (pose, residuals) when already solved.
+    ``guided``: find the bisection's lean with fewer restore solves where the restored
+    CoG decreases with the lean (`_monotone_bisection`), starting from
+    ``slope_mm_per_rad`` (the previous search's) or else the analytic slope
+    (`restored_lean_slope`); False runs every bisection step. Returns the lean and the
+    slope found near it (None when not known), the next search's start. ``made``: a list
+    that receives each restore solved, ``(taus, q, residual_mm)``, for the caller to
+    re-use where it restores the same lean (an unreachable goal's end of the range).
+    """
     sk = solver.skeleton
     split, lo, hi = _lean_range(sk, q)
 
@@ -305,25 +466,28 @@ def _bisect_lean(
         if total == 0.0 and at_zero is not None:
             qq = at_zero[0]
         else:
-            qq, _ = apply_lean(solver, q, total * split, targets, active)
+            taus = total * split
+            qq, resid = apply_lean(solver, q, taus, targets, active)
+            if made is not None:
+                made.append((taus, qq, resid))
         return cog_offset_mm(sk, qq, support)[0] - goal_mm
 
     f0 = f(0.0)
     if abs(f0) < 1.0:
-        return 0.0
+        return 0.0, slope_mm_per_rad
+    if guided:
+        slope = slope_mm_per_rad
+        if slope is None or not slope < 0:
+            base = q if at_zero is None else at_zero[0]
+            slope = restored_lean_slope(solver, base, targets, active)
+        lean, found = _monotone_bisection(f, f0, lo, hi, steps, slope)
+        return lean, found if found is not None and found < 0 else slope_mm_per_rad
     # with the head pinned, a forward bow moves the pelvis (and the CoG) backwards
     a, b = (0.0, hi) if f0 > 0 else (lo, 0.0)
     fa, fb = (f0, f(hi)) if f0 > 0 else (f(lo), f0)
     if np.sign(fa) == np.sign(fb):  # the spine range cannot reach the goal: best end
-        return a if abs(fa) < abs(fb) else b
-    for _ in range(steps):
-        m = 0.5 * (a + b)
-        fm = f(m)
-        if np.sign(fm) == np.sign(fa):
-            a, fa = m, fm
-        else:
-            b, fb = m, fm
-    return 0.5 * (a + b)
+        return (a if abs(fa) < abs(fb) else b), slope_mm_per_rad
+    return _plain_bisection(f, a, b, fa, steps), slope_mm_per_rad
 
 
 #: First trial lean (rad) of the secant search when no slope is known yet.
@@ -541,7 +705,9 @@ def calibrate_balance(
         for _ in range(20):  # let the secondary task settle the squat pose
             q = solver.solve(q, t).q
         back, front = cog_offset_mm(sk, q, support)[1:]
-        leans[i] = _bisect_lean(solver, q, t, None, 0.5 * (back + front), bisection_steps, support)
+        leans[i] = _bisect_lean(
+            solver, q, t, None, 0.5 * (back + front), bisection_steps, support, guided=False
+        )[0]
     p_total = float(np.sum(leans * dh) / np.sum(dh * dh))
     return BalanceModel(spine, p_total * split)
 
@@ -601,6 +767,9 @@ def balance_pose(
     act = None if active is None else np.asarray(active, dtype=bool)
     solved: tuple[FloatArray, FloatArray] | None = None
     zero: tuple[FloatArray, FloatArray] | None = None
+    # restores the search made, (taus, q, residual): the same lean restored again (from
+    # the same pose) would give the same answer
+    made: list[tuple[FloatArray, FloatArray, FloatArray]] = []
     slope = slope_mm_per_rad
     if cfg.mode == "proportional":
         if model is None:
@@ -650,8 +819,18 @@ def balance_pose(
                         solver, qa, t, act, goal, support, cfg, slope_mm_per_rad, zero
                     )
                 else:
-                    total = _bisect_lean(
-                        solver, qa, t, act, goal, cfg.bisection_steps, support, at_zero=zero
+                    total, slope = _bisect_lean(
+                        solver,
+                        qa,
+                        t,
+                        act,
+                        goal,
+                        cfg.bisection_steps,
+                        support,
+                        at_zero=zero,
+                        guided=cfg.guided_bisection,
+                        slope_mm_per_rad=slope_mm_per_rad,
+                        made=made,
                     )
                     solved = zero if total == 0.0 else None
                 taus = total * split
@@ -668,7 +847,10 @@ def balance_pose(
             qn, resid = solved
             solved = None
         else:
-            qn, resid = apply_lean(solver, qa, taus, t, act)
+            again = [m for m in made if np.array_equal(m[0], taus)]
+            qn, resid = (
+                (again[0][1], again[0][2]) if again else apply_lean(solver, qa, taus, t, act)
+            )
         if not np.nanmax(resid, initial=0.0) > tol:
             break
         taus = 0.5 * taus

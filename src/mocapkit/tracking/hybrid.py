@@ -111,10 +111,15 @@ TRACKING_BISECTION_STEPS = 6
 #: `TRACKING_BISECTION_STEPS` where one is needed, and no restore solve where none is
 #: applied (the CoG inside the margin, or head and hands 2 x tol to
 #: `BalanceConfig.restore_above_mm` off their markers; the smoothing polish solves next
-#: anyway): 2.4 ms a frame against 6.0 (bench, same load). ``search="newton"`` is faster
-#: still (1.2 ms) but moves the arm-refining configurations (see docs/hybrid.md, "Speed").
+#: anyway): 2.4 ms a frame against 6.0 (bench, same load). The bisection is guided
+#: (`BalanceConfig.guided_bisection`: the same leans from 62 restore solves instead of 107
+#: on the bench sessions). ``search="newton"`` is faster still (1.2 ms) but moves the
+#: arm-refining configurations (see docs/hybrid.md, "Speed").
 TRACKING_BALANCE = BalanceConfig(
-    mode="solve", bisection_steps=TRACKING_BISECTION_STEPS, restore_without_lean=False
+    mode="solve",
+    bisection_steps=TRACKING_BISECTION_STEPS,
+    restore_without_lean=False,
+    guided_bisection=True,
 )
 
 
@@ -191,6 +196,12 @@ class HybridConfig:
         tolerance and half the polishes ran their 100 iterations for nothing. Measured
         (accuracy clips lambada and 01_09, oriented sets, IK only): elbow 20.4 and
         15.8 mm without the stop, 20.5 and 16.3 mm with it; 25 % less time per frame.
+        Default 3: of the polish's 14 iterations a frame (154 of 363 polishes on the
+        bench sessions ran to the 30-iteration cap, the error stalled above the
+        tolerance, the pose crawling along the redundant DoFs, i.e. undoing the
+        smoothing) 4.7 remain; smoothing 1.77 -> 0.67 ms a frame, the accuracy within
+        0.5 mm in the default configuration and 1 mm in the other two
+        (docs/hybrid.md, "Speed", third round).
     member_offsets_mm : mapping of str to mapping of str to (3,) array_like
         Per marker set, its member markers' offsets (mm) in the effector joint's frame,
         from the default effector point (as ``marker_offsets_mm``). Each member then
@@ -238,7 +249,7 @@ class HybridConfig:
     init_iterations: int = 3
     plant_feet: bool = True
     smoothing_polish_tol_mm: float = 5.0
-    smoothing_polish_stall_iterations: int = 0
+    smoothing_polish_stall_iterations: int = 3
     replant_mm: float = 8.0
     member_offsets_mm: Mapping[str, Mapping[str, Sequence[float]]] = field(default_factory=dict)
     start_upright: bool = True
@@ -299,8 +310,11 @@ class HybridSample:
         Marker-set positions in the world frame (mm); NaN or absent when occluded.
     marker_time_s : float, optional
         Time stamp of the marker sample used (the newest one); ``time_s`` by default.
-    image : ndarray, optional
-        Video frame (H, W) or (H, W, 3) for the refinement.
+    image : ndarray or callable, optional
+        Video frame (H, W) or (H, W, 3) for the refinement, or a function without
+        arguments that returns it (decoded only when an arm is refined: with oriented
+        hand sets most frames need no image, and decoding a 640x480 frame costs about
+        0.5 ms).
     members_mm : mapping of str to array_like (3,), optional
         Member markers of the sets in ``HybridConfig.member_offsets_mm``, by marker name
         (NaN or absent when occluded).
@@ -309,7 +323,7 @@ class HybridSample:
     time_s: float
     markers_mm: Mapping[str, ArrayLike]
     marker_time_s: float | None = None
-    image: NDArray[Any] | None = None
+    image: NDArray[Any] | Callable[[], NDArray[Any]] | None = None
     members_mm: Mapping[str, ArrayLike] = field(default_factory=dict)
 
 
@@ -943,12 +957,14 @@ class HybridTracker:
                         "previous_elbows_mm": self._previous_elbows_in_world(q),
                         "elapsed_s": float(sample.time_s - self._prev_time_s),
                     }
-                image: Any = sample.image
-                if ref is refine_arms and isinstance(cfg_r, RefineConfig) and image is not None:
-                    # the whole-frame part of the edge cue, timed on its own; refine_arms
-                    # takes the prepared frame as it is
-                    with timer.stage("edges"):
+                with timer.stage("edges"):
+                    # a lazy frame is decoded here, only for frames whose arms are refined
+                    image: Any = sample.image() if callable(sample.image) else sample.image
+                    if ref is refine_arms and isinstance(cfg_r, RefineConfig):
+                        # the whole-frame part of the edge cue, timed on its own;
+                        # refine_arms takes the prepared frame as it is
                         image = prepare_frame(image, cfg_r.edges)
+                if ref is refine_arms and isinstance(cfg_r, RefineConfig):
                     self.arm_diagnostics = {}
                     extra_kw["diagnostics"] = self.arm_diagnostics
                 with timer.stage("refinement"):
