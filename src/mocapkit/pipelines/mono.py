@@ -30,7 +30,11 @@ from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
 from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments
 from mocapkit.tracking.base import BRIDGE_S, FrameResult, unobserved_part
-from mocapkit.tracking.mono.lengths import estimate_link_lengths, pixels_per_mm
+from mocapkit.tracking.mono.lengths import (
+    estimate_link_lengths,
+    pixels_per_mm,
+    raise_short_links,
+)
 from mocapkit.tracking.mono.pose_fit import fit_stick_pose
 from mocapkit.tracking.mono.smoother import smooth_keypoints
 from mocapkit.tracking.mono.stick import StickModel, stick_model
@@ -410,7 +414,12 @@ class MonoStream:
         return math.inf if i < 0 else self._times[k] - self._times[i]
 
 
-def refined_lengths(frames: list[MonoFrame], model: StickModel, lengths: FloatArray) -> FloatArray:
+def refined_lengths(
+    frames: list[MonoFrame],
+    model: StickModel,
+    lengths: FloatArray,
+    short_link_weight: float = 0.0,
+) -> FloatArray:
     """Link lengths measured again at each link's own depth from tracked poses (mm).
 
     The first estimate (`video_lengths`) reads every link in normalised image units and
@@ -420,7 +429,9 @@ def refined_lengths(frames: list[MonoFrame], model: StickModel, lengths: FloatAr
     taken from the tracked poses, in mm, and the same statistic as `video_lengths` (90th
     percentile, left and right sharing the longer, fallback for links never near
     parallel) gives new lengths, rescaled so that their sum equals the old one (the
-    absolute scale stays tied to the stature).
+    absolute scale stays tied to the stature). Links then shorter than the body's
+    proportions at the video's stature are moved the share ``short_link_weight`` of the
+    way up (`mocapkit.tracking.mono.lengths.raise_short_links`; 0: off).
     """
     pos = np.stack([f.joints_in_camera for f in frames])
     vec = pos[:, model.child] - pos[:, model.parent]
@@ -428,7 +439,10 @@ def refined_lengths(frames: list[MonoFrame], model: StickModel, lengths: FloatAr
     ray = mid / np.linalg.norm(mid, axis=-1, keepdims=True)
     lateral = vec - (vec * ray).sum(axis=-1, keepdims=True) * ray
     new, _ = estimate_link_lengths(np.linalg.norm(lateral, axis=-1), model.segments)
-    return np.asarray(new * (lengths.sum() / new.sum()), dtype=float)
+    new = new * (lengths.sum() / new.sum())
+    if short_link_weight > 0:
+        new = raise_short_links(new, model.segments, short_link_weight)
+    return np.asarray(new, dtype=float)
 
 
 def track_mono(
@@ -464,7 +478,8 @@ def track_mono(
         instead of keypoints.
     length_passes : int
         With video lengths and the perspective model: track this many times, each pass
-        measuring the lengths again from the previous pass's poses (`refined_lengths`).
+        measuring the lengths again from the previous pass's poses (`refined_lengths`,
+        with ``config.short_link_weight``).
         Every pass but the last runs without the soft priors of `MonoConfig`
         (`mocapkit.tracking.mono.priors`); the last one with them.
     """
@@ -524,7 +539,7 @@ def track_mono(
     )
     for _ in range(n_refine):
         frames = _run(lengths, cam, dt, paper_cfg, model, t, px)
-        lengths = refined_lengths(frames, model, lengths)
+        lengths = refined_lengths(frames, model, lengths, cfg.short_link_weight)
     lengths_mm = lengths / scale if ortho else lengths
     skeleton = output_skeleton(model, lengths_mm)
     stream = MonoStream(MonoTracker(lengths, cam, dt, cfg, model), skeleton, cam, scale)

@@ -8,6 +8,7 @@ from mocapkit.tracking.mono.lengths import (
     anthropometric_ratios,
     estimate_link_lengths,
     pixels_per_mm,
+    raise_short_links,
 )
 from mocapkit.tracking.mono.stick import stick_model
 
@@ -58,3 +59,29 @@ def test_bad_arguments_are_refused() -> None:
         estimate_link_lengths(np.ones((5, 3)), model.segments)
     with pytest.raises(ConfigError, match="percentile"):
         estimate_link_lengths(np.ones((5, model.n_links)), model.segments, percentile=0.0)
+
+
+def test_short_links_move_part_of_the_way_to_the_proportions() -> None:
+    model = stick_model()
+    segs = model.segments
+    ratios = anthropometric_ratios(segs)
+    stature = 1600.0
+    lengths = ratios * stature
+    i_fore = segs.index("left_forearm")
+    i_upper = segs.index("right_upper_arm")
+    i_trunk = segs.index("trunk")
+    lengths[i_fore] *= 0.8  # too short: raised
+    lengths[i_upper] *= 1.1  # too long: kept
+    lengths[i_trunk] *= 0.8  # steady: kept
+    got = raise_short_links(lengths, segs, weight=0.5)
+    # the median of lengths / ratios is still the stature (6 of 8 links are exact)
+    want = lengths.copy()
+    want[i_fore] = ratios[i_fore] * stature * 0.9
+    want *= lengths.sum() / want.sum()
+    np.testing.assert_allclose(got, want, rtol=1e-12)
+    np.testing.assert_allclose(got.sum(), lengths.sum(), rtol=1e-12)
+    np.testing.assert_array_equal(raise_short_links(lengths, segs, weight=0.0), lengths)
+    with pytest.raises(ConfigError, match="weight"):
+        raise_short_links(lengths, segs, weight=1.5)
+    with pytest.raises(ShapeError, match="positive lengths"):
+        raise_short_links(lengths[:3], segs)

@@ -106,6 +106,8 @@ def test_pose_fit_reproduces_skeleton_poses() -> None:
 def test_bad_configuration_is_refused() -> None:
     with pytest.raises(ConfigError, match="camera_model"):
         MonoConfig(camera_model="fisheye")
+    with pytest.raises(ConfigError, match="short_link_weight: expected \\[0, 1\\], found -0.1"):
+        MonoConfig(short_link_weight=-0.1)
     with pytest.raises(ConfigError, match="needs a calibrated camera"):
         MonoTracker(np.ones(8), None, 1 / FPS, MonoConfig())
     tr = MonoTracker(np.ones(8), None, 1 / FPS, MonoConfig(camera_model="orthographic"))

@@ -140,6 +140,60 @@ def estimate_link_lengths(
     return lengths, stature
 
 
+def raise_short_links(
+    lengths: ArrayLike,
+    segments: Sequence[str],
+    weight: float = 0.5,
+    steady: Sequence[str] = ("trunk", "head"),
+) -> FloatArray:
+    """Move links estimated shorter than the body's proportions part of the way up.
+
+    A link estimated too short cannot reach its child's ray whenever the true link lies
+    within acos(estimate / truth) of the image plane: the enumeration then has one
+    configuration for it (errata M5) and the true flip is not among the candidates at
+    all. A link estimated too long only biases its depth. The loss is one-sided, so
+    the correction is too: with the video's stature ``S = median(lengths / ratios)``
+    (`ANTHROPOMETRIC_RATIOS`), each link shorter than ``ratio * S`` is moved the share
+    ``weight`` of the way to it; longer links, and the ``steady`` ones (trunk and head,
+    whose canonical ends differ most between skeleton sources, see
+    `estimate_link_lengths`), are left alone. The result is rescaled to the input's sum,
+    so the absolute scale stays tied to the stature.
+
+    On the nine CMU clips of docs/mono.md (fourth round), 0.5 was the middle of the
+    weights that helped both clip sets (0.5-0.7, with the ratios taken without the
+    tested subject): in the frames whose true flips were absent from every candidate
+    set, the trunk, clavicles and upper arms were the links cut short.
+
+    Parameters
+    ----------
+    lengths : (L,) float
+        Link lengths (any unit).
+    segments : sequence of str
+        Segment name of each link.
+    weight : float
+        Share of the gap to the proportional length closed, in [0, 1]; 0 leaves the
+        lengths as they are.
+    steady : sequence of str
+        Segments never changed (other than by the rescaling).
+
+    Returns
+    -------
+    (L,) float
+    """
+    if not 0.0 <= weight <= 1.0:
+        raise ConfigError(f"raise_short_links: weight: expected [0, 1], found {weight}")
+    lens = np.asarray(lengths, dtype=float)
+    if lens.shape != (len(segments),) or not np.all(lens > 0):
+        raise ShapeError(
+            f"raise_short_links: expected {len(segments)} positive lengths, found {lens}"
+        )
+    ratios = anthropometric_ratios(segments)
+    expected = ratios * float(np.median(lens / ratios))
+    short = (lens < expected) & ~np.isin(np.asarray(segments), tuple(steady))
+    out = np.where(short, lens + weight * (expected - lens), lens)
+    return np.asarray(out * (lens.sum() / out.sum()), dtype=float)
+
+
 def pixels_per_mm(stature_px: float, height_mm: float | None) -> float:
     """Image scale (px per mm) from the video's stature and the subject's, if known."""
     h = DEFAULT_HEIGHT_MM if height_mm is None else float(height_mm)

@@ -131,6 +131,11 @@ class MonoConfig:
         (`mocapkit.tracking.mono.arm_prior.ArmPrior.cost`, both arms); 0: off. Default
         30: weights 10-100 all lowered the mean error of the five accuracy clips and of
         four held-out clips (each tracked with a prior fitted without it); docs/mono.md.
+    short_link_weight : float
+        With video lengths and the perspective model: after each length pass, links
+        shorter than the body's proportions at the video's stature are moved this share
+        of the way up (`mocapkit.tracking.mono.lengths.raise_short_links`); 0: off.
+        Default 0.5 (docs/mono.md, fourth round).
     arm_prior : ArmPrior or None
         The mixture the arm prior uses; None: the shipped table
         (`mocapkit.tracking.mono.arm_prior.default_arm_prior`).
@@ -154,6 +159,7 @@ class MonoConfig:
     joint_acceleration_weight: float = 0.0
     clavicle_weight: float = 300.0
     arm_prior_weight: float = 30.0
+    short_link_weight: float = 0.5
     arm_prior: ArmPrior | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -166,6 +172,10 @@ class MonoConfig:
             raise ConfigError(f"MonoConfig.cost: expected one of {COSTS}, found {self.cost!r}")
         if self.lag is not None and self.lag < 1:
             raise ConfigError(f"MonoConfig.lag: expected >= 1 frame or None, found {self.lag}")
+        if not 0.0 <= self.short_link_weight <= 1.0:
+            raise ConfigError(
+                f"MonoConfig.short_link_weight: expected [0, 1], found {self.short_link_weight}"
+            )
         if self.depth_window < 1 or self.max_pair_states < 1 or self.smooth_lag < 0:
             raise ConfigError(
                 "MonoConfig: depth_window and max_pair_states must be >= 1, smooth_lag >= 0"
