@@ -121,19 +121,25 @@ def test_joint_acceleration_step_with_a_negligible_weight_equals_the_fused_eq3_s
     assert [f.code for f in base] == [f.code for f in full]
 
 
+def _track_with_dominant_prior(cfg: MonoConfig, n: int = 12):
+    """The stick motion's first ``n`` frames tracked offline with the truth's lengths."""
+    joints, names, _ = stick_motion(n)
+    model = stick_model()
+    cam = camera()
+    world = joints[:, [names.index(nm) for nm in model.joint_names]]
+    lengths = np.linalg.norm(model.link_vectors(cam.to_camera(world[0])), axis=-1)
+    tracker = MonoTracker(lengths, cam, 1 / FPS, cfg, model)
+    for k in range(n):
+        tracker.push(k / FPS, cam.project(world[k]))
+    return model, tracker, tracker.finish()
+
+
 def test_a_dominant_unary_prior_picks_each_frames_cheapest_pose() -> None:
     from mocapkit.tracking.mono.priors import elbow_flex_cost
 
-    cfg = MonoConfig(elbow_flex_weight=1e9, smooth_lag=0, noise_px=0.5)
-    joints, names, _ = stick_motion(12)
-    model = stick_model()
-    cam = camera()
-    world = joints[:, [names.index(n) for n in model.joint_names]]
-    lengths = np.linalg.norm(model.link_vectors(cam.to_camera(world[0])), axis=-1)
-    tracker = MonoTracker(lengths, cam, 1 / FPS, cfg, model)
-    for k in range(12):
-        tracker.push(k / FPS, cam.project(world[k]))
-    frames = tracker.finish()
+    model, tracker, frames = _track_with_dominant_prior(
+        MonoConfig(elbow_flex_weight=1e9, smooth_lag=0, noise_px=0.5)
+    )
     varied = 0
     for f in frames:
         layer = tracker._layers[f.index]
@@ -148,17 +154,11 @@ def test_a_dominant_arm_prior_picks_each_frames_most_common_arms() -> None:
     from mocapkit.tracking.mono.arm_prior import default_arm_prior
 
     prior = default_arm_prior()
-    cfg = MonoConfig(arm_prior_weight=1e9, clavicle_weight=0.0, smooth_lag=0, noise_px=0.5)
-    joints, names, _ = stick_motion(12)
-    model = stick_model()
-    cam = camera()
-    world = joints[:, [names.index(n) for n in model.joint_names]]
-    lengths = np.linalg.norm(model.link_vectors(cam.to_camera(world[0])), axis=-1)
-    tracker = MonoTracker(lengths, cam, 1 / FPS, cfg, model)
-    for k in range(12):
-        tracker.push(k / FPS, cam.project(world[k]))
+    model, tracker, frames = _track_with_dominant_prior(
+        MonoConfig(arm_prior_weight=1e9, clavicle_weight=0.0, smooth_lag=0, noise_px=0.5)
+    )
     varied = 0
-    for f in tracker.finish():
+    for f in frames:
         layer = tracker._layers[f.index]
         costs = prior.cost(model, layer.positions[layer.keep])
         assert prior.cost(model, f.joints_in_camera[None])[0] == pytest.approx(costs.min())
