@@ -182,3 +182,53 @@ def test_joint_subset_restricts_comparison() -> None:
     assert joint_subset("left_elbow, right_elbow") == ("left_elbow", "right_elbow")
     with pytest.raises(KeyError, match="unknown canonical joint 'elbows'"):
         joint_subset("elbows")
+
+
+def test_best_swivel_elbow_known_turn() -> None:
+    """An elbow turned by a known angle about the shoulder-wrist axis is turned back onto
+    the target: same distances to shoulder and wrist, the turn recovered, floor 0."""
+    from mocapkit.eval.metrics import best_swivel_elbow
+
+    rng = np.random.default_rng(15)
+    t = 50
+    shoulder = rng.normal(0.0, 100.0, (t, 3))
+    wrist = shoulder + rng.normal(0.0, 200.0, (t, 3))
+    axis = (wrist - shoulder) / np.linalg.norm(wrist - shoulder, axis=1, keepdims=True)
+    target = shoulder + rng.normal(0.0, 150.0, (t, 3))
+    angle = rng.uniform(-3.0, 3.0, t)
+    # the tracked elbow: the target turned by -angle about the shoulder-wrist axis
+    elbow = np.array(
+        [
+            shoulder[i] + matrix_from_rotvec(-angle[i] * axis[i]) @ (target[i] - shoulder[i])
+            for i in range(t)
+        ]
+    )
+    best, turn = best_swivel_elbow(shoulder, elbow, wrist, target)
+    np.testing.assert_allclose(best, target, atol=1e-6)
+    np.testing.assert_allclose(turn, angle, atol=1e-9)
+    np.testing.assert_allclose(
+        np.linalg.norm(best - shoulder, axis=1), np.linalg.norm(elbow - shoulder, axis=1)
+    )
+    np.testing.assert_allclose(
+        np.linalg.norm(best - wrist, axis=1), np.linalg.norm(elbow - wrist, axis=1)
+    )
+
+
+def test_best_swivel_elbow_floor_and_degenerate() -> None:
+    """A target off the elbow's circle leaves a known floor; a straight arm gives NaN;
+    shapes must agree."""
+    from mocapkit.eval.metrics import best_swivel_elbow
+
+    # shoulder at 0, wrist 400 mm down z, elbow on the circle of radius 100 at z = -200
+    s, w, e = np.zeros(3), np.array([0.0, 0.0, -400.0]), np.array([100.0, 0.0, -200.0])
+    target = np.array([0.0, 300.0, -250.0])
+    best, turn = best_swivel_elbow(s, e, w, target)
+    np.testing.assert_allclose(best, [0.0, 100.0, -200.0], atol=1e-9)
+    # +x to +y about the shoulder-to-wrist axis -z: a right-handed -90 deg
+    assert float(turn) == pytest.approx(-np.pi / 2)
+    # floor: 200 mm radially beyond the circle and 50 mm along the axis
+    assert float(np.linalg.norm(best - target)) == pytest.approx(np.hypot(200.0, 50.0))
+    straight, _ = best_swivel_elbow(s, np.array([0.0, 0.0, -200.0]), w, target)
+    assert np.all(np.isnan(straight))
+    with pytest.raises(ShapeError, match="expected shoulder, elbow, wrist and target"):
+        best_swivel_elbow(np.zeros((2, 3)), np.zeros((3, 3)), np.zeros((2, 3)), np.zeros((2, 3)))

@@ -132,6 +132,61 @@ def similarity_align(source: FloatArray, target: FloatArray) -> FloatArray:
     return scale * xs @ rot.T + mu_t
 
 
+def best_swivel_elbow(
+    shoulder_mm: ArrayLike, elbow_mm: ArrayLike, wrist_mm: ArrayLike, target_mm: ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """The elbow turned about its shoulder-wrist axis to the point nearest a target.
+
+    Splits an elbow error into what the arm's swivel costs and what it does not: the
+    turned elbow keeps its distances to the shoulder and the wrist (the same segment
+    lengths and hand placement), so its distance to ``target`` (an elbow marker) is the
+    error no swivel could remove (the *best-swivel floor*), and ``turn_rad`` is how far
+    the tracked swivel is from it. With positions-only hand sets nothing but the IK's
+    relaxed-pose task chooses the swivel (docs/hybrid.md, "Raw files: where the elbow
+    error comes from").
+
+    Parameters
+    ----------
+    shoulder_mm, elbow_mm, wrist_mm, target_mm : array_like, shape (T, 3) or (3,)
+        Tracked shoulder, elbow and wrist, and the target (mm, one frame).
+
+    Returns
+    -------
+    elbow : ndarray, shape like ``elbow_mm``
+        The turned elbow (mm); NaN where any input is NaN, the arm is straight, or the
+        target lies on the shoulder-wrist axis.
+    turn_rad : ndarray, shape (T,) or ()
+        Signed turn (rad) from ``elbow_mm`` to ``elbow`` about the shoulder-to-wrist
+        axis (right-handed), in (-pi, pi].
+
+    Raises
+    ------
+    ShapeError
+        The four inputs differ in shape, or their last axis is not 3.
+    """
+    arrays = [np.asarray(a, dtype=float) for a in (shoulder_mm, elbow_mm, wrist_mm, target_mm)]
+    shapes = {a.shape for a in arrays}
+    if len(shapes) != 1 or arrays[0].shape[-1:] != (3,):
+        raise ShapeError(
+            "best_swivel_elbow: expected shoulder, elbow, wrist and target of one shape "
+            f"(T, 3) or (3,), found {[a.shape for a in arrays]}"
+        )
+    s, e, w, t = arrays
+    with np.errstate(invalid="ignore", divide="ignore"):
+        axis = (w - s) / np.linalg.norm(w - s, axis=-1, keepdims=True)
+        centre = s + np.sum((e - s) * axis, axis=-1, keepdims=True) * axis
+        radial = e - centre
+        radius = np.linalg.norm(radial, axis=-1, keepdims=True)
+        toward = t - centre
+        toward = toward - np.sum(toward * axis, axis=-1, keepdims=True) * axis
+        toward_len = np.linalg.norm(toward, axis=-1, keepdims=True)
+        degenerate = (radius < 1e-9) | (toward_len < 1e-9)
+        best = np.where(degenerate, np.nan, centre + radius * toward / toward_len)
+        sin = np.sum(np.cross(radial, best - centre) * axis, axis=-1)
+        cos = np.sum(radial * (best - centre), axis=-1)
+    return best, np.asarray(np.arctan2(sin, cos), dtype=float)
+
+
 def _second_difference(t: FloatArray, x: FloatArray) -> FloatArray:
     """Second derivative at interior samples (N-2, ...) for uneven times t (N,)."""
     h1 = (t[1:-1] - t[:-2]).reshape(-1, *([1] * (x.ndim - 1)))
