@@ -53,8 +53,11 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
+import llvmlite.binding
 import numba
 import numpy as np
+from numba.core import types as nb_types
+from numba.extending import get_cython_function_address
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import ConfigError, ShapeError, unknown_name
@@ -346,6 +349,22 @@ class IKSettings(NamedTuple):
 
 # ------------------------------------------------------------------ compiled pieces
 
+# LAPACK's dgesvd from SciPy's Cython bindings, bound by symbol name (not by address) so
+# the kernels that call it stay in Numba's on-disk cache. ``np.linalg.svd`` in Numba
+# always forms the thin U (dgesdd, jobz="S"); SDLS needs only the singular values, V and
+# the few numbers of each term that ``u_i = J_w v_i / sigma_i`` gives (`sdls_nb`).
+_DGESVD_SYMBOL = "mocapkit_sdls_dgesvd"
+llvmlite.binding.add_symbol(
+    _DGESVD_SYMBOL, get_cython_function_address("scipy.linalg.cython_lapack", "dgesvd")
+)
+_dgesvd = nb_types.ExternalFunction(
+    _DGESVD_SYMBOL, nb_types.void(*([nb_types.voidptr] * 14))
+)
+#: ``jobu``, ``jobvt`` of dgesvd: no U, the first min(m, n) rows of V^T.
+_JOB_NONE = ord("N")
+_JOB_THIN = ord("S")
+
+
 
 @numba.njit(cache=True)
 def clamp_error_nb(s: FloatArray, t: FloatArray, dmax: float, out: FloatArray) -> None:
@@ -364,6 +383,51 @@ def clamp_error_nb(s: FloatArray, t: FloatArray, dmax: float, out: FloatArray) -
         out[3 * k] = dx * f
         out[3 * k + 1] = dy * f
         out[3 * k + 2] = dz * f
+
+
+@numba.njit(cache=True)
+def thin_svd_v_nb(a: FloatArray, s: FloatArray, vt: FloatArray) -> None:
+    """Singular values and right singular vectors of an (m, n) matrix, LAPACK dgesvd.
+
+    ``a`` (n, m) is the matrix in column-major order (``a[j, r]`` its entry ``(r, j)``)
+    and is overwritten. With ``jobu="N"``, ``jobvt="S"``: ``s`` (k,) descending and
+    ``vt`` (n, k) with ``vt[j, i]`` the component ``j`` of ``v_i``, ``k = min(m, n)``.
+    Raises ``np.linalg.LinAlgError`` where the QR iteration does not converge.
+    """
+    n_c, n_rows = a.shape
+    k = min(n_rows, n_c)
+    ints = np.empty(7, dtype=np.int32)  # m, n, lda, ldu, ldvt, lwork, info
+    lwork = 8 * (n_rows + n_c)
+    work = np.empty(lwork)
+    u_dummy = np.empty(1)
+    jobs = np.empty(2, dtype=np.uint8)
+    jobs[0] = _JOB_NONE
+    jobs[1] = _JOB_THIN
+    ints[0] = n_rows
+    ints[1] = n_c
+    ints[2] = n_rows
+    ints[3] = 1
+    ints[4] = k
+    ints[5] = lwork
+    ints[6] = 0
+    _dgesvd(
+        jobs[0:].ctypes,
+        jobs[1:].ctypes,
+        ints[0:].ctypes,
+        ints[1:].ctypes,
+        a.ctypes,
+        ints[2:].ctypes,
+        s.ctypes,
+        u_dummy.ctypes,
+        ints[3:].ctypes,
+        vt.ctypes,  # V^T (k, n) column-major: vt[j, i] = V^T[i, j]
+        ints[4:].ctypes,
+        work.ctypes,
+        ints[5:].ctypes,
+        ints[6:].ctypes,
+    )
+    if ints[6] != 0:
+        raise np.linalg.LinAlgError("SVD did not converge")
 
 
 @numba.njit(cache=True)
@@ -389,36 +453,60 @@ def sdls_nb(
     n_eff = n_rows // 3
     for j in range(n_cols):
         dpsi[j] = 0.0
-    u, s, vt = np.linalg.svd(jw, full_matrices=False)
-    if s.shape[0] == 0 or s[0] <= 0.0:
+    # columns of frozen or locked DoFs are zero: they add only zero singular values
+    # (below the cut-off) and null vectors, so the SVD is taken of the others alone
+    cols = np.empty(n_cols, dtype=np.int64)
+    n_c = 0
+    for j in range(n_cols):
+        for r in range(n_rows):
+            if jw[r, j] != 0.0:
+                cols[n_c] = j
+                n_c += 1
+                break
+    if n_c == 0 or n_rows == 0:
         return 0
+    k = min(n_rows, n_c)
+    jwc = np.empty((n_c, n_rows))  # the nonzero columns, column-major
+    for r in range(n_rows):
+        for c in range(n_c):
+            jwc[c, r] = jw[r, cols[c]]
+    s = np.empty(k)
+    vt = np.empty((n_c, k))
+    thin_svd_v_nb(jwc.copy(), s, vt)
+    if s[0] <= 0.0:
+        return 0
+    # u_i = J_w v_i / sigma_i, as rows of ut (the SVD's own U is not formed)
+    ut = np.dot(vt.T, jwc)
     # rho[l, j]: norm of the 3-block of effector l in column j
     rho_sum = np.zeros(n_cols)
-    for j in range(n_cols):
+    for c in range(n_c):
+        j = cols[c]
         acc = 0.0
         for ll in range(n_eff):
-            a = jw[3 * ll, j]
-            b = jw[3 * ll + 1, j]
-            c = jw[3 * ll + 2, j]
-            acc += math.sqrt(a * a + b * b + c * c)
+            a = jwc[c, 3 * ll]
+            b = jwc[c, 3 * ll + 1]
+            c3 = jwc[c, 3 * ll + 2]
+            acc += math.sqrt(a * a + b * b + c3 * c3)
         rho_sum[j] = acc
-    phi = np.empty(n_cols)
     rank = 0
-    for i in range(s.shape[0]):
+    for i in range(k):
         si = s[i]
         if si < SIGMA_CUTOFF * s[0] or si <= 0.0:
             continue
+        inv_s = 1.0 / si
         alpha = 0.0
         n_i = 0.0
         for ll in range(n_eff):
-            a = u[3 * ll, i]
-            b = u[3 * ll + 1, i]
-            c = u[3 * ll + 2, i]
-            alpha += a * e[3 * ll] + b * e[3 * ll + 1] + c * e[3 * ll + 2]
-            n_i += math.sqrt(a * a + b * b + c * c)
+            a = ut[i, 3 * ll]
+            b = ut[i, 3 * ll + 1]
+            c3 = ut[i, 3 * ll + 2]
+            alpha += a * e[3 * ll] + b * e[3 * ll + 1] + c3 * e[3 * ll + 2]
+            n_i += math.sqrt(a * a + b * b + c3 * c3)
+        alpha *= inv_s
+        n_i *= inv_s
         m_i = 0.0
-        for j in range(n_cols):
-            m_i += abs(vt[i, j]) * rho_sum[j]
+        for c in range(n_c):
+            m_i += abs(vt[c, i]) * rho_sum[cols[c]]
         m_i /= si
         g = gamma
         if n_i < m_i:
@@ -426,10 +514,10 @@ def sdls_nb(
         g *= term_scale
         scale = alpha / si
         mx = 0.0
-        for j in range(n_cols):
-            phi[j] = scale * vt[i, j]
-            if abs(phi[j]) > mx:
-                mx = abs(phi[j])
+        for c in range(n_c):
+            ph = abs(scale * vt[c, i])
+            if ph > mx:
+                mx = ph
         if soft:
             f = g / (g + mx)
         elif mx > g:
@@ -437,9 +525,11 @@ def sdls_nb(
         else:
             f = 1.0
         for j in range(n_cols):
-            dpsi[j] += f * phi[j]
-        for j in range(n_cols):
-            vr[rank, j] = vt[i, j]
+            vr[rank, j] = 0.0
+        for c in range(n_c):
+            j = cols[c]
+            dpsi[j] += f * (scale * vt[c, i])
+            vr[rank, j] = vt[c, i]
         n_out[rank] = n_i
         m_out[rank] = m_i
         rank += 1
