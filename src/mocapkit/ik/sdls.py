@@ -440,29 +440,35 @@ def sdls_nb(
     vr: FloatArray,
     n_out: FloatArray,
     m_out: FloatArray,
-    term_scale: float = 1.0,
+    term_scale: float,
+    skip: BoolArray,
 ) -> int:
     """SDLS response ``dpsi`` (D,) of ``jw`` (3K, D) to the error ``e`` (3K,), per-term clamped.
 
     Writes the rows of ``V^T`` kept (rank r) into ``vr[:r]`` (for the null-space
     projector), and ``N_i``, ``M_i`` into ``n_out[:r]``, ``m_out[:r]``. Returns r.
     ``term_scale`` multiplies every per-term bound ``gamma_i`` (`IKConfig.term_clamp_scale`).
+    ``skip`` (D,) marks zero columns to leave out of the SVD (frozen DoFs; their
+    ``dpsi`` and ``vr`` entries are exactly 0). The SVD is LAPACK's dgesvd without U
+    (`thin_svd_v_nb`); ``u_i = J_w v_i / sigma_i`` gives ``alpha_i`` and ``N_i``.
     The outer clamp is left to the caller (it also covers the secondary task).
     """
     n_rows, n_cols = jw.shape
     n_eff = n_rows // 3
     for j in range(n_cols):
         dpsi[j] = 0.0
-    # columns of frozen or locked DoFs are zero: they add only zero singular values
-    # (below the cut-off) and null vectors, so the SVD is taken of the others alone
+    # the columns ``skip`` (frozen DoFs: zero) add only zero singular values (below
+    # the cut-off) and null vectors, so the SVD is taken of the others alone. Columns
+    # zeroed for a joint limit stay in: the round-off of their V entries gives a locked
+    # DoF the tiny steps by which `solve_ik_nb` releases it (with exact zeros it would
+    # stay locked for the rest of the solve: measured, the solves then stall short of
+    # the targets)
     cols = np.empty(n_cols, dtype=np.int64)
     n_c = 0
     for j in range(n_cols):
-        for r in range(n_rows):
-            if jw[r, j] != 0.0:
-                cols[n_c] = j
-                n_c += 1
-                break
+        if not skip[j]:
+            cols[n_c] = j
+            n_c += 1
     if n_c == 0 or n_rows == 0:
         return 0
     k = min(n_rows, n_c)
@@ -655,7 +661,7 @@ def solve_ik_nb(
                     jw[r, d] = 0.0
                 else:
                     jw[r, d] = jac[r, d] * inv_mu[d]
-        rank = sdls_nb(jw, e, gamma, soft, dpsi, vr, n_buf, m_buf, settings.term_scale)
+        rank = sdls_nb(jw, e, gamma, soft, dpsi, vr, n_buf, m_buf, settings.term_scale, frozen)
         if use_secondary:
             lever_weights_nb(
                 kin,
@@ -811,7 +817,10 @@ def sdls_response(
     vr = np.empty((n_sv, a.shape[1]))
     nb = np.empty(n_sv)
     mb = np.empty(n_sv)
-    r = sdls_nb(a, ev, float(gamma_rad), bool(soft), dpsi, vr, nb, mb, float(term_clamp_scale))
+    skip = ~np.any(a != 0.0, axis=0)  # zero columns (frozen DoFs)
+    r = sdls_nb(
+        a, ev, float(gamma_rad), bool(soft), dpsi, vr, nb, mb, float(term_clamp_scale), skip
+    )
     return SDLSStep(dpsi, vr[:r].copy(), nb[:r].copy(), mb[:r].copy())
 
 
