@@ -543,6 +543,91 @@ def sdls_nb(
 
 
 @numba.njit(cache=True)
+def sdls_gesdd_nb(
+    jw: FloatArray,
+    e: FloatArray,
+    gamma: float,
+    soft: bool,
+    dpsi: FloatArray,
+    vr: FloatArray,
+    n_out: FloatArray,
+    m_out: FloatArray,
+    term_scale: float = 1.0,
+) -> int:
+    """`sdls_nb` from numpy's SVD of the whole ``jw`` (LAPACK dgesdd, U formed).
+
+    `solve_ik_nb` takes this one on iterations where a DoF is held at a joint limit:
+    there the locked DoF's zeroed column gets steps of round-off size from dgesdd's
+    singular vectors, and their sign decides when the DoF is released (module doc).
+    Kept as it was so the released DoFs, and the tracker's trajectories, stay the same.
+
+    Writes the rows of ``V^T`` kept (rank r) into ``vr[:r]`` (for the null-space
+    projector), and ``N_i``, ``M_i`` into ``n_out[:r]``, ``m_out[:r]``. Returns r.
+    ``term_scale`` multiplies every per-term bound ``gamma_i`` (`IKConfig.term_clamp_scale`).
+    The outer clamp is left to the caller (it also covers the secondary task).
+    """
+    n_rows, n_cols = jw.shape
+    n_eff = n_rows // 3
+    for j in range(n_cols):
+        dpsi[j] = 0.0
+    u, s, vt = np.linalg.svd(jw, full_matrices=False)
+    if s.shape[0] == 0 or s[0] <= 0.0:
+        return 0
+    # rho[l, j]: norm of the 3-block of effector l in column j
+    rho_sum = np.zeros(n_cols)
+    for j in range(n_cols):
+        acc = 0.0
+        for ll in range(n_eff):
+            a = jw[3 * ll, j]
+            b = jw[3 * ll + 1, j]
+            c = jw[3 * ll + 2, j]
+            acc += math.sqrt(a * a + b * b + c * c)
+        rho_sum[j] = acc
+    phi = np.empty(n_cols)
+    rank = 0
+    for i in range(s.shape[0]):
+        si = s[i]
+        if si < SIGMA_CUTOFF * s[0] or si <= 0.0:
+            continue
+        alpha = 0.0
+        n_i = 0.0
+        for ll in range(n_eff):
+            a = u[3 * ll, i]
+            b = u[3 * ll + 1, i]
+            c = u[3 * ll + 2, i]
+            alpha += a * e[3 * ll] + b * e[3 * ll + 1] + c * e[3 * ll + 2]
+            n_i += math.sqrt(a * a + b * b + c * c)
+        m_i = 0.0
+        for j in range(n_cols):
+            m_i += abs(vt[i, j]) * rho_sum[j]
+        m_i /= si
+        g = gamma
+        if n_i < m_i:
+            g = gamma * n_i / m_i
+        g *= term_scale
+        scale = alpha / si
+        mx = 0.0
+        for j in range(n_cols):
+            phi[j] = scale * vt[i, j]
+            if abs(phi[j]) > mx:
+                mx = abs(phi[j])
+        if soft:
+            f = g / (g + mx)
+        elif mx > g:
+            f = g / mx
+        else:
+            f = 1.0
+        for j in range(n_cols):
+            dpsi[j] += f * phi[j]
+        for j in range(n_cols):
+            vr[rank, j] = vt[i, j]
+        n_out[rank] = n_i
+        m_out[rank] = m_i
+        rank += 1
+    return rank
+
+
+@numba.njit(cache=True)
 def project_nullspace_nb(vr: FloatArray, rank: int, x: FloatArray, out: FloatArray) -> None:
     """``out = (I - V_r V_r^T) x`` with the first ``rank`` rows of ``vr`` (errata Z7)."""
     for j in range(x.shape[0]):
@@ -661,7 +746,16 @@ def solve_ik_nb(
                     jw[r, d] = 0.0
                 else:
                     jw[r, d] = jac[r, d] * inv_mu[d]
-        rank = sdls_nb(jw, e, gamma, soft, dpsi, vr, n_buf, m_buf, settings.term_scale, frozen)
+        any_locked = False
+        for d in range(n_dofs):
+            if locked[d] and not frozen[d]:
+                any_locked = True
+        if any_locked:
+            rank = sdls_gesdd_nb(jw, e, gamma, soft, dpsi, vr, n_buf, m_buf, settings.term_scale)
+        else:
+            rank = sdls_nb(
+                jw, e, gamma, soft, dpsi, vr, n_buf, m_buf, settings.term_scale, frozen
+            )
         if use_secondary:
             lever_weights_nb(
                 kin,
