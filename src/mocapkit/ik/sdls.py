@@ -7,7 +7,8 @@ One iteration, for the active end effectors only:
 1. forward kinematics; effector positions ``s`` and position Jacobian ``J`` (3K, D);
 2. per-effector clamped error ``e_l = t_l - s_l`` shortened to ``D_max`` (Z2);
 3. weighted Jacobian ``J_w = J diag(mu)^-1`` (Z3), ``psi_j = mu_j theta_j``;
-4. SVD ``J_w = U S V^T``; terms with ``sigma_i < 1e-10 sigma_1`` are skipped;
+4. SVD ``J_w = U S V^T``; terms with ``sigma_i < 1e-10 sigma_1`` are skipped (with
+   `IKConfig.svd` ``"gesvd"`` U is not formed where no DoF is locked: see below);
 5. SDLS: ``phi_i = ClampMaxAbs(sigma_i^-1 alpha_i v_i, gamma_i)`` with
    ``gamma_i = Gamma min(1, N_i / M_i)``, ``N_i`` the sum of the norms of the 3-blocks of
    ``u_i`` (Z4), ``M_i = sigma_i^-1 sum_l sum_j |v_ji| |J_w[l, j]|`` (Z5);
@@ -43,7 +44,17 @@ per-DoF weighting (`IKWeighting`) and the settings (`IKSettings`) as named tuple
 
 Joint limits: a DoF clipped at a limit is locked (its Jacobian column zeroed) until a
 later step moves it back inside, so the remaining DoFs take over the task instead
-of the solver pushing against the limit every iteration.
+of the solver pushing against the limit every iteration. A zeroed column's step is
+round-off from the singular vectors of numpy's SVD (LAPACK dgesdd), and its sign is
+what releases the DoF. With `IKConfig.svd` ``"gesvd"`` (the hybrid tracker's), iterations
+with a locked DoF keep that SVD of the whole ``J_w`` (`sdls_gesdd_nb`, also the
+default's on every iteration) and the others (`sdls_nb`) take LAPACK's dgesvd without U over
+the columns of the DoFs not frozen, with ``u_i = J_w v_i / sigma_i``: the same SDLS
+response to round-off, 10-20 % cheaper an iteration, and much cheaper where most DoFs
+are frozen (foot re-planting). With exact zeros a locked DoF would stay locked for the
+rest of the solve (measured: solves stall short of their targets); releasing it by the
+sign of ``J^T e`` (the bound's multiplier, as in active-set least squares) let the
+scaled iteration cycle between release and clip (docs/hybrid.md, Speed).
 """
 
 from __future__ import annotations
@@ -51,7 +62,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import llvmlite.binding
 import numba
@@ -169,6 +180,14 @@ class IKConfig:
         from the pose the previous ones reached, within this iteration's null space and
         weights: with ``term_clamp_scale = m`` and ``relax_substeps = m``, one iteration
         does the work of ``m`` in both tasks, for the cost of one SVD.
+    svd : {"gesdd", "gesvd"}
+        ``"gesdd"``: numpy's SVD of the whole weighted Jacobian on every iteration
+        (LAPACK dgesdd, U formed; the paper's solver as before). ``"gesvd"``: where no
+        DoF is locked at a joint limit, LAPACK's dgesvd without U over the columns of
+        the DoFs not frozen (`sdls_nb`): the same response to round-off, cheaper (module
+        doc); iterations with a locked DoF still take dgesdd, whose round-off releases
+        the lock. Trajectories differ from ``"gesdd"`` by round-off, which the chaotic
+        cases amplify (docs/hybrid.md, Speed).
     """
 
     gamma_rad: float = DEFAULT_GAMMA_RAD
@@ -184,6 +203,7 @@ class IKConfig:
     prismatic_length_mm: float | None = None
     relax_substeps: int = 1
     term_clamp_scale: float = 1.0
+    svd: str = "gesdd"
 
     def __post_init__(self) -> None:
         if not (0.0 < self.gamma_rad <= math.pi):
@@ -216,6 +236,8 @@ class IKConfig:
                 "IKConfig.secondary_max_step_rad: expected a positive angle, found "
                 f"{self.secondary_max_step_rad}"
             )
+        if self.svd not in ("gesdd", "gesvd"):
+            raise ConfigError(f"IKConfig.svd: expected 'gesdd' or 'gesvd', found {self.svd!r}")
         if self.clamp not in ("hard", "soft"):
             raise ConfigError(f"IKConfig.clamp: expected 'hard' or 'soft', found {self.clamp!r}")
         if self.relax_substeps < 1 or not self.term_clamp_scale >= 1.0:
@@ -331,6 +353,8 @@ class IKSettings(NamedTuple):
         Gradient steps of the secondary task per iteration (`IKConfig.relax_substeps`).
     term_scale : float
         Factor on the per-term SDLS bounds (`IKConfig.term_clamp_scale`).
+    thin_svd : bool
+        `sdls_nb` where no DoF is locked (`IKConfig.svd` ``"gesvd"``), else `sdls_gesdd_nb`.
     """
 
     gain: float
@@ -345,6 +369,7 @@ class IKSettings(NamedTuple):
     stall_fraction: float
     substeps: int = 1
     term_scale: float = 1.0
+    thin_svd: bool = False
 
 
 # ------------------------------------------------------------------ compiled pieces
@@ -357,13 +382,10 @@ _DGESVD_SYMBOL = "mocapkit_sdls_dgesvd"
 llvmlite.binding.add_symbol(
     _DGESVD_SYMBOL, get_cython_function_address("scipy.linalg.cython_lapack", "dgesvd")
 )
-_dgesvd = nb_types.ExternalFunction(
-    _DGESVD_SYMBOL, nb_types.void(*([nb_types.voidptr] * 14))
-)
+_dgesvd: Any = nb_types.ExternalFunction(_DGESVD_SYMBOL, nb_types.void(*([nb_types.voidptr] * 14)))
 #: ``jobu``, ``jobvt`` of dgesvd: no U, the first min(m, n) rows of V^T.
 _JOB_NONE = ord("N")
 _JOB_THIN = ord("S")
-
 
 
 @numba.njit(cache=True)
@@ -458,11 +480,9 @@ def sdls_nb(
     for j in range(n_cols):
         dpsi[j] = 0.0
     # the columns ``skip`` (frozen DoFs: zero) add only zero singular values (below
-    # the cut-off) and null vectors, so the SVD is taken of the others alone. Columns
-    # zeroed for a joint limit stay in: the round-off of their V entries gives a locked
-    # DoF the tiny steps by which `solve_ik_nb` releases it (with exact zeros it would
-    # stay locked for the rest of the solve: measured, the solves then stall short of
-    # the targets)
+    # the cut-off) and null vectors, so the SVD is taken of the others alone. Their
+    # ``dpsi`` is then exactly 0; for a DoF locked at a joint limit that would keep it
+    # locked for good, so `solve_ik_nb` takes `sdls_gesdd_nb` on such iterations
     cols = np.empty(n_cols, dtype=np.int64)
     n_c = 0
     for j in range(n_cols):
@@ -559,7 +579,7 @@ def sdls_gesdd_nb(
     `solve_ik_nb` takes this one on iterations where a DoF is held at a joint limit:
     there the locked DoF's zeroed column gets steps of round-off size from dgesdd's
     singular vectors, and their sign decides when the DoF is released (module doc).
-    Kept as it was so the released DoFs, and the tracker's trajectories, stay the same.
+    Kept as it was (e6e041f's `sdls_nb`), so the locks are released by the same rule.
 
     Writes the rows of ``V^T`` kept (rank r) into ``vr[:r]`` (for the null-space
     projector), and ``N_i``, ``M_i`` into ``n_out[:r]``, ``m_out[:r]``. Returns r.
@@ -746,16 +766,14 @@ def solve_ik_nb(
                     jw[r, d] = 0.0
                 else:
                     jw[r, d] = jac[r, d] * inv_mu[d]
-        any_locked = False
+        use_gesdd = not settings.thin_svd
         for d in range(n_dofs):
             if locked[d] and not frozen[d]:
-                any_locked = True
-        if any_locked:
+                use_gesdd = True
+        if use_gesdd:
             rank = sdls_gesdd_nb(jw, e, gamma, soft, dpsi, vr, n_buf, m_buf, settings.term_scale)
         else:
-            rank = sdls_nb(
-                jw, e, gamma, soft, dpsi, vr, n_buf, m_buf, settings.term_scale, frozen
-            )
+            rank = sdls_nb(jw, e, gamma, soft, dpsi, vr, n_buf, m_buf, settings.term_scale, frozen)
         if use_secondary:
             lever_weights_nb(
                 kin,
@@ -1095,6 +1113,7 @@ class SDLSSolver:
             stall_fraction=float(cfg.stall_fraction),
             substeps=int(cfg.relax_substeps),
             term_scale=float(cfg.term_clamp_scale),
+            thin_svd=cfg.svd == "gesvd",
         )
 
     @property
