@@ -735,6 +735,15 @@ def solve_ik_nb(
     n_buf = np.empty(max(n_sv, 1))
     m_buf = np.empty(max(n_sv, 1))
     locked = np.zeros(n_dofs, dtype=np.bool_)
+    live = np.empty(n_dofs, dtype=np.int64)  # the DoFs not frozen
+    n_live = 0
+    for d in range(n_dofs):
+        if not frozen[d]:
+            live[n_live] = d
+            n_live += 1
+    jw_live = np.empty((3 * k_eff, n_live))
+    dpsi_live = np.empty(n_live)
+    vr_live = np.empty((max(min(3 * k_eff, n_live), 1), n_live))
     inv_mu = 1.0 / mu
     use_secondary = gain > 0.0
     substeps = settings.substeps
@@ -770,7 +779,25 @@ def solve_ik_nb(
         for d in range(n_dofs):
             if locked[d] and not frozen[d]:
                 use_gesdd = True
-        if use_gesdd:
+        if use_gesdd and settings.thin_svd and n_live < n_dofs:
+            # the frozen DoFs' zero columns are left out here too (re-planting solves
+            # move the legs alone); the locked ones stay in
+            for r in range(3 * k_eff):
+                for c in range(n_live):
+                    jw_live[r, c] = jw[r, live[c]]
+            rank = sdls_gesdd_nb(
+                jw_live, e, gamma, soft, dpsi_live, vr_live, n_buf, m_buf, settings.term_scale
+            )
+            for d in range(n_dofs):
+                dpsi[d] = 0.0
+            for c in range(n_live):
+                dpsi[live[c]] = dpsi_live[c]
+            for i in range(rank):
+                for d in range(n_dofs):
+                    vr[i, d] = 0.0
+                for c in range(n_live):
+                    vr[i, live[c]] = vr_live[i, c]
+        elif use_gesdd:
             rank = sdls_gesdd_nb(jw, e, gamma, soft, dpsi, vr, n_buf, m_buf, settings.term_scale)
         else:
             rank = sdls_nb(jw, e, gamma, soft, dpsi, vr, n_buf, m_buf, settings.term_scale, frozen)
