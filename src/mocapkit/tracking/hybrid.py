@@ -103,7 +103,9 @@ def foot_effectors(skeleton: Skeleton) -> list[Effector]:
 
 #: The tracker's IK settings: each iteration does the work of three of the paper's
 #: (`IKConfig.term_clamp_scale`, `IKConfig.relax_substeps`), 30 iterations a solve instead
-#: of 100 (see `HybridConfig.ik`).
+#: of 100 (see `HybridConfig.ik`). ``IKConfig.svd="gesvd"`` is left out: it moved
+#: charleston1's default-configuration elbow 43 -> 55 mm (round-off chaos, docs/hybrid.md,
+#: Speed, fourth round) for 1-2 % less IK time.
 TRACKING_IK = IKConfig(max_iterations=30, term_clamp_scale=3.0, relax_substeps=3)
 #: Bisection steps of the balance lean (`BalanceConfig.bisection_steps`) in ``"solve"`` mode.
 TRACKING_BISECTION_STEPS = 6
