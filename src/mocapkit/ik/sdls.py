@@ -476,7 +476,6 @@ def sdls_nb(
     The outer clamp is left to the caller (it also covers the secondary task).
     """
     n_rows, n_cols = jw.shape
-    n_eff = n_rows // 3
     for j in range(n_cols):
         dpsi[j] = 0.0
     # the columns ``skip`` (frozen DoFs: zero) add only zero singular values (below
@@ -499,67 +498,11 @@ def sdls_nb(
     s = np.empty(k)
     vt = np.empty((n_c, k))
     thin_svd_v_nb(jwc.copy(), s, vt)
-    if s[0] <= 0.0:
-        return 0
-    # u_i = J_w v_i / sigma_i, as rows of ut (the SVD's own U is not formed)
-    ut = np.dot(vt.T, jwc)
-    # rho[l, j]: norm of the 3-block of effector l in column j
-    rho_sum = np.zeros(n_cols)
-    for c in range(n_c):
-        j = cols[c]
-        acc = 0.0
-        for ll in range(n_eff):
-            a = jwc[c, 3 * ll]
-            b = jwc[c, 3 * ll + 1]
-            c3 = jwc[c, 3 * ll + 2]
-            acc += math.sqrt(a * a + b * b + c3 * c3)
-        rho_sum[j] = acc
-    rank = 0
-    for i in range(k):
-        si = s[i]
-        if si < SIGMA_CUTOFF * s[0] or si <= 0.0:
-            continue
-        inv_s = 1.0 / si
-        alpha = 0.0
-        n_i = 0.0
-        for ll in range(n_eff):
-            a = ut[i, 3 * ll]
-            b = ut[i, 3 * ll + 1]
-            c3 = ut[i, 3 * ll + 2]
-            alpha += a * e[3 * ll] + b * e[3 * ll + 1] + c3 * e[3 * ll + 2]
-            n_i += math.sqrt(a * a + b * b + c3 * c3)
-        alpha *= inv_s
-        n_i *= inv_s
-        m_i = 0.0
-        for c in range(n_c):
-            m_i += abs(vt[c, i]) * rho_sum[cols[c]]
-        m_i /= si
-        g = gamma
-        if n_i < m_i:
-            g = gamma * n_i / m_i
-        g *= term_scale
-        scale = alpha / si
-        mx = 0.0
-        for c in range(n_c):
-            ph = abs(scale * vt[c, i])
-            if ph > mx:
-                mx = ph
-        if soft:
-            f = g / (g + mx)
-        elif mx > g:
-            f = g / mx
-        else:
-            f = 1.0
-        for j in range(n_cols):
-            vr[rank, j] = 0.0
-        for c in range(n_c):
-            j = cols[c]
-            dpsi[j] += f * (scale * vt[c, i])
-            vr[rank, j] = vt[c, i]
-        n_out[rank] = n_i
-        m_out[rank] = m_i
-        rank += 1
-    return rank
+    # sigma_i u_i = J_w v_i, as rows (the SVD's own U is not formed)
+    sigma_u = np.dot(vt.T, jwc)
+    return _sdls_terms_nb(
+        jw, e, s, sigma_u, True, vt, cols[:n_c], gamma, soft, dpsi, vr, n_out, m_out, term_scale
+    )
 
 
 @numba.njit(cache=True)
@@ -579,31 +522,67 @@ def sdls_gesdd_nb(
     `solve_ik_nb` takes this one on iterations where a DoF is held at a joint limit:
     there the locked DoF's zeroed column gets steps of round-off size from dgesdd's
     singular vectors, and their sign decides when the DoF is released (module doc).
-    Kept as it was (e6e041f's `sdls_nb`), so the locks are released by the same rule.
+    Its SVD and terms are e6e041f's `sdls_nb` (bit for bit), so the locks are released
+    by the same rule.
 
     Writes the rows of ``V^T`` kept (rank r) into ``vr[:r]`` (for the null-space
     projector), and ``N_i``, ``M_i`` into ``n_out[:r]``, ``m_out[:r]``. Returns r.
     ``term_scale`` multiplies every per-term bound ``gamma_i`` (`IKConfig.term_clamp_scale`).
     The outer clamp is left to the caller (it also covers the secondary task).
     """
-    n_rows, n_cols = jw.shape
-    n_eff = n_rows // 3
+    n_cols = jw.shape[1]
     for j in range(n_cols):
         dpsi[j] = 0.0
     u, s, vt = np.linalg.svd(jw, full_matrices=False)
+    every = np.arange(n_cols)
+    return _sdls_terms_nb(
+        jw, e, s, u.T, False, vt.T, every, gamma, soft, dpsi, vr, n_out, m_out, term_scale
+    )
+
+
+@numba.njit(cache=True)
+def _sdls_terms_nb(
+    jw: FloatArray,
+    e: FloatArray,
+    s: FloatArray,
+    u_rows: FloatArray,
+    u_times_sigma: bool,
+    v: FloatArray,
+    cols: NDArray[np.int64],
+    gamma: float,
+    soft: bool,
+    dpsi: FloatArray,
+    vr: FloatArray,
+    n_out: FloatArray,
+    m_out: FloatArray,
+    term_scale: float,
+) -> int:
+    """The SDLS terms (errata Z4-Z6) of an SVD of the columns ``cols`` of ``jw`` (3K, D).
+
+    ``s`` (k,) descending singular values; ``u_rows`` (k, 3K) row ``i`` the left singular
+    vector ``u_i``, or ``sigma_i u_i`` (``= J_w v_i``) where ``u_times_sigma``; ``v``
+    (len(cols), k) with ``v[c, i]`` the component of ``v_i`` on column ``cols[c]``. Adds
+    each term's clamped step into ``dpsi`` (zeroed by the caller); writes the kept rows
+    of ``V^T`` (zero off ``cols``) into ``vr[:r]`` and ``N_i``, ``M_i`` into ``n_out[:r]``,
+    ``m_out[:r]``. Returns the rank r. Shared by `sdls_nb` and `sdls_gesdd_nb`, so both
+    SVDs give the same terms with the same arithmetic.
+    """
+    n_rows, n_cols = jw.shape
+    n_eff = n_rows // 3
+    n_c = cols.shape[0]
     if s.shape[0] == 0 or s[0] <= 0.0:
         return 0
     # rho[l, j]: norm of the 3-block of effector l in column j
     rho_sum = np.zeros(n_cols)
-    for j in range(n_cols):
+    for c in range(n_c):
+        j = cols[c]
         acc = 0.0
         for ll in range(n_eff):
             a = jw[3 * ll, j]
             b = jw[3 * ll + 1, j]
-            c = jw[3 * ll + 2, j]
-            acc += math.sqrt(a * a + b * b + c * c)
+            c3 = jw[3 * ll + 2, j]
+            acc += math.sqrt(a * a + b * b + c3 * c3)
         rho_sum[j] = acc
-    phi = np.empty(n_cols)
     rank = 0
     for i in range(s.shape[0]):
         si = s[i]
@@ -612,14 +591,18 @@ def sdls_gesdd_nb(
         alpha = 0.0
         n_i = 0.0
         for ll in range(n_eff):
-            a = u[3 * ll, i]
-            b = u[3 * ll + 1, i]
-            c = u[3 * ll + 2, i]
-            alpha += a * e[3 * ll] + b * e[3 * ll + 1] + c * e[3 * ll + 2]
-            n_i += math.sqrt(a * a + b * b + c * c)
+            a = u_rows[i, 3 * ll]
+            b = u_rows[i, 3 * ll + 1]
+            c3 = u_rows[i, 3 * ll + 2]
+            alpha += a * e[3 * ll] + b * e[3 * ll + 1] + c3 * e[3 * ll + 2]
+            n_i += math.sqrt(a * a + b * b + c3 * c3)
+        if u_times_sigma:
+            inv_s = 1.0 / si
+            alpha *= inv_s
+            n_i *= inv_s
         m_i = 0.0
-        for j in range(n_cols):
-            m_i += abs(vt[i, j]) * rho_sum[j]
+        for c in range(n_c):
+            m_i += abs(v[c, i]) * rho_sum[cols[c]]
         m_i /= si
         g = gamma
         if n_i < m_i:
@@ -627,10 +610,10 @@ def sdls_gesdd_nb(
         g *= term_scale
         scale = alpha / si
         mx = 0.0
-        for j in range(n_cols):
-            phi[j] = scale * vt[i, j]
-            if abs(phi[j]) > mx:
-                mx = abs(phi[j])
+        for c in range(n_c):
+            ph = abs(scale * v[c, i])
+            if ph > mx:
+                mx = ph
         if soft:
             f = g / (g + mx)
         elif mx > g:
@@ -638,9 +621,11 @@ def sdls_gesdd_nb(
         else:
             f = 1.0
         for j in range(n_cols):
-            dpsi[j] += f * phi[j]
-        for j in range(n_cols):
-            vr[rank, j] = vt[i, j]
+            vr[rank, j] = 0.0
+        for c in range(n_c):
+            j = cols[c]
+            dpsi[j] += f * (scale * v[c, i])
+            vr[rank, j] = v[c, i]
         n_out[rank] = n_i
         m_out[rank] = m_i
         rank += 1
@@ -674,14 +659,6 @@ def residuals_nb(targets: FloatArray, pts: FloatArray, residual: FloatArray) -> 
         residual[k] = d
         worst = max(worst, d)
     return worst
-
-
-@numba.njit(cache=True)
-def _sum_nb(x: FloatArray) -> float:
-    acc = 0.0
-    for v in x:
-        acc += v
-    return acc
 
 
 @numba.njit(cache=True)
@@ -761,7 +738,7 @@ def solve_ik_nb(
     # error grows as the unreachable one shrinks
     best_err = err
     since_best = 0
-    best_sum = _sum_nb(residual)
+    best_sum = residual.sum()
     since_best_sum = 0
     while it < max_iter and k_eff > 0:
         if err < tol and it >= min_iter:
@@ -876,7 +853,7 @@ def solve_ik_nb(
             since_best = 0
         else:
             since_best += 1
-        total = _sum_nb(residual)
+        total = residual.sum()
         if total < best_sum * (1.0 - stall_fraction):
             best_sum = total
             since_best_sum = 0
