@@ -44,6 +44,12 @@ def add_mono_accuracy_parser(methods: Any) -> None:
         default=None,
         help="weight of the data-driven arm prior per nat (default 30; 0: off)",
     )
+    m.add_argument(
+        "--initial-pose",
+        action="store_true",
+        help="give the tracker the true pose of the first frame (the paper's assumption 3); "
+        "report these figures apart",
+    )
     m.add_argument("--json", action="store_true", help="print JSON instead of a table")
     m.set_defaults(func=_run)
 
@@ -66,6 +72,7 @@ def _run(args: argparse.Namespace) -> int:
         noise_px=args.noise_px,
         openpose=args.openpose,
         skin=args.skin,
+        initial_pose=args.initial_pose,
         config=MonoConfig(lag=args.lag, cost=args.cost, **prior),
         say=(lambda _line: None) if args.json else print,
     )

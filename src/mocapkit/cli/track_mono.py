@@ -67,13 +67,20 @@ def add_mono_parser(methods: Any) -> None:
         default=None,
         help="weight of the data-driven arm prior per nat (default 30; 0: off)",
     )
+    p.add_argument(
+        "--initial-pose",
+        metavar="JOINTS_CSV",
+        help="the subject's known pose in the first frame (the paper's assumption 3): a "
+        "joints.csv (world frame, mm) whose first row is used; the neck is required",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=_run_mono)
 
 
 def _run_mono(args: argparse.Namespace) -> int:
-    from mocapkit.pipelines.mono import track_mono
+    from mocapkit.pipelines.mono import initial_pose_from, track_mono
     from mocapkit.pipelines.run import find_gaps
+    from mocapkit.tracking.mono.stick import stick_model
     from mocapkit.tracking.mono.tracker import MonoConfig
 
     cfg = MonoConfig(
@@ -83,6 +90,12 @@ def _run_mono(args: argparse.Namespace) -> int:
         lag=args.lag,
         **({} if args.arm_prior_weight is None else {"arm_prior_weight": args.arm_prior_weight}),
     )
+    start = None
+    if args.initial_pose is not None:
+        from mocapkit.io.joints_csv import read_joints_csv
+
+        _, names, joints = read_joints_csv(args.initial_pose)
+        start = initial_pose_from(names, joints[0], stick_model(cfg.legs, cfg.limits))
     run = track_mono(
         args.session,
         args.out,
@@ -91,6 +104,7 @@ def _run_mono(args: argparse.Namespace) -> int:
         config=cfg,
         use_session_lengths=args.session_lengths,
         skin=args.skin,
+        initial_pose=start,
     )
     summary = run.summary()
     if not args.json:  # limbs unseen past the bridge: NaN joints, status in fit.csv

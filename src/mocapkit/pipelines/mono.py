@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -20,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
-from mocapkit.errors import ConfigError, SessionError
+from mocapkit.errors import ConfigError, SessionError, ShapeError
 from mocapkit.io.motion import Motion
 from mocapkit.io.session import Session, load_session
 from mocapkit.io.session_csv import Keypoints, read_keypoints_csv
@@ -190,6 +191,34 @@ def video_lengths(
     return lengths / scale, float("nan")
 
 
+def initial_pose_from(
+    joint_names: Sequence[str], joints_mm: FloatArray, model: StickModel
+) -> FloatArray:
+    """The stick's joints (K, 3) out of one pose of named joints (world frame, mm).
+
+    For `track_mono`'s ``initial_pose``: e.g. the first row of a ``joints.csv``
+    (`mocapkit.io.joints_csv.read_joints_csv`) or of a session's truth. Joints of the
+    stick that the pose lacks are NaN; the neck is required.
+    """
+    p = np.asarray(joints_mm, dtype=float)
+    if p.shape != (len(joint_names), 3):
+        raise ShapeError(
+            f"initial pose: expected ({len(joint_names)}, 3) positions of {list(joint_names)}, "
+            f"found {p.shape}"
+        )
+    names = list(joint_names)
+    if model.joint_names[0] not in names:
+        raise SessionError(
+            f"initial pose: expected the joint {model.joint_names[0]!r} (the stick's root), "
+            f"found {names}"
+        )
+    out = np.full((model.n_joints, 3), np.nan)
+    for k, n in enumerate(model.joint_names):
+        if n in names:
+            out[k] = p[names.index(n)]
+    return out
+
+
 def session_lengths(session: Session, model: StickModel) -> FloatArray:
     """The session's measured link lengths (mm), refused when one is missing."""
     missing = [s for s in model.segments if s not in session.bone_lengths_mm]
@@ -262,8 +291,9 @@ def _run(
     model: StickModel,
     t: FloatArray,
     px: FloatArray,
+    initial: FloatArray | None = None,
 ) -> list[MonoFrame]:
-    tracker = MonoTracker(lengths, cam, dt, cfg, model)
+    tracker = MonoTracker(lengths, cam, dt, cfg, model, initial_pose=initial)
     frames: list[MonoFrame] = []
     with Progress(len(t), "track mono") as prog:
         for ti, p in zip(t, px):
@@ -455,6 +485,7 @@ def track_mono(
     pixels: FloatArray | None = None,
     length_passes: int = 2,
     skin: bool = False,
+    initial_pose: FloatArray | None = None,
 ) -> MonoRun:
     """Track a session with the monocular tracker and write the result folder.
 
@@ -482,6 +513,11 @@ def track_mono(
         with ``config.short_link_weight``).
         Every pass but the last runs without the soft priors of `MonoConfig`
         (`mocapkit.tracking.mono.priors`); the last one with them.
+    initial_pose : (K, 3) float, optional
+        The subject's known pose in the first posed frame (the paper's assumption 3):
+        the stick's joints (``stick_model(config.legs).joint_names``, e.g. picked by
+        `initial_pose_from`) in the world frame, mm, NaN where unknown. Every pass starts
+        from the candidate nearest to it (`MonoTracker`); None: the path's start is free.
     """
     if out_dir is not None:
         check_result_folder(out_dir)  # before the work (the length passes), not after it
@@ -522,6 +558,17 @@ def track_mono(
             f"{kp.source}: neck and pelvis are seen together in no frame, so no pose can be "
             "built (with --skin: the waist cue, the paper's golden belt, was never found)"
         )
+    initial = None
+    if initial_pose is not None:
+        q = np.asarray(initial_pose, dtype=float)
+        if q.shape != (model.n_joints, 3):
+            raise ShapeError(
+                f"track_mono: expected an initial pose of shape ({model.n_joints}, 3) for "
+                f"{model.joint_names}, found {q.shape}"
+            )
+        initial = cam.to_camera(q)  # camera frame, mm; the tracker uses it neck-relative
+        if ortho:
+            initial = initial * scale  # the orthographic model works in px
     refine = length_passes > 1 and not use_session_lengths and cfg.camera_model == "perspective"
     n_refine = length_passes - 1 if refine else 0
     # every pass but the last runs here; the last one streams through the runner below.
@@ -538,11 +585,12 @@ def track_mono(
         arm_prior_weight=0.0,
     )
     for _ in range(n_refine):
-        frames = _run(lengths, cam, dt, paper_cfg, model, t, px)
+        frames = _run(lengths, cam, dt, paper_cfg, model, t, px, initial)
         lengths = refined_lengths(frames, model, lengths, cfg.short_link_weight)
     lengths_mm = lengths / scale if ortho else lengths
     skeleton = output_skeleton(model, lengths_mm)
-    stream = MonoStream(MonoTracker(lengths, cam, dt, cfg, model), skeleton, cam, scale)
+    tracker = MonoTracker(lengths, cam, dt, cfg, model, initial_pose=initial)
+    stream = MonoStream(tracker, skeleton, cam, scale)
     run = run_tracker(
         stream,
         (MonoSample(float(ti), p) for ti, p in zip(t, px)),

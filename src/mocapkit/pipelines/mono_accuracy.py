@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from mocapkit.eval.metrics import evaluate_result
 from mocapkit.io.openpose import openpose_from_canonical, write_openpose_frame
 from mocapkit.io.session import load_session
-from mocapkit.pipelines.mono import MonoRun, track_mono
+from mocapkit.pipelines.mono import MonoRun, initial_pose_from, track_mono
 from mocapkit.skeleton.model import UPPER_BODY_JOINTS
 from mocapkit.synth.session_writer import SynthOptions, synthesize_session
 from mocapkit.tracking.mono.stick import StickModel
@@ -161,9 +161,15 @@ def mono_accuracy(
     say: Callable[[str], None] = lambda _line: None,
     reuse: bool = True,
     skin: bool = False,
+    initial_pose: bool = False,
 ) -> list[MonoClipAccuracy]:
     """Render (or reuse), track from noisy true keypoints (or OpenPose JSON, or the video
-    by skin blobs with ``skin``), and evaluate each clip."""
+    by skin blobs with ``skin``), and evaluate each clip.
+
+    With ``initial_pose`` the tracker is given the true pose of the first frame (the
+    paper's assumption 3; `mocapkit.pipelines.mono.track_mono`), so those figures are
+    to be reported apart from the default ones.
+    """
     if skin and openpose:
         from mocapkit.errors import ConfigError
 
@@ -182,16 +188,26 @@ def mono_accuracy(
                 SynthOptions(rig="mono", start_s=start, seconds=seconds, seed=seed, overwrite=True),
             )
         s, cam, names, px = noisy_keypoints(session, _model(cfg), noise_px, seed)
-        out = base / source
+        out = base / (source + ("_initial" if initial_pose else ""))
+        first_pose = None
+        if initial_pose:
+            assert s.truth is not None
+            first_pose = initial_pose_from(s.truth.joint_names, s.truth.joints_mm[0], _model(cfg))
         if skin:
-            run = track_mono(session, out, camera=cam, config=cfg, skin=True)
+            run = track_mono(
+                session, out, camera=cam, config=cfg, skin=True, initial_pose=first_pose
+            )
         elif openpose:
             folder = base / "openpose_json"
             write_openpose_with_bystander(folder, names, px, seed)
-            run = track_mono(session, out, camera=cam, keypoints=folder, config=cfg)
+            run = track_mono(
+                session, out, camera=cam, keypoints=folder, config=cfg, initial_pose=first_pose
+            )
         else:
             idx = [names.index(n) for n in _model(cfg).joint_names]
-            run = track_mono(session, out, camera=cam, config=cfg, pixels=px[:, idx])
+            run = track_mono(
+                session, out, camera=cam, config=cfg, pixels=px[:, idx], initial_pose=first_pose
+            )
         rep = evaluate_result(out, session, joints=UPPER_BODY_JOINTS)
         truth = s.truth
         assert truth is not None

@@ -41,7 +41,7 @@ def camera() -> Camera:
     return Camera("mono", (640, 480), k, np.zeros(5), look_at((0, -3000, 1250), (0, 0, 1250)))
 
 
-def _track(config: MonoConfig, n_frames: int = 60):
+def _track(config: MonoConfig, n_frames: int = 60, initial_pose=None, keep_tracker=None):  # type: ignore[no-untyped-def]
     joints, names, _ = stick_motion(n_frames)
     model = stick_model(limits=config.limits)
     order = [names.index(n) for n in model.joint_names]
@@ -50,7 +50,9 @@ def _track(config: MonoConfig, n_frames: int = 60):
     px = cam.project(world)
     truth_cam = cam.to_camera(world)
     lengths = np.linalg.norm(model.link_vectors(truth_cam[0]), axis=-1)
-    tracker = MonoTracker(lengths, cam, 1 / FPS, config, model)
+    tracker = MonoTracker(lengths, cam, 1 / FPS, config, model, initial_pose=initial_pose)
+    if keep_tracker is not None:
+        keep_tracker.append(tracker)
     frames = []
     for k in range(n_frames):
         frames += tracker.push(k / FPS, px[k])
@@ -164,3 +166,40 @@ def test_a_dominant_arm_prior_picks_each_frames_most_common_arms() -> None:
         assert prior.cost(model, f.joints_in_camera[None])[0] == pytest.approx(costs.min())
         varied += int(costs.max() > costs.min() + 1e-3)
     assert varied >= 3  # the prior had a choice to make
+
+
+def test_a_known_initial_pose_fixes_the_first_frames_candidate() -> None:
+    """The paper's assumption 3: the first frame keeps the survivor nearest to the given
+    pose (relative to the neck, so a pose at another depth selects the same one)."""
+    cfg = MonoConfig(smooth_lag=0)
+    kept: list[MonoTracker] = []
+    free, truth, model = _track(cfg, 20, keep_tracker=kept)
+    layer = kept[0]._layers[0]
+    assert layer.codes.shape[0] >= 2  # a choice to make
+    # every surviving candidate of the first frame, given as the initial pose 400 mm
+    # deeper and 50 mm aside, becomes the first frame's pose
+    for i in range(layer.codes.shape[0]):
+        start = layer.positions[i] + np.array([50.0, 0.0, 400.0])
+        frames, _, _ = _track(cfg, 20, initial_pose=start)
+        assert frames[0].code == layer.codes[i]
+        np.testing.assert_allclose(frames[0].joints_in_camera, layer.positions[i])
+        assert [f.index for f in frames] == list(range(20))
+    # the true first pose selects the truth's flips on every link out of the image plane
+    frames, _, _ = _track(cfg, 20, initial_pose=truth[0])
+    dz = truth[0, model.child, 2] - truth[0, model.parent, 2]
+    counted = np.abs(dz) > 0.2 * np.linalg.norm(model.link_vectors(truth[0]), axis=-1)
+    bits = (frames[0].code >> np.arange(model.n_links)) & 1
+    np.testing.assert_array_equal(bits[counted], (dz[counted] > 0).astype(int))
+    # only the first frame is constrained: the free path's later pruning statistics hold
+    assert [f.n_survivors for f in frames] == [f.n_survivors for f in free]
+
+
+def test_a_bad_initial_pose_is_refused() -> None:
+    model = stick_model()
+    lengths = np.full(model.n_links, 300.0)
+    with pytest.raises(ShapeError, match=r"initial pose of shape \(9, 3\)"):
+        MonoTracker(lengths, camera(), 1 / FPS, initial_pose=np.zeros((8, 3)))
+    no_neck = np.zeros((9, 3))
+    no_neck[0] = np.nan
+    with pytest.raises(ConfigError, match="needs the neck"):
+        MonoTracker(lengths, camera(), 1 / FPS, initial_pose=no_neck)

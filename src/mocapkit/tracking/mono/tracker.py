@@ -42,6 +42,15 @@ was within -37..+22 mm of the truth in the median, 134-185 mm at the 90th percen
 percentile, window and margin were picked on those two clips. The paper has no such step
 (its camera is orthographic).
 
+Known initial pose (the paper's third assumption, §4: "The initial pose of the subject
+is also known"; optional, ``initial_pose``): the first frame with a pose keeps only the
+surviving candidate nearest to it (mean distance of the joints relative to the neck), so
+the path starts in that pose's flips. Without it the offline path chooses its start
+freely: a link and its mirror through the image plane cost nearly the same in eq. 3
+(a reflection keeps every |alpha|; only perspective breaks the tie), so where the limits
+and priors allow both, the start decides which of the two the path follows
+(docs/mono.md, fifth round: charleston1's left arm).
+
 A frame whose poses are all pruned keeps its unpruned set (recipe M). Pair-state
 decoding is O(N^3) per frame; where a frame has more than ``max_pair_states`` survivors,
 the ones with the lowest first-order forward cost are kept (a beam; exact below the cap).
@@ -246,6 +255,12 @@ class MonoTracker:
     config : MonoConfig
     model : StickModel, optional
         Default: `stick_model` with ``config.legs`` and ``config.limits``.
+    initial_pose : (K, 3) float, optional
+        The known pose of the first posed frame (the paper's assumption 3): the stick's
+        joints in the camera frame, in the tracker's units (mm; px for the orthographic
+        model, whose depth is in px too), NaN where unknown; only positions relative to
+        the neck are used, so its depth need not match the tracker's. That frame keeps
+        only its surviving candidate nearest to it.
     """
 
     def __init__(
@@ -255,6 +270,7 @@ class MonoTracker:
         dt_s: float,
         config: MonoConfig | None = None,
         model: StickModel | None = None,
+        initial_pose: ArrayLike | None = None,
     ) -> None:
         self.config = cfg = config or MonoConfig()
         self.model = model or stick_model(cfg.legs, cfg.limits)
@@ -282,6 +298,22 @@ class MonoTracker:
         self._arm_prior: ArmPrior | None = None
         if cfg.arm_prior_weight > 0:
             self._arm_prior = cfg.arm_prior or default_arm_prior()
+        self._initial: FloatArray | None = None
+        if initial_pose is not None:
+            q = np.asarray(initial_pose, dtype=float)
+            if q.shape != (self.model.n_joints, 3):
+                raise ShapeError(
+                    f"MonoTracker: expected an initial pose of shape ({self.model.n_joints}, 3) "
+                    f"for {self.model.joint_names}, found {q.shape}"
+                )
+            known = np.isfinite(q).all(axis=1)
+            if not known[0] or not known[1:].any():
+                found = [n for n, ok in zip(self.model.joint_names, known) if ok]
+                raise ConfigError(
+                    "MonoTracker: the initial pose needs the neck and at least one other "
+                    f"joint, found finite joints {found}"
+                )
+            self._initial = q - q[0]
 
     # ------------------------------------------------------------ streaming
 
@@ -384,6 +416,9 @@ class MonoTracker:
             )
         unary = self._unary(positions, obs, depth)
         keep = self._beam_select(unary, r_full)
+        if self._initial is not None and np.isfinite(positions).any():
+            keep = np.array([self._nearest_to_initial(positions)], dtype=np.int64)
+            self._initial = None  # only the first posed frame
         layer = _Layer(
             k,
             self._times[k],
@@ -404,6 +439,17 @@ class MonoTracker:
             out.append(self._frame(frame, state))
             self._done.add(frame)
         return out
+
+    def _nearest_to_initial(self, positions: FloatArray) -> int:
+        """Index of the candidate (N, K, 3) nearest to the initial pose, relative to the neck
+        (mean distance over the joints finite in both)."""
+        assert self._initial is not None
+        rel = positions - positions[:, :1]
+        d = np.linalg.norm(rel - self._initial, axis=-1)  # (N, K)
+        ok = np.isfinite(d)
+        n = ok.sum(axis=1)
+        mean = np.where(n > 0, np.where(ok, d, 0.0).sum(axis=1) / np.maximum(n, 1), np.inf)
+        return int(np.argmin(mean))
 
     def _dt(self, a: int, b: int) -> float:
         d = self._times[b] - self._times[a]
