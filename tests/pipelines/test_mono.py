@@ -261,3 +261,59 @@ def test_cli_arm_prior_weight_reaches_the_tracker(tmp_path: Path) -> None:
     a = np.load(tmp_path / "off" / "motion.npz")["joints_mm"]
     b = np.load(tmp_path / "strong" / "motion.npz")["joints_mm"]
     assert not np.allclose(a, b, equal_nan=True)  # the weight changed the chosen poses
+
+
+def _joints_csv(path: Path, names: tuple[str, ...], pose: np.ndarray) -> None:
+    cols = [f"{n}_{a}_mm" for n in names for a in "xyz"]
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["time_s", *cols])
+        w.writerow([0.0, *pose.ravel().tolist()])
+
+
+def test_a_known_initial_pose_from_a_joints_csv_gives_the_first_frames_true_flips(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """World-frame start (joints.csv, canonical names, any order) -> the camera frame of
+    the tracker: the first frame takes the truth's flips on every link out of the image,
+    and each of its surviving candidates, given in the world 300 mm deeper, is chosen."""
+    from mocapkit.pipelines.mono import _apply, initial_pose_from
+
+    session = _session(tmp_path / "s")
+    joints, names, _ = stick_motion(N)
+    model = stick_model()
+    order = list(reversed(range(len(names))))  # the file's order is not the stick's
+    _joints_csv(tmp_path / "start.csv", tuple(names[i] for i in order), joints[0, order])
+    code = main(
+        ["track", "mono", str(session), "--out", str(tmp_path / "r"), "--initial-pose",
+         str(tmp_path / "start.csv"), "--json"]
+    )  # fmt: skip
+    assert code == 0
+    with open(tmp_path / "r" / FIT_FILE, newline="") as fh:
+        first = int(float(next(csv.DictReader(fh))["flips"]))
+    truth_cam = camera().to_camera(joints[0, [names.index(n) for n in model.joint_names]])
+    dz = truth_cam[model.child, 2] - truth_cam[model.parent, 2]
+    counted = np.abs(dz) > 0.2 * np.linalg.norm(model.link_vectors(truth_cam), axis=-1)
+    assert counted.sum() >= 3
+    bits = (first >> np.arange(model.n_links)) & 1
+    np.testing.assert_array_equal(bits[counted], (dz[counted] > 0).astype(int))
+    # the same start through the API
+    start = initial_pose_from(names, joints[0], model)
+    run = track_mono(session, None, initial_pose=start)
+    assert run.frames[0].code == first
+    kept: list[MonoTracker] = []
+    finish = MonoTracker.finish
+
+    def keeping(self: MonoTracker) -> list:  # type: ignore[type-arg]
+        kept.append(self)
+        return finish(self)
+
+    monkeypatch.setattr(MonoTracker, "finish", keeping)
+    track_mono(session, None)
+    layer = kept[-1]._layers[0]  # the last pass's first frame
+    assert layer.codes.shape[0] >= 2
+    for i, code in enumerate(layer.codes):
+        world = _apply(camera(), layer.positions[i] + np.array([0.0, 0.0, 300.0]))
+        assert track_mono(session, None, initial_pose=world).frames[0].code == code
+    with pytest.raises(SessionError, match="expected the joint 'neck'"):
+        initial_pose_from(("head", "pelvis"), joints[0, :2], model)
