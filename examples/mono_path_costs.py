@@ -23,6 +23,12 @@ fields, ``limits`` a JSON object of `LimitConfig` fields). Printed:
    and ``truth`` (the true joints): eq. 3 per link (rad/s^2, errata M1-M3), the clavicle
    prior and each arm's prior in the units of the decoder (times their weights, which
    are those of the settings' last pass), and the flips right per link.
+3. ``perspective cue``: with the true joints (true lengths, true depth), LINK's child
+   moved to the other point of its viewing ray at LINK's length from its parent (the
+   mirror the enumeration makes) and, for each link hanging from that child, whether it
+   can still reach its own child's ray: the frames where it cannot are the only ones
+   where the image residual could tell the mirror from the truth, even with a perfect
+   camera distance.
 """
 
 from __future__ import annotations
@@ -92,6 +98,26 @@ def cost_terms(model: StickModel, cfg: MonoConfig, pos: np.ndarray, dt: float) -
     return out
 
 
+def perspective_cue(
+    model: StickModel, true_cam: np.ndarray, li: int, counted: np.ndarray, focal_px: float
+) -> dict:
+    """Frames (of the counted ones) where the mirror of link ``li`` leaves a link hanging
+    from its child unable to reach its child's ray, and by how much (px at that depth)."""
+    parent, child = true_cam[:, model.parent[li]], true_cam[:, model.child[li]]
+    ray = child / np.linalg.norm(child, axis=1, keepdims=True)
+    mirror = 2 * (parent * ray).sum(axis=1, keepdims=True) * ray - child  # ray-sphere
+    out = {}
+    for lj in np.flatnonzero(model.parent == model.child[li]):
+        end = true_cam[:, model.child[lj]]
+        length = np.linalg.norm(end - child, axis=1)
+        c = end / np.linalg.norm(end, axis=1, keepdims=True)
+        gap = np.linalg.norm(mirror - (mirror * c).sum(axis=1, keepdims=True) * c, axis=1) - length
+        short = counted & (gap > 0)
+        px = np.where(short, gap, 0.0) / np.linalg.norm(end, axis=1) * focal_px
+        out[model.segments[lj]] = {"frames": int(short.sum()), "px_max": round(float(px.max()), 1)}
+    return out
+
+
 def main(work: str, clip: str = "charleston1.amc", link: str = "left_upper_arm",
          settings: str = "{}") -> None:  # fmt: skip
     data = find_shared_data()
@@ -147,6 +173,9 @@ def main(work: str, clip: str = "charleston1.amc", link: str = "left_upper_arm",
                       "counted": int(counted[:, li].sum()), "wrong": wrong, "absent": absent,
                       "pruned_by (kind 0 angle, 1 backward, 3 capsule, 4 elbow plane)":
                       pruned_by}))  # fmt: skip
+    print(json.dumps({"perspective cue (true depth and lengths)":
+                      perspective_cue(model, true_cam, li, counted[:, li],
+                                      float(s.camera(cam).K[0, 0]))}))  # fmt: skip
     dt = float(np.median(np.diff([f.time_s for f in run.frames])))
     paths = {
         "free": free,
