@@ -317,3 +317,23 @@ def test_a_known_initial_pose_from_a_joints_csv_gives_the_first_frames_true_flip
         assert track_mono(session, None, initial_pose=world).frames[0].code == code
     with pytest.raises(SessionError, match="expected the joint 'neck'"):
         initial_pose_from(("head", "pelvis"), joints[0, :2], model)
+
+
+def test_a_known_initial_pose_reaches_the_orthographic_model_in_px(tmp_path: Path) -> None:
+    """The orthographic model works in px (depth too): the world-frame start is scaled by
+    the image's px per mm; among the first frame's 64 survivors it picks the truth's flips."""
+    from mocapkit.pipelines.mono import initial_pose_from
+
+    session = _session(tmp_path / "s")
+    joints, names, _ = stick_motion(N)
+    model = stick_model()
+    cfg = MonoConfig(camera_model="orthographic")
+    run = track_mono(
+        session, None, config=cfg, initial_pose=initial_pose_from(names, joints[0], model)
+    )
+    assert run.frames[0].n_survivors >= 32
+    truth_cam = camera().to_camera(joints[0, [names.index(n) for n in model.joint_names]])
+    dz = truth_cam[model.child, 2] - truth_cam[model.parent, 2]
+    counted = np.abs(dz) > 0.2 * np.linalg.norm(model.link_vectors(truth_cam), axis=-1)
+    bits = (run.frames[0].code >> np.arange(model.n_links)) & 1
+    np.testing.assert_array_equal(bits[counted], (dz[counted] > 0).astype(int))

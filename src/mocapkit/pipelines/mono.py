@@ -291,9 +291,8 @@ def _run(
     model: StickModel,
     t: FloatArray,
     px: FloatArray,
-    initial: FloatArray | None = None,
 ) -> list[MonoFrame]:
-    tracker = MonoTracker(lengths, cam, dt, cfg, model, initial_pose=initial)
+    tracker = MonoTracker(lengths, cam, dt, cfg, model)
     frames: list[MonoFrame] = []
     with Progress(len(t), "track mono") as prog:
         for ti, p in zip(t, px):
@@ -516,8 +515,10 @@ def track_mono(
     initial_pose : (K, 3) float, optional
         The subject's known pose in the first posed frame (the paper's assumption 3):
         the stick's joints (``stick_model(config.legs).joint_names``, e.g. picked by
-        `initial_pose_from`) in the world frame, mm, NaN where unknown. Every pass starts
-        from the candidate nearest to it (`MonoTracker`); None: the path's start is free.
+        `initial_pose_from`) in the world frame, mm, NaN where unknown. The last pass
+        starts from the candidate nearest to it (`MonoTracker`); the length passes, like
+        the priors, leave it out (given to them too, it changed 01_09's refined lengths
+        online and cost 16 mm there, docs/mono.md fifth round). None: the start is free.
     """
     if out_dir is not None:
         check_result_folder(out_dir)  # before the work (the length passes), not after it
@@ -572,7 +573,8 @@ def track_mono(
     refine = length_passes > 1 and not use_session_lengths and cfg.camera_model == "perspective"
     n_refine = length_passes - 1 if refine else 0
     # every pass but the last runs here; the last one streams through the runner below.
-    # The length passes run the paper's graph (no soft priors): the refined lengths follow
+    # The length passes run the paper's graph (no soft priors, no initial pose, which
+    # changed 01_09's online lengths, 36 -> 52 mm): the refined lengths follow
     # the first pass's poses, and with the clavicle prior there they changed enough to
     # turn 01_09 from OpenPose JSON from 62 to 113 mm (docs/mono.md).
     paper_cfg = replace(
@@ -585,7 +587,7 @@ def track_mono(
         arm_prior_weight=0.0,
     )
     for _ in range(n_refine):
-        frames = _run(lengths, cam, dt, paper_cfg, model, t, px, initial)
+        frames = _run(lengths, cam, dt, paper_cfg, model, t, px)
         lengths = refined_lengths(frames, model, lengths, cfg.short_link_weight)
     lengths_mm = lengths / scale if ortho else lengths
     skeleton = output_skeleton(model, lengths_mm)
