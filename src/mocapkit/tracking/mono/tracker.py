@@ -310,8 +310,8 @@ class MonoTracker:
             if not known[0] or not known[1:].any():
                 found = [n for n, ok in zip(self.model.joint_names, known) if ok]
                 raise ConfigError(
-                    "MonoTracker: the initial pose needs the neck and at least one other "
-                    f"joint, found finite joints {found}"
+                    "MonoTracker: expected an initial pose with the neck and at least one "
+                    f"other joint finite (it needs the neck), found finite joints {found}"
                 )
             self._initial = q - q[0]
 
