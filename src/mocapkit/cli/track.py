@@ -187,6 +187,7 @@ def _run_hybrid(args: argparse.Namespace) -> int:
         summarize_fit([], warn_mm, warn_fraction)
         if args.up is not None:
             parse_up(args.up)
+        calibration = _calibration(args.calibration, args.no_static_calibration)
         run = track_hybrid_marker_file(
             read_markers(args.markers),
             args.marker_set,
@@ -196,7 +197,7 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             up=args.up,
             world_output=args.world_frame,
             posture=args.posture,
-            calibration=_calibration(args.calibration, args.no_static_calibration),
+            calibration=calibration,
             static=None if args.static is None else read_markers(args.static),
             proportions=args.proportions,
         )
