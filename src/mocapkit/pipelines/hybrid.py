@@ -1111,7 +1111,7 @@ def _calibrate_dynamic(
     fit = {s.name: np.array([p.fit.get(f"{s.name}_mm", np.nan) for p in poses]) for s in multi}
     members = {s.name: {m: world.positions_mm[:, world.index(m)] for m in s.members} for s in multi}
     try:
-        calib = calibrate_members_on_motion(sk, q, fit, members)
+        calib = calibrate_members_on_motion(sk, q, world.time_s, fit, members)
     except ConfigError as exc:
         return None, str(exc)
     return calib, calib.summary()
