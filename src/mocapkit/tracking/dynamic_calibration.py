@@ -27,7 +27,8 @@ calibration. Offsets are from the effector's default point, as
 
 One pass only: tracking again with the offsets and calibrating again returns nearly the
 offsets it started from (the IK now follows the members: per-frame offsets within 1 mm of
-their median), and on the tennis serve it moved the right elbow's error 114 -> 123 mm.
+their median), and on the tennis serve (every fitting frame used) it moved the right
+elbow's error 114 -> 123 mm.
 """
 
 from __future__ import annotations
@@ -49,8 +50,8 @@ FloatArray = NDArray[np.float64]
 #: Largest distance (mm) of a set's centre from its model point on a frame that is used:
 #: frames where the positions-only model does not reach the set (the tennis serve's
 #: racket drop: 30-110 mm) say nothing about where the members sit on it. The tennis
-#: serve's figures at 5 / 10 / 30 mm: elbows 94 / 123, 91 / 114, 89 / 126 mm (left /
-#: right mean).
+#: serve's figures at 5 / 10 / 30 mm with this the only condition: elbows 94 / 123,
+#: 91 / 114, 89 / 126 mm (left / right mean).
 MAX_FIT_MM = 10.0
 #: Share of the arm's length (shoulder-elbow plus elbow-wrist) by which a hand set's
 #: wrist must sit below its shoulder on a frame that is used: the arm hanging, as in the
@@ -74,7 +75,8 @@ class DynamicCalibration:
     spread_mm : dict of str to float
         Per set: the largest over its members of the median distance of the per-frame
         offsets from their median (how much the positions-only model's turn of the
-        joint wandered: the tennis serve's glasses 33-40 mm, wrist bars 18-25 mm).
+        joint wandered over the frames used: the tennis serve's glasses 37 mm, wrist bars
+        21 and 15 mm).
     frames_used : dict of str to int
         Per set: the frames the median is over.
     n_frames : int
