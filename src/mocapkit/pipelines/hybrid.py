@@ -830,9 +830,9 @@ def track_hybrid_marker_file(
         (`mocapkit.tracking.dynamic_calibration`); ``auto`` (default): static where a
         still window is found, else dynamic where a hand set has two or more members
         (a head set's orientation alone turns the trunk with the head: the basket
-        sprint's elbow error 140 -> 237 mm), else none; ``none``: set positions only. Not done when
-        ``config`` already gives ``member_offsets_mm``. ``calibration_note`` says which
-        ran.
+        sprint's elbow error 140 -> 242 mm), else none; ``none``: set positions only. Not
+        done when ``config`` already gives ``member_offsets_mm``. ``calibration_note``
+        says which ran.
     static : MarkerData, optional
         A separate static trial (same lab and marker names) to calibrate on; its stillest
         window anywhere is used. Default: the stillest window in the take's first
@@ -963,7 +963,7 @@ def track_hybrid_marker_file(
         if calib is None and calibration == "auto" and not oriented & set(HAND_SETS):
             # a head set's orientation without a hand set's turns the trunk with the head
             # (the model has the spine's and neck's twists only with both): calibrated on
-            # the motion, the basket sprint's elbow went 140 -> 237 mm
+            # the motion, the basket sprint's elbow went 140 -> 242 mm
             note = f"{note}; no hand set with two or more members to calibrate on the motion"
         elif calib is None and calibration in ("auto", "dynamic") and oriented:
             failed = f"{note}; " if calibration == "auto" else ""
