@@ -20,9 +20,11 @@ it. The frames used are those where that is most likely: the set's centre fits t
 under way, where the warm-started IK lags and the forearm turns), and for a hand set the
 model's arm hangs (wrist below the shoulder by `HANGING_FRACTION` of the arm's length:
 the relaxed pose, near which the relaxed-pose task's swivel is right). On the tennis serve
-at three statures (1714 / 1731 / 1748 mm) these frames give elbows of 103 / 102 mm mean
+at three statures (1714 / 1731 / 1748 mm) these frames give elbows of 101 / 98 mm mean
 (left / right) against 103 / 123 with every frame that fits, and 97 / 102 with the static
-calibration. Offsets are from the effector's default point, as
+calibration; on the ezc3d Qualisys take, which moves throughout, 87 / 40 against 77 / 26
+with every frame that fits (105 / 39 positions only): no choice was best on both
+(docs/hybrid.md). Offsets are from the effector's default point, as
 ``HybridConfig.member_offsets_mm``.
 
 One pass only: tracking again with the offsets and calibrating again returns nearly the
