@@ -112,21 +112,27 @@ def test_shared_c3d_z_up_and_as_y_up(shared_data, name, sets):
 
 
 def test_tennis_y_up_tracks_like_z_up(shared_data, tmp_path):
-    """The same take stored Y-up (as an OpenSim TRC) gives the same elbows, in its frame."""
+    """The same take stored Y-up (as an OpenSim TRC) gives the same elbows, in its frame,
+    with the member offsets calibrated on the still start (default) or on the motion."""
     from mocapkit.io.joints_csv import read_joints_csv
     from mocapkit.io.marker_files import read_markers
     from mocapkit.pipelines.hybrid import track_hybrid_marker_file
 
     m = read_markers(shared_data / "c3d" / TENNIS[0])
     n = 150
+    dyn_z = track_hybrid_marker_file(_rotated(m, np.eye(3), n), TENNIS[1], calibration="dynamic")
+    dyn_y = track_hybrid_marker_file(_rotated(m, YUP_FROM_ZUP, n), TENNIS[1], calibration="dynamic")
+    assert "dynamic: member offsets calibrated on the motion" in dyn_y.calibration_note
     z_run = track_hybrid_marker_file(_rotated(m, np.eye(3), n), TENNIS[1])
     y_run = track_hybrid_marker_file(_rotated(m, YUP_FROM_ZUP, n), TENNIS[1], out_dir=tmp_path)
     assert (z_run.frame.up, y_run.frame.up) == ("z", "y")
-    for side in ("left", "right"):
-        z_elbow = z_run.motion.joint(f"{side}_elbow")
-        y_elbow = y_run.motion.joint(f"{side}_elbow")
-        # outputs are in each file's frame: map the Y-up one back to compare
-        np.testing.assert_allclose(y_elbow @ YUP_FROM_ZUP, z_elbow, atol=1.0)
+    assert "static: member offsets" in y_run.calibration_note
+    for z, y in ((z_run, y_run), (dyn_z, dyn_y)):
+        for side in ("left", "right"):
+            z_elbow = z.motion.joint(f"{side}_elbow")
+            y_elbow = y.motion.joint(f"{side}_elbow")
+            # outputs are in each file's frame: map the Y-up one back to compare
+            np.testing.assert_allclose(y_elbow @ YUP_FROM_ZUP, z_elbow, atol=1.0)
     # joints.csv is written in the file's (Y-up) frame
     _, names, written_mm = read_joints_csv(tmp_path / "joints.csv")
     np.testing.assert_allclose(

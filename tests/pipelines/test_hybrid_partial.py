@@ -169,3 +169,14 @@ def test_cli_posture_and_static_options(tmp_path, capsys):
         main(["track", "hybrid", str(tmp_path), "--static", "x.c3d", "--out", str(tmp_path)]) == 2
     )
     assert "--static apply to --markers" in capsys.readouterr().err
+    assert main([*args, "--no-static-calibration", "--calibration", "dynamic"]) == 2
+    assert (
+        "--no-static-calibration means --calibration none; found --calibration dynamic"
+        in capsys.readouterr().err
+    )
+    session = ["track", "hybrid", str(tmp_path), "--out", str(tmp_path)]
+    assert main([*session, "--calibration", "dynamic"]) == 2
+    assert "--calibration apply to --markers" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main([*args, "--calibration", "functional"])
+    assert "invalid choice: 'functional'" in capsys.readouterr().err

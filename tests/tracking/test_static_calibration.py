@@ -156,9 +156,7 @@ def test_marker_file_calibrates_members_and_reports_them(tmp_path):
     assert {"LFHD_mm", "LWRA_mm", "rms_mm", "max_mm"} <= set(fit)
     assert rows[-1]["worst"] in {n for n in fit} | {k.removesuffix("_mm") for k in fit}
     assert np.nanmax(fit["LFHD_mm"]) < 10.0
-    off = track_hybrid_marker_file(
-        markers, SPECS, height_mm=1700.0, up="z", static_calibration=False
-    )
+    off = track_hybrid_marker_file(markers, SPECS, height_mm=1700.0, up="z", calibration="none")
     assert off.calibration is None and "positions only" in off.calibration_note
     assert not any("LFHD_mm" in r.fit for r in off.results)
 
@@ -177,7 +175,7 @@ def test_separate_static_trial():
     pos = np.stack([members[n] for n in names], axis=1)
     static = MarkerData(t[:60], names, pos[:60], RATE_HZ, "static.c3d")
     take = MarkerData(t[60:], names, pos[60:], RATE_HZ, "take.c3d")
-    alone = track_hybrid_marker_file(take, SPECS, height_mm=1700.0, up="z")
+    alone = track_hybrid_marker_file(take, SPECS, height_mm=1700.0, up="z", calibration="static")
     assert alone.calibration is None and "no window of 1 s in the take" in alone.calibration_note
     run = track_hybrid_marker_file(take, SPECS, height_mm=1700.0, up="z", static=static)
     assert run.calibration is not None and "static trial static.c3d" in run.calibration_note

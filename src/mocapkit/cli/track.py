@@ -100,9 +100,20 @@ def register(subparsers: Any) -> None:
         "take's first 5 s)",
     )
     hyb.add_argument(
+        "--calibration",
+        choices=("auto", "static", "dynamic", "none"),
+        default=None,
+        help="with --markers: how the marker sets' member offsets are calibrated: static "
+        "(on a still second, positions only where none is found), dynamic (on the motion: "
+        "the take tracked from the set centres, each member's median place on its joint), "
+        "auto (default: static where a still second is found, else dynamic where a hand "
+        "set has two or more members) or none (the sets' positions only); the run prints "
+        "which was used",
+    )
+    hyb.add_argument(
         "--no-static-calibration",
         action="store_true",
-        help="with --markers: do not calibrate member offsets; use the sets' positions only",
+        help="with --markers: the same as --calibration none",
     )
     hyb.add_argument(
         "--proportions",
@@ -176,6 +187,7 @@ def _run_hybrid(args: argparse.Namespace) -> int:
         summarize_fit([], warn_mm, warn_fraction)
         if args.up is not None:
             parse_up(args.up)
+        calibration = _calibration(args.calibration, args.no_static_calibration)
         run = track_hybrid_marker_file(
             read_markers(args.markers),
             args.marker_set,
@@ -185,14 +197,14 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             up=args.up,
             world_output=args.world_frame,
             posture=args.posture,
-            static_calibration=not args.no_static_calibration,
+            calibration=calibration,
             static=None if args.static is None else read_markers(args.static),
             proportions=args.proportions,
         )
         print(run.frame.summary())
         if run.posture is not None:
             print(_posture_line(run.posture))
-        print(f"static calibration: {run.calibration_note}")
+        print(f"member calibration: {run.calibration_note}")
         if not run.frame.sure:
             print(
                 f"WARNING: the up axis {run.frame.up!r} of {args.markers} is a guess; "
@@ -215,6 +227,7 @@ def _run_hybrid(args: argparse.Namespace) -> int:
                 ("--world-frame", args.world_frame),
                 ("--static", args.static is not None),
                 ("--no-static-calibration", args.no_static_calibration),
+                ("--calibration", args.calibration is not None),
             )
             if on
         ]
@@ -257,6 +270,18 @@ def _run_hybrid(args: argparse.Namespace) -> int:
     for line in report.warnings():
         print(line, file=sys.stderr)
     return 0
+
+
+def _calibration(chosen: str | None, no_static: bool) -> str:
+    """The member calibration of ``--calibration`` and ``--no-static-calibration``."""
+    from mocapkit.errors import SessionError
+
+    if no_static and chosen not in (None, "none"):
+        raise SessionError(
+            f"track hybrid: --no-static-calibration means --calibration none; found "
+            f"--calibration {chosen} with it"
+        )
+    return "none" if no_static else (chosen or "auto")
 
 
 def _posture_line(choice: Any) -> str:

@@ -42,6 +42,10 @@ from mocapkit.skeleton.scaling import (
 from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.arm_refinement import RefineConfig
 from mocapkit.tracking.base import FrameResult
+from mocapkit.tracking.dynamic_calibration import (
+    DynamicCalibration,
+    calibrate_members_on_motion,
+)
 from mocapkit.tracking.hybrid import (
     MARKER_SETS,
     HybridConfig,
@@ -69,6 +73,14 @@ from mocapkit.tracking.static_calibration import (
 )
 
 FloatArray = NDArray[np.float64]
+
+#: How `track_hybrid_marker_file` calibrates the member offsets of a raw file's marker
+#: sets: ``auto`` (static where a still window is found, else on the motion where a hand
+#: set has two or more members), ``static``, ``dynamic`` (on the motion) or ``none`` (set
+#: positions only).
+CALIBRATIONS: tuple[str, ...] = ("auto", "static", "dynamic", "none")
+#: The hand sets, whose orientation (a wrist bar's) fixes the elbow's swivel.
+HAND_SETS: tuple[str, ...] = ("left_hand", "right_hand")
 
 
 #: Body proportions `hybrid_skeleton` gives its model: Table 1's scaled by stature, or a
@@ -719,17 +731,18 @@ class MarkerFileRun:
         The tracker's per-frame results (fit figures in ``fit``).
     posture : PostureChoice
         The posture used and why, the stature and (seated) the seat's height.
-    calibration : MemberCalibration or None
-        The member offsets calibrated on a static interval, when that ran.
+    calibration : MemberCalibration or DynamicCalibration or None
+        The member offsets calibrated on a static interval or on the motion, when either
+        ran.
     calibration_note : str
-        What the static calibration did, or why it did not run.
+        Which calibration was used and what it did, or why none ran.
     """
 
     motion: Motion
     frame: LabFrame
     results: list[FrameResult]
     posture: PostureChoice | None = None
-    calibration: MemberCalibration | None = None
+    calibration: MemberCalibration | DynamicCalibration | None = None
     calibration_note: str = ""
 
 
@@ -764,7 +777,7 @@ def track_hybrid_marker_file(
     up: str | None = None,
     world_output: bool = False,
     posture: str = "standing",
-    static_calibration: bool = True,
+    calibration: str = "auto",
     static: MarkerData | None = None,
     proportions: str = "anthropometric",
 ) -> MarkerFileRun:
@@ -807,11 +820,19 @@ def track_hybrid_marker_file(
         the stature (given, or from the reach) and takes standing or seated
         (`mocapkit.tracking.posture.choose_posture`); a standing subject's stature is
         then estimated as before (from the head over standing frames).
-    static_calibration : bool
-        Calibrate the member offsets of the sets with two or more members on a static
-        interval (`mocapkit.tracking.static_calibration`), so their orientation drives the
-        IK too (the glasses' turn, the wrist bar's direction); False: set positions only.
-        Not done when ``config`` already gives ``member_offsets_mm``.
+    calibration : str
+        How the member offsets of the sets with two or more members are calibrated, so
+        their orientation drives the IK too (the glasses' turn, the wrist bar's
+        direction); one of `CALIBRATIONS`. ``static``: on a still interval
+        (`mocapkit.tracking.static_calibration`; positions only where none is found);
+        ``dynamic``: on the motion, the take tracked from the set centres first and each
+        member's offset the median over its frames
+        (`mocapkit.tracking.dynamic_calibration`); ``auto`` (default): static where a
+        still window is found, else dynamic where a hand set has two or more members
+        (a head set's orientation alone turns the trunk with the head: the basket
+        sprint's elbow error 140 -> 242 mm), else none; ``none``: set positions only. Not
+        done when ``config`` already gives ``member_offsets_mm``. ``calibration_note``
+        says which ran.
     static : MarkerData, optional
         A separate static trial (same lab and marker names) to calibrate on; its stillest
         window anywhere is used. Default: the stillest window in the take's first
@@ -835,6 +856,13 @@ def track_hybrid_marker_file(
     if out_dir is not None:
         check_result_folder(out_dir)  # before the work, not after it
     check_plausible_markers(markers)
+    if calibration not in CALIBRATIONS:
+        raise unknown_name("calibration", calibration, CALIBRATIONS)
+    if static is not None and calibration in ("dynamic", "none"):
+        raise ConfigError(
+            f"calibration: a static trial is for calibration 'static' or 'auto', found "
+            f"{calibration!r} with one"
+        )
     sets = parse_marker_sets(list(marker_sets))
     names = [s.name for s in sets]
     extra = [n for n in names if n not in MARKER_SETS]
@@ -859,7 +887,7 @@ def track_hybrid_marker_file(
     given_members = frozenset(config.member_offsets_mm) if config is not None else frozenset()
     oriented = given_members or (
         frozenset(s.name for s in sets if len(s.members) >= 2)
-        if static_calibration
+        if calibration != "none"
         else frozenset()
     )
 
@@ -919,18 +947,34 @@ def track_hybrid_marker_file(
     )
     if cfg.posture != choice.posture:
         cfg = replace(cfg, posture=choice.posture)
-    calibration, note = None, "off (positions only)"
+    calib: MemberCalibration | DynamicCalibration | None = None
+    note = "none (positions only)"
     members: dict[str, FloatArray] = {}
-    if static_calibration and not cfg.member_offsets_mm:
-        calibration, note = _calibrate_static(skeleton, cfg, sets, world, static, frame)
-        if calibration is not None:
-            cfg = replace(cfg, member_offsets_mm=calibration.offsets_mm)
-        elif oriented:
-            # no orientation after all: the model without the DoFs it would have driven
-            # (the same rest geometry, so the seat and the head-set offset stand)
-            skeleton = model(height_mm, frozenset())
-            if choice.posture == "seated":
-                skeleton = _seat(skeleton, head_pos[:, 2], choice)[0]
+    if calibration != "none" and not cfg.member_offsets_mm:
+        # the model without the DoFs the sets' orientation would drive (the same rest
+        # geometry and joint frames at those DoFs' zero, so the seat, the head-set offset
+        # and offsets calibrated on it stand)
+        plain = model(height_mm, frozenset())
+        if choice.posture == "seated":
+            plain = _seat(plain, head_pos[:, 2], choice)[0]
+        if calibration in ("auto", "static"):
+            calib, note = _calibrate_static(skeleton, cfg, sets, world, static, frame)
+            note = f"static: {note}"
+        if calib is None and calibration == "auto" and not oriented & set(HAND_SETS):
+            # a head set's orientation without a hand set's turns the trunk with the head
+            # (the model has the spine's and neck's twists only with both): calibrated on
+            # the motion, the basket sprint's elbow went 140 -> 242 mm
+            note = f"{note}; no hand set with two or more members to calibrate on the motion"
+        elif calib is None and calibration in ("auto", "dynamic") and oriented:
+            failed = f"{note}; " if calibration == "auto" else ""
+            calib, how = _calibrate_dynamic(plain, cfg, sets, world, height_mm, timer)
+            note = f"{failed}dynamic: {how}"
+        if calib is not None:
+            cfg = replace(cfg, member_offsets_mm=calib.offsets_mm)
+        else:
+            note = f"{note}; member offsets not calibrated (positions only)"
+            if oriented:
+                skeleton = plain
     elif cfg.member_offsets_mm:
         note = "member offsets given"
     for set_members in cfg.member_offsets_mm.values():
@@ -966,7 +1010,7 @@ def track_hybrid_marker_file(
     if out_dir is not None:
         with timer.stage("write"):
             write_run_folder(out_dir, motion, poses)
-    return MarkerFileRun(motion, frame, list(poses), choice, calibration, note)
+    return MarkerFileRun(motion, frame, list(poses), choice, calib, note)
 
 
 def head_band_offset_mm(skeleton: Skeleton) -> tuple[float, float, float]:
@@ -1007,7 +1051,7 @@ def _calibrate_static(
 
     multi = [s for s in sets if len(s.members) >= 2]
     if not multi:
-        return None, "no marker set has two or more members: positions only"
+        return None, "no marker set has two or more members"
     source = world if static is None else to_world(static, frame)
     where = "the take" if static is None else f"static trial {Path(static.source).name}"
     pos = evaluate_marker_sets(source, sets)
@@ -1017,8 +1061,7 @@ def _calibrate_static(
         first = f" (first {STATIC_SEARCH_S:g} s)" if static is None else ""
         return None, (
             f"no window of {STATIC_WINDOW_S:g} s in {where}{first} sees every marker set "
-            f"and moves less than {MAX_STATIC_RMS_MM:g} mm RMS; member offsets not "
-            "calibrated (positions only)"
+            f"and moves less than {MAX_STATIC_RMS_MM:g} mm RMS"
         )
     members = {
         s.name: {m: source.positions_mm[:, source.index(m)] for m in s.members} for s in multi
@@ -1036,6 +1079,42 @@ def _calibrate_static(
         f"member offsets of {', '.join(calib.offsets_mm)} calibrated on {where} over "
         f"{interval.summary()}; spread {spread}"
     )
+
+
+def _calibrate_dynamic(
+    sk: Skeleton,
+    cfg: HybridConfig,
+    sets: Sequence[MarkerSet],
+    world: MarkerData,
+    height_mm: float,
+    timer: StageTimer,
+) -> tuple[DynamicCalibration | None, str]:
+    """Member offsets of the sets with two or more members calibrated on the motion:
+    ``world`` tracked from the set centres with ``sk`` (the model without the sets'
+    orientation DoFs), then `calibrate_members_on_motion`; None and why when no set
+    fits on enough frames."""
+    from mocapkit.io.marker_sets import evaluate_marker_sets
+
+    multi = [s for s in sets if len(s.members) >= 2]
+    if not multi:
+        return None, "no marker set has two or more members"
+    pos = evaluate_marker_sets(world, sets)
+    _sk, q, poses = track_hybrid_marker_arrays(
+        world.time_s,
+        {s.name: pos[:, i] for i, s in enumerate(sets)},
+        height_mm,
+        replace(cfg, member_offsets_mm={}),
+        label="calibration pass (positions only)",
+        timer=timer,
+        skeleton=sk,
+    )
+    fit = {s.name: np.array([p.fit.get(f"{s.name}_mm", np.nan) for p in poses]) for s in multi}
+    members = {s.name: {m: world.positions_mm[:, world.index(m)] for m in s.members} for s in multi}
+    try:
+        calib = calibrate_members_on_motion(sk, q, world.time_s, fit, members)
+    except ConfigError as exc:
+        return None, str(exc)
+    return calib, calib.summary()
 
 
 def bench_ik(n_frames: int = 2000, repeats: int = 5, rate_hz: float = 50.0) -> dict[str, float]:
