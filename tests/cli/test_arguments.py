@@ -70,6 +70,19 @@ def test_accuracy_oriented_sets_are_parsed_when_read(capsys: pytest.CaptureFixtu
     assert "argument --oriented-sets: expected 'none' or comma-separated marker sets" in err
 
 
+def test_accuracy_jitter_repeats_are_counts_and_the_jitter_positive(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    args = build_parser().parse_args(["accuracy", "hybrid", "--jitter-repeats", "4"])
+    assert args.jitter_repeats == 4 and args.jitter_mm == 1e-6
+    args = build_parser().parse_args(["accuracy", "hybrid", "--jitter-mm", "1e-5"])
+    assert args.jitter_repeats == 0 and args.jitter_mm == 1e-5
+    err = _usage_error(["accuracy", "hybrid", "--jitter-repeats", "-1"], capsys)
+    assert "argument --jitter-repeats: expected an integer >= 0, found -1" in err
+    err = _usage_error(["accuracy", "hybrid", "--jitter-mm", "0"], capsys)
+    assert "argument --jitter-mm: expected a number > 0, found 0" in err
+
+
 @pytest.mark.parametrize(
     ("option", "value", "reason"),
     [

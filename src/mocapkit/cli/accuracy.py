@@ -6,8 +6,16 @@ import argparse
 from typing import Any
 
 from mocapkit.cli.accuracy_stereo import register_method as register_stereo
-from mocapkit.cli.args import mocap_folder, parsed_by
-from mocapkit.pipelines.accuracy import format_rows, hybrid_accuracy, summary, to_json
+from mocapkit.cli.args import mocap_folder, number, parsed_by
+from mocapkit.pipelines.accuracy import (
+    JITTER_MM,
+    format_rows,
+    hybrid_accuracy_repeats,
+    repeat_summary,
+    repeats_to_json,
+    summary,
+    to_json,
+)
 from mocapkit.pipelines.hybrid import parse_oriented_sets
 
 
@@ -28,6 +36,22 @@ def register(subparsers: Any) -> None:
     h.add_argument("--work", default="accuracy-output", help="folder for sessions and results")
     h.add_argument("--seed", type=int, default=0)
     h.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    h.add_argument(
+        "--jitter-repeats",
+        metavar="N",
+        type=number(int, at_least=0),
+        default=0,
+        help="track N copies of each session with every marker moved by a seeded amount "
+        "up to --jitter-mm and report the mean over them and their spread (the figures "
+        "are chaotic in round-off; default 0: one run on the sessions as rendered)",
+    )
+    h.add_argument(
+        "--jitter-mm",
+        metavar="MM",
+        type=number(above=0.0),
+        default=JITTER_MM,
+        help=f"half-width of the marker jitter of --jitter-repeats (default {JITTER_MM:g} mm)",
+    )
     orientation = h.add_mutually_exclusive_group()
     orientation.add_argument(
         "--positions-only",
@@ -54,22 +78,39 @@ def run(args: argparse.Namespace) -> int:
     say = (lambda _line: None) if args.json else print
     if not args.json:
         print(format_rows([]))
-    rows = hybrid_accuracy(
+    runs = hybrid_accuracy_repeats(
         mocap,
         args.work,
         args.clips,
         args.seed,
         say=say,
         oriented_sets=() if args.positions_only else args.oriented_sets,
+        repeats=args.jitter_repeats,
+        jitter_mm=args.jitter_mm,
     )
     if args.json:
-        print(to_json(rows))
-    else:
+        print(to_json(runs[0]) if args.jitter_repeats == 0 else repeats_to_json(runs))
+        return 0
+    for r, rows in enumerate(runs):
         s = summary(rows)
         change_pct = round(-100.0 * s["elbow_reduction"])  # 0, not -0, when unchanged
+        label = "mean" if args.jitter_repeats == 0 else f"[{r}] mean"
         print(
-            f"mean: elbow {s['elbow_ik_mm']:.1f} -> {s['elbow_video_mm']:.1f} mm "
+            f"{label}: elbow {s['elbow_ik_mm']:.1f} -> {s['elbow_video_mm']:.1f} mm "
             f"({change_pct:+d} % with video); upper-body MPJPE "
             f"{s['mpjpe_ik_mm']:.1f} -> {s['mpjpe_video_mm']:.1f} mm"
+        )
+    if args.jitter_repeats > 0:
+        rs = repeat_summary(runs)
+
+        def fig(key: str) -> str:
+            f = rs[key]
+            return f"{f['mean']:.1f} ({f['min']:.1f}-{f['max']:.1f}, sem {f['sem']:.1f})"
+
+        print(
+            f"over {args.jitter_repeats} jittered repeats (+-{args.jitter_mm:g} mm), mean "
+            f"(min-max, standard error): elbow {fig('elbow_ik_mm')} -> "
+            f"{fig('elbow_video_mm')} mm; upper-body MPJPE {fig('mpjpe_ik_mm')} -> "
+            f"{fig('mpjpe_video_mm')} mm"
         )
     return 0

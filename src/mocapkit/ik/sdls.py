@@ -53,8 +53,20 @@ the columns of the DoFs not frozen, with ``u_i = J_w v_i / sigma_i``: the same S
 response to round-off, 10-20 % cheaper an iteration, and much cheaper where most DoFs
 are frozen (foot re-planting). With exact zeros a locked DoF would stay locked for the
 rest of the solve (measured: solves stall short of their targets); releasing it by the
-sign of ``J^T e`` (the bound's multiplier, as in active-set least squares) let the
-scaled iteration cycle between release and clip (docs/hybrid.md, Speed).
+sign of ``J^T e`` (the gradient at the start of the step) let the scaled iteration
+cycle between release and clip (docs/hybrid.md, Speed).
+
+`IKConfig.lock_release` ``"kkt"`` (the tracker's) releases by the active-set rule
+instead: the locked columns are left out of the SVD like the frozen ones (exact zeros,
+so dgesvd without U serves every iteration), and a locked DoF is released when the
+step that the problem with its column back wants for it points inside the range
+(`free_step_nb`: the damped least-squares step of ``[A a]`` towards the relaxed-pose
+task's step, by Sherman-Morrison over the SVD already taken; for a column with a part
+``c`` outside the others' range it is ``c . e / |c|^2``, the sign of the bound's
+Lagrange multiplier at the constrained optimum, Lawson & Hanson's NNLS rule, not the
+gradient ``J^T e`` at the start). No decision then rests on round-off: targets moved by
+1e-9 mm move a solve by about 1e-9 rad, where the round-off rule moves it by a median
+0.18 rad (tests/ik/test_sdls_locks.py).
 """
 
 from __future__ import annotations
@@ -188,6 +200,24 @@ class IKConfig:
         doc); iterations with a locked DoF still take dgesdd, whose round-off releases
         the lock. Trajectories differ from ``"gesdd"`` by round-off, which the chaotic
         cases amplify (docs/hybrid.md, Speed).
+    lock_release : {"roundoff", "kkt"}
+        How a DoF locked at a joint limit (its column zeroed) is released.
+        ``"roundoff"``: when its step, which is round-off from the SVD's singular
+        vectors of the zeroed column, points inside (the solver as before; with ``svd
+        "gesvd"`` such iterations take dgesdd). ``"kkt"``: the locked columns are left
+        out of the SVD (exact zeros, the step of a locked DoF is exactly 0) and a DoF is
+        released when the step the problem with its column back wants for it
+        (`free_step_nb`: the damped least-squares step towards the relaxed-pose task's,
+        the active-set rule) points inside by more than ``release_margin``; it takes
+        effect on the next iteration. Deterministic: no decision rests on round-off.
+    release_margin : float
+        ``"kkt"``: the inward step (psi units, weighted rad) a locked DoF must want to be
+        released; a hysteresis against releasing a DoF the next step clips again.
+    release_damping : float
+        ``"kkt"``: the damping of the release test's least-squares step, as a fraction
+        of the largest singular value (``lam = release_damping sigma_1``): a column
+        whose part outside the others' range is below it counts as redundant, so a part
+        of round-off size does not decide.
     """
 
     gamma_rad: float = DEFAULT_GAMMA_RAD
@@ -204,6 +234,9 @@ class IKConfig:
     relax_substeps: int = 1
     term_clamp_scale: float = 1.0
     svd: str = "gesdd"
+    lock_release: str = "roundoff"
+    release_margin: float = 1e-6
+    release_damping: float = 1e-4
 
     def __post_init__(self) -> None:
         if not (0.0 < self.gamma_rad <= math.pi):
@@ -238,6 +271,15 @@ class IKConfig:
             )
         if self.svd not in ("gesdd", "gesvd"):
             raise ConfigError(f"IKConfig.svd: expected 'gesdd' or 'gesvd', found {self.svd!r}")
+        if self.lock_release not in ("roundoff", "kkt"):
+            raise ConfigError(
+                f"IKConfig.lock_release: expected 'roundoff' or 'kkt', found {self.lock_release!r}"
+            )
+        if not (self.release_margin >= 0 and self.release_damping > 0):
+            raise ConfigError(
+                "IKConfig: expected release_margin >= 0 and release_damping > 0, found "
+                f"{self.release_margin}, {self.release_damping}"
+            )
         if self.clamp not in ("hard", "soft"):
             raise ConfigError(f"IKConfig.clamp: expected 'hard' or 'soft', found {self.clamp!r}")
         if self.relax_substeps < 1 or not self.term_clamp_scale >= 1.0:
@@ -354,7 +396,12 @@ class IKSettings(NamedTuple):
     term_scale : float
         Factor on the per-term SDLS bounds (`IKConfig.term_clamp_scale`).
     thin_svd : bool
-        `sdls_nb` where no DoF is locked (`IKConfig.svd` ``"gesvd"``), else `sdls_gesdd_nb`.
+        `sdls_nb` where no DoF is locked (`IKConfig.svd` ``"gesvd"``), else `sdls_gesdd_nb`
+        (with ``kkt_release``: `sdls_nb` on every iteration, locked columns left out).
+    kkt_release : bool
+        `IKConfig.lock_release` ``"kkt"``.
+    release_margin, release_damping : float
+        `IKConfig.release_margin`, `IKConfig.release_damping`.
     """
 
     gain: float
@@ -370,6 +417,9 @@ class IKSettings(NamedTuple):
     substeps: int = 1
     term_scale: float = 1.0
     thin_svd: bool = False
+    kkt_release: bool = False
+    release_margin: float = 1e-6
+    release_damping: float = 1e-4
 
 
 # ------------------------------------------------------------------ compiled pieces
@@ -464,11 +514,13 @@ def sdls_nb(
     m_out: FloatArray,
     term_scale: float,
     skip: BoolArray,
+    s_out: FloatArray,
 ) -> int:
     """SDLS response ``dpsi`` (D,) of ``jw`` (3K, D) to the error ``e`` (3K,), per-term clamped.
 
     Writes the rows of ``V^T`` kept (rank r) into ``vr[:r]`` (for the null-space
-    projector), and ``N_i``, ``M_i`` into ``n_out[:r]``, ``m_out[:r]``. Returns r.
+    projector), ``N_i``, ``M_i`` into ``n_out[:r]``, ``m_out[:r]`` and the kept singular
+    values into ``s_out[:r]``. Returns r.
     ``term_scale`` multiplies every per-term bound ``gamma_i`` (`IKConfig.term_clamp_scale`).
     ``skip`` (D,) marks zero columns to leave out of the SVD (frozen DoFs; their
     ``dpsi`` and ``vr`` entries are exactly 0). The SVD is LAPACK's dgesvd without U
@@ -501,7 +553,21 @@ def sdls_nb(
     # sigma_i u_i = J_w v_i, as rows (the SVD's own U is not formed)
     sigma_u = np.dot(vt.T, jwc)
     return _sdls_terms_nb(
-        jw, e, s, sigma_u, True, vt, cols[:n_c], gamma, soft, dpsi, vr, n_out, m_out, term_scale
+        jw,
+        e,
+        s,
+        sigma_u,
+        True,
+        vt,
+        cols[:n_c],
+        gamma,
+        soft,
+        dpsi,
+        vr,
+        n_out,
+        m_out,
+        term_scale,
+        s_out,
     )
 
 
@@ -515,7 +581,8 @@ def sdls_gesdd_nb(
     vr: FloatArray,
     n_out: FloatArray,
     m_out: FloatArray,
-    term_scale: float = 1.0,
+    term_scale: float,
+    s_out: FloatArray,
 ) -> int:
     """`sdls_nb` from numpy's SVD of the whole ``jw`` (LAPACK dgesdd, U formed).
 
@@ -526,7 +593,8 @@ def sdls_gesdd_nb(
     by the same rule.
 
     Writes the rows of ``V^T`` kept (rank r) into ``vr[:r]`` (for the null-space
-    projector), and ``N_i``, ``M_i`` into ``n_out[:r]``, ``m_out[:r]``. Returns r.
+    projector), ``N_i``, ``M_i`` into ``n_out[:r]``, ``m_out[:r]`` and the kept singular
+    values into ``s_out[:r]``. Returns r.
     ``term_scale`` multiplies every per-term bound ``gamma_i`` (`IKConfig.term_clamp_scale`).
     The outer clamp is left to the caller (it also covers the secondary task).
     """
@@ -536,7 +604,7 @@ def sdls_gesdd_nb(
     u, s, vt = np.linalg.svd(jw, full_matrices=False)
     every = np.arange(n_cols)
     return _sdls_terms_nb(
-        jw, e, s, u.T, False, vt.T, every, gamma, soft, dpsi, vr, n_out, m_out, term_scale
+        jw, e, s, u.T, False, vt.T, every, gamma, soft, dpsi, vr, n_out, m_out, term_scale, s_out
     )
 
 
@@ -556,6 +624,7 @@ def _sdls_terms_nb(
     n_out: FloatArray,
     m_out: FloatArray,
     term_scale: float,
+    s_out: FloatArray,
 ) -> int:
     """The SDLS terms (errata Z4-Z6) of an SVD of the columns ``cols`` of ``jw`` (3K, D).
 
@@ -563,9 +632,10 @@ def _sdls_terms_nb(
     vector ``u_i``, or ``sigma_i u_i`` (``= J_w v_i``) where ``u_times_sigma``; ``v``
     (len(cols), k) with ``v[c, i]`` the component of ``v_i`` on column ``cols[c]``. Adds
     each term's clamped step into ``dpsi`` (zeroed by the caller); writes the kept rows
-    of ``V^T`` (zero off ``cols``) into ``vr[:r]`` and ``N_i``, ``M_i`` into ``n_out[:r]``,
-    ``m_out[:r]``. Returns the rank r. Shared by `sdls_nb` and `sdls_gesdd_nb`, so both
-    SVDs give the same terms with the same arithmetic.
+    of ``V^T`` (zero off ``cols``) into ``vr[:r]``, ``N_i``, ``M_i`` into ``n_out[:r]``,
+    ``m_out[:r]`` and ``sigma_i`` into ``s_out[:r]``. Returns the rank r. Shared by
+    `sdls_nb` and `sdls_gesdd_nb`, so both SVDs give the same terms with the same
+    arithmetic.
     """
     n_rows, n_cols = jw.shape
     n_eff = n_rows // 3
@@ -628,8 +698,139 @@ def _sdls_terms_nb(
             vr[rank, j] = v[c, i]
         n_out[rank] = n_i
         m_out[rank] = m_i
+        s_out[rank] = si
         rank += 1
     return rank
+
+
+@numba.njit(cache=True)
+def free_step_nb(
+    jw: FloatArray,
+    vr: FloatArray,
+    s: FloatArray,
+    rank: int,
+    qe: FloatArray,
+    a: FloatArray,
+    e0: FloatArray,
+    z_j: float,
+    lam2: float,
+) -> float:
+    """The step a locked DoF would take in the problem with its column back (psi units).
+
+    ``jw`` (3K, D) is the weighted Jacobian with the locked and frozen DoFs' columns
+    zeroed (``A``); ``vr[:rank]``, ``s[:rank]`` its kept right singular vectors and
+    singular values; ``a`` (3K,) the locked DoF's own weighted column; ``z`` the
+    secondary task's step (psi units; ``z_j`` the locked DoF's component); ``e0 = e - A
+    z`` (3K,) the clamped error less the free DoFs' share of ``z``, and ``qe[i] = u_i .
+    e0``. Returns component ``y`` of the damped least-squares step of ``[A a]`` towards
+    ``z`` (the relaxed-pose task, as in SDLS's null-space term)::
+
+        [x; y] = z + [A a]^T ([A a][A a]^T + lam2 I)^-1 (e - [A a] z)
+
+    by Sherman-Morrison over ``A``'s SVD, ``p_i = u_i . a``, ``c = a - U U^T a``::
+
+        y = z_j + (lam2 sum_i p_i (qe_i - p_i z_j) / (s_i^2 + lam2) + c . e0 - |c|^2 z_j)
+                  / (lam2 (1 + sum_i p_i^2 / (s_i^2 + lam2)) + |c|^2)
+
+    Where ``a`` has a part ``c`` outside ``A``'s range, ``y`` tends (``lam2 -> 0``) to the
+    least-squares answer ``c . e / |c|^2`` (the sign of the bound's Lagrange multiplier at
+    the constrained optimum, as in active-set least squares, Lawson & Hanson's NNLS);
+    where ``a`` lies in it (the DoF is redundant), to the minimum-norm step plus the
+    secondary task's null-space share (Greville's column update). ``lam2`` keeps ``|c|``
+    of round-off size from deciding.
+    """
+    n_rows, n_cols = jw.shape
+    # g = A^T a; p_i = u_i . a = v_i . g / s_i
+    g = np.zeros(n_cols)
+    aa = 0.0
+    ae = 0.0
+    for r in range(n_rows):
+        ar = a[r]
+        aa += ar * ar
+        ae += ar * e0[r]
+        if ar != 0.0:
+            for d in range(n_cols):
+                g[d] += jw[r, d] * ar
+    pp = 0.0
+    pq = 0.0
+    num = 0.0
+    den = 0.0
+    for i in range(rank):
+        p_i = 0.0
+        for d in range(n_cols):
+            p_i += vr[i, d] * g[d]
+        p_i /= s[i]
+        pp += p_i * p_i
+        pq += p_i * qe[i]
+        w = 1.0 / (s[i] * s[i] + lam2)
+        num += p_i * (qe[i] - p_i * z_j) * w
+        den += p_i * p_i * w
+    cc = max(aa - pp, 0.0)
+    ce = ae - pq
+    return z_j + (lam2 * num + ce - cc * z_j) / (lam2 * (1.0 + den) + cc)
+
+
+@numba.njit(cache=True)
+def release_locks_nb(
+    q: FloatArray,
+    jac: FloatArray,
+    jw: FloatArray,
+    e: FloatArray,
+    z: FloatArray,
+    inv_mu: FloatArray,
+    lower: FloatArray,
+    upper: FloatArray,
+    frozen: BoolArray,
+    vr: FloatArray,
+    s: FloatArray,
+    rank: int,
+    lam2: float,
+    margin: float,
+    locked: BoolArray,
+    e0: FloatArray,
+    h0: FloatArray,
+    qe: FloatArray,
+    a_col: FloatArray,
+) -> None:
+    """Release each locked DoF whose free step (`free_step_nb`) points inside by ``margin``.
+
+    ``jac`` (3K, D) the Jacobian, ``jw`` the weighted one with the locked and frozen
+    columns zeroed, ``e`` (3K,) the clamped error, ``z`` (D,) the secondary task's step
+    (psi units, 0 where it is off), ``vr``, ``s``, ``rank`` the kept SVD terms of ``jw``.
+    Clears ``locked[d]`` (it takes effect on the next iteration); ``e0``, ``h0``, ``qe``,
+    ``a_col`` are work arrays.
+    """
+    n_rows, n_dofs = jw.shape
+    # e0 = e - A z; qe_i = u_i . e0 = v_i . (A^T e0) / s_i
+    for r in range(n_rows):
+        acc = e[r]
+        for d in range(n_dofs):
+            acc -= jw[r, d] * z[d]
+        e0[r] = acc
+    for d in range(n_dofs):
+        acc = 0.0
+        for r in range(n_rows):
+            acc += jw[r, d] * e0[r]
+        h0[d] = acc
+    for i in range(rank):
+        acc = 0.0
+        for d in range(n_dofs):
+            acc += vr[i, d] * h0[d]
+        qe[i] = acc / s[i]
+    for d in range(n_dofs):
+        if not locked[d] or frozen[d]:
+            continue
+        for r in range(n_rows):
+            a_col[r] = jac[r, d] * inv_mu[d]
+        y = free_step_nb(jw, vr, s, rank, qe, a_col, e0, z[d], lam2)
+        if q[d] <= lower[d]:
+            if y > margin:
+                locked[d] = False
+        elif q[d] >= upper[d]:
+            if y < -margin:
+                locked[d] = False
+        else:
+            locked[d] = False  # not at a limit (cannot happen: locked DoFs sit on one)
 
 
 @numba.njit(cache=True)
@@ -711,7 +912,15 @@ def solve_ik_nb(
     vr = np.empty((max(n_sv, 1), n_dofs))
     n_buf = np.empty(max(n_sv, 1))
     m_buf = np.empty(max(n_sv, 1))
+    s_buf = np.empty(max(n_sv, 1))
     locked = np.zeros(n_dofs, dtype=np.bool_)
+    kkt = settings.kkt_release
+    skip = np.empty(n_dofs, dtype=np.bool_)
+    z = np.zeros(n_dofs)  # the secondary task's step (psi), locked DoFs included
+    e0 = np.empty(3 * k_eff)
+    h0 = np.empty(n_dofs)
+    qe = np.empty(max(n_sv, 1))
+    a_col = np.empty(3 * k_eff)
     live = np.empty(n_dofs, dtype=np.int64)  # the DoFs not frozen
     n_live = 0
     for d in range(n_dofs):
@@ -753,17 +962,36 @@ def solve_ik_nb(
                 else:
                     jw[r, d] = jac[r, d] * inv_mu[d]
         use_gesdd = not settings.thin_svd
+        n_locked = 0
         for d in range(n_dofs):
             if locked[d] and not frozen[d]:
-                use_gesdd = True
-        if use_gesdd and settings.thin_svd and n_live < n_dofs:
+                n_locked += 1
+        if n_locked > 0 and not kkt:
+            use_gesdd = True
+        if kkt and not use_gesdd:
+            # the locked columns are exact zeros: left out of the SVD like the frozen ones
+            for d in range(n_dofs):
+                skip[d] = frozen[d] or locked[d]
+            rank = sdls_nb(
+                jw, e, gamma, soft, dpsi, vr, n_buf, m_buf, settings.term_scale, skip, s_buf
+            )
+        elif use_gesdd and settings.thin_svd and n_live < n_dofs:
             # the frozen DoFs' zero columns are left out here too (re-planting solves
             # move the legs alone); the locked ones stay in
             for r in range(3 * k_eff):
                 for c in range(n_live):
                     jw_live[r, c] = jw[r, live[c]]
             rank = sdls_gesdd_nb(
-                jw_live, e, gamma, soft, dpsi_live, vr_live, n_buf, m_buf, settings.term_scale
+                jw_live,
+                e,
+                gamma,
+                soft,
+                dpsi_live,
+                vr_live,
+                n_buf,
+                m_buf,
+                settings.term_scale,
+                s_buf,
             )
             for d in range(n_dofs):
                 dpsi[d] = 0.0
@@ -775,9 +1003,21 @@ def solve_ik_nb(
                 for c in range(n_live):
                     vr[i, live[c]] = vr_live[i, c]
         elif use_gesdd:
-            rank = sdls_gesdd_nb(jw, e, gamma, soft, dpsi, vr, n_buf, m_buf, settings.term_scale)
+            rank = sdls_gesdd_nb(
+                jw, e, gamma, soft, dpsi, vr, n_buf, m_buf, settings.term_scale, s_buf
+            )
         else:
-            rank = sdls_nb(jw, e, gamma, soft, dpsi, vr, n_buf, m_buf, settings.term_scale, frozen)
+            rank = sdls_nb(
+                jw, e, gamma, soft, dpsi, vr, n_buf, m_buf, settings.term_scale, frozen, s_buf
+            )
+        if kkt and n_locked > 0:
+            # a locked DoF does not move (its zeroed column's round-off in dgesdd's
+            # singular vectors neither moves nor releases it: `release_locks_nb` does)
+            for d in range(n_dofs):
+                if locked[d]:
+                    dpsi[d] = 0.0
+                    for i in range(rank):
+                        vr[i, d] = 0.0
         if use_secondary:
             lever_weights_nb(
                 kin,
@@ -798,6 +1038,9 @@ def solve_ik_nb(
                 q_sub[d] = q[d]
             for _sub in range(substeps):
                 secondary_task_nb(q_sub, weighting.omega, mh, gain, sec_max, dphi)
+                if _sub == 0 and kkt:
+                    for d in range(n_dofs):
+                        z[d] = 0.0 if frozen[d] else dphi[d] * mu[d]
                 for d in range(n_dofs):
                     # psi space (Z8e); a DoF held at a limit has a zeroed column, so the
                     # projector would not compensate its motion: leave it out
@@ -808,6 +1051,28 @@ def solve_ik_nb(
                     q_sub[d] = q[d] + dphi_p[d] * inv_mu[d]
             for d in range(n_dofs):
                 dpsi[d] += dphi_p[d]
+        if kkt and n_locked > 0 and rank > 0:
+            release_locks_nb(
+                q,
+                jac,
+                jw,
+                e,
+                z,
+                inv_mu,
+                lower,
+                upper,
+                frozen,
+                vr,
+                s_buf,
+                rank,
+                (settings.release_damping * s_buf[0]) ** 2,
+                settings.release_margin,
+                locked,
+                e0,
+                h0,
+                qe,
+                a_col,
+            )
         # outer clamp on the sum (Buss & Kim); uniform scaling keeps the null-space part
         mx = 0.0
         for d in range(n_dofs):
@@ -933,9 +1198,10 @@ def sdls_response(
     vr = np.empty((n_sv, a.shape[1]))
     nb = np.empty(n_sv)
     mb = np.empty(n_sv)
+    sb = np.empty(n_sv)
     skip = ~np.any(a != 0.0, axis=0)  # zero columns (frozen DoFs)
     r = sdls_nb(
-        a, ev, float(gamma_rad), bool(soft), dpsi, vr, nb, mb, float(term_clamp_scale), skip
+        a, ev, float(gamma_rad), bool(soft), dpsi, vr, nb, mb, float(term_clamp_scale), skip, sb
     )
     return SDLSStep(dpsi, vr[:r].copy(), nb[:r].copy(), mb[:r].copy())
 
@@ -1118,6 +1384,9 @@ class SDLSSolver:
             substeps=int(cfg.relax_substeps),
             term_scale=float(cfg.term_clamp_scale),
             thin_svd=cfg.svd == "gesvd",
+            kkt_release=cfg.lock_release == "kkt",
+            release_margin=float(cfg.release_margin),
+            release_damping=float(cfg.release_damping),
         )
 
     @property

@@ -103,10 +103,14 @@ def foot_effectors(skeleton: Skeleton) -> list[Effector]:
 
 #: The tracker's IK settings: each iteration does the work of three of the paper's
 #: (`IKConfig.term_clamp_scale`, `IKConfig.relax_substeps`), 30 iterations a solve instead
-#: of 100 (see `HybridConfig.ik`). ``IKConfig.svd="gesvd"`` is left out: it moved
-#: charleston1's default-configuration elbow 43 -> 55 mm (round-off chaos, docs/hybrid.md,
-#: Speed, fourth round) for 1-2 % less IK time.
-TRACKING_IK = IKConfig(max_iterations=30, term_clamp_scale=3.0, relax_substeps=3)
+#: of 100 (see `HybridConfig.ik`), and LAPACK's dgesvd without U where no DoF is locked at
+#: a joint limit (``IKConfig.svd="gesvd"``). A single run had moved charleston1's
+#: default-configuration elbow 43 -> 55 mm (round-off chaos); averaged over four jittered
+#: repeats (`mocapkit accuracy hybrid --jitter-repeats 4`) every figure of the three
+#: configurations is within 0.3 mm of dgesdd's or better (docs/hybrid.md, Speed, fifth
+#: round). The active-set release of locked DoFs (``lock_release="kkt"``: deterministic,
+#: 165 frames/s) moved the default's MPJPE by 1.6-4 mm and is left out.
+TRACKING_IK = IKConfig(max_iterations=30, term_clamp_scale=3.0, relax_substeps=3, svd="gesvd")
 #: Bisection steps of the balance lean (`BalanceConfig.bisection_steps`) in ``"solve"`` mode.
 TRACKING_BISECTION_STEPS = 6
 #: The tracker's balance step (without paper mode): the lean bisected in
