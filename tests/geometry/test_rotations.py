@@ -14,6 +14,7 @@ from mocapkit.geometry import (
     matrix_from_axis_angle,
     matrix_from_euler,
     matrix_from_rotvec,
+    points_in_frame,
     rotvec_from_matrix,
     skew,
     transform_points,
@@ -98,6 +99,27 @@ def test_transform_round_trip(rng: np.random.Generator) -> None:
     pts = rng.normal(size=(3, 7, 3)) * 500
     back = transform_points(invert_transform(b_from_a), transform_points(b_from_a, pts))
     np.testing.assert_allclose(back, pts, atol=1e-9)
+
+
+def test_points_in_frame_inverts_transform_points(rng: np.random.Generator) -> None:
+    world_from_frame = make_transform(
+        matrix_from_rotvec(rng.normal(size=(6, 3))), rng.normal(size=(6, 3)) * 100
+    )
+    pts = rng.normal(size=(6, 3)) * 500
+    pts[2] = np.nan
+    local = points_in_frame(world_from_frame, pts)
+    expected = transform_points(invert_transform(world_from_frame), pts[:, None, :])[:, 0]
+    np.testing.assert_allclose(local, expected, atol=1e-9)
+    assert np.isnan(local[2]).all()
+    back = transform_points(world_from_frame, local[:, None, :])[:, 0]
+    np.testing.assert_allclose(back[[0, 1, 3, 4, 5]], pts[[0, 1, 3, 4, 5]], atol=1e-9)
+    # known value: a frame turned 90 deg about z and moved to (10, 0, 0)
+    turned = make_transform(matrix_from_axis_angle([0, 0, 1], np.pi / 2), [10.0, 0.0, 0.0])
+    np.testing.assert_allclose(
+        points_in_frame(turned, [10.0, 5.0, 2.0]), [5.0, 0.0, 2.0], atol=1e-12
+    )
+    with pytest.raises(ShapeError, match=r"points_in_frame: expected \(\.\.\., 4, 4\)"):
+        points_in_frame(np.eye(3), pts)
 
 
 def test_bad_shapes_are_rejected() -> None:

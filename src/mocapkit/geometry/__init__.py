@@ -11,6 +11,7 @@ from mocapkit.geometry.rotations import (
 from mocapkit.geometry.transforms import (
     invert_transform,
     make_transform,
+    points_in_frame,
     transform_points,
 )
 
@@ -21,6 +22,7 @@ __all__ = [
     "matrix_from_axis_angle",
     "matrix_from_euler",
     "matrix_from_rotvec",
+    "points_in_frame",
     "rotvec_from_matrix",
     "skew",
     "transform_points",

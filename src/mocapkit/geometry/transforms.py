@@ -45,3 +45,20 @@ def transform_points(dst_from_src: ArrayLike, points_in_src: ArrayLike) -> Float
             f"transform_points: expected (..., 4, 4) and (..., 3), found {m.shape} and {p.shape}"
         )
     return np.einsum("...ij,...nj->...ni", m[..., :3, :3], p) + m[..., None, :3, 3]
+
+
+def points_in_frame(world_from_frame: ArrayLike, points_in_world: ArrayLike) -> FloatArray:
+    """Points (..., 3) expressed in the frames (..., 4, 4), one point per frame: ``R^T (p - t)``.
+
+    The inverse of `transform_points` for one point per transform, without forming the
+    inverse (e.g. a marker's place on a joint over frames: ``world_from_joint`` (T, 4, 4)
+    from forward kinematics and the marker (T, 3) give it in the joint's frame, (T, 3)).
+    NaN points give NaN rows.
+    """
+    m = np.asarray(world_from_frame, dtype=float)
+    p = np.asarray(points_in_world, dtype=float)
+    if m.shape[-2:] != (4, 4) or p.shape[-1:] != (3,):
+        raise ShapeError(
+            f"points_in_frame: expected (..., 4, 4) and (..., 3), found {m.shape} and {p.shape}"
+        )
+    return np.einsum("...ji,...j->...i", m[..., :3, :3], p - m[..., :3, 3])

@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import ConfigError, ShapeError
+from mocapkit.geometry.transforms import points_in_frame
 from mocapkit.skeleton.kinematics import forward_kinematics
 from mocapkit.skeleton.limbs import arm
 from mocapkit.skeleton.model import Skeleton
@@ -237,9 +238,7 @@ def calibrate_members_on_motion(
         if fit.shape != (n,):
             raise ShapeError(f"fit_mm[{name!r}]: expected shape ({n},), found {fit.shape}")
         eff = effectors[name]
-        j = skeleton.joint_index(eff.joint)
-        rot = world[:, j, :3, :3]
-        origin = world[:, j, :3, 3]
+        world_from_joint = world[:, skeleton.joint_index(eff.joint)]
         local: dict[str, FloatArray] = {}
         traj_mm: list[FloatArray] = []
         for member, traj in members.items():
@@ -248,7 +247,7 @@ def calibrate_members_on_motion(
                 raise ShapeError(
                     f"members_mm[{name!r}][{member!r}]: expected shape ({n}, 3), found {m.shape}"
                 )
-            local[member] = np.einsum("nji,nj->ni", rot, m - origin) - np.asarray(eff.point_mm)
+            local[member] = points_in_frame(world_from_joint, m) - np.asarray(eff.point_mm)
             traj_mm.append(m)
         # the set's centre as the tracker sees it: the members' mean
         centre = np.mean(traj_mm, axis=0)

@@ -32,6 +32,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.cues.edges import EdgeConfig, prepare_frame
 from mocapkit.errors import ConfigError, ShapeError, unknown_name
+from mocapkit.geometry.transforms import points_in_frame
 from mocapkit.ik.sdls import Effector, IKConfig, IKResult, SDLSSolver
 from mocapkit.skeleton.kinematics import canonical_positions, forward_kinematics
 from mocapkit.skeleton.limbs import (
@@ -1137,9 +1138,7 @@ def calibrate_marker_offsets(
     world = forward_kinematics(skeleton, qa)
     out = np.full((len(effectors), 3), np.nan)
     for e, eff in enumerate(effectors):
-        j = skeleton.joint_index(eff.joint)
-        rot = world[:, j, :3, :3]
-        local = np.einsum("nji,nj->ni", rot, m[:, e] - world[:, j, :3, 3])
+        local = points_in_frame(world[:, skeleton.joint_index(eff.joint)], m[:, e])
         ok = np.all(np.isfinite(local), axis=1)
         if ok.any():
             out[e] = local[ok].mean(axis=0)

@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import ConfigError, ShapeError
+from mocapkit.geometry.transforms import points_in_frame
 from mocapkit.skeleton.kinematics import forward_kinematics
 from mocapkit.skeleton.model import Skeleton
 from mocapkit.tracking.hybrid import (
@@ -206,14 +207,12 @@ def calibrate_member_offsets(
         if name not in arrays or len(members) < 2:
             continue
         eff = effectors[name]
-        j = skeleton.joint_index(eff.joint)
-        rot = world[:, j, :3, :3]
-        origin = world[:, j, :3, 3]
+        world_from_joint = world[:, skeleton.joint_index(eff.joint)]
         out: dict[str, tuple[float, float, float]] = {}
         worst = 0.0
         for member, traj in members.items():
             m = np.asarray(traj, dtype=float)[rows]
-            local = np.einsum("nji,nj->ni", rot, m - origin) - np.asarray(eff.point_mm)
+            local = points_in_frame(world_from_joint, m) - np.asarray(eff.point_mm)
             ok = np.all(np.isfinite(local), axis=1)
             if not ok.any():
                 continue
