@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 import platform
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -160,6 +160,7 @@ def bench_hybrid(
     repeats: int = 3,
     work_dir: str | os.PathLike[str] | None = None,
     mocap_dir: str | os.PathLike[str] | None = None,
+    sessions: Sequence[str | os.PathLike[str]] | None = None,
 ) -> dict[str, Any]:
     """Frames per second of ``mocapkit track hybrid`` as shipped, end to end, one core.
 
@@ -174,6 +175,19 @@ def bench_hybrid(
     time (``time.process_time``, all its threads): on a dedicated core that is the wall
     time, and on a shared machine it is what the work itself took (the wall time is
     reported too).
+
+    Parameters
+    ----------
+    repeats : int
+        Timed runs (>= 1).
+    work_dir : path-like, optional
+        Cache folder of the rendered sessions (default ``mocapkit-bench-hybrid`` in the
+        temporary folder).
+    mocap_dir : path-like, optional
+        Folder of the clips (`bench_sessions`).
+    sessions : sequence of path-like, optional
+        Session folders to track instead of `bench_sessions` (e.g. jittered copies of
+        them, ``bench/hybrid_jitter.py``).
 
     Returns
     -------
@@ -204,7 +218,11 @@ def bench_hybrid(
         if work_dir is not None
         else Path(tempfile.gettempdir()) / "mocapkit-bench-hybrid"
     )
-    sessions = bench_sessions(cache / "sessions", mocap_dir)
+    sessions = (
+        bench_sessions(cache / "sessions", mocap_dir)
+        if sessions is None
+        else [Path(s) for s in sessions]
+    )
     threads = cv2.getNumThreads()
     cv2.setNumThreads(1)
     fps_list: list[float] = []
