@@ -585,6 +585,7 @@ def track_mono(
         joint_acceleration_weight=0.0,
         clavicle_weight=0.0,
         arm_prior_weight=0.0,
+        reach_tolerance=0.0,
     )
     for _ in range(n_refine):
         frames = _run(lengths, cam, dt, paper_cfg, model, t, px)

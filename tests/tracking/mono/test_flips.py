@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
-from mocapkit.errors import ShapeError
+from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.tracking.mono.flips import count_candidates, enumerate_poses, violates
 from mocapkit.tracking.mono.stick import LimitConfig, stick_model
+from mocapkit.tracking.mono.tracker import MonoConfig
 from tests.tracking.mono.conftest import random_pose
 
 
@@ -64,6 +65,96 @@ def test_a_link_parallel_to_the_image_halves_the_count() -> None:
     assert np.abs(fp.positions - _relative(pos)).max(axis=(1, 2)).min() < 1e-6
 
 
+def _ray_distance(pos: np.ndarray, p: int, c: int, perspective: bool) -> float:
+    """Distance from joint p to joint c's viewing ray (perspective) or projection line."""
+    if not perspective:
+        return float(np.linalg.norm(pos[c, :2] - pos[p, :2]))
+    ray = pos[c] / np.linalg.norm(pos[c])
+    return float(np.linalg.norm(np.cross(pos[p], ray)))
+
+
+def _shortened_link(rng: np.random.Generator, model, name: str, ratio: float, perspective: bool):  # type: ignore[no-untyped-def]
+    """A random pose with link ``name`` in a plane parallel to the image and every other
+    link 30 deg out of it (towards or away at random), the link's length set to ``ratio``
+    times its parent's distance to the child's ray."""
+    pos, lengths = random_pose(rng, model, 30.0)
+    i = model.link_index(name)
+    for j in range(model.n_links):  # links are ordered parents first
+        p, c = model.parent[j], model.child[j]
+        d = pos[c, :2] - pos[p, :2]
+        d /= np.linalg.norm(d)
+        sine = 0.0 if j == i else 0.5 * rng.choice([-1.0, 1.0])
+        step = lengths[j] * np.array([*(np.sqrt(1.0 - sine**2) * d), sine])
+        below = [c] + [int(model.child[k]) for k in range(j + 1, model.n_links)
+                       if model.parent[k] == c]  # fmt: skip
+        pos[below] += pos[p] + step - pos[c]  # the subtree moves with the child
+    lengths = lengths.copy()
+    lengths[i] = ratio * _ray_distance(pos, model.parent[i], model.child[i], perspective)
+    return pos, lengths, i
+
+
+@pytest.mark.parametrize("perspective", [False, True])
+def test_reach_tolerance_keeps_both_flips_of_a_link_just_too_short(perspective: bool) -> None:
+    """A link 3 % shorter than its parent's distance D to its child's ray: errata M5 gives
+    it one configuration; with ``reach_tolerance`` 0.05 it keeps two, the child on its ray
+    at the band's length L + (D - 0.95 L) / 2 = 1.04 L from its parent, the other links
+    (30 deg out of the image plane, outside the band) unchanged. Beyond the band
+    (tolerance 0.02) M5 holds. Orthographic: 2^(L-1) poses become 2^L."""
+    rng = np.random.default_rng(17)
+    model = stick_model()
+    pos, lengths, i = _shortened_link(rng, model, "left_upper_arm", 1.0 / 1.03, perspective)
+    p, c = model.parent[i], model.child[i]
+    if perspective:
+        obs, root = pos[:, :2] / pos[:, 2:], pos[0]
+        parent_true = pos[p]
+    else:
+        obs, root = _orthographic(pos)
+        parent_true = _relative(pos)[p]
+    kw = {"perspective": perspective, "prune": False}
+    bit = 1 << i
+    m5 = enumerate_poses(model, lengths, obs, root, **kw)
+    narrow = enumerate_poses(model, lengths, obs, root, reach_tolerance=0.02, **kw)
+    fp = enumerate_poses(model, lengths, obs, root, reach_tolerance=0.05, **kw)
+    np.testing.assert_array_equal(narrow.codes, m5.codes)
+    np.testing.assert_array_equal(narrow.positions, m5.positions)
+    at = [np.abs(f.positions[:, p] - parent_true).max(axis=1) < 1e-6 for f in (m5, fp)]
+    # where the link's parent is the truth's (its clavicle's true flip): one flip, then two
+    assert not np.any(m5.codes[at[0]] & bit)
+    assert at[1].sum() == 2 * at[0].sum() > 0
+    assert (fp.codes[at[1]] & bit != 0).sum() == at[0].sum()
+    if not perspective:
+        n = 1 << model.n_links
+        assert m5.codes.shape == (n // 2,) and m5.n_candidates == n // 2
+        assert fp.codes.shape == (n,) and fp.n_candidates == n
+        assert len(set(fp.codes.tolist())) == n
+        np.testing.assert_allclose(fp.positions[:, c, :2], np.broadcast_to(obs[c], (n, 2)))
+    else:  # the child lies on its ray
+        ray = np.append(obs[c], 1.0) / np.linalg.norm(np.append(obs[c], 1.0))
+        np.testing.assert_allclose(np.cross(fp.positions[at[1], c], ray), 0.0, atol=1e-6)
+    vec = model.link_vectors(fp.positions[at[1]])
+    np.testing.assert_allclose(np.linalg.norm(vec[:, i], axis=-1), 1.04 * lengths[i], rtol=1e-9)
+    others = [j for j in range(model.n_links) if j != i]
+    np.testing.assert_allclose(
+        np.linalg.norm(vec[:, others], axis=-1),
+        np.broadcast_to(lengths[others], (vec.shape[0], len(others))),
+        rtol=1e-9,
+    )
+    # bit set: the far configuration (the child deeper than with the bit clear)
+    sub = fp.codes[at[1]]
+    z = fp.positions[at[1], c, 2]
+    order_near = np.argsort(sub & ~bit, kind="stable")
+    near = z[order_near][~(sub[order_near] & bit).astype(bool)]
+    far = z[order_near][(sub[order_near] & bit).astype(bool)]
+    assert near.shape == far.shape and np.all(near < far)
+
+
+def test_reach_tolerance_is_refused_outside_its_range() -> None:
+    with pytest.raises(ConfigError, match="reach_tolerance: expected"):
+        MonoConfig(reach_tolerance=-0.01)
+    with pytest.raises(ConfigError, match="reach_tolerance: expected"):
+        MonoConfig(reach_tolerance=1.0)
+
+
 def test_perspective_candidates_share_the_rays_and_include_the_truth() -> None:
     rng = np.random.default_rng(12)
     model = stick_model()
@@ -82,20 +173,27 @@ def test_perspective_candidates_share_the_rays_and_include_the_truth() -> None:
     np.testing.assert_allclose(truth_like[:, :2] / truth_like[:, 2:], rays, atol=1e-9)
 
 
+@pytest.mark.parametrize("reach", [0.0, 0.08])
 @pytest.mark.parametrize("legs", [False, True])
 @pytest.mark.parametrize("perspective", [False, True])
-def test_pruning_during_the_search_equals_pruning_after_it(legs: bool, perspective: bool) -> None:
+def test_pruning_during_the_search_equals_pruning_after_it(
+    legs: bool, perspective: bool, reach: float
+) -> None:
+    """Also with a reach tolerance, the lengths then 4 % short so that some links use it."""
     rng = np.random.default_rng(13)
     model = stick_model(legs=legs)
     kept_some = pruned_some = 0
     for _ in range(30):
         pos, lengths = random_pose(rng, model, 35.0)
+        if reach > 0:
+            lengths = 0.96 * lengths
         if perspective:
             obs, root = pos[:, :2] / pos[:, 2:], pos[0]
         else:
             obs, root = _orthographic(pos)
-        full = enumerate_poses(model, lengths, obs, root, perspective=perspective, prune=False)
-        during = enumerate_poses(model, lengths, obs, root, perspective=perspective, prune=True)
+        kw = {"perspective": perspective, "reach_tolerance": reach}
+        full = enumerate_poses(model, lengths, obs, root, prune=False, **kw)
+        during = enumerate_poses(model, lengths, obs, root, prune=True, **kw)
         ok = ~violates(model, lengths, full.positions)
         if not ok.any():
             assert during.pruned_all

@@ -172,12 +172,28 @@ def _fails(pos: FloatArray, stick: StickArrays, checks: Checks, c: int) -> bool:
 
 
 @nb.njit(cache=True)
+def _reach_length(length: float, dist: float, reach: float) -> float:
+    """Length at which a link meets its child's ray at distance ``dist`` from its parent.
+
+    ``length`` itself with ``reach`` 0 (errata M5 exactly). Otherwise the length is
+    uncertain by the share ``reach`` (video lengths err by a few per cent): across the band
+    ``dist`` in [L (1 - reach), L (1 + reach)] it rises linearly from L to L (1 + reach),
+    so a child just beyond L keeps both flips, and the link's out-of-plane angle falls
+    continuously to zero at the band's far edge (beyond it, M5: one configuration).
+    """
+    if reach <= 0.0:
+        return length
+    return length + 0.5 * max(0.0, dist - length * (1.0 - reach))
+
+
+@nb.njit(cache=True)
 def _branches(
     stick: StickArrays,
     obs: FloatArray,
     pos: FloatArray,
     link: int,
     perspective: bool,
+    reach: float,
     out: FloatArray,
 ) -> int:
     """Candidate child positions of ``link`` given its placed parent; returns their count."""
@@ -191,7 +207,8 @@ def _branches(
         dx = o[0] - p[0]
         dy = o[1] - p[1]
         d2 = dx * dx + dy * dy
-        rest = length * length - d2
+        reach_len = _reach_length(length, np.sqrt(d2), reach)
+        rest = reach_len * reach_len - d2
         if rest <= (PARALLEL_TOL * length) ** 2:
             # errata M5: parallel (or longer than the link): one configuration, dz = 0
             d = np.sqrt(d2)
@@ -212,7 +229,8 @@ def _branches(
     r[2] = 1.0
     a = r @ r
     b = r @ p
-    disc = b * b - a * ((p @ p) - length * length)
+    reach_len = _reach_length(length, np.sqrt(max((p @ p) - b * b / a, 0.0)), reach)
+    disc = b * b - a * ((p @ p) - reach_len * reach_len)
     if disc <= a * (PARALLEL_TOL * length) ** 2:
         t0 = b / a
         w = t0 * r - p
@@ -238,6 +256,7 @@ def _enumerate(
     root: FloatArray,
     perspective: bool,
     prune: bool,
+    reach: float,
     out_codes: IntArray,
     out_pos: FloatArray,
 ) -> int:
@@ -253,7 +272,7 @@ def _enumerate(
     while level >= 0:
         branch[level] += 1
         if branch[level] == 0:
-            n_branch[level] = _branches(stick, obs, pos, level, perspective, cand[level])
+            n_branch[level] = _branches(stick, obs, pos, level, perspective, reach, cand[level])
         if branch[level] >= n_branch[level]:
             branch[level] = -1
             pos[stick.child[level]] = np.nan
@@ -301,6 +320,7 @@ def enumerate_poses(
     *,
     perspective: bool = False,
     prune: bool = True,
+    reach_tolerance: float = 0.0,
 ) -> FramePoses:
     """All flip configurations of one frame that satisfy the constraints.
 
@@ -320,6 +340,11 @@ def enumerate_poses(
         See the module docstring.
     prune : bool
         Apply the model's constraints during the search.
+    reach_tolerance : float
+        Relative length tolerance of errata M5 (module docstring): a link whose child's
+        ray (or projected end) lies beyond its length L but within ``L (1 +
+        reach_tolerance)`` keeps two configurations, the child on its ray at the distance
+        ``L (1 + reach_tolerance)`` from its parent; 0: the paper's (M5 exactly).
 
     Returns
     -------
@@ -341,13 +366,16 @@ def enumerate_poses(
     codes = np.zeros(cap, dtype=np.int64)
     pos = np.zeros((cap, model.n_joints, 3))
     n_all = -1
-    n = _enumerate(stick, model.checks, obs3, r, perspective, prune, codes, pos)
+    tol = float(reach_tolerance)
+    n = _enumerate(stick, model.checks, obs3, r, perspective, prune, tol, codes, pos)
     pruned_all = False
     if prune and n == 0:
-        n = _enumerate(stick, model.checks, obs3, r, perspective, False, codes, pos)
+        n = _enumerate(
+            stick, model.checks, obs3, r, perspective, False, tol, codes, pos
+        )
         n_all, pruned_all = n, True
     if n_all < 0:
-        n_all = count_candidates(model, stick.lengths, obs3, r, perspective)
+        n_all = count_candidates(model, stick.lengths, obs3, r, perspective, reach_tolerance)
     return FramePoses(codes[:n].copy(), pos[:n].copy(), n_all, pruned_all)
 
 
@@ -357,8 +385,10 @@ def count_candidates(
     observed: ArrayLike,
     root: ArrayLike,
     perspective: bool = False,
+    reach_tolerance: float = 0.0,
 ) -> int:
-    """Number of distinct poses before pruning (one full unpruned search)."""
+    """Number of distinct poses before pruning (one full unpruned search; arguments as
+    `enumerate_poses`)."""
     stick = model.arrays(np.asarray(lengths, dtype=float))
     obs = np.asarray(observed, dtype=float)
     obs3 = np.zeros((model.n_joints, 3))
@@ -373,6 +403,7 @@ def count_candidates(
             np.asarray(root, dtype=float),
             perspective,
             False,
+            float(reach_tolerance),
             np.zeros(cap, dtype=np.int64),
             np.zeros((cap, model.n_joints, 3)),
         )

@@ -145,6 +145,10 @@ class MonoConfig:
         shorter than the body's proportions at the video's stature are moved this share
         of the way up (`mocapkit.tracking.mono.lengths.raise_short_links`); 0: off.
         Default 0.5 (docs/mono.md, fourth round).
+    reach_tolerance : float
+        Relative length tolerance of errata M5 (`mocapkit.tracking.mono.flips`): a link
+        whose child's ray lies beyond its length L but within ``L (1 +
+        reach_tolerance)`` keeps both flips, at that longer length; 0: M5 exactly.
     arm_prior : ArmPrior or None
         The mixture the arm prior uses; None: the shipped table
         (`mocapkit.tracking.mono.arm_prior.default_arm_prior`).
@@ -169,6 +173,7 @@ class MonoConfig:
     clavicle_weight: float = 300.0
     arm_prior_weight: float = 30.0
     short_link_weight: float = 0.5
+    reach_tolerance: float = 0.0
     arm_prior: ArmPrior | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -184,6 +189,10 @@ class MonoConfig:
         if not 0.0 <= self.short_link_weight <= 1.0:
             raise ConfigError(
                 f"MonoConfig.short_link_weight: expected [0, 1], found {self.short_link_weight}"
+            )
+        if not 0.0 <= self.reach_tolerance < 1.0:
+            raise ConfigError(
+                f"MonoConfig.reach_tolerance: expected [0, 1), found {self.reach_tolerance}"
             )
         if self.depth_window < 1 or self.max_pair_states < 1 or self.smooth_lag < 0:
             raise ConfigError(
@@ -401,7 +410,14 @@ class MonoTracker:
         obs, root, depth = self._observation(pts)
         persp = self.config.camera_model == "perspective" and self.camera is not None
         if np.isfinite(root).all():
-            fp = enumerate_poses(self.model, self.lengths, obs, root, perspective=persp)
+            fp = enumerate_poses(
+                self.model,
+                self.lengths,
+                obs,
+                root,
+                perspective=persp,
+                reach_tolerance=self.config.reach_tolerance,
+            )
             codes, positions, n_cand, pruned_all = fp
         else:  # no root this frame: one empty pose keeps the graph connected
             codes = np.zeros(1, dtype=np.int64)
