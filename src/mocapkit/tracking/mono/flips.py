@@ -21,6 +21,19 @@ image, or longer through noise) has one configuration, not two; it is placed at 
 length along its projected direction (dz = 0), so its pixel moves by the excess. Then
 there are 2^(L-1) distinct poses, not 2^L with duplicates.
 
+Reach tolerance (beyond the paper; ``reach_tolerance``, 0 by default here): with lengths
+estimated from the video a link is often a few per cent short (docs/mono.md, fourth
+round), so a child that truly lies 12-20 deg out of the image plane falls just beyond
+its parent's reach and M5 leaves the link one configuration in the plane: its true flip
+is absent from every candidate. With a tolerance t the link's length is taken as
+uncertain by the share t: for a parent at distance D from the child's ray in the band
+[L (1 - t), L (1 + t)] the child is placed on its ray at the length
+``L + (D - L (1 - t)) / 2`` (rising from L to L (1 + t) across the band), so a child
+just beyond L keeps both flips, and the out-of-plane angle falls continuously to zero at
+the band's far edge, beyond which M5 applies. Links outside the band are untouched, so
+the counts above hold for links more than t from parallel; with t > 0 a link exactly
+parallel keeps two configurations.
+
 A joint without a 2-D position (NaN) has no candidates: it and the joints below it are
 NaN in every pose, its link does not branch and constraints reading it pass.
 """
@@ -370,9 +383,7 @@ def enumerate_poses(
     n = _enumerate(stick, model.checks, obs3, r, perspective, prune, tol, codes, pos)
     pruned_all = False
     if prune and n == 0:
-        n = _enumerate(
-            stick, model.checks, obs3, r, perspective, False, tol, codes, pos
-        )
+        n = _enumerate(stick, model.checks, obs3, r, perspective, False, tol, codes, pos)
         n_all, pruned_all = n, True
     if n_all < 0:
         n_all = count_candidates(model, stick.lengths, obs3, r, perspective, reach_tolerance)
