@@ -66,10 +66,11 @@ def _process_noting_frame(self, k):  # type: ignore[no-untyped-def]
     return _process(self, k)
 
 
-def _enumerate_both(model, lengths, obs, root, perspective=False, prune=True):  # type: ignore[no-untyped-def]
-    full = _enumerate(model, lengths, obs, root, perspective=perspective, prune=False)
+def _enumerate_both(model, lengths, obs, root, perspective=False, prune=True, reach_tolerance=0.0):  # type: ignore[no-untyped-def]
+    kw = {"perspective": perspective, "reach_tolerance": reach_tolerance}
+    full = _enumerate(model, lengths, obs, root, prune=False, **kw)
     _record[_current["frame"]] = (full, np.asarray(lengths))  # the last pass overwrites
-    return _enumerate(model, lengths, obs, root, perspective=perspective, prune=prune)
+    return _enumerate(model, lengths, obs, root, prune=prune, **kw)
 
 
 def config_from(settings: dict) -> MonoConfig:

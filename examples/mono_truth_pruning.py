@@ -69,9 +69,10 @@ def _process_noting_frame(self, k):  # type: ignore[no-untyped-def]
     return _process(self, k)
 
 
-def _enumerate_both(model, lengths, obs, root, perspective=False, prune=True):  # type: ignore[no-untyped-def]
-    fp = _enumerate(model, lengths, obs, root, perspective=perspective, prune=prune)
-    full = _enumerate(model, lengths, obs, root, perspective=perspective, prune=False)
+def _enumerate_both(model, lengths, obs, root, perspective=False, prune=True, reach_tolerance=0.0):  # type: ignore[no-untyped-def]
+    kw = {"perspective": perspective, "reach_tolerance": reach_tolerance}
+    fp = _enumerate(model, lengths, obs, root, prune=prune, **kw)
+    full = _enumerate(model, lengths, obs, root, prune=False, **kw)
     _record[_current["frame"]] = (fp.codes, full.codes, full.positions, np.asarray(lengths))
     return fp
 
