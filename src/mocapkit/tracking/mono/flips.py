@@ -354,10 +354,11 @@ def enumerate_poses(
     prune : bool
         Apply the model's constraints during the search.
     reach_tolerance : float
-        Relative length tolerance of errata M5 (module docstring): a link whose child's
-        ray (or projected end) lies beyond its length L but within ``L (1 +
-        reach_tolerance)`` keeps two configurations, the child on its ray at the distance
-        ``L (1 + reach_tolerance)`` from its parent; 0: the paper's (M5 exactly).
+        Length band t of errata M5 (module docstring): a link whose parent lies at a
+        distance D in [L (1 - t), L (1 + t)] from its child's ray (orthographic: from
+        its projected end) has its child placed on that ray at the length
+        ``L + (D - L (1 - t)) / 2``, two configurations up to D = L (1 + t); 0: the
+        paper's (M5 exactly).
 
     Returns
     -------
