@@ -22,14 +22,16 @@ Mapping onto canonical joints (`CANONICAL_JOINTS`):
   percentiles of their distance from it on the CMU clips the library reads: the neck's
   under 0.045 of its length, the pelvis's under 0.15):
   neck = M_h + f_n (M_s - M_h), pelvis = M_h + f_p (M_s - M_h); missing unless both
-  shoulders and both hips are seen. The fractions are a property of the subject, not of
-  the pose (within 0.003 of their median over a clip, 10th-90th percentiles), but differ
-  between subjects and skeleton sources (f_n 0.80-0.93, f_p 0.18-0.27), so a fixed pair
-  puts the neck up to 0.12 of the trunk off. What does not vary is the shoulder girdle:
-  the neck sits ``NECK_BELOW_SHOULDERS`` = 0.205 shoulder widths W below M_s and the
-  pelvis ``PELVIS_ABOVE_HIPS`` = 0.277 shoulder widths above M_h, along the trunk (per
-  clip 0.18-0.24 and 0.25-0.30, lambada's neck 0.10 aside; the same subject's BVH and AMC
-  skeletons give f_n 0.81 and 0.85 but 0.205 and 0.204). So `read_openpose_folder`
+  shoulders and both hips are seen. The fractions are a property of the subject more than
+  of the pose (on most clips f_n stays within 0.003 of its median over the clip, 10th-90th
+  percentiles; 01_12, hanging from a bar, 0.85-0.91), but differ between subjects and
+  skeleton sources (f_n 0.80-0.93, f_p 0.18-0.27), so a fixed pair puts the neck up to
+  0.12 of the trunk off. What varies far less is the shoulder girdle: the neck sits
+  ``NECK_BELOW_SHOULDERS`` = 0.205 shoulder widths W below M_s and the pelvis
+  ``PELVIS_ABOVE_HIPS`` = 0.277 shoulder widths above M_h, along the trunk (per clip
+  0.178-0.237 and 0.249-0.304 over the ten CMU clips, lambada's neck 0.100 aside; the
+  same subject's 01_01 as BVH and as AMC gives f_n 0.811 and 0.854 but 0.205 and 0.204
+  W; docs/mono.md, sixth round). So `read_openpose_folder`
   places them per take (`trunk_fractions`): f_n = 1 - 0.205 W / H, f_p = 0.277 W / H,
   with W and H (the length M_h-M_s) the 90th percentiles of their projected lengths
   over the frames that see both shoulders and both hips, as the link lengths are read
@@ -105,7 +107,9 @@ NECK_FRACTION = 0.81
 PELVIS_FRACTION = 0.25
 #: The neck's distance below the shoulder midpoint and the pelvis's above the hip midpoint,
 #: along the trunk, in shoulder widths (3-D; medians over the ten CMU clips of
-#: ``shared/data/mocap`` as the library reads them, canonical joints of the truth).
+#: ``shared/data/mocap`` as the library reads them, 01_01 as both BVH and AMC: the
+#: truth's canonical joints, per frame, then the median per clip; left one subject
+#: out, the medians move by at most 0.0015 and 0.004).
 NECK_BELOW_SHOULDERS = 0.205
 PELVIS_ABOVE_HIPS = 0.277
 
