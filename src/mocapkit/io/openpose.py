@@ -23,10 +23,10 @@ Mapping onto canonical joints (`CANONICAL_JOINTS`):
   under 0.045 of its length, the pelvis's under 0.15):
   neck = M_h + f_n (M_s - M_h), pelvis = M_h + f_p (M_s - M_h); missing unless both
   shoulders and both hips are seen. The fractions are a property of the subject more than
-  of the pose (on most clips f_n stays within 0.003 of its median over the clip, 10th-90th
-  percentiles; 01_12, hanging from a bar, 0.85-0.91), but differ between subjects and
-  skeleton sources (f_n 0.80-0.93, f_p 0.18-0.27), so a fixed pair puts the neck up to
-  0.12 of the trunk off. What varies far less is the shoulder girdle: the neck sits
+  of the pose (f_n within 0.005 of its median over a clip, f_p within 0.02, 10th-90th
+  percentiles; 01_12, hanging from a bar, 0.85-0.91 and 0.11-0.21), but differ between
+  subjects and skeleton sources (f_n 0.80-0.93, f_p 0.18-0.27), so a fixed pair puts the
+  neck up to 0.12 of the trunk off. What varies far less is the shoulder girdle: the neck sits
   ``NECK_BELOW_SHOULDERS`` = 0.205 shoulder widths W below M_s and the pelvis
   ``PELVIS_ABOVE_HIPS`` = 0.277 shoulder widths above M_h, along the trunk (per clip
   0.178-0.237 and 0.249-0.304 over the ten CMU clips, lambada's neck 0.100 aside; the
