@@ -6,18 +6,22 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from mocapkit.errors import FormatError, SessionError
+from mocapkit.errors import ConfigError, FormatError, SessionError, ShapeError
 from mocapkit.io.openpose import (
     BODY_25,
     COCO_18,
     MAPPED_JOINTS,
+    NECK_BELOW_SHOULDERS,
     NECK_FRACTION,
+    PELVIS_ABOVE_HIPS,
     PELVIS_FRACTION,
     follow_person,
     openpose_from_canonical,
+    place_trunk_joints,
     read_openpose_folder,
     read_openpose_frame,
     to_canonical,
+    trunk_fractions,
     write_openpose_frame,
 )
 
@@ -119,3 +123,114 @@ def test_bad_files_are_refused(tmp_path: Path) -> None:
     write_openpose_frame(one / "x.json", [])
     with pytest.raises(SessionError, match="one JSON file per video frame"):
         read_openpose_folder(one, np.zeros(3))
+
+
+def _girdle_take(rng: np.random.Generator, n: int = 40) -> tuple[np.ndarray, float, float]:
+    """A rigid trunk (shoulder width W = 360 mm, hip-to-shoulder midpoint H = 500 mm, neck
+    0.205 W below the shoulder midpoint, pelvis 0.277 W above the hip midpoint) turning
+    and leaning in front of an orthographic camera; canonical keypoints (n, 15, 2) px at
+    0.5 px/mm (frame 0 faces the camera upright), with W and H."""
+    w, h = 360.0, 500.0
+    body = {
+        "left_shoulder": (w / 2, h, 0), "right_shoulder": (-w / 2, h, 0),
+        "left_hip": (90, 0, 0), "right_hip": (-90, 0, 0),
+        "neck": (0, h - NECK_BELOW_SHOULDERS * w, 0), "pelvis": (0, PELVIS_ABOVE_HIPS * w, 0),
+        "head": (0, h + 200, 0), "left_elbow": (220, 300, 0), "left_wrist": (230, 60, 0),
+        "right_elbow": (-220, 300, 0), "right_wrist": (-230, 60, 0),
+        "left_knee": (90, -420, 0), "left_ankle": (90, -830, 0),
+        "right_knee": (-90, -420, 0), "right_ankle": (-90, -830, 0),
+    }  # fmt: skip
+    pts = np.array([body[j] for j in MAPPED_JOINTS], dtype=float)
+    out = np.empty((n, len(MAPPED_JOINTS), 2))
+    for t in range(n):
+        yaw = 0.0 if t == 0 else rng.uniform(-1.2, 1.2)  # turning about the vertical
+        lean = 0.0 if t == 0 else rng.uniform(-0.8, 0.8)  # towards or away from the camera
+        cy, sy, cl, sl = np.cos(yaw), np.sin(yaw), np.cos(lean), np.sin(lean)
+        r_yaw = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+        r_lean = np.array([[1, 0, 0], [0, cl, -sl], [0, sl, cl]])
+        p = pts @ (r_lean @ r_yaw).T
+        out[t] = 0.5 * np.stack([p[:, 0], -p[:, 1]], axis=-1) + [320.0, 300.0]
+    return out, w, h
+
+
+def test_trunk_fractions_put_the_neck_and_pelvis_where_the_rigid_girdle_has_them() -> None:
+    rng = np.random.default_rng(63)
+    true_px, w, h = _girdle_take(rng)
+    f_n, f_p = trunk_fractions(true_px, MAPPED_JOINTS, percentile=100.0)
+    # the upright frontal frame shows W and H unshortened: the fractions are exact
+    assert f_n == pytest.approx(1.0 - NECK_BELOW_SHOULDERS * w / h, abs=1e-12)
+    assert f_p == pytest.approx(PELVIS_ABOVE_HIPS * w / h, abs=1e-12)
+    assert (f_n, f_p) == pytest.approx((0.852_4, 0.199_44), abs=1e-12)
+    # a detector sees no neck or pelvis: both come back in every frame, turned or leaning
+    seen = true_px.copy()
+    seen[:, [MAPPED_JOINTS.index("neck"), MAPPED_JOINTS.index("pelvis")]] = np.nan
+    rebuilt = place_trunk_joints(seen, MAPPED_JOINTS, (f_n, f_p))
+    np.testing.assert_allclose(rebuilt, true_px, atol=1e-9)
+    # the fixed fractions of earlier rounds miss this neck by 0.042 H (the lean shortens it)
+    fixed = place_trunk_joints(seen, MAPPED_JOINTS, (NECK_FRACTION, PELVIS_FRACTION))
+    err = np.linalg.norm(fixed - true_px, axis=-1)[:, MAPPED_JOINTS.index("neck")]
+    assert err[0] == pytest.approx((1.0 - NECK_BELOW_SHOULDERS * w / h - 0.81) * h * 0.5)
+
+
+def test_trunk_fractions_fall_back_to_the_fixed_pair_and_refuse_bad_input() -> None:
+    rng = np.random.default_rng(64)
+    px, _, _ = _girdle_take(rng, 10)
+    no_hips = px.copy()
+    no_hips[:, MAPPED_JOINTS.index("left_hip")] = np.nan
+    assert trunk_fractions(no_hips, MAPPED_JOINTS) == (NECK_FRACTION, PELVIS_FRACTION)
+    # a trunk never seen longer than 0.3 of its length: W / H = 2.4 would put the neck
+    # below the pelvis
+    sh = [MAPPED_JOINTS.index("left_shoulder"), MAPPED_JOINTS.index("right_shoulder")]
+    hp = [MAPPED_JOINTS.index("left_hip"), MAPPED_JOINTS.index("right_hip")]
+    m_s = px[:, sh].mean(axis=1, keepdims=True)
+    squat = px.copy()
+    squat[:, hp] = m_s + 0.3 * (px[:, hp] - m_s)
+    w = np.linalg.norm(squat[:, sh[0]] - squat[:, sh[1]], axis=-1)
+    h = np.linalg.norm(m_s[:, 0] - squat[:, hp].mean(axis=1), axis=-1)
+    ratio = np.percentile(w, 90) / np.percentile(h, 90)
+    assert 1.0 - NECK_BELOW_SHOULDERS * ratio < PELVIS_ABOVE_HIPS * ratio
+    assert trunk_fractions(squat, MAPPED_JOINTS) == (NECK_FRACTION, PELVIS_FRACTION)
+    with pytest.raises(ShapeError, match="expected \\(T, 15, 2\\)"):
+        trunk_fractions(px[0], MAPPED_JOINTS)
+    with pytest.raises(ConfigError, match="percentile: expected \\(0, 100\\]"):
+        trunk_fractions(px, MAPPED_JOINTS, percentile=0.0)
+    with pytest.raises(ShapeError, match="expected \\(..., 15, 2\\)"):
+        place_trunk_joints(px[..., :1], MAPPED_JOINTS, (0.8, 0.2))
+
+
+def test_a_folder_gets_its_take_s_own_neck_and_pelvis(tmp_path: Path) -> None:
+    rng = np.random.default_rng(65)
+    true_px, w, h = _girdle_take(rng, 20)
+    det = openpose_from_canonical(true_px, MAPPED_JOINTS)
+    _write_frames(tmp_path / "op", [[d] for d in det], "BODY_25")
+    kp = read_openpose_folder(tmp_path / "op", np.arange(20) / 30.0)
+    f_n, f_p = trunk_fractions(kp.pixels, MAPPED_JOINTS)
+    assert f_n == pytest.approx(1.0 - NECK_BELOW_SHOULDERS * w / h, abs=0.01)
+    assert f"{f_n:.3f} and {f_p:.3f}" in kp.source
+    np.testing.assert_allclose(kp.pixels, true_px, atol=0.01 * h)
+    fixed = read_openpose_folder(
+        tmp_path / "op", np.arange(20) / 30.0, fractions=(NECK_FRACTION, PELVIS_FRACTION)
+    )
+    np.testing.assert_allclose(
+        fixed.pixels[:, 1], place_trunk_joints(true_px, MAPPED_JOINTS, (0.81, 0.25))[:, 1]
+    )
+
+
+def test_follow_person_keeps_a_subject_seen_only_in_part() -> None:
+    """A subject leaving the image down to one arm is still followed (the size is the
+    whole body's, not that of the points seen in the frame)."""
+    rng = np.random.default_rng(66)
+    subject = _person(rng, (300, 240), 200)
+    other = _person(rng, (520, 240), 120)
+    step = np.array([4.0, 0.0])
+    frames = []
+    for t in range(6):
+        s = subject + t * step
+        if t >= 2:
+            keep = ["left_elbow", "left_wrist"] if t < 4 else ["left_wrist"]
+            s = np.where(np.isin(MAPPED_JOINTS, keep)[:, None], s, np.nan)
+        frames.append(np.stack([other, s]))
+    out = follow_person(frames)
+    wrist = MAPPED_JOINTS.index("left_wrist")
+    for t in range(6):
+        np.testing.assert_allclose(out[t, wrist], subject[wrist] + t * step)

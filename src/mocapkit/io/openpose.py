@@ -17,19 +17,40 @@ Mapping onto canonical joints (`CANONICAL_JOINTS`):
   ears; with one ear or none, the mean of the ears and eyes seen (biased towards the face);
   missing when neither ears nor eyes are seen;
 - neck and pelvis: the detector's "Neck" is the midpoint of the shoulders and "MidHip" that
-  of the hips; ours are the neck base and the pelvis centre, which lie on the line from the
-  hip midpoint M_h to the shoulder midpoint M_s: neck = M_h + 0.81 (M_s - M_h),
-  pelvis = M_h + 0.25 (M_s - M_h) (medians over the CMU clips the library reads: 0.80-0.85
-  and 0.17-0.27); missing unless both shoulders and both hips are seen.
+  of the hips; ours are the neck base and the pelvis centre, which no detector marks. Both
+  lie near the line from the hip midpoint M_h to the shoulder midpoint M_s (10th-90th
+  percentiles of their distance from it on the CMU clips the library reads: the neck's
+  under 0.045 of its length, the pelvis's under 0.15):
+  neck = M_h + f_n (M_s - M_h), pelvis = M_h + f_p (M_s - M_h); missing unless both
+  shoulders and both hips are seen. The fractions are a property of the subject more than
+  of the pose (f_n within 0.005 of its median over a clip, f_p within 0.02, 10th-90th
+  percentiles; 01_12, hanging from a bar, 0.85-0.91 and 0.11-0.21), but differ between
+  subjects and skeleton sources (f_n 0.80-0.93, f_p 0.18-0.27), so a fixed pair puts the
+  neck up to 0.12 of the trunk off. What varies far less is the shoulder girdle: the neck sits
+  ``NECK_BELOW_SHOULDERS`` = 0.205 shoulder widths W below M_s and the pelvis
+  ``PELVIS_ABOVE_HIPS`` = 0.277 shoulder widths above M_h, along the trunk (per clip
+  0.178-0.237 and 0.249-0.304 over the ten CMU clips, lambada's neck 0.100 aside; the
+  same subject's 01_01 as BVH and as AMC gives f_n 0.811 and 0.854 but 0.205 and 0.204
+  W; docs/mono.md, sixth round). So `read_openpose_folder`
+  places them per take (`trunk_fractions`): f_n = 1 - 0.205 W / H, f_p = 0.277 W / H,
+  with W and H (the length M_h-M_s) the 90th percentiles of their projected lengths
+  over the frames that see both shoulders and both hips, as the link lengths are read
+  off the video (§4.1: each seen near parallel to the image at least once). A take
+  without such a frame, or with W / H so large that the neck would fall below the
+  pelvis, keeps the fixed pair ``NECK_FRACTION`` 0.81 and ``PELVIS_FRACTION`` 0.25 (the
+  clips' medians), which `to_canonical` also uses frame by frame (for following).
 
 Several people: one person is followed through the video (`follow_person`). In the first
 frame with anyone seen, the person with the largest bounding box of confident points
 (nearest the camera, usually the subject) is chosen, or the one nearest a given image
 point. In each later frame, the person whose points lie closest (mean distance over the
 joints seen in both) to the followed person's last seen points is taken, if that distance
-is within ``max_jump`` times the followed person's size (bounding-box diagonal) times the
-frames since they were last seen; otherwise the frame has no one (NaN) and the last seen
-points are kept for the next frame.
+is within ``max_jump`` times the followed person's size times the frames since they were
+last seen; otherwise the frame has no one (NaN) and the last seen points are kept for the
+next frame. The size is the bounding-box diagonal of every joint at its last seen place,
+so a partial view (one arm at the image's edge) does not shrink it (with the size of the
+points seen in the frame alone, a person down to an elbow and a wrist got a jump limit of
+a forearm, and one down to a wrist none: 11_01 lost 9 such frames).
 Everyone else is ignored.
 """
 
@@ -45,7 +66,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mocapkit.errors import FormatError, SessionError, ShapeError
+from mocapkit.errors import ConfigError, FormatError, SessionError, ShapeError
 from mocapkit.io.files import read_text
 from mocapkit.io.session_csv import Keypoints
 
@@ -80,9 +101,17 @@ DIRECT: dict[str, str] = {
     "right_knee": "RKnee",
     "right_ankle": "RAnkle",
 }
-#: Where the canonical neck and pelvis sit on the line from the hip to the shoulder midpoint.
+#: Where the canonical neck and pelvis sit on the line from the hip to the shoulder midpoint
+#: when the take gives no estimate of its own (medians over the CMU clips).
 NECK_FRACTION = 0.81
 PELVIS_FRACTION = 0.25
+#: The neck's distance below the shoulder midpoint and the pelvis's above the hip midpoint,
+#: along the trunk, in shoulder widths (3-D; medians over the ten CMU clips of
+#: ``shared/data/mocap`` as the library reads them, 01_01 as both BVH and AMC: the
+#: truth's canonical joints, per frame, then the median per clip; left one subject
+#: out, the medians move by at most 0.0015 and 0.004).
+NECK_BELOW_SHOULDERS = 0.205
+PELVIS_ABOVE_HIPS = 0.277
 
 #: Canonical joints the mapping provides, in canonical order.
 MAPPED_JOINTS: tuple[str, ...] = (
@@ -147,10 +176,17 @@ def read_openpose_frame(path: str | os.PathLike[str]) -> tuple[str, FloatArray]:
 LAYOUTS_BY_NAME: dict[str, tuple[str, ...]] = {name: kps for name, kps in LAYOUTS.values()}
 
 
-def to_canonical(people: ArrayLike, layout: str, min_confidence: float = 0.3) -> FloatArray:
+def to_canonical(
+    people: ArrayLike,
+    layout: str,
+    min_confidence: float = 0.3,
+    fractions: tuple[float, float] = (NECK_FRACTION, PELVIS_FRACTION),
+) -> FloatArray:
     """Map detector keypoints (P, J, 3) onto canonical joints (P, len(MAPPED_JOINTS), 2).
 
-    See the module docstring for the mapping; NaN where a joint is missing.
+    See the module docstring for the mapping; NaN where a joint is missing. ``fractions``
+    places the neck and pelvis on the hip-to-shoulder midpoint line (`trunk_fractions`
+    gives a take's own; one frame alone cannot).
     """
     if layout not in LAYOUTS_BY_NAME:
         raise FormatError(
@@ -177,11 +213,106 @@ def to_canonical(people: ArrayLike, layout: str, min_confidence: float = 0.3) ->
     with np.errstate(invalid="ignore"), _quiet_nanmean():
         head = np.where(both_ears[:, None], ears.mean(axis=1), np.nanmean(face, axis=1))
     out[:, col["head"]] = head
-    m_s = 0.5 * (kp("LShoulder") + kp("RShoulder"))
-    m_h = 0.5 * (kp("LHip") + kp("RHip"))
-    out[:, col["neck"]] = m_h + NECK_FRACTION * (m_s - m_h)
-    out[:, col["pelvis"]] = m_h + PELVIS_FRACTION * (m_s - m_h)
+    return place_trunk_joints(out, MAPPED_JOINTS, fractions)
+
+
+def _trunk_points(
+    pixels: FloatArray, joint_names: Sequence[str]
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Shoulder midpoint, hip midpoint (..., 2) and shoulder-to-shoulder vector (..., 2)."""
+    names = list(joint_names)
+
+    def j(name: str) -> FloatArray:
+        return pixels[..., names.index(name), :]
+
+    m_s = 0.5 * (j("left_shoulder") + j("right_shoulder"))
+    m_h = 0.5 * (j("left_hip") + j("right_hip"))
+    return m_s, m_h, j("left_shoulder") - j("right_shoulder")
+
+
+def place_trunk_joints(
+    pixels: ArrayLike, joint_names: Sequence[str], fractions: tuple[float, float]
+) -> FloatArray:
+    """Canonical keypoints (..., K, 2) with the neck and pelvis rebuilt from the shoulders
+    and hips: neck = M_h + f_n (M_s - M_h), pelvis = M_h + f_p (M_s - M_h).
+
+    Parameters
+    ----------
+    pixels : (..., K, 2) float
+        Canonical keypoints (px) of ``joint_names``, NaN where missing; must include
+        both shoulders and hips, the neck and the pelvis.
+    joint_names : sequence of str
+    fractions : (f_n, f_p)
+        Places of the neck and pelvis on the line from the hip midpoint M_h (0) to the
+        shoulder midpoint M_s (1) (`trunk_fractions`).
+
+    Returns
+    -------
+    (..., K, 2) float
+        A copy; neck and pelvis NaN where a shoulder or hip is missing.
+    """
+    out = np.array(pixels, dtype=float)
+    names = list(joint_names)
+    if out.ndim < 2 or out.shape[-2:] != (len(names), 2):
+        raise ShapeError(
+            f"place_trunk_joints: expected (..., {len(names)}, 2) keypoints, found {out.shape}"
+        )
+    m_s, m_h, _ = _trunk_points(out, names)
+    f_n, f_p = fractions
+    out[..., names.index("neck"), :] = m_h + f_n * (m_s - m_h)
+    out[..., names.index("pelvis"), :] = m_h + f_p * (m_s - m_h)
     return out
+
+
+def trunk_fractions(
+    pixels: ArrayLike, joint_names: Sequence[str], percentile: float = 90.0
+) -> tuple[float, float]:
+    """A take's neck and pelvis fractions from its shoulder width over its trunk.
+
+    The shoulder girdle is rigid: the neck lies ``NECK_BELOW_SHOULDERS`` shoulder widths
+    below the shoulder midpoint and the pelvis ``PELVIS_ABOVE_HIPS`` shoulder widths
+    above the hip midpoint, along the trunk (module docstring). With the shoulder width
+    W and the hip-to-shoulder midpoint length H of the subject, the fractions of the
+    line M_h -> M_s are f_n = 1 - 0.205 W / H and f_p = 0.277 W / H; in the image both
+    offsets shorten with the trunk, so the fractions hold in every frame (orthographic
+    projection keeps ratios along a line). W and H are read off the video as the link
+    lengths are (§4.1): the ``percentile`` of their projected lengths over the frames
+    that see both shoulders and both hips.
+
+    Parameters
+    ----------
+    pixels : (T, K, 2) float
+        One person's canonical keypoints over a take (px), NaN where missing.
+    joint_names : sequence of str
+    percentile : float
+        High percentile of the projected lengths taken as seen parallel to the image (90,
+        as `mocapkit.tracking.mono.lengths.estimate_link_lengths`).
+
+    Returns
+    -------
+    (f_n, f_p) : tuple of float
+        ``(NECK_FRACTION, PELVIS_FRACTION)`` when no frame sees both shoulders and both
+        hips, or when W / H would put the neck at or below the pelvis.
+    """
+    px = np.asarray(pixels, dtype=float)
+    if px.ndim != 3 or px.shape[1:] != (len(joint_names), 2):
+        raise ShapeError(
+            f"trunk_fractions: expected (T, {len(joint_names)}, 2) keypoints, found {px.shape}"
+        )
+    if not 0 < percentile <= 100:
+        raise ConfigError(f"trunk_fractions: percentile: expected (0, 100], found {percentile}")
+    m_s, m_h, across = _trunk_points(px, joint_names)
+    w = np.linalg.norm(across, axis=-1)
+    h = np.linalg.norm(m_s - m_h, axis=-1)
+    ok = np.isfinite(w) & np.isfinite(h) & (h > 0)
+    if not ok.any():
+        return NECK_FRACTION, PELVIS_FRACTION
+    ratio = float(np.percentile(w[ok], percentile) / np.percentile(h[ok], percentile))
+    f_n = 1.0 - NECK_BELOW_SHOULDERS * ratio
+    f_p = PELVIS_ABOVE_HIPS * ratio
+    if not f_p < f_n:
+        return NECK_FRACTION, PELVIS_FRACTION
+    return f_n, f_p
 
 
 @contextmanager
@@ -255,7 +386,7 @@ def follow_person(
         out[t] = cands[pick]
         seen = np.isfinite(cands[pick]).all(axis=-1)
         last = out[t].copy() if last is None else np.where(seen[:, None], out[t], last)
-        last_size = max(_size(cands[pick]), 1e-9)
+        last_size = max(_size(last), 1e-9)
         last_t = t
     return out
 
@@ -266,6 +397,7 @@ def read_openpose_folder(
     min_confidence: float = 0.3,
     max_jump: float = 0.2,
     start_px: ArrayLike | None = None,
+    fractions: tuple[float, float] | None = None,
 ) -> Keypoints:
     """Canonical keypoints of the followed person in an OpenPose JSON folder.
 
@@ -279,6 +411,9 @@ def read_openpose_folder(
         Points below this confidence are missing.
     max_jump, start_px
         See `follow_person`.
+    fractions : (f_n, f_p), optional
+        Places of the neck and pelvis on the hip-to-shoulder midpoint line; default: the
+        followed person's own over the take (`trunk_fractions`).
     """
     files = openpose_files(folder)
     t = np.asarray(time_s, dtype=float)
@@ -300,7 +435,16 @@ def read_openpose_folder(
             else np.zeros((0, len(MAPPED_JOINTS), 2))
         )
     px = follow_person(frames, max_jump=max_jump, start_px=start_px)
-    return Keypoints(t, MAPPED_JOINTS, px, f"{folder} (OpenPose {layout_seen or 'empty'})")
+    if fractions is None:
+        fractions = trunk_fractions(px, MAPPED_JOINTS)
+    px = place_trunk_joints(px, MAPPED_JOINTS, fractions)
+    return Keypoints(
+        t,
+        MAPPED_JOINTS,
+        px,
+        f"{folder} (OpenPose {layout_seen or 'empty'}; neck and pelvis at "
+        f"{fractions[0]:.3f} and {fractions[1]:.3f} of the hip-to-shoulder line)",
+    )
 
 
 def write_openpose_frame(
