@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -139,7 +140,11 @@ def write_openpose_with_bystander(
     """
     rng = np.random.default_rng(seed)
     det = openpose_from_canonical(pixels, joint_names, "BODY_25")
-    centre = np.nanmean(pixels, axis=1, keepdims=True)
+    with warnings.catch_warnings():
+        # A frame where the subject is out of view (11_01) has no keypoints: its centre is
+        # NaN and so is its bystander, which is what a detector would write there.
+        warnings.filterwarnings("ignore", "Mean of empty slice", RuntimeWarning)
+        centre = np.nanmean(pixels, axis=1, keepdims=True)
     side = 220.0 if float(np.nanmedian(centre[..., 0])) < 320 else -220.0
     other_px = (pixels - centre) * 0.6 + centre + [side, 20.0]
     other_px = other_px + rng.normal(scale=1.0, size=other_px.shape)
