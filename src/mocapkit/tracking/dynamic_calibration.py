@@ -97,11 +97,12 @@ class DynamicCalibration:
         default point (``HybridConfig.member_offsets_mm``).
     spread_mm : dict of str to float
         Per set: the largest over its members of the median distance of the per-frame
-        offsets from their median (how much the positions-only model's turn of the
-        joint wandered over the frames used: the tennis serve's glasses 37 mm, wrist bars
-        21 and 15 mm).
+        offsets from their median over the frames used (the tennis serve's glasses 6.1
+        mm, wrist bars 2.7 and 3.5 mm; over every candidate frame, without the consensus,
+        33, 21 and 16 mm).
     frames_used : dict of str to int
-        Per set: the frames the median is over.
+        Per set: the frames the median is over (the candidates that agree on the layout:
+        the tennis serve's 112 / 96 / 92 of 449 / 324 / 349).
     n_frames : int
         Frames of the take.
     """
