@@ -29,12 +29,12 @@ between serves), with one tight cluster, the still stance's 100 frames within a 
 degrees of each other; the median of all of them came out 23 deg round from the static
 calibration's bar, the consensus 0.5 deg. Frames where the assumption holds all give the
 same layout; frames where it fails each give their own, so they scatter (RANSAC's
-maximum consensus, with `CONSENSUS_DEG`). Measured over the tennis serve and four copies
-of it jittered by 1e-6 mm (the tracker is chaotic in round-off; docs/hybrid.md), elbows
-left / right mean: median 101 / 105 mm, consensus 94 / 98 (static calibration 93 / 91);
-on the ezc3d Qualisys take, which moves throughout, 87 / 40 -> 52 / 32 (positions only
-105 / 39). Offsets are from the effector's default point, as
-``HybridConfig.member_offsets_mm``.
+maximum consensus, with `CONSENSUS_DEG`). Elbows, mean left / right over eight copies
+of the tennis serve jittered by 1e-6 mm (the tracker is chaotic in round-off;
+docs/hybrid.md): median 97 / 107 mm, consensus 94 / 98, static calibration 92 / 93; on
+the ezc3d Qualisys take, which moves throughout, 87 / 40 -> 52 / 32 (at 10-12.5 deg
+only: its left elbow has two states, about 50 and 89 mm; positions only 105 / 39).
+Offsets are from the effector's default point, as ``HybridConfig.member_offsets_mm``.
 
 One pass only: tracking again with the offsets and calibrating again returns nearly the
 offsets it started from (the IK now follows the members: per-frame offsets within 1 mm of
