@@ -272,7 +272,10 @@ def consensus_frames(
     agree = layout_turn_deg(d, d[seeds[int(np.argmax(support))]][None])[0] < max_turn_deg
     for _ in range(rounds):
         middle = np.median(v[agree], axis=0)
-        agree = layout_turn_deg(d, middle[None])[0] < max_turn_deg
+        shifted = layout_turn_deg(d, middle[None])[0] < max_turn_deg
+        if not shifted.any():  # a median layout no frame is near: keep the last frames
+            break
+        agree = shifted
     return agree
 
 
