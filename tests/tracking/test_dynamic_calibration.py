@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from mocapkit.errors import ConfigError, ShapeError, UnknownNameError
+from mocapkit.geometry.rotations import matrix_from_axis_angle
 from mocapkit.io.markers import MarkerData
 from mocapkit.pipelines.hybrid import (
     head_band_offset_mm,
@@ -19,6 +20,8 @@ from mocapkit.tracking.dynamic_calibration import (
     MAX_FIT_MM,
     calibrate_members_on_motion,
     calibration_frames,
+    consensus_frames,
+    layout_turn_deg,
 )
 from mocapkit.tracking.hybrid import HybridConfig, HybridTracker, default_marker_effectors
 from mocapkit.tracking.static_calibration import rotation_between_deg
@@ -84,22 +87,69 @@ def test_calibration_frames_slow_and_hanging():
         calibration_frames(sk, world, "head", t, centre["head"][:5], fit)
 
 
-def test_median_leaves_out_frames_turned_wrong():
-    """Exact poses with known offsets give them back; 30 % of the frames posed wrong, the
-    arms turned 90 deg about the upper arm and the head bent 60 deg sideways (what a
-    positions-only track gets wrong on part of a take: the swivel, the head's turn), move
-    the mean over the same frames by over 10 mm and the median by less than 1 mm; only
-    `calibration_frames` are used."""
+def test_layout_turn_known_values():
+    """A bar turned 30 deg is 30 deg off; a cross of four members turned 20 deg about the
+    line through two of them is 20 deg off (the largest member's turn); unturned, 0."""
+    bar = np.array([[[47.0, 0.0, 0.0], [-47.0, 0.0, 0.0]]])
+    turned = bar @ matrix_from_axis_angle([0.0, 0.0, 1.0], np.radians(30.0)).T
+    d = turned / np.linalg.norm(turned, axis=2, keepdims=True)
+    assert layout_turn_deg(d, bar)[0, 0] == pytest.approx(30.0, abs=1e-9)
+    cross = np.array([[[50.0, 0, 0], [-50.0, 0, 0], [0, 50.0, 0], [0, -50.0, 0]]])
+    rot = cross @ matrix_from_axis_angle([1.0, 0.0, 0.0], np.radians(20.0)).T
+    both = np.concatenate([cross, rot]) / 50.0
+    np.testing.assert_allclose(layout_turn_deg(both, cross), [[0.0, 20.0]], atol=1e-6)
+    with pytest.raises(ShapeError, match=r"layout_turn_deg: expected directions \(N, M, 3\)"):
+        layout_turn_deg(both, cross[:, :3])
+
+
+def test_consensus_frames_find_the_frames_that_agree():
+    """40 frames of one layout (0.3 mm noise) among 60 turned each by its own angle
+    (20-140 deg) about one axis, one way (a forearm pronated by varying amounts: a
+    positions-only track's wrist frame does not turn with it): exactly the 40 agree, also
+    with a few seeds tried; the per-member median over all 100 frames is tens of mm off,
+    over the 40 within 0.5 mm."""
+    rng = np.random.default_rng(11)
+    layout = np.array(
+        [[-60.0, 45.0, -10.0], [80.0, 70.0, -20.0], [-70.0, -60.0, -40.0], [85.0, -50.0, -45.0]]
+    )
+    n = 100
+    loc = np.repeat(layout[None], n, axis=0) + rng.normal(0.0, 0.3, (n, 4, 3))
+    wrong = rng.permutation(n)[:60]
+    for k in wrong:
+        angle = rng.uniform(np.radians(20.0), np.radians(140.0))
+        loc[k] = loc[k] @ matrix_from_axis_angle([0.0, 0.0, 1.0], angle).T
+    want = np.ones(n, dtype=bool)
+    want[wrong] = False
+    np.testing.assert_array_equal(consensus_frames(loc), want)
+    np.testing.assert_array_equal(consensus_frames(loc, max_seeds=7), want)
+    assert np.abs(np.median(loc, axis=0) - layout).max() > 20.0
+    assert np.abs(np.median(loc[want], axis=0) - layout).max() < 0.5
+    with pytest.raises(ShapeError, match=r"consensus_frames: expected members \(N >= 1, M >= 2"):
+        consensus_frames(loc[:, :1])
+    with pytest.raises(ConfigError, match="expected 0 < max_turn_deg < 180"):
+        consensus_frames(loc, max_turn_deg=0.0)
+
+
+def test_consensus_leaves_out_frames_turned_wrong():
+    """Exact poses with known offsets give them back; 60 % of the frames posed wrong, each
+    its own way (the arms turned 30-150 deg about the upper arm, the head bent 30-70 deg
+    sideways, either sign: what a positions-only track gets wrong on part of a take, the
+    swivel and the head's turn), move the median over the candidate frames by over 10 mm
+    but the offsets, over the frames that agree, by less than 1 mm; those frames are the
+    candidates (`calibration_frames`) posed right."""
     sk = raw_marker_skeleton(1700.0)
     rng = np.random.default_rng(6)
     q, t = _hang_then_raise(sk, 300)
     members = _members_from_poses(sk, q, rng, noise_mm=0.5)
     by_set = {name: {m: members[m] for m in ms} for name, ms in TRUE_MEMBERS.items()}
     wrong = q.copy()
-    turned = rng.random(q.shape[0]) < 0.3
-    for dof, turn in (("l_shoulder_rotation", 1.57), ("r_shoulder_rotation", 1.57)):
-        wrong[turned, sk.dof_index(dof)] += turn
-    wrong[turned, sk.dof_index("neck_lateral")] += 1.05
+    turned = rng.random(q.shape[0]) < 0.6
+    k = int(turned.sum())
+    for dof in ("l_shoulder_rotation", "r_shoulder_rotation"):
+        wrong[turned, sk.dof_index(dof)] += rng.choice([-1, 1], k) * rng.uniform(0.52, 2.6, k)
+    wrong[turned, sk.dof_index("neck_lateral")] += rng.choice([-1, 1], k) * rng.uniform(
+        0.52, 1.22, k
+    )
     fit = {name: np.zeros(q.shape[0]) for name in TRUE_MEMBERS}
     fit["left_hand"][:20] = MAX_FIT_MM + 1.0
     calib = calibrate_members_on_motion(sk, wrong, t, fit, by_set)
@@ -108,18 +158,29 @@ def test_median_leaves_out_frames_turned_wrong():
     for name, ms in TRUE_MEMBERS.items():
         centre = np.mean([members[m] for m in ms], axis=0)
         used = calibration_frames(sk, world, name, t, centre, fit[name])
-        assert calib.frames_used[name] == used.sum() >= 50, name
+        assert calib.frames_used[name] == (used & ~turned).sum() >= 50, name
         got = np.array([calib.offsets_mm[name][m] for m in ms])
         want = np.array(list(ms.values()))
         assert np.abs(got - want).max() < 1.0, name
         assert rotation_between_deg(got, want) < 1.0, name
-        # the mean over the same frames is pulled off by the turned ones
+        # the median over all the candidate frames is pulled off by the turned ones
         j = sk.joint_index(eff[name].joint)
-        first = next(iter(ms))
-        local = np.einsum(
-            "nji,nj->ni", world[used, j, :3, :3], members[first][used] - world[used, j, :3, 3]
-        ) - np.asarray(eff[name].point_mm)
-        assert np.linalg.norm(local.mean(axis=0) - ms[first]) > 10.0, name
+        off = max(
+            np.linalg.norm(
+                np.median(
+                    np.einsum(
+                        "nji,nj->ni",
+                        world[used, j, :3, :3],
+                        members[m][used] - world[used, j, :3, 3],
+                    ),
+                    axis=0,
+                )
+                - np.asarray(eff[name].point_mm)
+                - ms[m]
+            )
+            for m in ms
+        )
+        assert off > 10.0, name
     with pytest.raises(ConfigError, match="expected a marker set with two or more members"):
         calibrate_members_on_motion(sk, wrong, t, fit, by_set, min_frames=q.shape[0] + 1)
     with pytest.raises(ShapeError, match=r"q: expected shape \(T, "):

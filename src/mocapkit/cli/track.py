@@ -105,7 +105,8 @@ def register(subparsers: Any) -> None:
         default=None,
         help="with --markers: how the marker sets' member offsets are calibrated: static "
         "(on a still second, positions only where none is found), dynamic (on the motion: "
-        "the take tracked from the set centres, each member's median place on its joint), "
+        "the take tracked from the set centres, each member's median place on its joint over "
+        "the frames that agree on the set's layout), "
         "auto (default: static where a still second is found, else dynamic where a hand "
         "set has two or more members) or none (the sets' positions only); the run prints "
         "which was used",

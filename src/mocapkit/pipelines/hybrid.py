@@ -826,7 +826,7 @@ def track_hybrid_marker_file(
         direction); one of `CALIBRATIONS`. ``static``: on a still interval
         (`mocapkit.tracking.static_calibration`; positions only where none is found);
         ``dynamic``: on the motion, the take tracked from the set centres first and each
-        member's offset the median over its frames
+        member's offset the median over the frames that agree on the set's layout
         (`mocapkit.tracking.dynamic_calibration`); ``auto`` (default): static where a
         still window is found, else dynamic where a hand set has two or more members
         (a head set's orientation alone turns the trunk with the head: the basket

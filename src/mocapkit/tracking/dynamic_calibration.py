@@ -6,26 +6,35 @@ Where a take has none (or none is wanted), the offsets are calibrated on the mot
 biomechanics does with a functional calibration or OpenSim's marker placement on a
 dynamic trial: the take is tracked from the set centres alone (positions only), each
 member is put in its effector joint's frame on every frame, and its offset is the median
-over the frames where the calibration's assumption can hold (`calibration_frames`).
+over the frames where the calibration's assumption can hold (`calibration_frames`) and
+that agree with one another on where the members sit (`consensus_frames`).
 
-Why the median: with positions only the head's turn and the forearm's (the elbow's swivel
-about the shoulder-wrist line) come from the IK's relaxed-pose task, and they are wrong on
-part of a moving take (the tennis serve's ball-tossing arm swings down with its elbow
-up, the head looks up at the ball); the per-frame offsets of those frames are outliers
-that the median leaves out where the mean would be pulled by them. The calibration
-assumes on most of the fitting frames what the static one assumes on one still second:
+The assumption is the static calibration's, on many frames rather than one still second:
 the head faces the way the trunk does and the forearm is turned as the relaxed pose turns
-it. The frames used are those where that is most likely: the set's centre fits the model
-(within `MAX_FIT_MM`), it moves slower than its median speed over the take (no swing
-under way, where the warm-started IK lags and the forearm turns), and for a hand set the
-model's arm hangs (wrist below the shoulder by `HANGING_FRACTION` of the arm's length:
-the relaxed pose, near which the relaxed-pose task's swivel is right). On the tennis serve
-at three statures (1714 / 1731 / 1748 mm) these frames give elbows of 101 / 98 mm mean
-(left / right) against 103 / 123 with every frame that fits, and 97 / 102 with the static
-calibration; on the ezc3d Qualisys take, which moves throughout, 87 / 40 against 77 / 26
-with every frame that fits (105 / 39 positions only): no choice was best on both
-(docs/hybrid.md). Offsets are from the effector's default point, as
-``HybridConfig.member_offsets_mm``.
+it. With positions only the head's turn and the forearm's (the elbow's swivel about the
+shoulder-wrist line, and no pronation at all) come from the IK's relaxed-pose task, and
+they are wrong on part of a moving take (the tennis serve's ball-tossing arm swings down
+with its elbow up, the head looks up at the ball, the forearms turn). The candidate frames
+are those where the assumption is most likely: the set's centre fits the model (within
+`MAX_FIT_MM`), it moves slower than its median speed over the take (no swing under way,
+where the warm-started IK lags and the forearm turns), and for a hand set the model's arm
+hangs (wrist below the shoulder by `HANGING_FRACTION` of the arm's length: the relaxed
+pose, near which the relaxed-pose task's swivel is right).
+
+Why the consensus rather than the median over the candidates: the assumption fails on
+many of them too, and not at random. On the tennis serve the toss arm's wrist bar, put
+in the positions-only model's wrist frame, lies anywhere over 0-180 deg round the forearm
+on its hanging, slow frames (the player holds the forearm turned in different ways
+between serves), with one tight cluster, the still stance's 100 frames within a few
+degrees of each other; the median of all of them came out 23 deg round from the static
+calibration's bar, the consensus 0.5 deg. Frames where the assumption holds all give the
+same layout; frames where it fails each give their own, so they scatter (RANSAC's
+maximum consensus, with `CONSENSUS_DEG`). Elbows, mean left / right over eight copies
+of the tennis serve jittered by 1e-6 mm (the tracker is chaotic in round-off;
+docs/hybrid.md): median 97 / 107 mm, consensus 94 / 98, static calibration 92 / 93; on
+the ezc3d Qualisys take, which moves throughout, 87 / 40 -> 52 / 32 (at 10-12.5 deg
+only: its left elbow has two states, about 50 and 89 mm; positions only 105 / 39).
+Offsets are from the effector's default point, as ``HybridConfig.member_offsets_mm``.
 
 One pass only: tracking again with the offsets and calibrating again returns nearly the
 offsets it started from (the IK now follows the members: per-frame offsets within 1 mm of
@@ -62,8 +71,19 @@ MAX_FIT_MM = 10.0
 HANGING_FRACTION = 0.8
 #: Percentile of a set's speed over the take below which its frames are used.
 SLOW_PERCENTILE = 50.0
-#: Fewest such frames a set needs to be calibrated (1 s at 50 Hz, as the static window).
+#: Fewest such frames a set needs to be calibrated (1 s at 50 Hz, as the static window),
+#: and fewest of them that must agree on its members' layout (`consensus_frames`).
 MIN_FRAMES = 50
+#: Largest turn (deg) of a frame's member layout from another's for the two to agree
+#: (`consensus_frames`): a still stance's frames agree within 2-5 deg (the tennis serve's
+#: first 2 s), what the positions-only track gets wrong turns a frame's layout by tens of
+#: degrees (the toss arm's wrist bar over its hanging frames: 0-180 deg about the forearm).
+CONSENSUS_DEG = 10.0
+#: Rounds in which the agreeing frames are chosen again about their own median layout.
+CONSENSUS_ROUNDS = 5
+#: Most frames tried as the seed of the consensus (evenly spaced over the candidates), so
+#: that a long take's search stays O(frames) (the tennis serve's 300-450 are all tried).
+MAX_SEEDS = 500
 
 
 @dataclass(frozen=True)
@@ -77,11 +97,12 @@ class DynamicCalibration:
         default point (``HybridConfig.member_offsets_mm``).
     spread_mm : dict of str to float
         Per set: the largest over its members of the median distance of the per-frame
-        offsets from their median (how much the positions-only model's turn of the
-        joint wandered over the frames used: the tennis serve's glasses 37 mm, wrist bars
-        21 and 15 mm).
+        offsets from their median over the frames used (the tennis serve's glasses 6.1
+        mm, wrist bars 2.7 and 3.5 mm; over every candidate frame, without the consensus,
+        33, 21 and 16 mm).
     frames_used : dict of str to int
-        Per set: the frames the median is over.
+        Per set: the frames the median is over (the candidates that agree on the layout:
+        the tennis serve's 112 / 96 / 92 of 449 / 324 / 349).
     n_frames : int
         Frames of the take.
     """
@@ -100,7 +121,8 @@ class DynamicCalibration:
         return (
             f"member offsets calibrated on the motion (median over the frames of the "
             f"{self.n_frames} tracked from the set centres where the set fits within "
-            f"{MAX_FIT_MM:g} mm, moves slower than its median and a hand's arm hangs): {sets}"
+            f"{MAX_FIT_MM:g} mm, moves slower than its median and a hand's arm hangs, and "
+            f"that agree on its layout within {CONSENSUS_DEG:g} deg): {sets}"
         )
 
 
@@ -160,6 +182,101 @@ def calibration_frames(
         with np.errstate(invalid="ignore"):
             good &= shoulder[:, 2] - wrist[:, 2] >= HANGING_FRACTION * reach
     return good
+
+
+def layout_turn_deg(directions: ArrayLike, reference: ArrayLike) -> FloatArray:
+    """How far each frame's member layout is turned from a reference layout.
+
+    Parameters
+    ----------
+    directions : array_like, shape (N, M, 3)
+        Per frame, the unit directions of a set's M members from their centre (in the
+        effector joint's frame).
+    reference : array_like, shape (K, M, 3)
+        K reference layouts, the same way (e.g. other frames'); need not be unit length.
+
+    Returns
+    -------
+    ndarray, shape (K, N)
+        The largest over the members of the angle (deg) between a member's direction in
+        the frame and in the reference: for two members the angle between the bars; for
+        more, at least as much as any member moved (a turn about an axis through one
+        member still moves the others).
+    """
+    d = np.asarray(directions, dtype=float)
+    r = np.asarray(reference, dtype=float)
+    if d.ndim != 3 or d.shape[2] != 3 or r.ndim != 3 or r.shape[1:] != d.shape[1:]:
+        raise ShapeError(
+            f"layout_turn_deg: expected directions (N, M, 3) and reference (K, M, 3), found "
+            f"{d.shape} and {r.shape}"
+        )
+    r = r / np.linalg.norm(r, axis=2, keepdims=True)
+    cos = np.einsum("kmi,nmi->knm", r, d).min(axis=2)
+    return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+
+def consensus_frames(
+    local_mm: ArrayLike,
+    max_turn_deg: float = CONSENSUS_DEG,
+    rounds: int = CONSENSUS_ROUNDS,
+    max_seeds: int = MAX_SEEDS,
+) -> NDArray[np.bool_]:
+    """The largest set of frames that agree on where a set's members sit on its joint.
+
+    Where the calibration's assumption holds (the subject in the relaxed pose the
+    positions-only IK takes), every frame puts the members at the same place in the
+    effector joint's frame; where it fails (the swivel flipped, the forearm turned, the
+    head turned from the trunk), each frame fails its own way, so those frames scatter
+    rather than agree. The offsets are therefore taken over the frames that agree with
+    the most others (maximum consensus, as RANSAC), not over all of them: a median needs
+    the assumption to hold on more than half the frames, and on the tennis serve's hanging,
+    slow frames the toss arm's wrist bar lies 0-180 deg round the forearm, the still
+    stance's 100 frames within a few degrees of each other (34 deg) and the median at 57.
+
+    Parameters
+    ----------
+    local_mm : array_like, shape (N, M, 3)
+        Per frame, the M >= 2 members in the effector joint's frame (mm), all finite.
+    max_turn_deg : float
+        Largest turn (`layout_turn_deg`) between frames that agree.
+    rounds : int
+        Times the agreeing frames are chosen again about their median layout (each a
+        step of mean shift towards the cluster's middle).
+    max_seeds : int
+        Most frames tried as the seed (evenly spaced).
+
+    Returns
+    -------
+    ndarray of bool, shape (N,)
+        The agreeing frames: those within ``max_turn_deg`` of the median layout of the
+        best seed's agreeing frames, after ``rounds`` such steps.
+    """
+    loc = np.asarray(local_mm, dtype=float)
+    if loc.ndim != 3 or loc.shape[1] < 2 or loc.shape[2] != 3 or loc.shape[0] < 1:
+        raise ShapeError(
+            f"consensus_frames: expected members (N >= 1, M >= 2, 3), found {loc.shape}"
+        )
+    if not 0 < max_turn_deg < 180 or rounds < 0 or max_seeds < 1:
+        raise ConfigError(
+            f"consensus_frames: expected 0 < max_turn_deg < 180, rounds >= 0 and max_seeds "
+            f">= 1, found {max_turn_deg}, {rounds}, {max_seeds}"
+        )
+    v = loc - loc.mean(axis=1, keepdims=True)
+    d = v / np.linalg.norm(v, axis=2, keepdims=True)
+    n = d.shape[0]
+    seeds = np.unique(np.linspace(0, n - 1, min(n, max_seeds)).round().astype(int))
+    support = np.zeros(seeds.size, dtype=int)
+    for k in range(0, seeds.size, 64):  # a block of seeds at a time: (64, N) angles
+        block = seeds[k : k + 64]
+        support[k : k + 64] = (layout_turn_deg(d, d[block]) < max_turn_deg).sum(axis=1)
+    agree = layout_turn_deg(d, d[seeds[int(np.argmax(support))]][None])[0] < max_turn_deg
+    for _ in range(rounds):
+        middle = np.median(v[agree], axis=0)
+        shifted = layout_turn_deg(d, middle[None])[0] < max_turn_deg
+        if not shifted.any():  # a median layout no frame is near: keep the last frames
+            break
+        agree = shifted
+    return agree
 
 
 def calibrate_members_on_motion(
@@ -256,6 +373,12 @@ def calibrate_members_on_motion(
             good &= np.all(np.isfinite(loc), axis=1)
         if int(good.sum()) < min_frames:
             continue
+        rows = np.flatnonzero(good)
+        agree = consensus_frames(np.stack([loc[rows] for loc in local.values()], axis=1))
+        if int(agree.sum()) < min_frames:
+            continue
+        good[:] = False
+        good[rows[agree]] = True
         out: dict[str, tuple[float, float, float]] = {}
         worst = 0.0
         for member, loc in local.items():
@@ -275,11 +398,16 @@ def calibrate_members_on_motion(
 
 
 __all__ = [
+    "CONSENSUS_DEG",
+    "CONSENSUS_ROUNDS",
     "HANGING_FRACTION",
     "MAX_FIT_MM",
+    "MAX_SEEDS",
     "MIN_FRAMES",
     "SLOW_PERCENTILE",
     "DynamicCalibration",
     "calibrate_members_on_motion",
     "calibration_frames",
+    "consensus_frames",
+    "layout_turn_deg",
 ]
