@@ -111,10 +111,13 @@ def test_trunk_from_head_without_a_belt_follows_the_anthropometric_ratios() -> N
 
 def test_a_foreground_mask_hides_static_skin() -> None:
     img = _figure()
-    cv2.circle(img, (560, 60), 30, SKIN_BGR, -1)  # a skin-coloured lamp above the right
+    cv2.circle(img, (540, 60), 30, SKIN_BGR, -1)  # two skin-coloured lamps up on the right
+    cv2.circle(img, (610, 40), 30, SKIN_BGR, -1)
     top = SkinTracker().update(img)
-    # the lamp is the topmost large blob: taken for the head
-    np.testing.assert_allclose(top.blobs["head"].centre, (560, 60), atol=1.5)
+    # the lamps are larger than the forearms and reach higher than the head: of the three
+    # blobs reaching highest (head, lamps) the middle one from left to right, the nearer
+    # lamp, is taken for the head
+    np.testing.assert_allclose(top.blobs["head"].centre, (540, 60), atol=1.5)
     fg = np.full(img.shape[:2], 255, dtype=np.uint8)
     fg[:, 500:] = 0
     f = SkinTracker().update(img, foreground=fg)
@@ -198,12 +201,27 @@ def test_bare_from_places_elbow_and_wrist_on_the_arm_blob() -> None:
         np.testing.assert_allclose(paper[f"{side}_wrist"], mid + half * 2 / np.sqrt(3), atol=2.5)
 
 
-def test_the_first_head_is_the_blob_reaching_highest() -> None:
-    """A hand raised beside the face, its centroid above the head's (lambada's first
-    frame): the head is still the blob whose top is highest."""
+def test_the_first_head_lies_between_the_forearms() -> None:
+    """A hand raised beside the face, its centroid above the head's: the head is the
+    middle one, left to right, of the three blobs reaching highest."""
     img = _figure(left=((430, 118), (440, 80)), belt=False)
     by_y = sorted(mask_blobs(_skin(img)), key=lambda b: b.centre[1])
     assert by_y[0].centre[0] > 400  # the raised hand's centroid is the topmost
     f = SkinTracker().update(img)
     np.testing.assert_allclose(f.blobs["head"].centre, (320, 100), atol=1.5)
     assert f.blobs["left_hand"].centre[0] > 400 and f.blobs["right_hand"].centre[0] < 250
+
+
+def test_the_first_head_merged_with_a_forearm_is_the_blob_reaching_highest() -> None:
+    """Lambada's first frame: the right forearm across the face (one blob with the head)
+    and the left one raised, its centroid above the merged blob's; with two blobs the
+    head is the one reaching highest, the raised forearm the left hand."""
+    img = _figure(left=((430, 130), (440, 80)), right=((280, 130), (380, 150)), belt=False)
+    blobs = mask_blobs(_skin(img))
+    assert len(blobs) == 2
+    merged = max(blobs, key=lambda b: b.area)
+    raised = min(blobs, key=lambda b: b.area)
+    assert raised.centre[1] < merged.centre[1]  # the topmost centroid is the forearm's
+    f = SkinTracker().update(img)
+    np.testing.assert_allclose(f.blobs["head"].centre, merged.centre)
+    np.testing.assert_allclose(f.blobs["left_hand"].centre, raised.centre)

@@ -6,10 +6,13 @@ waist (the paper's golden belt, which its skin model also accepts), joints read 
 ellipses, then the fixed-lag smoother of the tracker (errata M6).
 
 Labels. First frame (the subject faces the camera, as the paper's initial pose is known):
-the head is the blob of the four largest that reaches highest (the top end of its major
-axis; the top of the head is the subject's highest skin with the hands below it, while a
-raised forearm's centroid can lie above the head's centroid, or above that of a head
-merged with an arm, as in the lambada clip's first frame); the waist is a blob below the head
+of the four largest blobs, the three that reach highest (the top ends of their major
+axes) are the head and the forearms, and the head is the middle one of them from left to
+right (with fewer than three, the one reaching highest: the top of the head is the
+subject's highest skin unless a hand is raised). Neither a raised forearm whose centroid
+lies above the head's (or above that of a head merged with the other arm, as in the
+lambada clip's first frame) nor a hand raised above the head is taken for it, as the
+topmost centroid or the highest top alone would; the waist is a blob below the head
 whose major axis lies within 30 deg of the horizontal; the other two are the forearms, the
 subject's left one on the image's right. Later frames: each label takes the blob nearest
 its previous centre (minimum total distance, `scipy.optimize.linear_sum_assignment`)
@@ -199,7 +202,7 @@ class SkinTracker:
         cands = blobs[:4]
         if not cands:
             return SkinFrame({})
-        head = min(cands, key=lambda b: b.ends[0, 1])  # the top end: see the module docstring
+        head = _first_head(cands)
         rest = [b for b in cands if b is not head]
         labelled: dict[str, Blob] = {"head": head}
         waist = [
@@ -247,6 +250,14 @@ class SkinTracker:
                     labelled[n] = _moved(prev.blobs[n], shift)
                     merged.add(n)
         return SkinFrame(labelled, merged)
+
+
+def _first_head(cands: list[Blob]) -> Blob:
+    """The head among the first frame's largest blobs; see the module docstring."""
+    top = sorted(cands, key=lambda b: b.ends[0, 1])[:3]
+    if len(top) < 3:
+        return top[0]
+    return sorted(top, key=lambda b: b.centre[0])[1]
 
 
 def joints_from_blobs(
