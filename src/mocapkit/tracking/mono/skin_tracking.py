@@ -8,8 +8,9 @@ ellipses, then the fixed-lag smoother of the tracker (errata M6).
 Labels. First frame (the subject faces the camera, as the paper's initial pose is known):
 of the four largest blobs, the three that reach highest (the top ends of their major
 axes) are the head and the forearms, and the head is the middle one of them from left to
-right (with fewer than three, the one reaching highest: the top of the head is the
-subject's highest skin unless a hand is raised). Neither a raised forearm whose centroid
+right if its top lies above the other two's centroids (else, or with fewer than three,
+the one reaching highest: the top of the head is the subject's highest skin unless a
+hand is raised). Neither a raised forearm whose centroid
 lies above the head's (or above that of a head merged with the other arm, as in the
 lambada clip's first frame) nor a hand raised above the head is taken for it, as the
 topmost centroid or the highest top alone would; the waist is a blob below the head
@@ -257,7 +258,10 @@ def _first_head(cands: list[Blob]) -> Blob:
     top = sorted(cands, key=lambda b: b.ends[0, 1])[:3]
     if len(top) < 3:
         return top[0]
-    return sorted(top, key=lambda b: b.centre[0])[1]
+    mid = sorted(top, key=lambda b: b.centre[0])[1]
+    if all(mid.ends[0, 1] < b.centre[1] for b in top if b is not mid):
+        return mid
+    return top[0]
 
 
 def joints_from_blobs(
