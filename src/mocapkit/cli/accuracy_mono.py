@@ -33,6 +33,13 @@ def add_mono_accuracy_parser(methods: Any) -> None:
         action="store_true",
         help="track from the rendered video by skin blobs (the trunk drawn from the head)",
     )
+    m.add_argument(
+        "--bare-from",
+        choices=("paper", "elbow", "mid_upper_arm", "shoulder"),
+        default="mid_upper_arm",
+        help="with --skin: where the arms' skin starts (default mid_upper_arm: the sessions "
+        "are rendered with short sleeves); paper: the arm ellipse's ends as elbow and wrist",
+    )
     m.add_argument("--lag", type=int, default=None, help="online fixed lag (frames)")
     m.add_argument(
         "--cost", choices=("acceleration", "joint_acceleration", "rotation"),
@@ -72,6 +79,7 @@ def _run(args: argparse.Namespace) -> int:
         noise_px=args.noise_px,
         openpose=args.openpose,
         skin=args.skin,
+        skin_bare_from=None if args.bare_from == "paper" else args.bare_from,
         initial_pose=args.initial_pose,
         config=MonoConfig(lag=args.lag, cost=args.cost, **prior),
         say=(lambda _line: None) if args.json else print,

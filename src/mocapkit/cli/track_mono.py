@@ -55,6 +55,14 @@ def add_mono_parser(methods: Any) -> None:
         "from a waist blob (the paper's golden belt) or, without one, is drawn upright from "
         "the head",
     )
+    p.add_argument(
+        "--bare-from",
+        choices=("elbow", "mid_upper_arm", "shoulder"),
+        default=None,
+        help="with --skin: where the arms' skin starts (e.g. mid_upper_arm under short "
+        "sleeves); the elbow and wrist are then placed on the arm blob by anthropometric "
+        "fractions. Default: the paper's rule, the arm ellipse's ends",
+    )
     p.add_argument("--legs", action="store_true", help="track the legs too")
     p.add_argument(
         "--session-lengths",
@@ -105,6 +113,7 @@ def _run_mono(args: argparse.Namespace) -> int:
         use_session_lengths=args.session_lengths,
         skin=args.skin,
         initial_pose=start,
+        skin_bare_from=args.bare_from,
     )
     summary = run.summary()
     if not args.json:  # limbs unseen past the bridge: NaN joints, status in fit.csv

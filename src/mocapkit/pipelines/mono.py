@@ -117,18 +117,21 @@ def load_keypoints(
     return read_keypoints_csv(p)
 
 
-def skin_keypoints(session: Session, camera: str, trunk_from_head: bool = True) -> Keypoints:
+def skin_keypoints(
+    session: Session, camera: str, trunk_from_head: bool = True, bare_from: str | None = None
+) -> Keypoints:
     """2-D joints of the stick from the camera's video by skin blobs (paper §3.3).
 
     `mocapkit.tracking.mono.skin_tracking.SkinTracker` on every frame. A waist blob (the
     paper's belt) gives the pelvis and shoulders; without one, ``trunk_from_head`` draws
     an upright trunk from the head ellipse (the synthetic sessions and the real videos
-    have no belt), else those joints are NaN.
+    have no belt), else those joints are NaN. ``bare_from``: where the arms' skin starts
+    (`SkinTracker`; None: the paper's ellipse ends).
     """
     from mocapkit.tracking.mono.skin_tracking import SKIN_JOINTS, SkinTracker
 
     video = session.video(camera)
-    tracker = SkinTracker(trunk_from_head=trunk_from_head)
+    tracker = SkinTracker(trunk_from_head=trunk_from_head, bare_from=bare_from)
     px = np.full((video.n_frames, len(SKIN_JOINTS), 2), np.nan)
     stream = video.open()
     try:
@@ -485,6 +488,7 @@ def track_mono(
     length_passes: int = 2,
     skin: bool = False,
     initial_pose: FloatArray | None = None,
+    skin_bare_from: str | None = None,
 ) -> MonoRun:
     """Track a session with the monocular tracker and write the result folder.
 
@@ -506,6 +510,9 @@ def track_mono(
     skin : bool
         Read the 2-D joints off the camera's video by skin blobs (`skin_keypoints`)
         instead of keypoints.
+    skin_bare_from : {None, "elbow", "mid_upper_arm", "shoulder"}
+        With ``skin``: where the arms' skin starts (`SkinTracker`'s ``bare_from``; None:
+        the paper's rule, the arm ellipse's ends are the elbow and wrist).
     length_passes : int
         With video lengths and the perspective model: track this many times, each pass
         measuring the lengths again from the previous pass's poses (`refined_lengths`,
@@ -539,7 +546,11 @@ def track_mono(
         raise ConfigError("track mono: give either --skin or --keypoints, not both")
     if skin:
         session.require(video=True, cameras=[cam_name])
-    kp = skin_keypoints(session, cam_name) if skin else load_keypoints(session, cam_name, keypoints)
+    kp = (
+        skin_keypoints(session, cam_name, bare_from=skin_bare_from)
+        if skin
+        else load_keypoints(session, cam_name, keypoints)
+    )
     px = stick_pixels(kp, model) if pixels is None else np.asarray(pixels, dtype=float)
     t = np.asarray(kp.time_s, dtype=float)
     dt = float(np.median(np.diff(t))) if t.shape[0] > 1 else 1.0 / 30.0

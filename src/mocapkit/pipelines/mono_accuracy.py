@@ -40,6 +40,9 @@ from mocapkit.tracking.mono.tracker import MonoConfig
 FloatArray = NDArray[np.float64]
 
 FLIP_MIN_SINE = 0.2
+#: Sleeves of the rendered sessions (the renderer's default): the lower half of the upper
+#: arm, the forearm and the hand are skin.
+SKIN_SLEEVE = "short"
 
 #: Clips of ``shared/data/mocap`` and the excerpt (start s, length s) rendered from each.
 MONO_CLIPS: dict[str, tuple[float, float]] = {
@@ -167,9 +170,15 @@ def mono_accuracy(
     reuse: bool = True,
     skin: bool = False,
     initial_pose: bool = False,
+    skin_bare_from: str | None = "mid_upper_arm",
 ) -> list[MonoClipAccuracy]:
     """Render (or reuse), track from noisy true keypoints (or OpenPose JSON, or the video
     by skin blobs with ``skin``), and evaluate each clip.
+
+    The sessions are rendered with `SKIN_SLEEVE` sleeves; ``skin_bare_from`` tells the
+    skin tracker where the arms' skin starts (`mocapkit.pipelines.mono.track_mono`;
+    default: the middle of the upper arm, as short sleeves leave it; None: the paper's
+    rule, the arm ellipse's ends).
 
     With ``initial_pose`` the tracker is given the true pose of the first frame (the
     paper's assumption 3; `mocapkit.pipelines.mono.track_mono`), so those figures are
@@ -190,7 +199,14 @@ def mono_accuracy(
             synthesize_session(
                 str(Path(mocap_dir) / clip),
                 session,
-                SynthOptions(rig="mono", start_s=start, seconds=seconds, seed=seed, overwrite=True),
+                SynthOptions(
+                    rig="mono",
+                    start_s=start,
+                    seconds=seconds,
+                    seed=seed,
+                    overwrite=True,
+                    sleeve=SKIN_SLEEVE,
+                ),
             )
         s, cam, names, px = noisy_keypoints(session, _model(cfg), noise_px, seed)
         out = base / (source + ("_initial" if initial_pose else ""))
@@ -200,7 +216,13 @@ def mono_accuracy(
             first_pose = initial_pose_from(s.truth.joint_names, s.truth.joints_mm[0], _model(cfg))
         if skin:
             run = track_mono(
-                session, out, camera=cam, config=cfg, skin=True, initial_pose=first_pose
+                session,
+                out,
+                camera=cam,
+                config=cfg,
+                skin=True,
+                initial_pose=first_pose,
+                skin_bare_from=skin_bare_from,
             )
         elif openpose:
             folder = base / "openpose_json"

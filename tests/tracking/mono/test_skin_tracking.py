@@ -111,10 +111,13 @@ def test_trunk_from_head_without_a_belt_follows_the_anthropometric_ratios() -> N
 
 def test_a_foreground_mask_hides_static_skin() -> None:
     img = _figure()
-    cv2.circle(img, (560, 60), 30, SKIN_BGR, -1)  # a skin-coloured lamp above the right
+    cv2.circle(img, (540, 60), 30, SKIN_BGR, -1)  # two skin-coloured lamps up on the right
+    cv2.circle(img, (610, 40), 30, SKIN_BGR, -1)
     top = SkinTracker().update(img)
-    # the lamp is the topmost large blob: taken for the head
-    np.testing.assert_allclose(top.blobs["head"].centre, (560, 60), atol=1.5)
+    # the lamps are larger than the forearms and reach higher than the head: of the three
+    # blobs reaching highest (head, lamps) the middle one from left to right, the nearer
+    # lamp, is taken for the head
+    np.testing.assert_allclose(top.blobs["head"].centre, (540, 60), atol=1.5)
     fg = np.full(img.shape[:2], 255, dtype=np.uint8)
     fg[:, 500:] = 0
     f = SkinTracker().update(img, foreground=fg)
@@ -145,3 +148,80 @@ def test_mask_blobs_equal_ellipse_of_each_component() -> None:
         if w.major - w.minor > 1e-6:  # a round blob's axis is any direction
             np.testing.assert_allclose(b.ends, w.ends, atol=1e-9)
     assert [b.area for b in blobs] == sorted((b.area for b in blobs), reverse=True)
+
+
+def test_arm_fractions_follow_the_visible_segment_lengths() -> None:
+    from mocapkit.tracking.mono.skin_tracking import ARM_RATIOS, arm_fractions
+
+    u, f, h = ARM_RATIOS["upper_arm"], ARM_RATIOS["forearm"], ARM_RATIOS["hand"]
+    # the paper's costume: forearm and hand bare, the elbow is the proximal end
+    assert arm_fractions("elbow") == pytest.approx((0.0, f / (f + h)))
+    # short sleeves: the lower half of the upper arm is bare too (0.19 / 2, 0.13, 0.108)
+    assert arm_fractions("mid_upper_arm") == pytest.approx(
+        (0.5 * u / (0.5 * u + f + h), (0.5 * u + f) / (0.5 * u + f + h))
+    )
+    assert arm_fractions("mid_upper_arm") == pytest.approx((0.2853, 0.6757), abs=1e-4)
+    assert arm_fractions("shoulder") == pytest.approx((u / (u + f + h), (u + f) / (u + f + h)))
+    with pytest.raises(ConfigError, match="bare_from in"):
+        arm_fractions("wrist")
+    with pytest.raises(ConfigError, match="bare_from in"):
+        SkinTracker(bare_from="sleeveless")
+
+
+def _rod(img: np.ndarray, p0: np.ndarray, p1: np.ndarray, width: float) -> None:
+    """A skin rectangle from p0 to p1 (its second moment along the axis is l^2 / 12)."""
+    n = np.array([-(p1 - p0)[1], (p1 - p0)[0]]) / np.linalg.norm(p1 - p0) * width / 2
+    quad = np.array([p0 + n, p1 + n, p1 - n, p0 - n]).round().astype(np.int32)
+    cv2.fillPoly(img, [quad], SKIN_BGR)
+
+
+def test_bare_from_places_elbow_and_wrist_on_the_arm_blob() -> None:
+    """An arm bare from the middle of the upper arm to the fingertips, drawn straight as a
+    rod: the elbow and wrist at the costume's fractions of its length, and the paper's
+    rule (the ellipse's ends) beyond both ends of the drawn rod."""
+    from mocapkit.tracking.mono.skin_tracking import arm_fractions
+
+    img = np.full((480, 640, 3), (90, 110, 60), dtype=np.uint8)
+    cv2.ellipse(img, (320, 100), (28, 38), 0, 0, 360, SKIN_BGR, -1)
+    ends = {"left": (np.array([390.0, 170.0]), np.array([500.0, 330.0])),
+            "right": (np.array([250.0, 170.0]), np.array([160.0, 340.0]))}  # fmt: skip
+    for p0, p1 in ends.values():
+        _rod(img, p0, p1, 18)
+    fe, fw = arm_fractions("mid_upper_arm")
+    f = SkinTracker(bare_from="mid_upper_arm").update(img)
+    j = dict(zip(SKIN_JOINTS, f.joints_px))
+    for side, (p0, p1) in ends.items():
+        np.testing.assert_allclose(j[f"{side}_elbow"], p0 + fe * (p1 - p0), atol=2.0)
+        np.testing.assert_allclose(j[f"{side}_wrist"], p0 + fw * (p1 - p0), atol=2.0)
+    paper = dict(zip(SKIN_JOINTS, SkinTracker().update(img).joints_px))
+    for side, (p0, p1) in ends.items():
+        # the moment ellipse's ends lie 2 / sqrt(3) of the rod's half-length from its middle
+        mid, half = (p0 + p1) / 2, (p1 - p0) / 2
+        np.testing.assert_allclose(paper[f"{side}_elbow"], mid - half * 2 / np.sqrt(3), atol=2.5)
+        np.testing.assert_allclose(paper[f"{side}_wrist"], mid + half * 2 / np.sqrt(3), atol=2.5)
+
+
+def test_the_first_head_lies_between_the_forearms() -> None:
+    """A hand raised beside the face, its centroid above the head's: the head is the
+    middle one, left to right, of the three blobs reaching highest."""
+    img = _figure(left=((430, 118), (440, 80)), belt=False)
+    by_y = sorted(mask_blobs(_skin(img)), key=lambda b: b.centre[1])
+    assert by_y[0].centre[0] > 400  # the raised hand's centroid is the topmost
+    f = SkinTracker().update(img)
+    np.testing.assert_allclose(f.blobs["head"].centre, (320, 100), atol=1.5)
+    assert f.blobs["left_hand"].centre[0] > 400 and f.blobs["right_hand"].centre[0] < 250
+
+
+def test_the_first_head_merged_with_a_forearm_is_the_blob_reaching_highest() -> None:
+    """Lambada's first frame: the right forearm across the face (one blob with the head)
+    and the left one raised, its centroid above the merged blob's; with two blobs the
+    head is the one reaching highest, the raised forearm the left hand."""
+    img = _figure(left=((430, 130), (440, 80)), right=((280, 130), (380, 150)), belt=False)
+    blobs = mask_blobs(_skin(img))
+    assert len(blobs) == 2
+    merged = max(blobs, key=lambda b: b.area)
+    raised = min(blobs, key=lambda b: b.area)
+    assert raised.centre[1] < merged.centre[1]  # the topmost centroid is the forearm's
+    f = SkinTracker().update(img)
+    np.testing.assert_allclose(f.blobs["head"].centre, merged.centre)
+    np.testing.assert_allclose(f.blobs["left_hand"].centre, raised.centre)

@@ -6,7 +6,14 @@ waist (the paper's golden belt, which its skin model also accepts), joints read 
 ellipses, then the fixed-lag smoother of the tracker (errata M6).
 
 Labels. First frame (the subject faces the camera, as the paper's initial pose is known):
-the head is the topmost of the four largest blobs; the waist is a blob below the head
+of the four largest blobs, the three that reach highest (the top ends of their major
+axes) are the head and the forearms, and the head is the middle one of them from left to
+right if its top lies above the other two's centroids (else, or with fewer than three,
+the one reaching highest: the top of the head is the subject's highest skin unless a
+hand is raised). Neither a raised forearm whose centroid
+lies above the head's (or above that of a head merged with the other arm, as in the
+lambada clip's first frame) nor a hand raised above the head is taken for it, as the
+topmost centroid or the highest top alone would; the waist is a blob below the head
 whose major axis lies within 30 deg of the horizontal; the other two are the forearms, the
 subject's left one on the image's right. Later frames: each label takes the blob nearest
 its previous centre (minimum total distance, `scipy.optimize.linear_sum_assignment`)
@@ -18,7 +25,7 @@ it is unseen (NaN) for that frame.
 
 Joints from the ellipses (§3.3): head = the head ellipse's centre; neck = the lower end of
 its major axis; elbow and wrist = the ends of a forearm ellipse's major axis, the one
-nearer the neck being the elbow (short sleeves leave the forearm bare); pelvis = the
+nearer the neck being the elbow (the paper's costume leaves the forearm bare); pelvis = the
 waist ellipse's centre; shoulders by the paper's heuristic: "exactly above the waist
 region endpoints and in horizontal line with the lower end of the neck". Without a waist
 blob (no belt), pelvis and shoulders are unseen, and the 3-D tracker has no trunk.
@@ -30,6 +37,15 @@ head link, neck to head centre, is the ellipse's semi-major axis a): the pelvis 
 ``a * trunk / head`` straight below the neck in the image and the shoulders
 ``a * clavicle / head`` either side of it. The trunk then never leans or turns, which is
 wrong whenever the subject bends; it lets the 3-D step run on real video.
+
+``bare_from`` (off by default; the paper takes the axis' ends) reads the elbow and wrist
+off an arm blob by the costume instead: the skin runs from ``bare_from`` (the elbow, the
+middle of the upper arm under short sleeves, or the shoulder) to the fingertips, so the
+blob is that part of the upper arm, the forearm and the hand in line. Its extent along the
+major axis is taken as a thin rod's, sqrt(3)/2 of the moment ellipse's semi-major axis
+either side of the centre (a uniform rod of length l has the second moment l^2/12), and
+the elbow and wrist lie on it at the fractions of the visible lengths (`ARM_RATIOS`;
+proximal end = the end nearer the neck, as above). A bent arm is read as if straight.
 
 Foreground (optional, `SkinTracker.update`): a mask of moving pixels
 (`mocapkit.cues.foreground`) that the skin mask is intersected with, for scenes whose
@@ -50,6 +66,38 @@ from mocapkit.errors import ConfigError
 from mocapkit.tracking.mono.lengths import ANTHROPOMETRIC_RATIOS
 
 FloatArray = NDArray[np.float64]
+
+#: Half-length of a uniform thin rod over its moment ellipse's semi-major axis, sqrt(3)/2.
+ROD_EXTENT = float(np.sqrt(3.0) / 2.0)
+#: Segment lengths over stature for the arm blob: upper arm and forearm as the tracker's
+#: ratios (`ANTHROPOMETRIC_RATIOS`), the hand (wrist to the middle fingertip) 0.108 as in
+#: Drillis & Contini's segment proportions (Winter, Biomechanics and Motor Control of
+#: Human Movement, 4th ed., fig. 4.1).
+ARM_RATIOS: dict[str, float] = {
+    "upper_arm": ANTHROPOMETRIC_RATIOS["left_upper_arm"],
+    "forearm": ANTHROPOMETRIC_RATIOS["left_forearm"],
+    "hand": 0.108,
+}
+#: Share of the upper arm that is bare, per ``bare_from``.
+BARE_UPPER_ARM: dict[str, float] = {"elbow": 0.0, "mid_upper_arm": 0.5, "shoulder": 1.0}
+
+
+def arm_fractions(bare_from: str) -> tuple[float, float]:
+    """Elbow and wrist as fractions (0-1) of an arm blob's length from its proximal end.
+
+    Parameters
+    ----------
+    bare_from : {"elbow", "mid_upper_arm", "shoulder"}
+        Where the skin starts on the arm; it runs to the fingertips.
+    """
+    if bare_from not in BARE_UPPER_ARM:
+        raise ConfigError(
+            f"arm_fractions: expected bare_from in {sorted(BARE_UPPER_ARM)}, found {bare_from!r}"
+        )
+    u = BARE_UPPER_ARM[bare_from] * ARM_RATIOS["upper_arm"]
+    f, h = ARM_RATIOS["forearm"], ARM_RATIOS["hand"]
+    return u / (u + f + h), (u + f) / (u + f + h)
+
 
 LABELS: tuple[str, ...] = ("head", "left_hand", "right_hand", "waist")
 #: Joints this tracker reads off the blobs, in `stick_model` order.
@@ -100,6 +148,11 @@ class SkinTracker:
     trunk_from_head : bool
         Without a waist blob, draw an upright trunk from the head ellipse (see the module
         docstring).
+    bare_from : {None, "elbow", "mid_upper_arm", "shoulder"}
+        Where the arms' skin starts; None (default): the paper's rule, the ellipse's ends
+        are the elbow and wrist. Else the joints at the costume's fractions
+        (`arm_fractions`; the synthetic renderer's default short sleeves:
+        ``"mid_upper_arm"``).
     """
 
     def __init__(
@@ -109,6 +162,7 @@ class SkinTracker:
         close_px: int = 2,
         max_jump_px: float = 60.0,
         trunk_from_head: bool = False,
+        bare_from: str | None = None,
     ) -> None:
         if min_area_px < 1 or close_px < 0 or max_jump_px <= 0:
             raise ConfigError(
@@ -120,6 +174,7 @@ class SkinTracker:
         self.close_px = close_px
         self.max_jump_px = max_jump_px
         self.trunk_from_head = trunk_from_head
+        self.arm_fractions = None if bare_from is None else arm_fractions(bare_from)
         self.previous: SkinFrame | None = None
 
     def update(self, image_bgr: ArrayLike, foreground: ArrayLike | None = None) -> SkinFrame:
@@ -139,7 +194,7 @@ class SkinTracker:
     def update_blobs(self, blobs: list[Blob]) -> SkinFrame:
         """Track one frame from its blobs (largest first)."""
         frame = self._first(blobs) if self.previous is None else self._follow(blobs)
-        frame.joints_px = joints_from_blobs(frame.blobs, self.trunk_from_head)
+        frame.joints_px = joints_from_blobs(frame.blobs, self.trunk_from_head, self.arm_fractions)
         if frame.blobs:
             self.previous = frame
         return frame
@@ -148,7 +203,7 @@ class SkinTracker:
         cands = blobs[:4]
         if not cands:
             return SkinFrame({})
-        head = min(cands, key=lambda b: b.centre[1])
+        head = _first_head(cands)
         rest = [b for b in cands if b is not head]
         labelled: dict[str, Blob] = {"head": head}
         waist = [
@@ -198,10 +253,27 @@ class SkinTracker:
         return SkinFrame(labelled, merged)
 
 
-def joints_from_blobs(blobs: dict[str, Blob], trunk_from_head: bool = False) -> FloatArray:
+def _first_head(cands: list[Blob]) -> Blob:
+    """The head among the first frame's largest blobs; see the module docstring."""
+    top = sorted(cands, key=lambda b: b.ends[0, 1])[:3]
+    if len(top) < 3:
+        return top[0]
+    mid = sorted(top, key=lambda b: b.centre[0])[1]
+    if all(mid.ends[0, 1] < b.centre[1] for b in top if b is not mid):
+        return mid
+    return top[0]
+
+
+def joints_from_blobs(
+    blobs: dict[str, Blob],
+    trunk_from_head: bool = False,
+    fractions: tuple[float, float] | None = None,
+) -> FloatArray:
     """`SKIN_JOINTS` (9, 2) px read off labelled ellipses; see the module docstring.
 
     ``trunk_from_head``: without a waist blob, the upright trunk drawn from the head.
+    ``fractions``: elbow and wrist along an arm blob's rod extent from its proximal end
+    (`arm_fractions`); None: the ellipse's ends.
     """
     out = np.full((len(SKIN_JOINTS), 2), np.nan)
     col = {n: i for i, n in enumerate(SKIN_JOINTS)}
@@ -217,8 +289,14 @@ def joints_from_blobs(blobs: dict[str, Blob], trunk_from_head: bool = False) -> 
         ref = neck if np.isfinite(neck).all() else b.centre
         d = np.linalg.norm(b.ends - ref, axis=1)
         near, far = (0, 1) if d[0] <= d[1] else (1, 0)
-        out[col[f"{side}_elbow"]] = b.ends[near]
-        out[col[f"{side}_wrist"]] = b.ends[far]
+        if fractions is None:
+            out[col[f"{side}_elbow"]] = b.ends[near]
+            out[col[f"{side}_wrist"]] = b.ends[far]
+            continue
+        p0 = b.centre + ROD_EXTENT * (b.ends[near] - b.centre)
+        p1 = b.centre + ROD_EXTENT * (b.ends[far] - b.centre)
+        out[col[f"{side}_elbow"]] = p0 + fractions[0] * (p1 - p0)
+        out[col[f"{side}_wrist"]] = p0 + fractions[1] * (p1 - p0)
     waist = blobs.get("waist")
     if waist is not None:
         out[col["pelvis"]] = waist.centre
