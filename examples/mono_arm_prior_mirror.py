@@ -19,13 +19,12 @@ from __future__ import annotations
 
 import json
 import sys
-from pathlib import Path
 
 import numpy as np
 
 from mocapkit.io.session import load_session
 from mocapkit.pipelines.demo import find_shared_data
-from mocapkit.pipelines.mono_accuracy import FLIP_MIN_SINE, MONO_CLIPS, mono_accuracy
+from mocapkit.pipelines.mono_accuracy import FLIP_MIN_SINE, MONO_CLIPS, mono_session
 from mocapkit.tracking.mono.arm_prior import arm_features, default_arm_prior
 from mocapkit.tracking.mono.stick import stick_model
 
@@ -38,12 +37,10 @@ def main(work: str, *clips: str) -> None:
     model = stick_model()
     prior = default_arm_prior()
     for clip in clips or tuple(MONO_CLIPS):
-        session = Path(work) / Path(clip).stem / "session"
-        if not (session / "truth.npz").is_file():
-            data = find_shared_data()
-            if data is None:
-                raise SystemExit("../shared/data/mocap not found")
-            mono_accuracy(data / "mocap", work, clips=[clip])  # renders the session
+        data = find_shared_data()
+        if data is None:
+            raise SystemExit("../shared/data/mocap not found")
+        session = mono_session(data / "mocap", work, clip)  # rendered unless already there
         s = load_session(session)
         truth = s.truth
         assert truth is not None

@@ -40,7 +40,7 @@ from mocapkit.pipelines.mono import stick_pixels, track_mono
 from mocapkit.pipelines.mono_accuracy import (
     MONO_CLIPS,
     flip_accuracy,
-    mono_accuracy,
+    mono_session,
     noisy_keypoints,
     write_openpose_with_bystander,
 )
@@ -106,9 +106,8 @@ def main(work: str, variant: str, *clips: str) -> None:
     if data is None:
         raise SystemExit("../shared/data/mocap not found")
     chosen = clips or (*MONO_CLIPS, *HELD_OUT)
-    absent = [c for c in chosen if not (Path(work) / Path(c).stem / "session/truth.npz").is_file()]
-    if absent:
-        mono_accuracy(data / "mocap", work, clips=absent)  # renders their sessions
+    for clip in chosen:
+        mono_session(data / "mocap", work, clip)  # rendered unless already there
     model = stick_model(False)
     rows = []
     for clip in chosen:

@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import json
 import sys
-from pathlib import Path
 
 import numpy as np
 
@@ -45,7 +44,7 @@ from mocapkit.pipelines.mono import MonoRun, initial_pose_from, track_mono
 from mocapkit.pipelines.mono_accuracy import (
     FLIP_MIN_SINE,
     flip_accuracy,
-    mono_accuracy,
+    mono_session,
     noisy_keypoints,
 )
 from mocapkit.tracking.mono.arm_prior import arm_features, default_arm_prior
@@ -122,11 +121,9 @@ def perspective_cue(
 def main(work: str, clip: str = "charleston1.amc", link: str = "left_upper_arm",
          settings: str = "{}") -> None:  # fmt: skip
     data = find_shared_data()
-    session = Path(work) / Path(clip).stem / "session"
-    if not (session / "truth.npz").is_file():
-        if data is None:
-            raise SystemExit("../shared/data/mocap not found")
-        mono_accuracy(data / "mocap", work, clips=[clip])  # renders the session
+    if data is None:
+        raise SystemExit("../shared/data/mocap not found")
+    session = mono_session(data / "mocap", work, clip)  # rendered unless already there
     cfg = config_from(json.loads(settings))
     model = stick_model(cfg.legs, cfg.limits)
     s, cam, names, px = noisy_keypoints(session, model, 2.0, 0)

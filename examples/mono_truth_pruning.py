@@ -40,7 +40,7 @@ from mocapkit.pipelines.mono_accuracy import (
     FLIP_MIN_SINE,
     MONO_CLIPS,
     flip_accuracy,
-    mono_accuracy,
+    mono_session,
     noisy_keypoints,
 )
 from mocapkit.tracking.mono.flips import _fails
@@ -169,9 +169,8 @@ def main(work: str, *clips: str) -> None:
     if data is None:
         raise SystemExit("../shared/data/mocap not found")
     chosen = clips or (*MONO_CLIPS, *HELD_OUT)
-    absent = [c for c in chosen if not (Path(work) / Path(c).stem / "session/truth.npz").is_file()]
-    if absent:
-        mono_accuracy(data / "mocap", work, clips=absent)  # renders their sessions
+    for clip in chosen:
+        mono_session(data / "mocap", work, clip)  # rendered unless already there
     tracker_module.MonoTracker._process = _process_noting_frame  # type: ignore[method-assign]
     tracker_module.enumerate_poses = _enumerate_both  # type: ignore[assignment]
     for clip in chosen:

@@ -158,6 +158,41 @@ def write_openpose_with_bystander(
         write_openpose_frame(folder / f"video_{t:012d}_keypoints.json", people)
 
 
+def mono_session(
+    mocap_dir: str | os.PathLike[str],
+    work_dir: str | os.PathLike[str],
+    clip: str,
+    seed: int = 0,
+    reuse: bool = True,
+) -> Path:
+    """The mono session of one clip, ``WORK/<clip stem>/session``, rendered unless present.
+
+    The clip's window is `MONO_CLIPS`' (other clips: their first 6 s); sleeves are
+    `SKIN_SLEEVE`. With ``reuse`` an existing session (its ``truth.npz``) is kept as is.
+
+    Returns
+    -------
+    Path
+        The session folder.
+    """
+    start, seconds = MONO_CLIPS.get(clip, (0.0, 6.0))
+    session = Path(work_dir) / Path(clip).stem / "session"
+    if not (reuse and (session / "truth.npz").is_file()):
+        synthesize_session(
+            str(Path(mocap_dir) / clip),
+            session,
+            SynthOptions(
+                rig="mono",
+                start_s=start,
+                seconds=seconds,
+                seed=seed,
+                overwrite=True,
+                sleeve=SKIN_SLEEVE,
+            ),
+        )
+    return session
+
+
 def mono_accuracy(
     mocap_dir: str | os.PathLike[str],
     work_dir: str | os.PathLike[str],
@@ -192,22 +227,8 @@ def mono_accuracy(
     source = "skin" if skin else "openpose" if openpose else "keypoints"
     rows = []
     for clip in clips or tuple(MONO_CLIPS):
-        start, seconds = MONO_CLIPS.get(clip, (0.0, 6.0))
         base = Path(work_dir) / Path(clip).stem
-        session = base / "session"
-        if not (reuse and (session / "truth.npz").is_file()):
-            synthesize_session(
-                str(Path(mocap_dir) / clip),
-                session,
-                SynthOptions(
-                    rig="mono",
-                    start_s=start,
-                    seconds=seconds,
-                    seed=seed,
-                    overwrite=True,
-                    sleeve=SKIN_SLEEVE,
-                ),
-            )
+        session = mono_session(mocap_dir, work_dir, clip, seed=seed, reuse=reuse)
         s, cam, names, px = noisy_keypoints(session, _model(cfg), noise_px, seed)
         out = base / (source + ("_initial" if initial_pose else ""))
         first_pose = None
