@@ -886,7 +886,7 @@ def track_hybrid_marker_file(
     # the sets whose orientation will drive the IK (members given, or calibrated)
     given_members = frozenset(config.member_offsets_mm) if config is not None else frozenset()
     oriented = given_members or (
-        frozenset(s.name for s in sets if len(s.members) >= 2)
+        frozenset(s.name for s in sets if len(s.all_members) >= 2)
         if calibration != "none"
         else frozenset()
     )
@@ -1049,7 +1049,7 @@ def _calibrate_static(
     ``static`` (whole trial) or of ``world``'s first seconds; None and why when none."""
     from mocapkit.io.marker_sets import evaluate_marker_sets
 
-    multi = [s for s in sets if len(s.members) >= 2]
+    multi = [s for s in sets if len(s.all_members) >= 2]
     if not multi:
         return None, "no marker set has two or more members"
     source = world if static is None else to_world(static, frame)
@@ -1064,7 +1064,7 @@ def _calibrate_static(
             f"and moves less than {MAX_STATIC_RMS_MM:g} mm RMS"
         )
     members = {
-        s.name: {m: source.positions_mm[:, source.index(m)] for m in s.members} for s in multi
+        s.name: {m: source.positions_mm[:, source.index(m)] for m in s.all_members} for s in multi
     }
     calib = calibrate_member_offsets(
         sk,
@@ -1095,7 +1095,7 @@ def _calibrate_dynamic(
     fits on enough frames."""
     from mocapkit.io.marker_sets import evaluate_marker_sets
 
-    multi = [s for s in sets if len(s.members) >= 2]
+    multi = [s for s in sets if len(s.all_members) >= 2]
     if not multi:
         return None, "no marker set has two or more members"
     pos = evaluate_marker_sets(world, sets)
@@ -1109,7 +1109,9 @@ def _calibrate_dynamic(
         skeleton=sk,
     )
     fit = {s.name: np.array([p.fit.get(f"{s.name}_mm", np.nan) for p in poses]) for s in multi}
-    members = {s.name: {m: world.positions_mm[:, world.index(m)] for m in s.members} for s in multi}
+    members = {
+        s.name: {m: world.positions_mm[:, world.index(m)] for m in s.all_members} for s in multi
+    }
     try:
         calib = calibrate_members_on_motion(sk, q, world.time_s, fit, members)
     except ConfigError as exc:
