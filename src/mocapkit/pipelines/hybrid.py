@@ -977,6 +977,7 @@ def track_hybrid_marker_file(
                 skeleton = plain
     elif cfg.member_offsets_mm:
         note = "member offsets given"
+    note += _blind_turn_note(sets, frozenset(cfg.member_offsets_mm))
     for set_members in cfg.member_offsets_mm.values():
         for m in set_members:
             members[m] = world.positions_mm[:, world.index(m)]
@@ -1011,6 +1012,25 @@ def track_hybrid_marker_file(
         with timer.stage("write"):
             write_run_folder(out_dir, motion, poses)
     return MarkerFileRun(motion, frame, list(poses), choice, calib, note)
+
+
+def _blind_turn_note(sets: Sequence[MarkerSet], oriented: frozenset[str]) -> str:
+    """A note for the oriented hand sets of two members and no turning marker: both
+    members and the set's centre lie on one line (a wrist bar), so the forearm may turn
+    about that line unseen, and a serve's elbow flips round to the other side there
+    (docs/hybrid.md, "Raw files: the wrist bar's blind turn"). Empty where none."""
+    blind = [
+        s.name
+        for s in sets
+        if s.name in HAND_SETS and s.name in oriented and len(s.all_members) == 2
+    ]
+    if not blind:
+        return ""
+    return (
+        f"; {', '.join(blind)}: two members on one line with the set's centre, so the "
+        "forearm's turn about it is not seen (add a forearm marker after '/', e.g. "
+        "left_hand=LWRA+LWRB/LFRM)"
+    )
 
 
 def head_band_offset_mm(skeleton: Skeleton) -> tuple[float, float, float]:
