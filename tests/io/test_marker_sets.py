@@ -55,6 +55,39 @@ def test_parse_marker_set() -> None:
     assert PLUG_IN_GAIT_SETS["head"] == s
 
 
+def test_parse_turning_markers() -> None:
+    s = parse_marker_set("left_hand = LWRA+LWRB / LFRM")
+    assert s == MarkerSet("left_hand", ("LWRA", "LWRB"), ("LFRM",))
+    assert s.all_members == ("LWRA", "LWRB", "LFRM")
+    assert s.spec == "left_hand=LWRA+LWRB/LFRM"
+    assert parse_marker_set(s.spec) == s
+    assert parse_marker_set("left_hand=LWRA+LWRB").turning == ()
+
+
+def test_turning_markers_do_not_move_the_centre() -> None:
+    pos = np.array([[[0.0, -30, 0], [0.0, 30, 0], [40.0, 0, 120]]])
+    m = _markers(("LWRA", "LWRB", "LFRM"), pos)
+    centre = evaluate_marker_sets(m, "left_hand=LWRA+LWRB/LFRM")
+    np.testing.assert_allclose(centre[0, 0], [0.0, 0.0, 0.0])
+    np.testing.assert_allclose(
+        evaluate_marker_sets(m, "left_hand=LWRA+LWRB+LFRM")[0, 0], [40.0 / 3, 0.0, 40.0]
+    )
+
+
+@pytest.mark.parametrize(
+    ("spec", "pattern"),
+    [
+        ("left_hand=A/B/C", r"expected at most one '/' before the turning markers.*found 2"),
+        ("left_hand=A+B/", r"found an empty member"),
+        ("left_hand=/B", r"found an empty member"),
+        ("left_hand=A+B/A", r"expected distinct members, found A more than once"),
+    ],
+)
+def test_parse_turning_marker_errors(spec: str, pattern: str) -> None:
+    with pytest.raises(FormatError, match=pattern):
+        parse_marker_set(spec)
+
+
 @pytest.mark.parametrize(
     ("spec", "pattern"),
     [

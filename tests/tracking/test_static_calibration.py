@@ -161,6 +161,40 @@ def test_marker_file_calibrates_members_and_reports_them(tmp_path):
     assert not any("LFHD_mm" in r.fit for r in off.results)
 
 
+def test_turning_marker_is_calibrated_and_tracked_without_moving_the_set(tmp_path):
+    """A forearm marker after '/' (``right_hand=RWRA+RWRB/RFRM``): calibrated as a member
+    and fitted by the IK, while the set's point stays the wrist bar's midpoint (with it in
+    the mean, the wrist would be pulled 40 mm up the forearm)."""
+    sk = _raw_model()
+    rng = np.random.default_rng(5)
+    q = _take(sk, 60, 40)
+    band = np.asarray(head_band_offset_mm(sk))
+    members = _members_from_poses(sk, q, rng, set_offsets_mm={"head": band})
+    eff = default_marker_effectors(sk)["right_hand"]
+    world = forward_kinematics(sk, q)[:, sk.joint_index(eff.joint)]
+    forearm_local = np.array([40.0, 0.0, 120.0])  # 120 mm up the forearm, 40 mm aside
+    local = np.asarray(eff.point_mm) + forearm_local
+    members["RFRM"] = np.einsum("nij,j->ni", world[:, :3, :3], local) + world[:, :3, 3]
+    ankles = canonical_positions(sk, q, ["left_ankle", "right_ankle"])
+    members.update({"LANK": ankles[:, 0], "RANK": ankles[:, 1]})
+    names = list(members)
+    t = np.arange(q.shape[0]) / RATE_HZ
+    markers = MarkerData(
+        t, names, np.stack([members[n] for n in names], axis=1), RATE_HZ, "synthetic"
+    )
+    specs = [*SPECS[:2], "right_hand=RWRA+RWRB/RFRM"]
+    run = track_hybrid_marker_file(markers, specs, height_mm=1700.0, up="z", out_dir=tmp_path)
+    assert run.calibration is not None
+    got = run.calibration.offsets_mm["right_hand"]
+    assert set(got) == {"RWRA", "RWRB", "RFRM"}
+    assert np.abs(np.asarray(got["RFRM"]) - forearm_local).max() < 5.0
+    for m, want in TRUE_MEMBERS["right_hand"].items():
+        assert np.abs(np.asarray(got[m]) - want).max() < 5.0
+    _rows, fit = read_fit_csv(tmp_path / "fit.csv")
+    assert np.nanmax(fit["RFRM_mm"]) < 10.0
+    assert np.nanmax(fit["right_hand_mm"]) < 10.0
+
+
 def test_separate_static_trial():
     """``static=``: the offsets come from a separate still trial, not the moving take."""
     sk = _raw_model()

@@ -53,8 +53,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         action="append",
         default=[],
         type=checked_by(parse_marker_set, "marker set"),
-        metavar="NAME=M1+M2",
-        help="marker set of the --markers-glob files (head, left_hand, right_hand); repeat",
+        metavar="NAME=M1+M2[/T1]",
+        help="marker set of the --markers-glob files (head, left_hand, right_hand); markers "
+        "after '/' turn the set without placing it; repeat",
     )
     p.add_argument(
         "--joints",

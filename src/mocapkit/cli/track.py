@@ -55,8 +55,10 @@ def register(subparsers: Any) -> None:
         "--marker-set",
         action="append",
         default=[],
-        metavar="NAME=M1+M2",
-        help="marker set for --markers (head, left_hand, right_hand); repeat",
+        metavar="NAME=M1+M2[/T1]",
+        help="marker set for --markers (head, left_hand, right_hand); markers after '/' "
+        "turn the set without placing it (e.g. a forearm marker with a wrist bar: "
+        "left_hand=LWRA+LWRB/LFRM); repeat",
     )
     hyb.add_argument(
         "--height-mm",

@@ -36,7 +36,7 @@ from mocapkit.errors import ConfigError, FormatError, UnknownNameError
 from mocapkit.io.markers import MarkerData, longest_true_run
 
 _SET_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
-_FORBIDDEN_IN_MEMBER = re.compile(r"[\s=+,;]")
+_FORBIDDEN_IN_MEMBER = re.compile(r"[\s=+,;/]")
 
 #: Rigid fit only when the visible reference members spread in 2-D: second singular value
 #: of their centred coordinates at least this fraction of the first (else nearly collinear,
@@ -54,14 +54,29 @@ class MarkerSet:
         Set name (letters, digits, ``_ . -``; not starting with a digit).
     members : tuple of str
         Marker names, matched as in `MarkerData.index` (``Subject:`` prefix optional).
+    turning : tuple of str
+        Markers that turn the set without placing it (written after a ``/``:
+        ``left_hand=LWRA+LWRB/LFRM``): the tracker uses them as members (their offsets
+        calibrated as the others'), so they show the set's orientation, but the set's
+        position stays the mean of ``members``. A wrist bar's two markers and its
+        centre lie on one line, which leaves the forearm free to turn about that line; a
+        forearm marker off it fixes that turn while the set's point stays the wrist
+        (docs/hybrid.md, "Raw files: the wrist bar's blind turn").
     """
 
     name: str
     members: tuple[str, ...]
+    turning: tuple[str, ...] = ()
+
+    @property
+    def all_members(self) -> tuple[str, ...]:
+        """``members`` then ``turning``: every marker whose offset the tracker uses."""
+        return self.members + self.turning
 
     def __post_init__(self) -> None:
         members = tuple(self.members)
         object.__setattr__(self, "members", members)
+        object.__setattr__(self, "turning", tuple(self.turning))
         if not isinstance(self.name, str) or not _SET_NAME.match(self.name):
             raise FormatError(
                 f"marker set name: expected letters, digits, '_', '.' or '-' not starting "
@@ -69,13 +84,14 @@ class MarkerSet:
             )
         if not members:
             raise FormatError(f"marker set {self.name!r}: expected at least one member, found none")
-        for m in members:
+        for m in members + self.turning:
             if not isinstance(m, str) or not m or _FORBIDDEN_IN_MEMBER.search(m):
                 raise FormatError(
                     f"marker set {self.name!r}: expected member marker names without spaces, "
-                    f"'=', '+', ',' or ';', found {m!r}"
+                    f"'=', '+', '/', ',' or ';', found {m!r}"
                 )
-        dupes = sorted({m for m in members if members.count(m) > 1})
+        every = members + self.turning
+        dupes = sorted({m for m in every if every.count(m) > 1})
         if dupes:
             raise FormatError(
                 f"marker set {self.name!r}: expected distinct members, found {', '.join(dupes)} "
@@ -85,7 +101,8 @@ class MarkerSet:
     @property
     def spec(self) -> str:
         """The set written as ``name=A+B+C`` (parsed back by `parse_marker_set`)."""
-        return f"{self.name}={'+'.join(self.members)}"
+        turning = f"/{'+'.join(self.turning)}" if self.turning else ""
+        return f"{self.name}={'+'.join(self.members)}{turning}"
 
 
 #: Vicon Plug-in-Gait sets: head band centre and the wrist-bar midpoints.
@@ -97,11 +114,11 @@ PLUG_IN_GAIT_SETS: dict[str, MarkerSet] = {
 
 
 def parse_marker_set(spec: str) -> MarkerSet:
-    """Parse ``"name=A+B+C"`` into a `MarkerSet`.
+    """Parse ``"name=A+B+C"`` (or ``"name=A+B/C"``, ``C`` turning only) into a `MarkerSet`.
 
     Blanks around names are ignored. Raises `FormatError` for a missing or repeated
-    ``=``, an empty or invalid set name, an empty member (``A++B``, a trailing ``+``),
-    or a member listed twice.
+    ``=``, more than one ``/``, an empty or invalid set name, an empty member (``A++B``,
+    a trailing ``+`` or ``/``), or a member listed twice.
     """
     if not isinstance(spec, str):
         raise FormatError(f"marker set: expected a string 'name=A+B', found {type(spec).__name__}")
@@ -114,13 +131,20 @@ def parse_marker_set(spec: str) -> MarkerSet:
     name = name.strip()
     if not name:
         raise FormatError(f"marker set {spec!r}: expected a set name before '=', found none")
-    members = [m.strip() for m in rhs.split("+")]
-    if any(not m for m in members):
+    if rhs.count("/") > 1:
+        raise FormatError(
+            f"marker set {spec!r}: expected at most one '/' before the turning markers, as in "
+            f"'left_hand=LWRA+LWRB/LFRM', found {rhs.count('/')}"
+        )
+    placing, slash, turning_text = rhs.partition("/")
+    members = [m.strip() for m in placing.split("+")]
+    turning = [m.strip() for m in turning_text.split("+")] if slash else []
+    if any(not m for m in members + turning):
         raise FormatError(
             f"marker set {spec!r}: expected marker names separated by single '+', found an "
             f"empty member"
         )
-    return MarkerSet(name, tuple(members))
+    return MarkerSet(name, tuple(members), tuple(turning))
 
 
 def parse_marker_sets(specs: str | Iterable[str]) -> tuple[MarkerSet, ...]:

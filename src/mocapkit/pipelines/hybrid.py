@@ -886,7 +886,7 @@ def track_hybrid_marker_file(
     # the sets whose orientation will drive the IK (members given, or calibrated)
     given_members = frozenset(config.member_offsets_mm) if config is not None else frozenset()
     oriented = given_members or (
-        frozenset(s.name for s in sets if len(s.members) >= 2)
+        frozenset(s.name for s in sets if len(s.all_members) >= 2)
         if calibration != "none"
         else frozenset()
     )
@@ -977,6 +977,7 @@ def track_hybrid_marker_file(
                 skeleton = plain
     elif cfg.member_offsets_mm:
         note = "member offsets given"
+    note += _blind_turn_note(sets, frozenset(cfg.member_offsets_mm))
     for set_members in cfg.member_offsets_mm.values():
         for m in set_members:
             members[m] = world.positions_mm[:, world.index(m)]
@@ -1011,6 +1012,25 @@ def track_hybrid_marker_file(
         with timer.stage("write"):
             write_run_folder(out_dir, motion, poses)
     return MarkerFileRun(motion, frame, list(poses), choice, calib, note)
+
+
+def _blind_turn_note(sets: Sequence[MarkerSet], oriented: frozenset[str]) -> str:
+    """A note for the oriented hand sets of two members and no turning marker: both
+    members and the set's centre lie on one line (a wrist bar), so the forearm may turn
+    about that line unseen, and a serve's elbow flips round to the other side there
+    (docs/hybrid.md, "Raw files: the wrist bar's blind turn"). Empty where none."""
+    blind = [
+        s.name
+        for s in sets
+        if s.name in HAND_SETS and s.name in oriented and len(s.all_members) == 2
+    ]
+    if not blind:
+        return ""
+    return (
+        f"; {', '.join(blind)}: two members on one line with the set's centre, so the "
+        "forearm's turn about it is not seen (add a forearm marker after '/', e.g. "
+        "left_hand=LWRA+LWRB/LFRM)"
+    )
 
 
 def head_band_offset_mm(skeleton: Skeleton) -> tuple[float, float, float]:
@@ -1049,7 +1069,7 @@ def _calibrate_static(
     ``static`` (whole trial) or of ``world``'s first seconds; None and why when none."""
     from mocapkit.io.marker_sets import evaluate_marker_sets
 
-    multi = [s for s in sets if len(s.members) >= 2]
+    multi = [s for s in sets if len(s.all_members) >= 2]
     if not multi:
         return None, "no marker set has two or more members"
     source = world if static is None else to_world(static, frame)
@@ -1064,7 +1084,7 @@ def _calibrate_static(
             f"and moves less than {MAX_STATIC_RMS_MM:g} mm RMS"
         )
     members = {
-        s.name: {m: source.positions_mm[:, source.index(m)] for m in s.members} for s in multi
+        s.name: {m: source.positions_mm[:, source.index(m)] for m in s.all_members} for s in multi
     }
     calib = calibrate_member_offsets(
         sk,
@@ -1095,7 +1115,7 @@ def _calibrate_dynamic(
     fits on enough frames."""
     from mocapkit.io.marker_sets import evaluate_marker_sets
 
-    multi = [s for s in sets if len(s.members) >= 2]
+    multi = [s for s in sets if len(s.all_members) >= 2]
     if not multi:
         return None, "no marker set has two or more members"
     pos = evaluate_marker_sets(world, sets)
@@ -1109,7 +1129,9 @@ def _calibrate_dynamic(
         skeleton=sk,
     )
     fit = {s.name: np.array([p.fit.get(f"{s.name}_mm", np.nan) for p in poses]) for s in multi}
-    members = {s.name: {m: world.positions_mm[:, world.index(m)] for m in s.members} for s in multi}
+    members = {
+        s.name: {m: world.positions_mm[:, world.index(m)] for m in s.all_members} for s in multi
+    }
     try:
         calib = calibrate_members_on_motion(sk, q, world.time_s, fit, members)
     except ConfigError as exc:
