@@ -36,7 +36,7 @@ import numpy as np
 from mocapkit.eval.metrics import evaluate_result
 from mocapkit.io.openpose import read_openpose_folder
 from mocapkit.pipelines.demo import find_shared_data
-from mocapkit.pipelines.mono import stick_pixels, track_mono
+from mocapkit.pipelines.mono import detector_config, stick_pixels, track_mono
 from mocapkit.pipelines.mono_accuracy import (
     MONO_CLIPS,
     flip_accuracy,
@@ -115,7 +115,10 @@ def main(work: str, variant: str, *clips: str) -> None:
         s, cam, use = clip_input(base, variant)
         out = base / ("substitute_" + variant.replace("+", "_"))
         shutil.rmtree(out, ignore_errors=True)
-        run = track_mono(base / "session", out, camera=cam, config=MonoConfig(), pixels=use)
+        # a rebuilt neck tracks as `track_mono` tracks an OpenPose folder
+        rebuilt = variant != "keypoints" and "neck" not in variant.split("+")
+        cfg = detector_config(MonoConfig()) if rebuilt else MonoConfig()
+        run = track_mono(base / "session", out, camera=cam, config=cfg, pixels=use)
         rep = evaluate_result(out, base / "session", joints=UPPER_BODY_JOINTS)
         t = s.truth
         tj = t.joints_mm[:, [t.joint_names.index(n) for n in model.joint_names]]

@@ -337,3 +337,33 @@ def test_a_known_initial_pose_reaches_the_orthographic_model_in_px(tmp_path: Pat
     counted = np.abs(dz) > 0.2 * np.linalg.norm(model.link_vectors(truth_cam), axis=-1)
     bits = (run.frames[0].code >> np.arange(model.n_links)) & 1
     np.testing.assert_array_equal(bits[counted], (dz[counted] > 0).astype(int))
+
+
+def test_openpose_input_tracks_with_the_rebuilt_neck_settings(tmp_path: Path) -> None:
+    """An OpenPose folder's neck and pelvis are rebuilt: `track_mono` tracks it with
+    `detector_config` (the clavicles' wider band, the girdle cost), the same as the
+    folder's pixels given with that configuration; the session's keypoints keep the
+    plain one."""
+    from mocapkit.io.openpose import GIRDLE_COSINE, MAPPED_JOINTS, read_openpose_folder
+    from mocapkit.pipelines.mono import detector_config, stick_pixels
+
+    session = _session(tmp_path / "s")
+    joints, jn, _ = stick_motion(N)
+    px = camera().project(joints)
+    full = np.full((N, len(MAPPED_JOINTS), 2), np.nan)
+    for i, n in enumerate(jn):
+        full[:, MAPPED_JOINTS.index(n)] = px[:, i]
+    pelvis = px[:, jn.index("pelvis")]
+    full[:, MAPPED_JOINTS.index("left_hip")] = pelvis + np.array([20.0, 8.0])
+    full[:, MAPPED_JOINTS.index("right_hip")] = pelvis + np.array([-20.0, 8.0])
+    write_openpose_with_bystander(tmp_path / "op", MAPPED_JOINTS, full, seed=1)
+    cfg = detector_config(MonoConfig())
+    assert cfg.rebuilt_joints == ("neck", "pelvis") and cfg.girdle_cosine == GIRDLE_COSINE
+    assert GIRDLE_COSINE == pytest.approx((0.205**2 - 0.25) / (0.205**2 + 0.25))
+    assert MonoConfig().rebuilt_joints == ()
+    run = track_mono(session, None, keypoints=tmp_path / "op")
+    model = stick_model()
+    kp = read_openpose_folder(tmp_path / "op", np.arange(N) / FPS)
+    same = track_mono(session, None, config=cfg, pixels=stick_pixels(kp, model))
+    np.testing.assert_array_equal(run.motion.joints_mm, same.motion.joints_mm)
+    assert np.isfinite(run.motion.joints_mm).any()

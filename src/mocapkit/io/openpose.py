@@ -112,6 +112,14 @@ PELVIS_FRACTION = 0.25
 #: out, the medians move by at most 0.0015 and 0.004).
 NECK_BELOW_SHOULDERS = 0.205
 PELVIS_ABOVE_HIPS = 0.277
+#: The canonical joints this mapping rebuilds rather than reads off the detector.
+REBUILT_JOINTS: tuple[str, ...] = ("neck", "pelvis")
+#: Cosine of the angle between the two clavicles (neck to each shoulder) of the girdle that
+#: the placement assumes: the neck ``NECK_BELOW_SHOULDERS`` = d shoulder widths below the
+#: shoulder midpoint, so each clavicle is (+-1/2, d) W and the cosine (d^2 - 1/4) /
+#: (d^2 + 1/4) = -0.712 (135 deg; on the CMU clips constant within a clip to three
+#: decimals, e.g. 01_09 -0.710; lambada, whose neck sits 0.100 W down, -0.922).
+GIRDLE_COSINE = (NECK_BELOW_SHOULDERS**2 - 0.25) / (NECK_BELOW_SHOULDERS**2 + 0.25)
 
 #: Canonical joints the mapping provides, in canonical order.
 MAPPED_JOINTS: tuple[str, ...] = (

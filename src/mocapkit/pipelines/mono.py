@@ -117,6 +117,25 @@ def load_keypoints(
     return read_keypoints_csv(p)
 
 
+def detector_config(config: MonoConfig) -> MonoConfig:
+    """``config`` for 2-D whose neck and pelvis are rebuilt from the shoulders and hips.
+
+    A detector (OpenPose JSON, `mocapkit.io.openpose`) marks neither our neck nor our
+    pelvis; both are placed on the hip-to-shoulder midpoint line, so the two clavicles are
+    mirror images of each other in the image and a few px of the neck's error (its offset
+    across the line, its fraction along it) change their 40 px projected lengths by up to
+    10 %, which decides their flips near the image plane (docs/mono.md, seventh round).
+    The tracker then widens the reach band of the clavicles
+    (``rebuilt_reach_tolerance``: both flips kept, each some way out of the plane) and
+    lets the rigid girdle choose between them (``girdle_weight``, the angle between the
+    clavicles that the placement assumes, `mocapkit.io.openpose.GIRDLE_COSINE`; in the
+    length passes too, the band there off as ``reach_tolerance`` is).
+    """
+    from mocapkit.io.openpose import GIRDLE_COSINE, REBUILT_JOINTS
+
+    return replace(config, rebuilt_joints=REBUILT_JOINTS, girdle_cosine=GIRDLE_COSINE)
+
+
 def skin_keypoints(
     session: Session, camera: str, trunk_from_head: bool = True, bare_from: str | None = None
 ) -> Keypoints:
@@ -551,6 +570,8 @@ def track_mono(
         if skin
         else load_keypoints(session, cam_name, keypoints)
     )
+    if keypoints is not None and Path(keypoints).is_dir() and not cfg.rebuilt_joints:
+        cfg = detector_config(cfg)
     px = stick_pixels(kp, model) if pixels is None else np.asarray(pixels, dtype=float)
     t = np.asarray(kp.time_s, dtype=float)
     dt = float(np.median(np.diff(t))) if t.shape[0] > 1 else 1.0 / 30.0
@@ -590,7 +611,10 @@ def track_mono(
     # changed 01_09's online lengths, 36 -> 52 mm): the refined lengths follow
     # the first pass's poses, and with the clavicle prior there they changed enough to
     # turn 01_09 from OpenPose JSON from 62 to 113 mm (docs/mono.md). The reach tolerance
-    # too (in every pass it changed the refined lengths: 45.2 -> 46.4 mm, sixth round).
+    # too (in every pass it changed the refined lengths: 45.2 -> 46.4 mm, sixth round), and
+    # the clavicles' wider band for a rebuilt neck with it; the girdle cost of a rebuilt
+    # neck stays (a rigid bone triangle, not a prior on the pose: without it in the length
+    # passes 01_09 from OpenPose JSON 41.5 -> 42.6 mm, 91.2 -> 86.6 %, seventh round).
     paper_cfg = replace(
         cfg,
         residual_weight=0.0,
@@ -600,6 +624,7 @@ def track_mono(
         clavicle_weight=0.0,
         arm_prior_weight=0.0,
         reach_tolerance=0.0,
+        rebuilt_reach_tolerance=0.0,
     )
     for _ in range(n_refine):
         frames = _run(lengths, cam, dt, paper_cfg, model, t, px)

@@ -263,3 +263,28 @@ def test_bad_inputs_are_refused() -> None:
         enumerate_poses(model, np.ones(3), np.zeros((model.n_joints, 2)), np.zeros(3))
     with pytest.raises(ShapeError, match="observed"):
         enumerate_poses(model, np.ones(model.n_links), np.zeros((4, 2)), np.zeros(3))
+
+
+def test_reach_tolerance_per_link_widens_only_its_links() -> None:
+    """A band per link (L,): the shortened link keeps both flips only where its own entry
+    covers it; the same share for every link equals the scalar; a wrong length is refused."""
+    rng = np.random.default_rng(23)
+    model = stick_model()
+    pos, lengths, i = _shortened_link(rng, model, "left_upper_arm", 1.0 / 1.03, False)
+    obs, root = _orthographic(pos)
+    kw = {"perspective": False, "prune": False}
+    n = 1 << model.n_links
+    scalar = enumerate_poses(model, lengths, obs, root, reach_tolerance=0.05, **kw)
+    same = enumerate_poses(model, lengths, obs, root, reach_tolerance=np.full(8, 0.05), **kw)
+    np.testing.assert_array_equal(same.codes, scalar.codes)
+    np.testing.assert_array_equal(same.positions, scalar.positions)
+    only = np.zeros(model.n_links)
+    only[i] = 0.05
+    fp = enumerate_poses(model, lengths, obs, root, reach_tolerance=only, **kw)
+    assert fp.codes.shape == (n,) and fp.n_candidates == n
+    other = np.full(model.n_links, 0.05)
+    other[i] = 0.0
+    m5 = enumerate_poses(model, lengths, obs, root, reach_tolerance=other, **kw)
+    assert m5.codes.shape == (n // 2,) and m5.n_candidates == n // 2
+    with pytest.raises(ShapeError, match=r"reach_tolerance: expected a number or \(8,\)"):
+        enumerate_poses(model, lengths, obs, root, reach_tolerance=np.zeros(3), **kw)

@@ -9,6 +9,7 @@ from mocapkit.tracking.mono.priors import (
     clavicle_forward_cost,
     depth_velocity_cost,
     elbow_flex_cost,
+    girdle_angle_cost,
     reprojection_cost,
 )
 from mocapkit.tracking.mono.stick import stick_model
@@ -153,3 +154,33 @@ def test_clavicle_forward_cost_equals_the_body_frame_definition_on_random_poses(
         expect += np.clip(np.sum(u * fwd, -1) / np.linalg.norm(u, axis=-1) - 0.05, 0.0, None)
     assert (expect > 0).sum() >= 5  # some poses pay
     np.testing.assert_allclose(clavicle_forward_cost(model, poses), expect, atol=1e-12)
+
+
+def test_girdle_angle_cost_known_values_and_flip_pairs() -> None:
+    """Clavicles (+-1/2, -d, z) shoulder widths (the neck d = 0.205 W below the shoulder
+    midpoint): in the image plane the cosine is (d^2 - 1/4) / (d^2 + 1/4), cost 0; out of
+    it the cosine is (d^2 - 1/4 +- z^2) / (d^2 + 1/4 + z^2), + for the same flip on both
+    sides (the shoulders brought together), - for opposite flips (the shoulder line
+    turned): the cost tells the pairs apart, not the mirror of both."""
+    model = stick_model()
+    d, z = 0.205, 0.3
+    c0 = (d * d - 0.25) / (d * d + 0.25)
+    down = (0.0, 1.0, 0.0)
+
+    def pose(zl: float, zr: float) -> np.ndarray:
+        return _arm_pose(model, down, down, (0.5, -d, zl), (-0.5, -d, zr))
+
+    poses = np.stack([pose(0.0, 0.0), pose(z, z), pose(-z, -z), pose(z, -z), pose(-z, z)])
+    same = (d * d - 0.25 + z * z) / (d * d + 0.25 + z * z)
+    opposite = (d * d - 0.25 - z * z) / (d * d + 0.25 + z * z)
+    np.testing.assert_allclose(
+        girdle_angle_cost(model, poses, c0),
+        [0.0, same - c0, same - c0, c0 - opposite, c0 - opposite],
+        atol=1e-12,
+    )
+    assert same - c0 > 0.2 and c0 - opposite < 0.1  # the turned line is the nearer
+    nan = poses[:1].copy()
+    nan[0, model.child[model.link_index("left_clavicle")]] = np.nan
+    assert girdle_angle_cost(model, nan, c0) == pytest.approx([0.0])
+    with pytest.raises(ShapeError, match="girdle_angle_cost: expected positions"):
+        girdle_angle_cost(model, poses[0], c0)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
-from mocapkit.errors import ConfigError, ShapeError
+from mocapkit.errors import ConfigError, ShapeError, UnknownNameError
 from mocapkit.eval.metrics import similarity_align
 from mocapkit.skeleton.kinematics import canonical_positions
 from mocapkit.skeleton.presets import load_preset
@@ -203,3 +203,26 @@ def test_a_bad_initial_pose_is_refused() -> None:
     no_neck[0] = np.nan
     with pytest.raises(ConfigError, match="needs the neck"):
         MonoTracker(lengths, camera(), 1 / FPS, initial_pose=no_neck)
+
+
+def test_rebuilt_neck_widens_the_clavicles_band_and_turns_the_girdle_cost_on() -> None:
+    """Default (a seen neck): one band for every link, no girdle cost. With the neck and
+    pelvis rebuilt (as `mocapkit.pipelines.mono.detector_config` sets for OpenPose JSON):
+    the clavicles' band is ``rebuilt_reach_tolerance``, the girdle cost on."""
+    model = stick_model()
+    lengths = np.full(model.n_links, 250.0)
+    seen = MonoTracker(lengths, camera(), 1 / FPS, MonoConfig(girdle_cosine=-0.7), model)
+    np.testing.assert_array_equal(seen._reach, np.full(model.n_links, 0.02))
+    assert not seen._girdle  # the neck is seen: no cost, whatever the cosine
+    cfg = MonoConfig(rebuilt_joints=("neck", "pelvis"), girdle_cosine=-0.7)
+    rebuilt = MonoTracker(lengths, camera(), 1 / FPS, cfg, model)
+    expect = np.full(model.n_links, 0.02)
+    expect[[model.link_index("left_clavicle"), model.link_index("right_clavicle")]] = 0.1
+    np.testing.assert_array_equal(rebuilt._reach, expect)
+    assert rebuilt._girdle
+    with pytest.raises(UnknownNameError, match="rebuilt_joints joint"):
+        MonoTracker(lengths, camera(), 1 / FPS, MonoConfig(rebuilt_joints=("chest",)), model)
+    with pytest.raises(ConfigError, match="rebuilt_reach_tolerance: expected"):
+        MonoConfig(rebuilt_reach_tolerance=1.0)
+    with pytest.raises(ConfigError, match="girdle_weight: expected"):
+        MonoConfig(girdle_weight=-1.0)

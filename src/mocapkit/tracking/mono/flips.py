@@ -269,7 +269,7 @@ def _enumerate(
     root: FloatArray,
     perspective: bool,
     prune: bool,
-    reach: float,
+    reach: FloatArray,
     out_codes: IntArray,
     out_pos: FloatArray,
 ) -> int:
@@ -285,7 +285,9 @@ def _enumerate(
     while level >= 0:
         branch[level] += 1
         if branch[level] == 0:
-            n_branch[level] = _branches(stick, obs, pos, level, perspective, reach, cand[level])
+            n_branch[level] = _branches(
+                stick, obs, pos, level, perspective, reach[level], cand[level]
+            )
         if branch[level] >= n_branch[level]:
             branch[level] = -1
             pos[stick.child[level]] = np.nan
@@ -333,7 +335,7 @@ def enumerate_poses(
     *,
     perspective: bool = False,
     prune: bool = True,
-    reach_tolerance: float = 0.0,
+    reach_tolerance: float | ArrayLike = 0.0,
 ) -> FramePoses:
     """All flip configurations of one frame that satisfy the constraints.
 
@@ -353,9 +355,9 @@ def enumerate_poses(
         See the module docstring.
     prune : bool
         Apply the model's constraints during the search.
-    reach_tolerance : float
-        Length band t of errata M5 (module docstring): a link whose parent lies at a
-        distance D in [L (1 - t), L (1 + t)] from its child's ray (orthographic: from
+    reach_tolerance : float or (L,) float
+        Length band t of errata M5, one for every link or one per link (module
+        docstring): a link whose parent lies at a distance D in [L (1 - t), L (1 + t)] from its child's ray (orthographic: from
         its projected end) has its child placed on that ray at the length
         ``L + (D - L (1 - t)) / 2``, two configurations up to D = L (1 + t); 0: the
         paper's (M5 exactly).
@@ -380,7 +382,7 @@ def enumerate_poses(
     codes = np.zeros(cap, dtype=np.int64)
     pos = np.zeros((cap, model.n_joints, 3))
     n_all = -1
-    tol = float(reach_tolerance)
+    tol = _reach_array(reach_tolerance, model.n_links)
     n = _enumerate(stick, model.checks, obs3, r, perspective, prune, tol, codes, pos)
     pruned_all = False
     if prune and n == 0:
@@ -391,13 +393,23 @@ def enumerate_poses(
     return FramePoses(codes[:n].copy(), pos[:n].copy(), n_all, pruned_all)
 
 
+def _reach_array(reach_tolerance: float | ArrayLike, n_links: int) -> FloatArray:
+    """The reach band per link (L,) from one share or one per link."""
+    tol = np.asarray(reach_tolerance, dtype=float)
+    if tol.ndim > 1 or (tol.ndim == 1 and tol.shape != (n_links,)):
+        raise ShapeError(
+            f"reach_tolerance: expected a number or ({n_links},) per link, found {tol.shape}"
+        )
+    return np.ascontiguousarray(np.broadcast_to(tol, (n_links,)), dtype=float)
+
+
 def count_candidates(
     model: StickModel,
     lengths: ArrayLike,
     observed: ArrayLike,
     root: ArrayLike,
     perspective: bool = False,
-    reach_tolerance: float = 0.0,
+    reach_tolerance: float | ArrayLike = 0.0,
 ) -> int:
     """Number of distinct poses before pruning (one full unpruned search; arguments as
     `enumerate_poses`)."""
@@ -415,7 +427,7 @@ def count_candidates(
             np.asarray(root, dtype=float),
             perspective,
             False,
-            float(reach_tolerance),
+            _reach_array(reach_tolerance, model.n_links),
             np.zeros(cap, dtype=np.int64),
             np.zeros((cap, model.n_joints, 3)),
         )

@@ -22,6 +22,10 @@ plain cost; a weight of 0 leaves the tracker as the paper's.
   backwards from the neck; on nine CMU clips (2026-11-25) their forward sine in the
   body frame lay in -0.21..+0.02 (1st-99th percentiles). The cost is the sum over both
   clavicles of the forward sine beyond ``margin`` (0.05), clipped at 0.
+- `girdle_angle_cost` (unary, 0-2): the neck and both shoulders are one rigid triangle;
+  the departure of the cosine of the angle between the clavicles from the girdle's. Used
+  where the neck is rebuilt from a detector's shoulders and hips (its clavicles mirror
+  images in 2-D, their flips undecided by their own lengths; docs/mono.md seventh round).
 - `depth_velocity_cost` (pair, mm^2/s^2): the sum over joints of the squared change of
   each joint's depth relative to the root between consecutive frames over dt^2 (per-link
   depth continuity).
@@ -171,6 +175,48 @@ def clavicle_forward_cost(
         )
         c = np.clip(s - margin, 0.0, None)
     return np.asarray(np.nan_to_num(c, nan=0.0).sum(axis=1), dtype=float)
+
+
+def girdle_angle_cost(model: StickModel, positions: ArrayLike, cosine: float) -> FloatArray:
+    """Departure of the angle between the two clavicles from a rigid girdle's (N,).
+
+    The neck and both shoulders are one rigid bone triangle (on the CMU clips the cosine
+    of the angle between the clavicles is constant within a clip to three decimals), but
+    the stick gives each clavicle its own flip. Where the neck is seen, the clavicles'
+    2-D asymmetry tells their flips apart; where it is rebuilt on the hip-to-shoulder
+    midpoint line (a detector's, `mocapkit.io.openpose`), the two clavicles are mirror
+    images in the image and their depths carry no cue of their own. For two clavicles of
+    out-of-plane components z_l and z_r the cosine holds ``z_l z_r`` with its sign, so a
+    pose with one clavicle flipped (both forward, the shoulders brought together) has
+    another angle than the true one: the cost tells the flip pairs apart, not the mirror
+    of both (the trunk and the clavicle prior decide that).
+
+    Parameters
+    ----------
+    model : StickModel
+        Needs the links ``left_clavicle`` and ``right_clavicle``.
+    positions : (N, K, 3) float
+    cosine : float
+        The girdle's cosine of the angle between the two clavicles (neck to shoulder).
+
+    Returns
+    -------
+    (N,) float
+        ``|cos(angle) - cosine|`` (0-2); NaN poses cost 0.
+    """
+    p = np.asarray(positions, dtype=float)
+    if p.ndim != 3 or p.shape[1:] != (model.n_joints, 3):
+        raise ShapeError(
+            f"girdle_angle_cost: expected positions (N, {model.n_joints}, 3), found {p.shape}"
+        )
+    idx = [model.link_index(n) for n in ("left_clavicle", "right_clavicle")]
+    vec = p[:, model.child[idx]] - p[:, model.parent[idx]]  # (N, 2, 3)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c = np.einsum("nc,nc->n", vec[:, 0], vec[:, 1]) / np.sqrt(
+            np.einsum("nc,nc->n", vec[:, 0], vec[:, 0])
+            * np.einsum("nc,nc->n", vec[:, 1], vec[:, 1])
+        )
+    return np.asarray(np.nan_to_num(np.abs(c - cosine), nan=0.0), dtype=float)
 
 
 def depth_velocity_cost(

@@ -15,7 +15,9 @@ Per frame (streaming, `MonoTracker.push`):
    first-order rotation (``"rotation"``, plain states).
    Beyond the paper, each pose carries soft costs (`mocapkit.tracking.mono.priors`):
    by default the clavicle prior (``clavicle_weight``) and the data-driven arm prior
-   (``arm_prior_weight``, `mocapkit.tracking.mono.arm_prior`); the image residual, elbow
+   (``arm_prior_weight``, `mocapkit.tracking.mono.arm_prior`), and where the neck is
+   rebuilt (a detector's, ``rebuilt_joints``) the rigid girdle's clavicle angle
+   (``girdle_weight``) with a wider reach band on the clavicles; the image residual, elbow
    flex, depth velocity and joint-acceleration terms are off (measured in docs/mono.md);
 5. Viterbi picks the path (§4.3): offline (``lag=None``) exactly at the end, online with
    a fixed lag (`mocapkit.tracking.mono.viterbi.Decoder`). The online latency is
@@ -67,7 +69,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.camera.pinhole import Camera
-from mocapkit.errors import ConfigError, ShapeError
+from mocapkit.errors import ConfigError, ShapeError, unknown_name
 from mocapkit.tracking.mono.arm_prior import ArmPrior, default_arm_prior
 from mocapkit.tracking.mono.flips import enumerate_poses
 from mocapkit.tracking.mono.motion_cost import (
@@ -80,6 +82,7 @@ from mocapkit.tracking.mono.priors import (
     clavicle_forward_cost,
     depth_velocity_cost,
     elbow_flex_cost,
+    girdle_angle_cost,
     reprojection_cost,
 )
 from mocapkit.tracking.mono.smoother import KeypointSmoother
@@ -155,6 +158,28 @@ class MonoConfig:
         `mocapkit.pipelines.mono.track_mono` the last pass only): 0.015-0.025 lowered
         the error and raised the flips of the five accuracy clips and of four held-out
         clips, over three noise seeds (docs/mono.md, sixth round).
+    rebuilt_joints : tuple of str
+        Joints of the 2-D input that were not observed but rebuilt from others (a
+        detector's neck and pelvis, placed on the hip-to-shoulder midpoint line by
+        `mocapkit.io.openpose`; `mocapkit.pipelines.mono.detector_config`). Default none
+        (the keypoints' own neck and pelvis).
+    rebuilt_reach_tolerance : float
+        The reach band of the ``rebuilt_reach_links`` with an end in ``rebuilt_joints``
+        (at least ``reach_tolerance``): a few px of a rebuilt neck's error change a 40 px
+        clavicle's projected length by up to 10 %, so a clavicle 15-20 deg out of the
+        plane can look longer than its link and lose both flips to the in-plane one.
+        Default 0.1 (0.08-0.1 with the girdle cost kept both sets' figures; 0.15 and
+        0.06 did not, docs/mono.md seventh round).
+    rebuilt_reach_links : tuple of str
+        Links the wider band applies to: the clavicles (also the trunk and head: worse).
+    girdle_weight : float
+        Unary cost per unit of `mocapkit.tracking.mono.priors.girdle_angle_cost` where
+        the clavicles' common parent (the neck) is in ``rebuilt_joints`` and
+        ``girdle_cosine`` is finite; 0: off. Default 300 (100: 01_09's right clavicle
+        72 % right instead of 100 %; 1000: zombie's left arm mirrored; seventh round).
+    girdle_cosine : float
+        Cosine of the angle between the two clavicles of the subject's rigid girdle;
+        NaN (default): no girdle cost.
     arm_prior : ArmPrior or None
         The mixture the arm prior uses; None: the shipped table
         (`mocapkit.tracking.mono.arm_prior.default_arm_prior`).
@@ -180,6 +205,11 @@ class MonoConfig:
     arm_prior_weight: float = 30.0
     short_link_weight: float = 0.5
     reach_tolerance: float = 0.02
+    rebuilt_joints: tuple[str, ...] = ()
+    rebuilt_reach_tolerance: float = 0.1
+    rebuilt_reach_links: tuple[str, ...] = ("left_clavicle", "right_clavicle")
+    girdle_weight: float = 300.0
+    girdle_cosine: float = float("nan")
     arm_prior: ArmPrior | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -199,6 +229,15 @@ class MonoConfig:
         if not 0.0 <= self.reach_tolerance < 1.0:
             raise ConfigError(
                 f"MonoConfig.reach_tolerance: expected [0, 1), found {self.reach_tolerance}"
+            )
+        if not 0.0 <= self.rebuilt_reach_tolerance < 1.0:
+            raise ConfigError(
+                "MonoConfig.rebuilt_reach_tolerance: expected [0, 1), found "
+                f"{self.rebuilt_reach_tolerance}"
+            )
+        if not self.girdle_weight >= 0.0:
+            raise ConfigError(
+                f"MonoConfig.girdle_weight: expected >= 0, found {self.girdle_weight}"
             )
         if self.depth_window < 1 or self.max_pair_states < 1 or self.smooth_lag < 0:
             raise ConfigError(
@@ -290,6 +329,14 @@ class MonoTracker:
         self.config = cfg = config or MonoConfig()
         self.model = model or stick_model(cfg.legs, cfg.limits)
         self.lengths = np.asarray(lengths, dtype=float)
+        self._reach = self._link_reach()
+        # the girdle cost where the neck is rebuilt (its clavicles mirror images in 2-D)
+        self._girdle = (
+            cfg.girdle_weight > 0
+            and np.isfinite(cfg.girdle_cosine)
+            and self.model.joint_names[self.model.parent[self.model.link_index("left_clavicle")]]
+            in cfg.rebuilt_joints
+        )
         self.model.arrays(self.lengths)  # validates
         if cfg.camera_model != "orthographic" and camera is None:
             raise ConfigError(
@@ -411,6 +458,25 @@ class MonoTracker:
             z = self.lengths[from_root] / (np.linalg.norm(r) * np.sin(np.maximum(ang, 1e-9)))
         return float(np.nanmin(z)) if np.isfinite(z).any() else float("nan")
 
+    def _link_reach(self) -> FloatArray:
+        """Reach band per link (L,): ``reach_tolerance``, widened to
+        ``rebuilt_reach_tolerance`` on the ``rebuilt_reach_links`` with an end in
+        ``rebuilt_joints``."""
+        cfg = self.config
+        names = self.model.joint_names
+        for j in cfg.rebuilt_joints:
+            if j not in names:
+                raise unknown_name("MonoConfig.rebuilt_joints joint", j, names)
+        for s in cfg.rebuilt_reach_links:
+            self.model.link_index(s)  # raises on an unknown link
+        rebuilt = [names.index(j) for j in cfg.rebuilt_joints]
+        tol = np.full(self.model.n_links, cfg.reach_tolerance)
+        for s in cfg.rebuilt_reach_links:
+            li = self.model.link_index(s)
+            if self.model.parent[li] in rebuilt or self.model.child[li] in rebuilt:
+                tol[li] = max(tol[li], cfg.rebuilt_reach_tolerance)
+        return tol
+
     def _process(self, k: int) -> list[MonoFrame]:
         pts = self._smoother.smoothed(k)
         obs, root, depth = self._observation(pts)
@@ -422,7 +488,7 @@ class MonoTracker:
                 obs,
                 root,
                 perspective=persp,
-                reach_tolerance=self.config.reach_tolerance,
+                reach_tolerance=self._reach,
             )
             codes, positions, n_cand, pruned_all = fp
         else:  # no root this frame: one empty pose keeps the graph connected
@@ -489,6 +555,8 @@ class MonoTracker:
             u += cfg.elbow_flex_weight * elbow_flex_cost(self.model, positions)
         if cfg.clavicle_weight > 0:
             u += cfg.clavicle_weight * clavicle_forward_cost(self.model, positions)
+        if cfg.girdle_weight > 0 and self._girdle:
+            u += cfg.girdle_weight * girdle_angle_cost(self.model, positions, cfg.girdle_cosine)
         if self._arm_prior is not None:
             u += cfg.arm_prior_weight * self._arm_prior.cost(self.model, positions)
         return u
