@@ -357,10 +357,10 @@ def enumerate_poses(
         Apply the model's constraints during the search.
     reach_tolerance : float or (L,) float
         Length band t of errata M5, one for every link or one per link (module
-        docstring): a link whose parent lies at a distance D in [L (1 - t), L (1 + t)] from its child's ray (orthographic: from
-        its projected end) has its child placed on that ray at the length
-        ``L + (D - L (1 - t)) / 2``, two configurations up to D = L (1 + t); 0: the
-        paper's (M5 exactly).
+        docstring): a link whose parent lies at a distance D in [L (1 - t), L (1 + t)]
+        from its child's ray (orthographic: from its projected end) has its child placed
+        on that ray at the length ``L + (D - L (1 - t)) / 2``, two configurations up to
+        D = L (1 + t); 0: the paper's (M5 exactly).
 
     Returns
     -------
