@@ -400,7 +400,9 @@ def _reach_array(reach_tolerance: float | ArrayLike, n_links: int) -> FloatArray
         raise ShapeError(
             f"reach_tolerance: expected a number or ({n_links},) per link, found {tol.shape}"
         )
-    return np.ascontiguousarray(np.broadcast_to(tol, (n_links,)), dtype=float)
+    # always a fresh writeable C array: one numba signature (a read-only view would
+    # compile a second one)
+    return np.array(np.broadcast_to(tol, (n_links,)), dtype=float, order="C")
 
 
 def count_candidates(
