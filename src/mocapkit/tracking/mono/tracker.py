@@ -175,8 +175,10 @@ class MonoConfig:
     girdle_weight : float
         Unary cost per unit of `mocapkit.tracking.mono.priors.girdle_angle_cost` where
         the clavicles' common parent (the neck) is in ``rebuilt_joints`` and
-        ``girdle_cosine`` is finite; 0: off. Default 300 (100: 01_09's right clavicle
-        72 % right instead of 100 %; 1000: zombie's left arm mirrored; seventh round).
+        ``girdle_cosine`` is finite; 0: off. Default 100: offline 300 gained 0.3-0.5 mm
+        and about a point of flips on the five accuracy clips (two noise seeds), but
+        online (``lag`` 10) it mirrored zombie's left arm (59.8 mm against 48.8 at 100
+        and 50.0 without the change); 1000 mirrors it offline too (seventh round).
     girdle_cosine : float
         Cosine of the angle between the two clavicles of the subject's rigid girdle;
         NaN (default): no girdle cost.
@@ -208,7 +210,7 @@ class MonoConfig:
     rebuilt_joints: tuple[str, ...] = ()
     rebuilt_reach_tolerance: float = 0.1
     rebuilt_reach_links: tuple[str, ...] = ("left_clavicle", "right_clavicle")
-    girdle_weight: float = 300.0
+    girdle_weight: float = 100.0
     girdle_cosine: float = float("nan")
     arm_prior: ArmPrior | None = field(default=None, compare=False, repr=False)
 
