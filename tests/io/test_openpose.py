@@ -207,6 +207,7 @@ def test_a_folder_gets_its_take_s_own_neck_and_pelvis(tmp_path: Path) -> None:
     f_n, f_p = trunk_fractions(kp.pixels, MAPPED_JOINTS)
     assert f_n == pytest.approx(1.0 - NECK_BELOW_SHOULDERS * w / h, abs=0.01)
     assert f"{f_n:.3f} and {f_p:.3f}" in kp.source
+    assert kp.rebuilt_joints == ("neck", "pelvis")  # tells the tracker they are not seen
     np.testing.assert_allclose(kp.pixels, true_px, atol=0.01 * h)
     fixed = read_openpose_folder(
         tmp_path / "op", np.arange(20) / 30.0, fractions=(NECK_FRACTION, PELVIS_FRACTION)

@@ -452,6 +452,7 @@ def read_openpose_folder(
         px,
         f"{folder} (OpenPose {layout_seen or 'empty'}; neck and pelvis at "
         f"{fractions[0]:.3f} and {fractions[1]:.3f} of the hip-to-shoulder line)",
+        REBUILT_JOINTS,
     )
 
 

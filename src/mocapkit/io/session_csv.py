@@ -70,12 +70,16 @@ class Keypoints:
     pixels : (T, K, 2) float array
         Image positions (px); NaN where unseen.
     source : str
+    rebuilt_joints : tuple of str
+        Joints not observed but placed from others by the reader (a detector's neck and
+        pelvis, `mocapkit.io.openpose`); empty for keypoints that give every joint.
     """
 
     time_s: FloatArray
     joint_names: tuple[str, ...]
     pixels: FloatArray
     source: str = ""
+    rebuilt_joints: tuple[str, ...] = ()
 
 
 def _read_numeric_csv(path: Path, what: str) -> tuple[list[str], FloatArray]:

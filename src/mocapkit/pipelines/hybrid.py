@@ -980,7 +980,7 @@ def track_hybrid_marker_file(
     note += _blind_turn_note(sets, frozenset(cfg.member_offsets_mm))
     for set_members in cfg.member_offsets_mm.values():
         for m in set_members:
-            members[m] = world.positions_mm[:, world.index(m)]
+            members[m] = world.trajectory(m)
     where = "the Z-up world" if world_output else "the file's frame"
     source = (
         f"hybrid tracker IK on {Path(markers.source).name} (file up = {frame.up}, floor "
@@ -1033,6 +1033,13 @@ def _blind_turn_note(sets: Sequence[MarkerSet], oriented: frozenset[str]) -> str
     )
 
 
+def _member_trajectories(
+    data: MarkerData, sets: Sequence[MarkerSet]
+) -> dict[str, dict[str, FloatArray]]:
+    """Per set, per marker whose offset is calibrated (``all_members``): its (T, 3) mm."""
+    return {s.name: {m: data.trajectory(m) for m in s.all_members} for s in sets}
+
+
 def head_band_offset_mm(skeleton: Skeleton) -> tuple[float, float, float]:
     """Offset (mm, head joint frame) of a raw head set's centre from the model's head point.
 
@@ -1083,9 +1090,7 @@ def _calibrate_static(
             f"no window of {STATIC_WINDOW_S:g} s in {where}{first} sees every marker set "
             f"and moves less than {MAX_STATIC_RMS_MM:g} mm RMS"
         )
-    members = {
-        s.name: {m: source.positions_mm[:, source.index(m)] for m in s.all_members} for s in multi
-    }
+    members = _member_trajectories(source, multi)
     calib = calibrate_member_offsets(
         sk,
         cfg,
@@ -1129,9 +1134,7 @@ def _calibrate_dynamic(
         skeleton=sk,
     )
     fit = {s.name: np.array([p.fit.get(f"{s.name}_mm", np.nan) for p in poses]) for s in multi}
-    members = {
-        s.name: {m: world.positions_mm[:, world.index(m)] for m in s.all_members} for s in multi
-    }
+    members = _member_trajectories(world, multi)
     try:
         calib = calibrate_members_on_motion(sk, q, world.time_s, fit, members)
     except ConfigError as exc:

@@ -570,7 +570,7 @@ def track_mono(
         if skin
         else load_keypoints(session, cam_name, keypoints)
     )
-    if keypoints is not None and Path(keypoints).is_dir() and not cfg.rebuilt_joints:
+    if kp.rebuilt_joints and not cfg.rebuilt_joints:
         cfg = detector_config(cfg)
     px = stick_pixels(kp, model) if pixels is None else np.asarray(pixels, dtype=float)
     t = np.asarray(kp.time_s, dtype=float)

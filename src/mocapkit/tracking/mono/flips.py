@@ -389,7 +389,7 @@ def enumerate_poses(
         n = _enumerate(stick, model.checks, obs3, r, perspective, False, tol, codes, pos)
         n_all, pruned_all = n, True
     if n_all < 0:
-        n_all = count_candidates(model, stick.lengths, obs3, r, perspective, reach_tolerance)
+        n_all = count_candidates(model, stick.lengths, obs3, r, perspective, tol)
     return FramePoses(codes[:n].copy(), pos[:n].copy(), n_all, pruned_all)
 
 

@@ -469,12 +469,10 @@ class MonoTracker:
         for j in cfg.rebuilt_joints:
             if j not in names:
                 raise unknown_name("MonoConfig.rebuilt_joints joint", j, names)
-        for s in cfg.rebuilt_reach_links:
-            self.model.link_index(s)  # raises on an unknown link
         rebuilt = [names.index(j) for j in cfg.rebuilt_joints]
         tol = np.full(self.model.n_links, cfg.reach_tolerance)
         for s in cfg.rebuilt_reach_links:
-            li = self.model.link_index(s)
+            li = self.model.link_index(s)  # raises on an unknown link
             if self.model.parent[li] in rebuilt or self.model.child[li] in rebuilt:
                 tol[li] = max(tol[li], cfg.rebuilt_reach_tolerance)
         return tol
@@ -557,7 +555,7 @@ class MonoTracker:
             u += cfg.elbow_flex_weight * elbow_flex_cost(self.model, positions)
         if cfg.clavicle_weight > 0:
             u += cfg.clavicle_weight * clavicle_forward_cost(self.model, positions)
-        if cfg.girdle_weight > 0 and self._girdle:
+        if self._girdle:
             u += cfg.girdle_weight * girdle_angle_cost(self.model, positions, cfg.girdle_cosine)
         if self._arm_prior is not None:
             u += cfg.arm_prior_weight * self._arm_prior.cost(self.model, positions)
