@@ -508,6 +508,7 @@ def track_mono(
     skin: bool = False,
     initial_pose: FloatArray | None = None,
     skin_bare_from: str | None = None,
+    skin_trunk_from_head: bool = True,
 ) -> MonoRun:
     """Track a session with the monocular tracker and write the result folder.
 
@@ -532,6 +533,10 @@ def track_mono(
     skin_bare_from : {None, "elbow", "mid_upper_arm", "shoulder"}
         With ``skin``: where the arms' skin starts (`SkinTracker`'s ``bare_from``; None:
         the paper's rule, the arm ellipse's ends are the elbow and wrist).
+    skin_trunk_from_head : bool
+        With ``skin``: in frames without a waist blob (the paper's belt), draw an upright
+        trunk from the head ellipse (`SkinTracker`'s ``trunk_from_head``); False: those
+        frames have no pelvis and shoulders.
     length_passes : int
         With video lengths and the perspective model: track this many times, each pass
         measuring the lengths again from the previous pass's poses (`refined_lengths`,
@@ -566,7 +571,9 @@ def track_mono(
     if skin:
         session.require(video=True, cameras=[cam_name])
     kp = (
-        skin_keypoints(session, cam_name, bare_from=skin_bare_from)
+        skin_keypoints(
+            session, cam_name, trunk_from_head=skin_trunk_from_head, bare_from=skin_bare_from
+        )
         if skin
         else load_keypoints(session, cam_name, keypoints)
     )
