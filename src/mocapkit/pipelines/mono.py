@@ -137,7 +137,12 @@ def detector_config(config: MonoConfig) -> MonoConfig:
 
 
 def skin_keypoints(
-    session: Session, camera: str, trunk_from_head: bool = True, bare_from: str | None = None
+    session: Session,
+    camera: str,
+    trunk_from_head: bool = True,
+    bare_from: str | None = None,
+    belt: bool = False,
+    reacquire: bool = False,
 ) -> Keypoints:
     """2-D joints of the stick from the camera's video by skin blobs (paper §3.3).
 
@@ -145,12 +150,15 @@ def skin_keypoints(
     paper's belt) gives the pelvis and shoulders; without one, ``trunk_from_head`` draws
     an upright trunk from the head ellipse (the synthetic sessions and the real videos
     have no belt), else those joints are NaN. ``bare_from``: where the arms' skin starts
-    (`SkinTracker`; None: the paper's ellipse ends).
+    (`SkinTracker`; None: the paper's ellipse ends). ``belt``, ``reacquire``: as
+    `SkinTracker`'s.
     """
     from mocapkit.tracking.mono.skin_tracking import SKIN_JOINTS, SkinTracker
 
     video = session.video(camera)
-    tracker = SkinTracker(trunk_from_head=trunk_from_head, bare_from=bare_from)
+    tracker = SkinTracker(
+        trunk_from_head=trunk_from_head, bare_from=bare_from, belt=belt, reacquire=reacquire
+    )
     px = np.full((video.n_frames, len(SKIN_JOINTS), 2), np.nan)
     stream = video.open()
     try:
@@ -509,6 +517,8 @@ def track_mono(
     initial_pose: FloatArray | None = None,
     skin_bare_from: str | None = None,
     skin_trunk_from_head: bool = True,
+    skin_belt: bool = False,
+    skin_reacquire: bool = False,
 ) -> MonoRun:
     """Track a session with the monocular tracker and write the result folder.
 
@@ -537,6 +547,9 @@ def track_mono(
         With ``skin``: in frames without a waist blob (the paper's belt), draw an upright
         trunk from the head ellipse (`SkinTracker`'s ``trunk_from_head``); False: those
         frames have no pelvis and shoulders.
+    skin_belt, skin_reacquire : bool
+        With ``skin``: the subject wears the paper's belt, and lost hand labels are taken
+        up again (`SkinTracker`'s ``belt`` and ``reacquire``).
     length_passes : int
         With video lengths and the perspective model: track this many times, each pass
         measuring the lengths again from the previous pass's poses (`refined_lengths`,
@@ -572,7 +585,12 @@ def track_mono(
         session.require(video=True, cameras=[cam_name])
     kp = (
         skin_keypoints(
-            session, cam_name, trunk_from_head=skin_trunk_from_head, bare_from=skin_bare_from
+            session,
+            cam_name,
+            trunk_from_head=skin_trunk_from_head,
+            bare_from=skin_bare_from,
+            belt=skin_belt,
+            reacquire=skin_reacquire,
         )
         if skin
         else load_keypoints(session, cam_name, keypoints)

@@ -24,6 +24,7 @@ import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -51,14 +52,15 @@ SKIN_SLEEVE = "short"
 #: any colour) those rules do not hold and the tracker needs stand-ins (`SKIN_SETTINGS`);
 #: its figures are reported apart (``costume="everyday"``).
 SKIN_COSTUME = "paper"
-#: `SkinTracker` settings each costume implies: ``bare_from`` (where the arms' skin
-#: starts; None: the paper's rule, the arm ellipse's ends) and ``trunk_from_head``
-#: (without a belt, an upright trunk drawn from the head; the paper's costume has the
-#: belt, so frames where it is not found have no trunk).
-SKIN_SETTINGS: dict[str, tuple[str | None, bool]] = {
-    "paper": (None, False),
-    "everyday": ("mid_upper_arm", True),
+#: `SkinTracker` settings each costume implies (`mocapkit.pipelines.mono.track_mono`'s
+#: ``skin_*``): ``bare_from``, where the arms' skin starts; ``trunk_from_head``, without
+#: a belt an upright trunk drawn from the head (the paper's costume has the belt, so
+#: frames where it is not found have no trunk); ``belt``; ``reacquire``.
+SKIN_SETTINGS: dict[str, dict[str, Any]] = {
+    "paper": {"bare_from": "elbow", "trunk_from_head": False, "belt": True, "reacquire": True},
+    "everyday": {"bare_from": "mid_upper_arm", "trunk_from_head": True},
 }
+
 
 #: Clips of ``shared/data/mocap`` and the excerpt (start s, length s) rendered from each.
 MONO_CLIPS: dict[str, tuple[float, float]] = {
@@ -243,6 +245,7 @@ def mono_accuracy(
     initial_pose: bool = False,
     skin_bare_from: str | None = "costume",
     costume: str | None = None,
+    skin_settings: dict[str, Any] | None = None,
 ) -> list[MonoClipAccuracy]:
     """Render (or reuse), track from noisy true keypoints (or OpenPose JSON, or the video
     by skin blobs with ``skin``), and evaluate each clip.
@@ -273,9 +276,10 @@ def mono_accuracy(
         raise ConfigError(
             f"mono_accuracy: expected a costume in {sorted(SKIN_SETTINGS)}, found {dress!r}"
         )
-    bare_from, drawn_trunk = SKIN_SETTINGS[dress]
+    settings = {"belt": False, "reacquire": False, **SKIN_SETTINGS[dress]}
     if skin_bare_from != "costume":
-        bare_from = skin_bare_from
+        settings["bare_from"] = skin_bare_from
+    settings.update(skin_settings or {})
     cfg = config or MonoConfig()
     source = "skin" if skin else "openpose" if openpose else "keypoints"
     rows = []
@@ -297,8 +301,10 @@ def mono_accuracy(
                 config=cfg,
                 skin=True,
                 initial_pose=first_pose,
-                skin_bare_from=bare_from,
-                skin_trunk_from_head=drawn_trunk,
+                skin_bare_from=settings["bare_from"],
+                skin_trunk_from_head=settings["trunk_from_head"],
+                skin_belt=settings["belt"],
+                skin_reacquire=settings["reacquire"],
             )
         elif openpose:
             folder = base / "openpose_json"
