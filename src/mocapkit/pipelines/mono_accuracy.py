@@ -53,11 +53,22 @@ SKIN_SLEEVE = "short"
 #: its figures are reported apart (``costume="everyday"``).
 SKIN_COSTUME = "paper"
 #: `SkinTracker` settings each costume implies (`mocapkit.pipelines.mono.track_mono`'s
-#: ``skin_*``): ``bare_from``, where the arms' skin starts; ``trunk_from_head``, without
-#: a belt an upright trunk drawn from the head (the paper's costume has the belt, so
-#: frames where it is not found have no trunk); ``belt``; ``reacquire``.
+#: ``skin_*``). Paper: the skin runs from the elbow to the fingertips (``bare_from``
+#: elbow: the elbow and wrist on the blob at the visible lengths' fractions); the trunk
+#: from the belt, no drawn trunk (``trunk_from_head`` off: frames without the belt have
+#: none); the waist labelled among fewer than four blobs and taken up again (``belt``);
+#: lost hands given to blobs on their side (``reacquire``); the neck moved from the
+#: shoulders' level to the stick's neck base (``girdle_neck``). Everyday: the skin from
+#: the middle of the upper arm (short sleeves) and the trunk drawn from the head (no
+#: belt). docs/mono.md, eighth round.
 SKIN_SETTINGS: dict[str, dict[str, Any]] = {
-    "paper": {"bare_from": "elbow", "trunk_from_head": False, "belt": True, "reacquire": True},
+    "paper": {
+        "bare_from": "elbow",
+        "trunk_from_head": False,
+        "belt": True,
+        "reacquire": True,
+        "girdle_neck": True,
+    },
     "everyday": {"bare_from": "mid_upper_arm", "trunk_from_head": True},
 }
 
@@ -276,7 +287,7 @@ def mono_accuracy(
         raise ConfigError(
             f"mono_accuracy: expected a costume in {sorted(SKIN_SETTINGS)}, found {dress!r}"
         )
-    settings = {"belt": False, "reacquire": False, **SKIN_SETTINGS[dress]}
+    settings = {"belt": False, "reacquire": False, "girdle_neck": False, **SKIN_SETTINGS[dress]}
     if skin_bare_from != "costume":
         settings["bare_from"] = skin_bare_from
     settings.update(skin_settings or {})
@@ -305,6 +316,7 @@ def mono_accuracy(
                 skin_trunk_from_head=settings["trunk_from_head"],
                 skin_belt=settings["belt"],
                 skin_reacquire=settings["reacquire"],
+                skin_girdle_neck=settings["girdle_neck"],
             )
         elif openpose:
             folder = base / "openpose_json"
