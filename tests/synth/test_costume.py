@@ -160,3 +160,17 @@ def test_mono_sessions_are_cached_per_costume_and_seed(tmp_path, monkeypatch):
     assert len(rendered) == 3
     with pytest.raises(ConfigError, match="skin tracking only"):
         mono_accuracy.mono_accuracy(tmp_path, tmp_path / "w", costume="paper")
+
+
+def test_cli_synth_costume(tmp_path, capsys):
+    from mocapkit.cli.main import main
+
+    args = ["synth", "builtin:wave", "--seconds", "0.1", "--size", "96x72", "--rig", "mono"]
+    assert main([*args, "--out", str(tmp_path / "p"), "--costume", "paper"]) == 0
+    info = json.loads((tmp_path / "p" / "session.json").read_text())["synthetic"]
+    assert info["costume"] == "paper" and info["sleeve"] == "elbow"
+    capsys.readouterr()
+    bad = [*args, "--out", str(tmp_path / "q"), "--costume", "paper", "--sleeve", "long"]
+    assert main(bad) != 0
+    assert "covers the upper arms to the elbow" in capsys.readouterr().err
+    assert not (tmp_path / "q").exists()
