@@ -367,3 +367,27 @@ def test_openpose_input_tracks_with_the_rebuilt_neck_settings(tmp_path: Path) ->
     same = track_mono(session, None, config=cfg, pixels=stick_pixels(kp, model))
     np.testing.assert_array_equal(run.motion.joints_mm, same.motion.joints_mm)
     assert np.isfinite(run.motion.joints_mm).any()
+
+
+def test_girdle_neck_lies_below_the_shoulders_by_the_girdle_rule() -> None:
+    """The paper's neck (shoulders' level) moved to the stick's neck base: the fraction
+    d W / (T + d W) of the way from the shoulder midpoint to the pelvis, with W the
+    shoulder width that the clavicle ratio gives for d = 0.205 (0.178)."""
+    from mocapkit.io.openpose import NECK_BELOW_SHOULDERS as d
+    from mocapkit.pipelines.mono import girdle_neck_px
+    from mocapkit.tracking.mono.lengths import ANTHROPOMETRIC_RATIOS as r
+    from mocapkit.tracking.mono.skin_tracking import SKIN_JOINTS
+
+    w = r["left_clavicle"] / np.sqrt(0.25 + d * d)
+    frac = d * w / (r["trunk"] + d * w)
+    assert frac == pytest.approx(0.178, abs=5e-4)
+    px = np.full((2, len(SKIN_JOINTS), 2), np.nan)
+    col = SKIN_JOINTS.index
+    px[:, col("left_shoulder")] = (160.0, 100.0)
+    px[:, col("right_shoulder")] = (100.0, 100.0)
+    px[:, col("pelvis")] = (130.0, 200.0)
+    px[:, col("neck")] = (131.0, 99.0)
+    px[1, col("pelvis")] = np.nan  # no belt: the paper's neck is kept
+    neck = girdle_neck_px(px, SKIN_JOINTS)
+    np.testing.assert_allclose(neck[0], (130.0, 100.0 + 100.0 * frac))
+    np.testing.assert_allclose(neck[1], (131.0, 99.0))

@@ -31,14 +31,24 @@ def add_mono_accuracy_parser(methods: Any) -> None:
     src.add_argument(
         "--skin",
         action="store_true",
-        help="track from the rendered video by skin blobs (the trunk drawn from the head)",
+        help="track from the rendered video by skin blobs",
+    )
+    m.add_argument(
+        "--costume",
+        choices=("paper", "everyday"),
+        default=None,
+        help="with --skin: the subject's clothing (default paper: the paper's costume, "
+        "bare forearms and a skin-like belt, tracked by the paper's rules; everyday: short "
+        "sleeves and no belt, the elbow and wrist placed on the arm blob and the trunk "
+        "drawn from the head)",
     )
     m.add_argument(
         "--bare-from",
-        choices=("paper", "elbow", "mid_upper_arm", "shoulder"),
-        default="mid_upper_arm",
-        help="with --skin: where the arms' skin starts (default mid_upper_arm: the sessions "
-        "are rendered with short sleeves); paper: the arm ellipse's ends as elbow and wrist",
+        choices=("costume", "paper", "elbow", "mid_upper_arm", "shoulder"),
+        default="costume",
+        help="with --skin: where the arms' skin starts (default: the costume's, paper for "
+        "the paper's costume, mid_upper_arm for everyday); paper: the arm ellipse's ends "
+        "as elbow and wrist",
     )
     m.add_argument("--lag", type=int, default=None, help="online fixed lag (frames)")
     m.add_argument(
@@ -80,6 +90,7 @@ def _run(args: argparse.Namespace) -> int:
         openpose=args.openpose,
         skin=args.skin,
         skin_bare_from=None if args.bare_from == "paper" else args.bare_from,
+        costume=args.costume,
         initial_pose=args.initial_pose,
         config=MonoConfig(lag=args.lag, cost=args.cost, **prior),
         say=(lambda _line: None) if args.json else print,

@@ -7,7 +7,7 @@ from collections.abc import Callable
 
 from mocapkit.cli.args import checked_by, number, output_folder
 from mocapkit.synth.realism import BACKGROUNDS, REALISM_RANGES, RealismOptions
-from mocapkit.synth.render import SLEEVES, parse_colour
+from mocapkit.synth.render import COSTUMES, SLEEVES, parse_colour
 from mocapkit.synth.rigs import RIG_NAMES
 from mocapkit.synth.session_writer import (
     FPS_RANGE,
@@ -138,7 +138,17 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         help=f"video time stamp jitter sigma, s (default {d.video_jitter_s}; 0 = even)",
     )
     p.add_argument(
-        "--sleeve", choices=SLEEVES, default="short", help="shirt sleeves (default short)"
+        "--sleeve",
+        choices=SLEEVES,
+        default=None,
+        help="shirt sleeves (default: the costume's, short for everyday, elbow for paper)",
+    )
+    p.add_argument(
+        "--costume",
+        choices=COSTUMES,
+        default="everyday",
+        help="clothing (default everyday: shirt and trousers; paper: Mamania et al.'s dance "
+        "costume, one dress to the elbows, bare forearms, a skin-like gold belt)",
     )
     p.add_argument(
         "--shirt-colour",
@@ -180,6 +190,7 @@ def run(args: argparse.Namespace) -> int:
         marker_rate_hz=args.marker_rate,
         image_size=args.size,
         sleeve=args.sleeve,
+        costume=args.costume,
         shirt_colour=args.shirt_colour,
         video_format="png" if args.png else "mp4",
         overwrite=args.overwrite,

@@ -32,6 +32,7 @@ from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments
 from mocapkit.tracking.base import BRIDGE_S, FrameResult, unobserved_part
 from mocapkit.tracking.mono.lengths import (
+    ANTHROPOMETRIC_RATIOS,
     estimate_link_lengths,
     pixels_per_mm,
     raise_short_links,
@@ -137,7 +138,13 @@ def detector_config(config: MonoConfig) -> MonoConfig:
 
 
 def skin_keypoints(
-    session: Session, camera: str, trunk_from_head: bool = True, bare_from: str | None = None
+    session: Session,
+    camera: str,
+    trunk_from_head: bool = True,
+    bare_from: str | None = None,
+    belt: bool = False,
+    reacquire: bool = False,
+    girdle_neck: bool = False,
 ) -> Keypoints:
     """2-D joints of the stick from the camera's video by skin blobs (paper §3.3).
 
@@ -145,12 +152,16 @@ def skin_keypoints(
     paper's belt) gives the pelvis and shoulders; without one, ``trunk_from_head`` draws
     an upright trunk from the head ellipse (the synthetic sessions and the real videos
     have no belt), else those joints are NaN. ``bare_from``: where the arms' skin starts
-    (`SkinTracker`; None: the paper's ellipse ends).
+    (`SkinTracker`; None: the paper's ellipse ends). ``belt``, ``reacquire``: as
+    `SkinTracker`'s. ``girdle_neck``: the neck moved from the head blob's lower end down
+    to the stick's neck base by `girdle_neck_px` (where the shoulders are seen).
     """
     from mocapkit.tracking.mono.skin_tracking import SKIN_JOINTS, SkinTracker
 
     video = session.video(camera)
-    tracker = SkinTracker(trunk_from_head=trunk_from_head, bare_from=bare_from)
+    tracker = SkinTracker(
+        trunk_from_head=trunk_from_head, bare_from=bare_from, belt=belt, reacquire=reacquire
+    )
     px = np.full((video.n_frames, len(SKIN_JOINTS), 2), np.nan)
     stream = video.open()
     try:
@@ -161,7 +172,40 @@ def skin_keypoints(
                 prog.update()
     finally:
         stream.close()
+    if girdle_neck:
+        px[:, SKIN_JOINTS.index("neck")] = girdle_neck_px(px, SKIN_JOINTS)
     return Keypoints(video.time_s, SKIN_JOINTS, px, f"{video.path} (skin blobs)")
+
+
+def girdle_neck_px(pixels: FloatArray, joint_names: Sequence[str]) -> FloatArray:
+    """The stick's neck (T, 2) px from the paper's shoulders and pelvis (§3.3).
+
+    The paper's shoulders lie "in horizontal line with the lower end of the neck" (the
+    head blob's lower end), so its neck is the shoulders' level; the stick's neck is the
+    base of the neck, `mocapkit.io.openpose.NECK_BELOW_SHOULDERS` d = 0.205 shoulder
+    widths W below the shoulder midpoint M_s along the trunk (the CMU clips' rigid
+    girdle). With the clavicle c = sqrt(1/4 + d^2) W and the trunk T (neck to pelvis) of
+    `ANTHROPOMETRIC_RATIOS`, the neck lies the fraction d W / (T + d W) = 0.178 of the way
+    from M_s to the pelvis, in the image too (orthographic ratios along a line), so the
+    offset shortens as the trunk does. Frames without both shoulders and the pelvis keep
+    the input's neck.
+
+    Parameters
+    ----------
+    pixels : (T, K, 2) float
+        Joints px, NaN where unseen, with neck, pelvis and both shoulders among them.
+    joint_names : sequence of str
+    """
+    from mocapkit.io.openpose import NECK_BELOW_SHOULDERS as d
+
+    px = np.asarray(pixels, dtype=float)
+    i = {n: joint_names.index(n) for n in ("neck", "pelvis", "left_shoulder", "right_shoulder")}
+    r = ANTHROPOMETRIC_RATIOS
+    width = r["left_clavicle"] / math.sqrt(0.25 + d * d)
+    frac = d * width / (r["trunk"] + d * width)
+    m_s = 0.5 * (px[:, i["left_shoulder"]] + px[:, i["right_shoulder"]])
+    neck = m_s + frac * (px[:, i["pelvis"]] - m_s)
+    return np.where(np.isfinite(neck), neck, px[:, i["neck"]])
 
 
 def stick_pixels(keypoints: Keypoints, model: StickModel) -> FloatArray:
@@ -508,6 +552,10 @@ def track_mono(
     skin: bool = False,
     initial_pose: FloatArray | None = None,
     skin_bare_from: str | None = None,
+    skin_trunk_from_head: bool = True,
+    skin_belt: bool = False,
+    skin_reacquire: bool = False,
+    skin_girdle_neck: bool = False,
 ) -> MonoRun:
     """Track a session with the monocular tracker and write the result folder.
 
@@ -532,6 +580,15 @@ def track_mono(
     skin_bare_from : {None, "elbow", "mid_upper_arm", "shoulder"}
         With ``skin``: where the arms' skin starts (`SkinTracker`'s ``bare_from``; None:
         the paper's rule, the arm ellipse's ends are the elbow and wrist).
+    skin_trunk_from_head : bool
+        With ``skin``: in frames without a waist blob (the paper's belt), draw an upright
+        trunk from the head ellipse (`SkinTracker`'s ``trunk_from_head``); False: those
+        frames have no pelvis and shoulders.
+    skin_belt, skin_reacquire : bool
+        With ``skin``: the subject wears the paper's belt, and lost hand labels are taken
+        up again (`SkinTracker`'s ``belt`` and ``reacquire``).
+    skin_girdle_neck : bool
+        With ``skin``: the neck rebuilt below the shoulders (`girdle_neck_px`).
     length_passes : int
         With video lengths and the perspective model: track this many times, each pass
         measuring the lengths again from the previous pass's poses (`refined_lengths`,
@@ -566,7 +623,15 @@ def track_mono(
     if skin:
         session.require(video=True, cameras=[cam_name])
     kp = (
-        skin_keypoints(session, cam_name, bare_from=skin_bare_from)
+        skin_keypoints(
+            session,
+            cam_name,
+            trunk_from_head=skin_trunk_from_head,
+            bare_from=skin_bare_from,
+            belt=skin_belt,
+            reacquire=skin_reacquire,
+            girdle_neck=skin_girdle_neck,
+        )
         if skin
         else load_keypoints(session, cam_name, keypoints)
     )

@@ -124,7 +124,58 @@ _NAMED_COLOURS_BGR = {
 _SKIN_TONES_BGR = ((150, 180, 225), (120, 160, 210), (95, 135, 185), (70, 100, 150), (55, 75, 110))
 _TROUSERS_BGR = ((80, 55, 35), (60, 60, 60), (110, 110, 120), (40, 35, 30), (90, 110, 140))
 _HAIR_BGR = ((30, 40, 60), (20, 25, 30), (50, 90, 140), (40, 60, 90))
-SLEEVES = ("short", "long", "none")
+SLEEVES = ("short", "long", "none", "elbow")
+#: Clothing of the rendered subject. ``everyday``: a shirt (sleeves per ``sleeve``) and
+#: trousers of independent colours. ``paper``: the costume of Mamania et al. (2004, §3):
+#: "covers her entire body except the face, forearms, and the feet", with "the golden
+#: belt [...] around the waist region" that their skin model "categorised as skin region":
+#: one dress colour over trunk, upper arms (sleeves to the elbow) and legs, bare
+#: forearms and hands, and a skin-like gold belt (`BELT_BGR`). The neck stays bare and
+#: the feet shod (the paper's feet are bare; below the upper body its tracker ignores).
+COSTUMES = ("everyday", "paper")
+#: The paper's belt colour: a dull, dark (antique) gold, RGB (155, 100, 45). Brighter,
+#: more saturated golds leave the default skin model's hue band (`mocapkit.cues.skin`)
+#: at some light; this one is accepted from 0.5 to 1.12 times its colour (shading 0.72-1
+#: times the lighting field's 0.75-1.1), as the paper's belt is by its skin model.
+BELT_BGR = (45, 100, 155)
+#: Belt band height (mm) and the margin (mm) it stands off the trousers' hull.
+BELT_HEIGHT_MM = 70.0
+BELT_STANDOFF_MM = 6.0
+#: The paper's dress replaces a drawn shirt colour that the skin model accepts in shadow
+#: (orange at half light, `mocapkit.cues.skin`) by red, so that the dress is never skin;
+#: a substitution rather than a new draw keeps the seeded draws (and the cameras placed
+#: after them) those of the everyday clothing.
+_DRESS_FOR_SHIRT = {"orange": "red"}
+
+
+def costume_sleeve(costume: str, sleeve: str | None = None) -> str:
+    """The sleeve a costume is drawn with: ``sleeve`` checked against it, or its own.
+
+    Parameters
+    ----------
+    costume : {"everyday", "paper"}
+        `COSTUMES`.
+    sleeve : {"short", "long", "none", "elbow"}, optional
+        `SLEEVES`; None: the costume's own (everyday: short; paper: elbow, the only one
+        it takes).
+
+    Raises
+    ------
+    ConfigError
+        An unknown costume or sleeve, or the paper's costume with other than elbow sleeves.
+    """
+    if costume not in COSTUMES:
+        raise ConfigError(f"costume: expected one of {', '.join(COSTUMES)}, found {costume!r}")
+    if sleeve is None:
+        return "elbow" if costume == "paper" else "short"
+    if sleeve not in SLEEVES:
+        raise ConfigError(f"sleeve: expected one of {', '.join(SLEEVES)}, found {sleeve!r}")
+    if costume == "paper" and sleeve != "elbow":
+        raise ConfigError(
+            f"sleeve: the paper's costume covers the upper arms to the elbow; expected "
+            f"'elbow' (or none given), found {sleeve!r}"
+        )
+    return sleeve
 
 
 def parse_colour(text: str) -> tuple[int, int, int]:
@@ -146,7 +197,11 @@ def parse_colour(text: str) -> tuple[int, int, int]:
 
 @dataclass(frozen=True)
 class Appearance:
-    """Colours (BGR, 0-255) and clothing of the rendered subject."""
+    """Colours (BGR, 0-255) and clothing of the rendered subject.
+
+    ``belt``: the colour of a band around the waist (the paper's golden belt), None: no
+    belt. `Appearance.random` dresses the subject by `COSTUMES`.
+    """
 
     skin: tuple[int, int, int]
     shirt: tuple[int, int, int]
@@ -154,23 +209,50 @@ class Appearance:
     shoes: tuple[int, int, int]
     hair: tuple[int, int, int]
     sleeve: str = "short"
+    belt: tuple[int, int, int] | None = None
 
     @staticmethod
     def random(
-        rng: np.random.Generator, shirt: str | None = None, sleeve: str = "short"
+        rng: np.random.Generator,
+        shirt: str | None = None,
+        sleeve: str | None = None,
+        costume: str = "everyday",
     ) -> Appearance:
-        """A seeded appearance; ``shirt`` (a colour name or #RRGGBB) overrides the draw."""
-        if sleeve not in SLEEVES:
-            raise ConfigError(f"sleeve: expected one of {', '.join(SLEEVES)}, found {sleeve!r}")
+        """A seeded appearance; ``shirt`` (a colour name or #RRGGBB) overrides the draw.
+
+        Parameters
+        ----------
+        rng : numpy.random.Generator
+        shirt : str, optional
+            Shirt (the paper's costume: dress) colour; default drawn.
+        sleeve : {"short", "long", "none", "elbow"}, optional
+            Default: the costume's, ``short`` for ``everyday``, ``elbow`` for ``paper``
+            (which takes no other).
+        costume : {"everyday", "paper"}
+            See `COSTUMES`. Both draw the same numbers from ``rng``.
+        """
+        sleeve = costume_sleeve(costume, sleeve)
         names = ("red", "blue", "green", "yellow", "orange", "purple", "teal", "white")
-        shirt_bgr = parse_colour(shirt) if shirt else _NAMED_COLOURS_BGR[str(rng.choice(names))]
+        if shirt:
+            shirt_bgr = parse_colour(shirt)
+        else:
+            name = str(rng.choice(names))
+            if costume == "paper":
+                name = _DRESS_FOR_SHIRT.get(name, name)
+            shirt_bgr = _NAMED_COLOURS_BGR[name]
+        skin = _SKIN_TONES_BGR[int(rng.integers(len(_SKIN_TONES_BGR)))]
+        trousers = _TROUSERS_BGR[int(rng.integers(len(_TROUSERS_BGR)))]
+        hair = _HAIR_BGR[int(rng.integers(len(_HAIR_BGR)))]
+        if costume == "paper":
+            trousers = shirt_bgr  # one dress over the whole body
         return Appearance(
-            skin=_SKIN_TONES_BGR[int(rng.integers(len(_SKIN_TONES_BGR)))],
+            skin=skin,
             shirt=shirt_bgr,
-            trousers=_TROUSERS_BGR[int(rng.integers(len(_TROUSERS_BGR)))],
+            trousers=trousers,
             shoes=(30, 30, 35),
-            hair=_HAIR_BGR[int(rng.integers(len(_HAIR_BGR)))],
+            hair=hair,
             sleeve=sleeve,
+            belt=BELT_BGR if costume == "paper" else None,
         )
 
 
@@ -367,7 +449,7 @@ def build_body(
         elif role == "upper_arm":
             if a.sleeve == "none":
                 prims.append(Primitive(CAPSULE, (p, j), radii, a.skin))
-            elif a.sleeve == "long":
+            elif a.sleeve in ("long", "elbow"):
                 prims.append(Primitive(CAPSULE, (p, j), (radii[0] + 5, radii[1] + 5), a.shirt))
             else:  # short sleeve: the proximal half is covered, the rest is skin
                 mid = add(0.5 * (joints[:, p] + joints[:, j]))
@@ -408,6 +490,34 @@ def build_body(
             )
     prims.append(Primitive(HULL, tuple(upper), (), a.shirt, 40.0))
     prims.append(Primitive(HULL, tuple(lower), (), a.trousers, 45.0))
+    if a.belt is not None:
+        # The belt is worn at the height of the stick's pelvis (the CMU root, about 100 mm
+        # above the hip joints: the iliac crests), around the trousers' hull there, whose
+        # half-width and depth it takes by linear interpolation between the hull's bottom
+        # (hip_mid - 60 up) and top (waist + 30 up) rings, standing off it by
+        # BELT_STANDOFF_MM.
+        h_belt = np.sum((pelvis - hip_mid) * up, axis=-1, keepdims=True)
+        h_top = np.sum((waist + 30.0 * up - hip_mid) * up, axis=-1, keepdims=True)
+        f = np.clip((h_belt + 60.0) / np.maximum(h_top + 60.0, 1.0), 0.0, 1.0)
+        half_w = (1.0 - f) * (0.5 * hip_w + 60.0) + f * waist_w + BELT_STANDOFF_MM
+        half_d = (1.0 - f) * 95.0 + f * 100.0 + BELT_STANDOFF_MM
+        right_b = _unit((1.0 - f) * right_hip + f * waist_right)
+        fwd_b = _unit(np.cross(up, right_b))
+        ring: list[int] = []
+        for ang in np.linspace(0.0, 2.0 * np.pi, 16, endpoint=False):
+            for dh in (-0.5 * BELT_HEIGHT_MM, 0.5 * BELT_HEIGHT_MM):
+                ring.append(
+                    add(
+                        hip_mid
+                        + (h_belt + dh) * up
+                        + np.cos(ang) * half_w * right_b
+                        + np.sin(ang) * half_d * fwd_b
+                    )
+                )
+        # Drawn over the dress and the thighs' capsules (whose hip ends reach up to the
+        # belt) at equal depth; a thigh whose middle comes 10 mm nearer than the waist (a
+        # raised knee, a crouch) covers it, as do arms in front.
+        prims.append(Primitive(HULL, tuple(ring), (), a.belt, -10.0))
 
     # ------------------------------------------------------------ head, hair, glasses
     head_j = owner["head"]

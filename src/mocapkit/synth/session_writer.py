@@ -59,6 +59,7 @@ from mocapkit.synth.render import (
     Appearance,
     CameraRenderer,
     build_body,
+    costume_sleeve,
     declared_marker_offsets,
     interpolate_tracks,
 )
@@ -91,7 +92,10 @@ class SynthOptions:
     fps: float = 30.0
     marker_rate_hz: float = 120.0
     image_size: tuple[int, int] = (640, 480)
-    sleeve: str = "short"
+    #: Shirt sleeves (`mocapkit.synth.render.SLEEVES`); None: the costume's own.
+    sleeve: str | None = None
+    #: Clothing (`mocapkit.synth.render.COSTUMES`): ``everyday`` or ``paper``.
+    costume: str = "everyday"
     shirt_colour: str | None = None
     video_format: str = "mp4"
     overwrite: bool = False
@@ -101,6 +105,7 @@ class SynthOptions:
     blackout_s: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
+        costume_sleeve(self.costume, self.sleeve)
         if self.blackout_s is not None:
             b0, bd = self.blackout_s
             if not (np.isfinite(b0) and np.isfinite(bd) and b0 >= 0 and bd > 0):
@@ -372,7 +377,7 @@ def _render_session(motion_spec: str, out: Path, label: str, options: SynthOptio
     ]
     chest = (float(np.mean(shoulders)) + shift[2] - 120.0) if shoulders else 1300.0
 
-    appearance = Appearance.random(rng_look, opts.shirt_colour, opts.sleeve)
+    appearance = Appearance.random(rng_look, opts.shirt_colour, opts.sleeve, opts.costume)
     body = build_body(motion.skeleton, t_local, np.asarray(motion.q)[i0:i1], appearance, shift)
     cameras = make_rig(opts.rig, np.zeros(3), fwd, chest, opts.image_size, rng_look)
     cameras, pulled_back_mm = keep_cameras_away(cameras, joints_all[i0:i1] + shift)
@@ -468,7 +473,8 @@ def _render_session(motion_spec: str, out: Path, label: str, options: SynthOptio
             "seed": opts.seed,
             "rig": opts.rig,
             "shift_mm": [round(float(v), 3) for v in shift],
-            "sleeve": opts.sleeve,
+            "sleeve": appearance.sleeve,
+            "costume": opts.costume,
             "blackout_s": None if opts.blackout_s is None else list(opts.blackout_s),
             "realism": asdict(opts.realism),
             "notes": notes,

@@ -225,3 +225,40 @@ def test_the_first_head_merged_with_a_forearm_is_the_blob_reaching_highest() -> 
     f = SkinTracker().update(img)
     np.testing.assert_allclose(f.blobs["head"].centre, merged.centre)
     np.testing.assert_allclose(f.blobs["left_hand"].centre, raised.centre)
+
+
+def test_with_the_belt_the_waist_is_labelled_among_fewer_blobs() -> None:
+    """The right forearm merged with the belt (a hand hanging at the hip, as in the
+    charleston1 and zombie clips' first frames under the paper's costume): three blobs.
+    Without ``belt`` the waist needs four blobs and the merged one is taken for a hand;
+    with it, the flat blob below the head is the waist."""
+    img = _figure(right=((260, 250), (245, 330)))
+    assert len(mask_blobs(_skin(img))) == 3
+    plain = SkinTracker().update(img)
+    assert "waist" not in plain.blobs and "right_hand" in plain.blobs
+    belted = SkinTracker(belt=True).update(img)
+    assert set(belted.blobs) == {"head", "left_hand", "waist"}
+
+
+def test_reacquire_gives_a_lost_hand_the_blob_on_its_side() -> None:
+    """A hand merged with the belt in the first frame, then lifted off it: only with
+    ``reacquire`` does its label come back (on the image's left of the head: the
+    subject's right, as in the first frame's rule)."""
+    first = _figure(right=((260, 250), (245, 330)))
+    later = _figure(right=((240, 200), (210, 290)))
+    for reacquire, want in ((False, False), (True, True)):
+        tr = SkinTracker(belt=True, reacquire=reacquire)
+        tr.update(first)
+        f = tr.update(later)
+        assert ("right_hand" in f.blobs) is want
+    j = dict(zip(SKIN_JOINTS, f.joints_px))
+    np.testing.assert_allclose(j["right_wrist"], (210, 290), atol=4)
+    np.testing.assert_allclose(j["pelvis"], (320, 330), atol=1.5)
+
+
+def test_a_lost_belt_is_taken_up_again() -> None:
+    tr = SkinTracker(belt=True)
+    tr.update(_figure(belt=False))  # no belt in sight: no waist label
+    f = tr.update(_figure())
+    assert "waist" in f.blobs
+    np.testing.assert_allclose(f.joints_px[SKIN_JOINTS.index("pelvis")], (320, 330), atol=1.5)

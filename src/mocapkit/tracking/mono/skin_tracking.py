@@ -23,6 +23,18 @@ ellipse moved with the merged blob's centroid (the paper separates merged blobs 
 following the merging ellipses through the previous frame). A label with no blob near
 it is unseen (NaN) for that frame.
 
+``belt`` (the subject wears the paper's belt, as the synthetic sessions in the paper's
+costume do, `mocapkit.synth.render.COSTUMES`): the first frame's waist is the lowest flat
+blob below the head however many blobs there are (without ``belt`` it needs all four, so
+that a flat forearm in clothing without a belt is not taken for it), and a waist label
+lost in a later frame is given again to such an unlabelled blob among the four largest.
+A forearm hanging at the hip merges with the belt into one flat blob in the first frames
+of charleston1 and zombie (and lambada's head merged with a forearm leaves three blobs),
+so the four-blob rule missed the waist in three of the five clips.
+``reacquire``: a hand label lost (or never found) is given to an unlabelled blob of the
+four largest on its side of the head (the subject's left on the image's right), so a
+forearm that leaves the belt it hung against is labelled again.
+
 Joints from the ellipses (§3.3): head = the head ellipse's centre; neck = the lower end of
 its major axis; elbow and wrist = the ends of a forearm ellipse's major axis, the one
 nearer the neck being the elbow (the paper's costume leaves the forearm bare); pelvis = the
@@ -148,6 +160,10 @@ class SkinTracker:
     trunk_from_head : bool
         Without a waist blob, draw an upright trunk from the head ellipse (see the module
         docstring).
+    belt : bool
+        The subject wears the paper's belt (see the module docstring).
+    reacquire : bool
+        Give lost hand labels to unlabelled blobs on their side (module docstring).
     bare_from : {None, "elbow", "mid_upper_arm", "shoulder"}
         Where the arms' skin starts; None (default): the paper's rule, the ellipse's ends
         are the elbow and wrist. Else the joints at the costume's fractions
@@ -163,6 +179,8 @@ class SkinTracker:
         max_jump_px: float = 60.0,
         trunk_from_head: bool = False,
         bare_from: str | None = None,
+        belt: bool = False,
+        reacquire: bool = False,
     ) -> None:
         if min_area_px < 1 or close_px < 0 or max_jump_px <= 0:
             raise ConfigError(
@@ -175,6 +193,8 @@ class SkinTracker:
         self.max_jump_px = max_jump_px
         self.trunk_from_head = trunk_from_head
         self.arm_fractions = None if bare_from is None else arm_fractions(bare_from)
+        self.belt = belt
+        self.reacquire = reacquire
         self.previous: SkinFrame | None = None
 
     def update(self, image_bgr: ArrayLike, foreground: ArrayLike | None = None) -> SkinFrame:
@@ -210,7 +230,7 @@ class SkinTracker:
             b for b in rest
             if b.centre[1] > head.centre[1] + head.major and abs(b.direction[1]) < 0.5
         ]  # fmt: skip
-        if len(rest) >= 3 and waist:
+        if waist and (len(rest) >= 3 or self.belt):
             w = max(waist, key=lambda b: b.centre[1])
             labelled["waist"] = w
             rest = [b for b in rest if b is not w]
@@ -250,7 +270,34 @@ class SkinTracker:
                     shift = b.centre - prev.blobs[owner].centre
                     labelled[n] = _moved(prev.blobs[n], shift)
                     merged.add(n)
+        if (self.reacquire or self.belt) and blobs:
+            self._reacquire(blobs[:4], labelled)
         return SkinFrame(labelled, merged)
+
+    def _reacquire(self, cands: list[Blob], labelled: dict[str, Blob]) -> None:
+        """Give the waist (with ``belt``) and hands (with ``reacquire``) missing this frame
+        to unlabelled blobs of ``cands`` (in place); see the module docstring."""
+        used = {id(b) for b in labelled.values()}
+        free = [b for b in cands if id(b) not in used]
+        head = labelled.get("head")
+        if head is None or not free:
+            return
+        if self.belt and "waist" not in labelled:
+            w = [
+                b for b in free
+                if b.centre[1] > head.centre[1] + head.major and abs(b.direction[1]) < 0.5
+            ]  # fmt: skip
+            if w:
+                best = max(w, key=lambda b: b.centre[1])
+                labelled["waist"] = best
+                free = [b for b in free if b is not best]
+        for side, sign in (("left_hand", 1.0), ("right_hand", -1.0)):
+            if side in labelled or not self.reacquire:
+                continue
+            mine = [b for b in free if sign * (b.centre[0] - head.centre[0]) > 0]
+            if mine:
+                labelled[side] = mine[0]
+                free = [b for b in free if b is not mine[0]]
 
 
 def _first_head(cands: list[Blob]) -> Blob:
