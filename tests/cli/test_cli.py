@@ -169,3 +169,53 @@ def test_os_errors_are_reported_by_path_not_as_none(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and "take.c3d: expected a marker file, found a folder" in err
     assert "not found" not in err
+
+
+@pytest.mark.parametrize(
+    ("extra", "expected"),
+    [
+        (["--costume", "paper"], {"bare_from": "elbow", "belt": True, "girdle_neck": True}),
+        (["--costume", "everyday"], {"bare_from": "mid_upper_arm", "trunk_from_head": True}),
+        (
+            ["--costume", "paper", "--bare-from", "shoulder"],
+            {"bare_from": "shoulder", "belt": True},
+        ),
+        ([], {"bare_from": None}),
+    ],
+)
+def test_track_mono_costume_sets_the_skin_tracker(
+    extra: list[str], expected: dict[str, object], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--costume`` passes that costume's `SKIN_SETTINGS` to `track_mono`; ``--bare-from``
+    overrides where the arms' skin starts; without either, the paper's printed rules."""
+    import mocapkit.pipelines.mono as mono
+    from mocapkit.pipelines.mono import SKIN_SETTINGS
+
+    seen: dict[str, object] = {}
+
+    class Called(Exception):
+        pass
+
+    def record(*args: object, **kwargs: object) -> None:
+        seen.update(kwargs)
+        raise Called
+
+    monkeypatch.setattr(mono, "track_mono", record)
+    with pytest.raises(Called):
+        main(["track", "mono", str(tmp_path), "--out", str(tmp_path / "out"), "--skin", *extra])
+    assert seen["skin"] is True
+    for key, value in expected.items():
+        assert seen[f"skin_{key}"] == value
+    if "--costume" in extra:
+        costume = extra[extra.index("--costume") + 1]
+        assert {k for k in seen if k.startswith("skin_")} == {
+            f"skin_{k}" for k in SKIN_SETTINGS[costume]
+        }
+
+
+def test_track_mono_costume_needs_skin(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    code = main(
+        ["track", "mono", str(tmp_path), "--out", str(tmp_path / "o"), "--costume", "paper"]
+    )
+    assert code == 2
+    assert "expected them with --skin" in capsys.readouterr().err

@@ -63,6 +63,16 @@ def add_mono_parser(methods: Any) -> None:
         "sleeves); the elbow and wrist are then placed on the arm blob by anthropometric "
         "fractions. Default: the paper's rule, the arm ellipse's ends",
     )
+    p.add_argument(
+        "--costume",
+        choices=("paper", "everyday"),
+        default=None,
+        help="with --skin: the subject's clothing, which sets the skin tracker's rules "
+        "(paper: the paper's costume, a dress to the elbows and a skin-like belt, whose "
+        "ends give the trunk; everyday: short sleeves, no belt, the trunk drawn from the "
+        "head). --bare-from overrides where the arms' skin starts. Default: the paper's "
+        "rules as printed (the arm ellipse's ends; the trunk from a belt or the head)",
+    )
     p.add_argument("--legs", action="store_true", help="track the legs too")
     p.add_argument(
         "--session-lengths",
@@ -86,11 +96,18 @@ def add_mono_parser(methods: Any) -> None:
 
 
 def _run_mono(args: argparse.Namespace) -> int:
-    from mocapkit.pipelines.mono import initial_pose_from, track_mono
+    from mocapkit.pipelines.mono import SKIN_SETTINGS, initial_pose_from, track_mono
     from mocapkit.pipelines.run import find_gaps
     from mocapkit.tracking.mono.stick import stick_model
     from mocapkit.tracking.mono.tracker import MonoConfig
 
+    if not args.skin and (args.costume is not None or args.bare_from is not None):
+        from mocapkit.errors import ConfigError
+
+        raise ConfigError(
+            "track mono: --costume and --bare-from set the skin tracker; expected them with "
+            "--skin, found them without it"
+        )
     cfg = MonoConfig(
         legs=args.legs,
         camera_model=args.camera_model,
@@ -104,6 +121,9 @@ def _run_mono(args: argparse.Namespace) -> int:
 
         _, names, joints = read_joints_csv(args.initial_pose)
         start = initial_pose_from(names, joints[0], stick_model(cfg.legs, cfg.limits))
+    skin_settings = {f"skin_{k}": v for k, v in SKIN_SETTINGS.get(args.costume, {}).items()}
+    if args.bare_from is not None or args.costume is None:
+        skin_settings["skin_bare_from"] = args.bare_from
     run = track_mono(
         args.session,
         args.out,
@@ -113,7 +133,7 @@ def _run_mono(args: argparse.Namespace) -> int:
         use_session_lengths=args.session_lengths,
         skin=args.skin,
         initial_pose=start,
-        skin_bare_from=args.bare_from,
+        **skin_settings,
     )
     summary = run.summary()
     if not args.json:  # limbs unseen past the bridge: NaN joints, status in fit.csv

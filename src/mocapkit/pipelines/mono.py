@@ -16,6 +16,7 @@ import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -43,6 +44,35 @@ from mocapkit.tracking.mono.stick import StickModel, stick_model
 from mocapkit.tracking.mono.tracker import MonoConfig, MonoFrame, MonoTracker
 
 FloatArray = NDArray[np.float64]
+
+
+#: `SkinTracker` settings each costume implies, as `track_mono`'s ``skin_*`` keywords
+#: (``mocapkit track mono --skin --costume``, ``mocapkit accuracy mono --skin``). Paper
+#: (its §3.3 costume: a dress to the elbows, bare forearms, a golden belt): the skin runs
+#: from the elbow to the fingertips (``bare_from`` elbow: the elbow and wrist on the blob
+#: at the visible lengths' fractions); the trunk from the belt, no drawn trunk
+#: (``trunk_from_head`` off: frames without the belt have none); the waist labelled
+#: among fewer than four blobs and taken up again (``belt``); lost hands given to blobs
+#: on their side (``reacquire``); the neck moved from the shoulders' level to the stick's
+#: neck base (``girdle_neck``). Everyday: the skin from the middle of the upper arm
+#: (short sleeves) and the trunk drawn from the head (no belt). docs/mono.md, eighth
+#: round.
+SKIN_SETTINGS: dict[str, dict[str, Any]] = {
+    "paper": {
+        "bare_from": "elbow",
+        "trunk_from_head": False,
+        "belt": True,
+        "reacquire": True,
+        "girdle_neck": True,
+    },
+    "everyday": {
+        "bare_from": "mid_upper_arm",
+        "trunk_from_head": True,
+        "belt": False,
+        "reacquire": False,
+        "girdle_neck": False,
+    },
+}
 
 
 @dataclass

@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 from mocapkit.eval.metrics import evaluate_result
 from mocapkit.io.openpose import openpose_from_canonical, write_openpose_frame
 from mocapkit.io.session import load_session
-from mocapkit.pipelines.mono import MonoRun, initial_pose_from, track_mono
+from mocapkit.pipelines.mono import SKIN_SETTINGS, MonoRun, initial_pose_from, track_mono
 from mocapkit.skeleton.model import UPPER_BODY_JOINTS
 from mocapkit.synth.session_writer import SynthOptions, synthesize_session
 from mocapkit.tracking.mono.stick import StickModel
@@ -49,28 +49,10 @@ SKIN_SLEEVE = "short"
 #: for it: its labels are head, forearms and the golden belt, the forearm ellipse's ends
 #: are the elbow and wrist because the dress covers the upper arms, and the shoulders
 #: come from the belt's ends. In everyday clothing (short sleeves, no belt, trousers of
-#: any colour) those rules do not hold and the tracker needs stand-ins (`SKIN_SETTINGS`);
+#: any colour) those rules do not hold and the tracker needs stand-ins
+#: (`mocapkit.pipelines.mono.SKIN_SETTINGS`);
 #: its figures are reported apart (``costume="everyday"``).
 SKIN_COSTUME = "paper"
-#: `SkinTracker` settings each costume implies (`mocapkit.pipelines.mono.track_mono`'s
-#: ``skin_*``). Paper: the skin runs from the elbow to the fingertips (``bare_from``
-#: elbow: the elbow and wrist on the blob at the visible lengths' fractions); the trunk
-#: from the belt, no drawn trunk (``trunk_from_head`` off: frames without the belt have
-#: none); the waist labelled among fewer than four blobs and taken up again (``belt``);
-#: lost hands given to blobs on their side (``reacquire``); the neck moved from the
-#: shoulders' level to the stick's neck base (``girdle_neck``). Everyday: the skin from
-#: the middle of the upper arm (short sleeves) and the trunk drawn from the head (no
-#: belt). docs/mono.md, eighth round.
-SKIN_SETTINGS: dict[str, dict[str, Any]] = {
-    "paper": {
-        "bare_from": "elbow",
-        "trunk_from_head": False,
-        "belt": True,
-        "reacquire": True,
-        "girdle_neck": True,
-    },
-    "everyday": {"bare_from": "mid_upper_arm", "trunk_from_head": True},
-}
 
 
 #: Clips of ``shared/data/mocap`` and the excerpt (start s, length s) rendered from each.
@@ -287,7 +269,7 @@ def mono_accuracy(
         raise ConfigError(
             f"mono_accuracy: expected a costume in {sorted(SKIN_SETTINGS)}, found {dress!r}"
         )
-    settings = {"belt": False, "reacquire": False, "girdle_neck": False, **SKIN_SETTINGS[dress]}
+    settings = dict(SKIN_SETTINGS[dress])
     if skin_bare_from != "costume":
         settings["bare_from"] = skin_bare_from
     settings.update(skin_settings or {})
