@@ -441,10 +441,14 @@ def enumerate_poses(
 def _per_link(value: float | ArrayLike, n_links: int, name: str) -> FloatArray:
     """A number per link (L,) from one number or one per link (the reach band, the
     in-plane candidate's ratio)."""
+    if isinstance(value, (int, float)):
+        return np.full(n_links, float(value))
     tol = np.asarray(value, dtype=float)
     if tol.ndim > 1 or (tol.ndim == 1 and tol.shape != (n_links,)):
         raise ShapeError(f"{name}: expected a number or ({n_links},) per link, found {tol.shape}")
-    # always a fresh writeable C array: one numba signature (a read-only view would
+    if tol.ndim == 1 and tol.flags.c_contiguous and tol.flags.writeable:
+        return tol  # the per-frame arrays of `MonoTracker`: no copy (read only here)
+    # else a fresh writeable C array: one numba signature (a read-only view would
     # compile a second one)
     return np.array(np.broadcast_to(tol, (n_links,)), dtype=float, order="C")
 
