@@ -206,23 +206,36 @@ def test_a_bad_initial_pose_is_refused() -> None:
 
 
 def test_rebuilt_neck_widens_the_clavicles_band_and_turns_the_girdle_cost_on() -> None:
-    """Default (a seen neck): one band for every link, no girdle cost. With the neck and
-    pelvis rebuilt (as `mocapkit.pipelines.mono.detector_config` sets for OpenPose JSON):
-    the clavicles' band is ``rebuilt_reach_tolerance``, the girdle cost on."""
+    """Default (a seen neck): one band for every link, no in-plane candidate, no girdle
+    cost. With the neck and pelvis rebuilt (as `mocapkit.pipelines.mono.detector_config`
+    sets for OpenPose JSON): the clavicles' band is ``rebuilt_reach_tolerance``, the
+    girdle cost on, and the in-plane candidate only where ``rebuilt_in_plane_from`` is
+    given (off by default)."""
     model = stick_model()
     lengths = np.full(model.n_links, 250.0)
     seen = MonoTracker(lengths, camera(), 1 / FPS, MonoConfig(girdle_cosine=-0.7), model)
     np.testing.assert_array_equal(seen._reach, np.full(model.n_links, 0.02))
+    assert np.isinf(seen._plane_from).all()
     assert not seen._girdle  # the neck is seen: no cost, whatever the cosine
     cfg = MonoConfig(rebuilt_joints=("neck", "pelvis"), girdle_cosine=-0.7)
     rebuilt = MonoTracker(lengths, camera(), 1 / FPS, cfg, model)
     expect = np.full(model.n_links, 0.02)
     expect[[model.link_index("left_clavicle"), model.link_index("right_clavicle")]] = 0.1
     np.testing.assert_array_equal(rebuilt._reach, expect)
+    assert np.isinf(rebuilt._plane_from).all()
     assert rebuilt._girdle
+    plane_cfg = MonoConfig(
+        rebuilt_joints=("neck", "pelvis"), girdle_cosine=-0.7, rebuilt_in_plane_from=0.95
+    )
+    in_plane = MonoTracker(lengths, camera(), 1 / FPS, plane_cfg, model)
+    plane = np.full(model.n_links, np.inf)
+    plane[[model.link_index("left_clavicle"), model.link_index("right_clavicle")]] = 0.95
+    np.testing.assert_array_equal(in_plane._plane_from, plane)
     with pytest.raises(UnknownNameError, match="rebuilt_joints joint"):
         MonoTracker(lengths, camera(), 1 / FPS, MonoConfig(rebuilt_joints=("chest",)), model)
     with pytest.raises(ConfigError, match="rebuilt_reach_tolerance: expected"):
         MonoConfig(rebuilt_reach_tolerance=1.0)
     with pytest.raises(ConfigError, match="girdle_weight: expected"):
         MonoConfig(girdle_weight=-1.0)
+    with pytest.raises(ConfigError, match=r"rebuilt_in_plane_from: expected >= 0"):
+        MonoConfig(rebuilt_in_plane_from=float("nan"))

@@ -34,6 +34,15 @@ the band's far edge, beyond which M5 applies. Links outside the band are untouch
 the counts above hold for links more than t from parallel; with t > 0 a link exactly
 parallel keeps two configurations.
 
+In-plane candidate (beyond the paper; ``in_plane_from``, off by default): the band
+places a link whose projection is as long as the link about ``sqrt(t)`` rad out of the
+image plane, so a link truly in the plane whose 2-D length is uncertain (a clavicle from
+a rebuilt neck) has no candidate there. With a ratio r a link whose parent lies at
+D >= r L from its child's ray, and that still has two flips, gets a third: the child on
+its ray at the point nearest the parent (dz = 0, the placement at the band's far edge).
+Its code sets bit ``L + l`` instead of bit l, so there are up to 3^k 2^(L-k) poses with k
+such links.
+
 A joint without a 2-D position (NaN) has no candidates: it and the joints below it are
 NaN in every pose, its link does not branch and constraints reading it pass.
 """
@@ -71,11 +80,13 @@ class FramePoses(NamedTuple):
     Attributes
     ----------
     codes : (N,) int
-        Bit l set: link l takes its far configuration (child farther from the camera).
+        Bit l set: link l takes its far configuration (child farther from the camera);
+        bit ``n_links + l`` set: its in-plane candidate (``in_plane_from``).
     positions : (N, K, 3) float
         Joints in the camera frame (x right, y down, z along the optical axis; mm).
     n_candidates : int
-        Distinct poses before pruning: 2^(links with two configurations).
+        Distinct poses before pruning: 2^(links with two configurations) times 3^(links
+        with three).
     pruned_all : bool
         Every candidate violated a constraint; ``codes`` then holds the unpruned set
         (recipe M: such a frame keeps its unpruned set).
@@ -207,9 +218,16 @@ def _branches(
     link: int,
     perspective: bool,
     reach: float,
+    plane_from: float,
     out: FloatArray,
 ) -> int:
-    """Candidate child positions of ``link`` given its placed parent; returns their count."""
+    """Candidate child positions of ``link`` given its placed parent; returns their count.
+
+    Where the parent lies at least ``plane_from L`` from the child's ray and both flips
+    exist, a third candidate follows them: the child on its ray where the ray passes
+    nearest the parent (the band's far-edge placement, dz = 0); ``plane_from`` inf:
+    never.
+    """
     p = pos[stick.parent[link]]
     o = obs[stick.child[link]]
     length = stick.lengths[link]
@@ -236,13 +254,19 @@ def _branches(
         out[1, 0] = o[0]
         out[1, 1] = o[1]
         out[1, 2] = p[2] + dz
+        if d2 >= (length * plane_from) ** 2:
+            out[2, 0] = o[0]
+            out[2, 1] = o[1]
+            out[2, 2] = p[2]
+            return 3
         return 2
     # perspective: |t r - p| = L on the viewing ray r = (x_n, y_n, 1)
     r = o.copy()
     r[2] = 1.0
     a = r @ r
     b = r @ p
-    reach_len = _reach_length(length, np.sqrt(max((p @ p) - b * b / a, 0.0)), reach)
+    dist = np.sqrt(max((p @ p) - b * b / a, 0.0))
+    reach_len = _reach_length(length, dist, reach)
     disc = b * b - a * ((p @ p) - reach_len * reach_len)
     if disc <= a * (PARALLEL_TOL * length) ** 2:
         t0 = b / a
@@ -258,6 +282,9 @@ def _branches(
         return 1
     out[0, :] = t_near * r
     out[1, :] = t_far * r
+    if dist >= length * plane_from:
+        out[2, :] = (b / a) * r  # the ray's point nearest the parent
+        return 3
     return 2
 
 
@@ -270,13 +297,14 @@ def _enumerate(
     perspective: bool,
     prune: bool,
     reach: FloatArray,
+    plane_from: FloatArray,
     out_codes: IntArray,
     out_pos: FloatArray,
 ) -> int:
     n_links = stick.parent.shape[0]
     pos = np.full((obs.shape[0], 3), np.nan)
     pos[stick.root] = root
-    cand = np.zeros((n_links, 2, 3))
+    cand = np.zeros((n_links, 3, 3))
     n_branch = np.zeros(n_links, dtype=np.int64)
     branch = np.full(n_links, -1, dtype=np.int64)
     code = np.zeros(n_links + 1, dtype=np.int64)  # code[l]: bits of links < l
@@ -286,7 +314,7 @@ def _enumerate(
         branch[level] += 1
         if branch[level] == 0:
             n_branch[level] = _branches(
-                stick, obs, pos, level, perspective, reach[level], cand[level]
+                stick, obs, pos, level, perspective, reach[level], plane_from[level], cand[level]
             )
         if branch[level] >= n_branch[level]:
             branch[level] = -1
@@ -303,7 +331,13 @@ def _enumerate(
                     break
         if not ok:
             continue
-        code[level + 1] = code[level] | (b << level)
+        # far: bit l; in the plane (the band's third candidate): bit n_links + l
+        if b == 0:
+            code[level + 1] = code[level]
+        elif b == 1:
+            code[level + 1] = code[level] | (np.int64(1) << level)
+        else:
+            code[level + 1] = code[level] | (np.int64(1) << (n_links + level))
         if level == n_links - 1:
             out_codes[n] = code[level + 1]
             out_pos[n] = pos
@@ -336,6 +370,7 @@ def enumerate_poses(
     perspective: bool = False,
     prune: bool = True,
     reach_tolerance: float | ArrayLike = 0.0,
+    in_plane_from: float | ArrayLike = np.inf,
 ) -> FramePoses:
     """All flip configurations of one frame that satisfy the constraints.
 
@@ -361,6 +396,15 @@ def enumerate_poses(
         from its child's ray (orthographic: from its projected end) has its child placed
         on that ray at the length ``L + (D - L (1 - t)) / 2``, two configurations up to
         D = L (1 + t); 0: the paper's (M5 exactly).
+    in_plane_from : float or (L,) float
+        Ratio r, one for every link or one per link: a link whose parent lies at a
+        distance D >= r L from its child's ray and that still has two flips (D below
+        ``L (1 + t)``) gets a third candidate, the child on its ray at the ray's point
+        nearest the parent (orthographic: at the parent's depth; dz = 0, the band's
+        far-edge placement; its code sets bit ``L + l``, not bit l). The band alone
+        places a link that looks as long as itself about ``sqrt(t)`` rad out of the image
+        plane, so a link truly in the plane has no pose there (docs/mono.md, eighth
+        round). inf (default): no third candidate, the paper's two flips.
 
     Returns
     -------
@@ -378,31 +422,41 @@ def enumerate_poses(
     r = np.asarray(root, dtype=float)
     if r.shape != (3,) or not np.all(np.isfinite(r)):
         raise ShapeError(f"enumerate_poses: expected a finite root (3,), found {r}")
-    cap = 1 << model.n_links
+    flat = _per_link(in_plane_from, model.n_links, "in_plane_from")
+    cap = _capacity(model.n_links, flat)
     codes = np.zeros(cap, dtype=np.int64)
     pos = np.zeros((cap, model.n_joints, 3))
     n_all = -1
-    tol = _reach_array(reach_tolerance, model.n_links)
-    n = _enumerate(stick, model.checks, obs3, r, perspective, prune, tol, codes, pos)
+    tol = _per_link(reach_tolerance, model.n_links, "reach_tolerance")
+    n = _enumerate(stick, model.checks, obs3, r, perspective, prune, tol, flat, codes, pos)
     pruned_all = False
     if prune and n == 0:
-        n = _enumerate(stick, model.checks, obs3, r, perspective, False, tol, codes, pos)
+        n = _enumerate(stick, model.checks, obs3, r, perspective, False, tol, flat, codes, pos)
         n_all, pruned_all = n, True
     if n_all < 0:
-        n_all = count_candidates(model, stick.lengths, obs3, r, perspective, tol)
+        n_all = count_candidates(model, stick.lengths, obs3, r, perspective, tol, flat)
     return FramePoses(codes[:n].copy(), pos[:n].copy(), n_all, pruned_all)
 
 
-def _reach_array(reach_tolerance: float | ArrayLike, n_links: int) -> FloatArray:
-    """The reach band per link (L,) from one share or one per link."""
-    tol = np.asarray(reach_tolerance, dtype=float)
+def _per_link(value: float | ArrayLike, n_links: int, name: str) -> FloatArray:
+    """A number per link (L,) from one number or one per link (the reach band, the
+    in-plane candidate's ratio)."""
+    if isinstance(value, (int, float)):
+        return np.full(n_links, float(value))
+    tol = np.asarray(value, dtype=float)
     if tol.ndim > 1 or (tol.ndim == 1 and tol.shape != (n_links,)):
-        raise ShapeError(
-            f"reach_tolerance: expected a number or ({n_links},) per link, found {tol.shape}"
-        )
-    # always a fresh writeable C array: one numba signature (a read-only view would
+        raise ShapeError(f"{name}: expected a number or ({n_links},) per link, found {tol.shape}")
+    if tol.ndim == 1 and tol.flags.c_contiguous and tol.flags.writeable:
+        return tol  # the per-frame arrays of `MonoTracker`: no copy (read only here)
+    # else a fresh writeable C array: one numba signature (a read-only view would
     # compile a second one)
     return np.array(np.broadcast_to(tol, (n_links,)), dtype=float, order="C")
+
+
+def _capacity(n_links: int, plane_from: FloatArray) -> int:
+    """Most poses of one frame: 2 per link, 3 per link with an in-plane candidate."""
+    n3 = int(np.isfinite(plane_from).sum())
+    return (1 << (n_links - n3)) * 3**n3
 
 
 def count_candidates(
@@ -412,6 +466,7 @@ def count_candidates(
     root: ArrayLike,
     perspective: bool = False,
     reach_tolerance: float | ArrayLike = 0.0,
+    in_plane_from: float | ArrayLike = np.inf,
 ) -> int:
     """Number of distinct poses before pruning (one full unpruned search; arguments as
     `enumerate_poses`)."""
@@ -420,7 +475,8 @@ def count_candidates(
     obs3 = np.zeros((model.n_joints, 3))
     obs3[:, :2] = obs[:, :2]
     obs3[np.isnan(obs[:, :2]).any(axis=1)] = np.nan
-    cap = 1 << model.n_links
+    flat = _per_link(in_plane_from, model.n_links, "in_plane_from")
+    cap = _capacity(model.n_links, flat)
     return int(
         _enumerate(
             stick,
@@ -429,7 +485,8 @@ def count_candidates(
             np.asarray(root, dtype=float),
             perspective,
             False,
-            _reach_array(reach_tolerance, model.n_links),
+            _per_link(reach_tolerance, model.n_links, "reach_tolerance"),
+            flat,
             np.zeros(cap, dtype=np.int64),
             np.zeros((cap, model.n_joints, 3)),
         )

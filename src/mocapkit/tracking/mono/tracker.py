@@ -172,6 +172,17 @@ class MonoConfig:
         0.06 did not, docs/mono.md seventh round).
     rebuilt_reach_links : tuple of str
         Links the wider band applies to: the clavicles (also the trunk and head: worse).
+    rebuilt_in_plane_from : float
+        Where the wider band applies, a third candidate besides the two flips where the
+        link looks at least this share of its length long: the child on its ray at the
+        parent's depth (`mocapkit.tracking.mono.flips.enumerate_poses`,
+        ``in_plane_from``). The band alone places a clavicle whose 2-D length equals its
+        link about ``sqrt(rebuilt_reach_tolerance)`` rad (18 deg) out of the image plane,
+        so one truly in the plane (zombie's) had no pose there. Default inf (off): 0.95
+        with the band 0.1 gave zombie 35.5 -> 27.6 mm and the held-out clips 39.6 ->
+        37.4 mm, but online (``lag`` 10) it mirrored zombie's left arm (75 mm) and with
+        another noise seed it cost lambada 9 mm; 1.0 cost 01_09 5 mm (docs/mono.md,
+        eighth round).
     girdle_weight : float
         Unary cost per unit of `mocapkit.tracking.mono.priors.girdle_angle_cost` where
         the clavicles' common parent (the neck) is in ``rebuilt_joints`` and
@@ -210,6 +221,7 @@ class MonoConfig:
     rebuilt_joints: tuple[str, ...] = ()
     rebuilt_reach_tolerance: float = 0.1
     rebuilt_reach_links: tuple[str, ...] = ("left_clavicle", "right_clavicle")
+    rebuilt_in_plane_from: float = float("inf")
     girdle_weight: float = 100.0
     girdle_cosine: float = float("nan")
     arm_prior: ArmPrior | None = field(default=None, compare=False, repr=False)
@@ -236,6 +248,11 @@ class MonoConfig:
             raise ConfigError(
                 "MonoConfig.rebuilt_reach_tolerance: expected [0, 1), found "
                 f"{self.rebuilt_reach_tolerance}"
+            )
+        if not self.rebuilt_in_plane_from >= 0.0:
+            raise ConfigError(
+                "MonoConfig.rebuilt_in_plane_from: expected >= 0 (inf: off), found "
+                f"{self.rebuilt_in_plane_from}"
             )
         if not self.girdle_weight >= 0.0:
             raise ConfigError(
@@ -332,6 +349,10 @@ class MonoTracker:
         self.model = model or stick_model(cfg.legs, cfg.limits)
         self.lengths = np.asarray(lengths, dtype=float)
         self._reach = self._link_reach()
+        # the band's in-plane candidate where the band was widened for a rebuilt end
+        self._plane_from = np.where(
+            self._reach > cfg.reach_tolerance, cfg.rebuilt_in_plane_from, np.inf
+        )
         # the girdle cost where the neck is rebuilt (its clavicles mirror images in 2-D)
         self._girdle = (
             cfg.girdle_weight > 0
@@ -489,6 +510,7 @@ class MonoTracker:
                 root,
                 perspective=persp,
                 reach_tolerance=self._reach,
+                in_plane_from=self._plane_from,
             )
             codes, positions, n_cand, pruned_all = fp
         else:  # no root this frame: one empty pose keeps the graph connected
