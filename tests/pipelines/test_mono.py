@@ -73,6 +73,22 @@ def test_track_mono_writes_the_result_folder_and_fit(tmp_path: Path) -> None:
     assert rep.mpjpe_mm < 80.0
 
 
+def _stick_openpose_folder(folder: Path) -> None:
+    """Write the stick motion's projection as OpenPose JSON with a bystander. The detector
+    also sees hips a little below the pelvis (the stick has none)."""
+    from mocapkit.io.openpose import MAPPED_JOINTS
+
+    joints, jn, _ = stick_motion(N)
+    px = camera().project(joints)
+    full = np.full((N, len(MAPPED_JOINTS), 2), np.nan)
+    for i, n in enumerate(jn):
+        full[:, MAPPED_JOINTS.index(n)] = px[:, i]
+    pelvis = px[:, jn.index("pelvis")]
+    full[:, MAPPED_JOINTS.index("left_hip")] = pelvis + np.array([20.0, 8.0])
+    full[:, MAPPED_JOINTS.index("right_hip")] = pelvis + np.array([-20.0, 8.0])
+    write_openpose_with_bystander(folder, MAPPED_JOINTS, full, seed=1)
+
+
 def test_cli_video_lengths_and_openpose_input(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
@@ -80,18 +96,7 @@ def test_cli_video_lengths_and_openpose_input(
     assert main(["track", "mono", str(session), "--out", str(tmp_path / "r"), "--json"]) == 0
     assert '"survivors_mean"' in capsys.readouterr().out
     names = UPPER_BODY_JOINTS
-    joints, jn, _ = stick_motion(N)
-    px = camera().project(joints)
-    full = np.full((N, 15, 2), np.nan)
-    from mocapkit.io.openpose import MAPPED_JOINTS
-
-    for i, n in enumerate(jn):
-        full[:, MAPPED_JOINTS.index(n)] = px[:, i]
-    # the detector also sees hips a little below the pelvis (the stick has none)
-    pelvis = px[:, jn.index("pelvis")]
-    full[:, MAPPED_JOINTS.index("left_hip")] = pelvis + np.array([20.0, 8.0])
-    full[:, MAPPED_JOINTS.index("right_hip")] = pelvis + np.array([-20.0, 8.0])
-    write_openpose_with_bystander(tmp_path / "op", MAPPED_JOINTS, full, seed=1)
+    _stick_openpose_folder(tmp_path / "op")
     code = main(
         ["track", "mono", str(session), "--out", str(tmp_path / "r2"), "--keypoints",
          str(tmp_path / "op"), "--lag", "4", "--cost", "rotation"]
@@ -344,19 +349,11 @@ def test_openpose_input_tracks_with_the_rebuilt_neck_settings(tmp_path: Path) ->
     `detector_config` (the clavicles' wider band, the girdle cost), the same as the
     folder's pixels given with that configuration; the session's keypoints keep the
     plain one."""
-    from mocapkit.io.openpose import GIRDLE_COSINE, MAPPED_JOINTS, read_openpose_folder
+    from mocapkit.io.openpose import GIRDLE_COSINE, read_openpose_folder
     from mocapkit.pipelines.mono import detector_config, stick_pixels
 
     session = _session(tmp_path / "s")
-    joints, jn, _ = stick_motion(N)
-    px = camera().project(joints)
-    full = np.full((N, len(MAPPED_JOINTS), 2), np.nan)
-    for i, n in enumerate(jn):
-        full[:, MAPPED_JOINTS.index(n)] = px[:, i]
-    pelvis = px[:, jn.index("pelvis")]
-    full[:, MAPPED_JOINTS.index("left_hip")] = pelvis + np.array([20.0, 8.0])
-    full[:, MAPPED_JOINTS.index("right_hip")] = pelvis + np.array([-20.0, 8.0])
-    write_openpose_with_bystander(tmp_path / "op", MAPPED_JOINTS, full, seed=1)
+    _stick_openpose_folder(tmp_path / "op")
     cfg = detector_config(MonoConfig())
     assert cfg.rebuilt_joints == ("neck", "pelvis") and cfg.girdle_cosine == GIRDLE_COSINE
     assert GIRDLE_COSINE == pytest.approx((0.205**2 - 0.25) / (0.205**2 + 0.25))

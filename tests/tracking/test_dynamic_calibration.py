@@ -7,13 +7,12 @@ import pytest
 
 from mocapkit.errors import ConfigError, ShapeError, UnknownNameError
 from mocapkit.geometry.rotations import matrix_from_axis_angle
-from mocapkit.io.markers import MarkerData
 from mocapkit.pipelines.hybrid import (
     head_band_offset_mm,
     raw_marker_skeleton,
     track_hybrid_marker_file,
 )
-from mocapkit.skeleton.kinematics import canonical_positions, forward_kinematics
+from mocapkit.skeleton.kinematics import forward_kinematics
 from mocapkit.skeleton.limbs import arm
 from mocapkit.tracking.dynamic_calibration import (
     HANGING_FRACTION,
@@ -26,7 +25,13 @@ from mocapkit.tracking.dynamic_calibration import (
 from mocapkit.tracking.hybrid import HybridConfig, HybridTracker, default_marker_effectors
 from mocapkit.tracking.static_calibration import rotation_between_deg
 
-from .test_static_calibration import RATE_HZ, SPECS, TRUE_MEMBERS, _members_from_poses
+from .test_static_calibration import (
+    RATE_HZ,
+    SPECS,
+    TRUE_MEMBERS,
+    _members_from_poses,
+    _recording,
+)
 
 
 def _moving_take(sk, n_frames):
@@ -194,13 +199,7 @@ def test_consensus_leaves_out_frames_turned_wrong():
 def _marker_data(sk, q, rng, source):
     band = np.asarray(head_band_offset_mm(sk))
     members = _members_from_poses(sk, q, rng, set_offsets_mm={"head": band})
-    # ankle markers: the floor is found from the lowest markers
-    ankles = canonical_positions(sk, q, ["left_ankle", "right_ankle"])
-    members.update({"LANK": ankles[:, 0], "RANK": ankles[:, 1]})
-    names = list(members)
-    t = np.arange(q.shape[0]) / RATE_HZ
-    pos = np.stack([members[n] for n in names], axis=1)
-    return MarkerData(t, names, pos, RATE_HZ, source), band
+    return _recording(sk, q, members, source), band
 
 
 def test_marker_file_without_a_still_second_calibrates_on_the_motion():

@@ -129,6 +129,16 @@ def _raw_model():
     return hybrid_skeleton(1700.0, proportions="anthropometric", forearm_rotation=True)
 
 
+def _recording(sk, q, members, source="synthetic"):  # type: ignore[no-untyped-def]
+    """``members`` (name -> (T, 3) mm) and ankle markers as a recording at `RATE_HZ`; the
+    ankles because the floor is found from the lowest markers."""
+    ankles = canonical_positions(sk, q, ["left_ankle", "right_ankle"])
+    members = {**members, "LANK": ankles[:, 0], "RANK": ankles[:, 1]}
+    names = list(members)
+    t = np.arange(q.shape[0]) / RATE_HZ
+    return MarkerData(t, names, np.stack([members[n] for n in names], axis=1), RATE_HZ, source)
+
+
 def test_marker_file_calibrates_members_and_reports_them(tmp_path):
     """Through the raw-marker path: offsets calibrated on the still start, members in the
     IK and in fit.csv (each member's distance, the RMS, the largest and its name)."""
@@ -138,14 +148,7 @@ def test_marker_file_calibrates_members_and_reports_them(tmp_path):
     # a raw head set sits where a head band does on a standing model
     band = np.asarray(head_band_offset_mm(sk))
     members = _members_from_poses(sk, q, rng, set_offsets_mm={"head": band})
-    # ankle markers: the floor is found from the lowest markers
-    ankles = canonical_positions(sk, q, ["left_ankle", "right_ankle"])
-    members.update({"LANK": ankles[:, 0], "RANK": ankles[:, 1]})
-    names = list(members)
-    t = np.arange(q.shape[0]) / RATE_HZ
-    markers = MarkerData(
-        t, names, np.stack([members[n] for n in names], axis=1), RATE_HZ, "synthetic"
-    )
+    markers = _recording(sk, q, members)
     run = track_hybrid_marker_file(markers, SPECS, height_mm=1700.0, up="z", out_dir=tmp_path)
     assert run.calibration is not None and "calibrated on the take" in run.calibration_note
     for name, ms in TRUE_MEMBERS.items():
@@ -175,13 +178,7 @@ def test_turning_marker_is_calibrated_and_tracked_without_moving_the_set(tmp_pat
     forearm_local = np.array([40.0, 0.0, 120.0])  # 120 mm up the forearm, 40 mm aside
     local = np.asarray(eff.point_mm) + forearm_local
     members["RFRM"] = np.einsum("nij,j->ni", world[:, :3, :3], local) + world[:, :3, 3]
-    ankles = canonical_positions(sk, q, ["left_ankle", "right_ankle"])
-    members.update({"LANK": ankles[:, 0], "RANK": ankles[:, 1]})
-    names = list(members)
-    t = np.arange(q.shape[0]) / RATE_HZ
-    markers = MarkerData(
-        t, names, np.stack([members[n] for n in names], axis=1), RATE_HZ, "synthetic"
-    )
+    markers = _recording(sk, q, members)
     specs = [*SPECS[:2], "right_hand=RWRA+RWRB/RFRM"]
     run = track_hybrid_marker_file(markers, specs, height_mm=1700.0, up="z", out_dir=tmp_path)
     assert run.calibration is not None
@@ -202,11 +199,8 @@ def test_separate_static_trial():
     q = _take(sk, 60, 40)
     band = np.asarray(head_band_offset_mm(sk))
     members = _members_from_poses(sk, q, rng, set_offsets_mm={"head": band})
-    ankles = canonical_positions(sk, q, ["left_ankle", "right_ankle"])
-    members.update({"LANK": ankles[:, 0], "RANK": ankles[:, 1]})
-    names = list(members)
-    t = np.arange(q.shape[0]) / RATE_HZ
-    pos = np.stack([members[n] for n in names], axis=1)
+    both = _recording(sk, q, members)
+    t, names, pos = both.time_s, both.names, both.positions_mm
     static = MarkerData(t[:60], names, pos[:60], RATE_HZ, "static.c3d")
     take = MarkerData(t[60:], names, pos[60:], RATE_HZ, "take.c3d")
     alone = track_hybrid_marker_file(take, SPECS, height_mm=1700.0, up="z", calibration="static")

@@ -17,6 +17,14 @@ def _orthographic(pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return pos[:, :2], root
 
 
+def _observed(pos: np.ndarray, perspective: bool) -> tuple[np.ndarray, np.ndarray]:
+    """What the enumeration sees of ``pos``: normalised image points and the root under
+    perspective, else `_orthographic`'s."""
+    if perspective:
+        return pos[:, :2] / pos[:, 2:], pos[0]
+    return _orthographic(pos)
+
+
 def _relative(pos: np.ndarray) -> np.ndarray:
     out = pos.copy()
     out[..., 2] -= pos[..., :1, 2]
@@ -104,12 +112,8 @@ def test_reach_tolerance_keeps_both_flips_of_a_link_just_too_short(perspective: 
     model = stick_model()
     pos, lengths, i = _shortened_link(rng, model, "left_upper_arm", 1.0 / 1.03, perspective)
     p, c = model.parent[i], model.child[i]
-    if perspective:
-        obs, root = pos[:, :2] / pos[:, 2:], pos[0]
-        parent_true = pos[p]
-    else:
-        obs, root = _orthographic(pos)
-        parent_true = _relative(pos)[p]
+    obs, root = _observed(pos, perspective)
+    parent_true = pos[p] if perspective else _relative(pos)[p]
     kw = {"perspective": perspective, "prune": False}
     bit = 1 << i
     m5 = enumerate_poses(model, lengths, obs, root, **kw)
@@ -188,10 +192,7 @@ def test_pruning_during_the_search_equals_pruning_after_it(
         pos, lengths = random_pose(rng, model, 35.0)
         if reach > 0:
             lengths = 0.96 * lengths
-        if perspective:
-            obs, root = pos[:, :2] / pos[:, 2:], pos[0]
-        else:
-            obs, root = _orthographic(pos)
+        obs, root = _observed(pos, perspective)
         # the in-plane candidate on the first six links only: 3^k poses on all 14 would
         # need 4.8 M of them per frame
         plane = np.where(np.arange(model.n_links) < 6, plane_from, np.inf)
@@ -306,10 +307,7 @@ def test_in_plane_candidate_of_a_link_that_looks_longer_than_itself(perspective:
     model = stick_model()
     pos, lengths, i = _shortened_link(rng, model, "left_upper_arm", 1.0 / 1.03, perspective)
     p, c = model.parent[i], model.child[i]
-    if perspective:
-        obs, root = pos[:, :2] / pos[:, 2:], pos[0]
-    else:
-        obs, root = _orthographic(pos)
+    obs, root = _observed(pos, perspective)
     kw = {"perspective": perspective, "prune": False, "reach_tolerance": 0.05}
     band = enumerate_poses(model, lengths, obs, root, **kw)
     only = np.full(model.n_links, np.inf)
