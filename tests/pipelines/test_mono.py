@@ -388,3 +388,15 @@ def test_girdle_neck_lies_below_the_shoulders_by_the_girdle_rule() -> None:
     neck = girdle_neck_px(px, SKIN_JOINTS)
     np.testing.assert_allclose(neck[0], (130.0, 100.0 + 100.0 * frac))
     np.testing.assert_allclose(neck[1], (131.0, 99.0))
+
+
+def test_skin_keywords_are_the_costumes_settings_with_overrides() -> None:
+    from mocapkit.pipelines.mono import SKIN_SETTINGS, skin_keywords
+
+    paper = skin_keywords("paper")
+    assert paper == {f"skin_{k}": v for k, v in SKIN_SETTINGS["paper"].items()}
+    assert paper["skin_belt"] is True and paper["skin_bare_from"] == "elbow"
+    assert skin_keywords("everyday", bare_from=None)["skin_bare_from"] is None
+    assert skin_keywords("everyday", bare_from=None)["skin_trunk_from_head"] is True
+    with pytest.raises(ConfigError, match="costume: expected one of paper, everyday, found 'gala'"):
+        skin_keywords("gala")

@@ -96,7 +96,7 @@ def add_mono_parser(methods: Any) -> None:
 
 
 def _run_mono(args: argparse.Namespace) -> int:
-    from mocapkit.pipelines.mono import SKIN_SETTINGS, initial_pose_from, track_mono
+    from mocapkit.pipelines.mono import initial_pose_from, skin_keywords, track_mono
     from mocapkit.pipelines.run import find_gaps
     from mocapkit.tracking.mono.stick import stick_model
     from mocapkit.tracking.mono.tracker import MonoConfig
@@ -121,9 +121,13 @@ def _run_mono(args: argparse.Namespace) -> int:
 
         _, names, joints = read_joints_csv(args.initial_pose)
         start = initial_pose_from(names, joints[0], stick_model(cfg.legs, cfg.limits))
-    skin_settings = {f"skin_{k}": v for k, v in SKIN_SETTINGS.get(args.costume, {}).items()}
-    if args.bare_from is not None or args.costume is None:
-        skin_settings["skin_bare_from"] = args.bare_from
+    # the costume's settings, else track_mono's defaults (the paper's printed rules)
+    own_arms = {} if args.bare_from is None else {"bare_from": args.bare_from}
+    skin_settings = (
+        skin_keywords(args.costume, **own_arms)
+        if args.costume is not None
+        else {"skin_bare_from": args.bare_from}
+    )
     run = track_mono(
         args.session,
         args.out,

@@ -75,6 +75,20 @@ SKIN_SETTINGS: dict[str, dict[str, Any]] = {
 }
 
 
+def skin_keywords(costume: str, **overrides: Any) -> dict[str, Any]:
+    """`track_mono`'s ``skin_*`` keywords for a costume: its `SKIN_SETTINGS`, with
+    ``overrides`` (settings by their short names, e.g. ``bare_from="shoulder"``) on top.
+
+    Raises
+    ------
+    ConfigError
+        ``costume`` is not a key of `SKIN_SETTINGS`.
+    """
+    if costume not in SKIN_SETTINGS:
+        raise ConfigError(f"costume: expected one of {', '.join(SKIN_SETTINGS)}, found {costume!r}")
+    return {f"skin_{k}": v for k, v in {**SKIN_SETTINGS[costume], **overrides}.items()}
+
+
 @dataclass
 class MonoRun:
     """What `track_mono` produced.

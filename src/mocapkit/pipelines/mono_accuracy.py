@@ -24,15 +24,15 @@ import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from mocapkit.errors import ConfigError
 from mocapkit.eval.metrics import evaluate_result
 from mocapkit.io.openpose import openpose_from_canonical, write_openpose_frame
 from mocapkit.io.session import load_session
-from mocapkit.pipelines.mono import SKIN_SETTINGS, MonoRun, initial_pose_from, track_mono
+from mocapkit.pipelines.mono import MonoRun, initial_pose_from, skin_keywords, track_mono
 from mocapkit.skeleton.model import UPPER_BODY_JOINTS
 from mocapkit.synth.session_writer import SynthOptions, synthesize_session
 from mocapkit.tracking.mono.stick import StickModel
@@ -238,15 +238,15 @@ def mono_accuracy(
     initial_pose: bool = False,
     skin_bare_from: str | None = "costume",
     costume: str | None = None,
-    skin_settings: dict[str, Any] | None = None,
 ) -> list[MonoClipAccuracy]:
     """Render (or reuse), track from noisy true keypoints (or OpenPose JSON, or the video
     by skin blobs with ``skin``), and evaluate each clip.
 
     With ``skin`` the sessions are rendered in ``costume`` (default `SKIN_COSTUME`, the
     paper's; ``"everyday"``: shirt with `SKIN_SLEEVE` sleeves and trousers) and the skin
-    tracker runs with that costume's `SKIN_SETTINGS`; ``skin_bare_from`` overrides where
-    it takes the arms' skin to start (`mocapkit.pipelines.mono.track_mono`;
+    tracker runs with that costume's settings (`mocapkit.pipelines.mono.skin_keywords`);
+    ``skin_bare_from`` overrides where it takes the arms' skin to start
+    (`mocapkit.pipelines.mono.track_mono`;
     ``"costume"``: the costume's; None: the paper's rule, the arm ellipse's ends). The
     other inputs take the everyday sessions (the keypoints are the same in both).
 
@@ -255,24 +255,12 @@ def mono_accuracy(
     to be reported apart from the default ones.
     """
     if skin and openpose:
-        from mocapkit.errors import ConfigError
-
         raise ConfigError("mono_accuracy: give either skin or openpose, not both")
     if costume is not None and not skin:
-        from mocapkit.errors import ConfigError
-
         raise ConfigError("mono_accuracy: a costume is chosen for skin tracking only")
     dress = (costume or SKIN_COSTUME) if skin else "everyday"
-    if dress not in SKIN_SETTINGS:
-        from mocapkit.errors import ConfigError
-
-        raise ConfigError(
-            f"mono_accuracy: expected a costume in {sorted(SKIN_SETTINGS)}, found {dress!r}"
-        )
-    settings = dict(SKIN_SETTINGS[dress])
-    if skin_bare_from != "costume":
-        settings["bare_from"] = skin_bare_from
-    settings.update(skin_settings or {})
+    own_arms = {} if skin_bare_from == "costume" else {"bare_from": skin_bare_from}
+    skin_kw = skin_keywords(dress, **own_arms)
     cfg = config or MonoConfig()
     source = "skin" if skin else "openpose" if openpose else "keypoints"
     rows = []
@@ -294,11 +282,7 @@ def mono_accuracy(
                 config=cfg,
                 skin=True,
                 initial_pose=first_pose,
-                skin_bare_from=settings["bare_from"],
-                skin_trunk_from_head=settings["trunk_from_head"],
-                skin_belt=settings["belt"],
-                skin_reacquire=settings["reacquire"],
-                skin_girdle_neck=settings["girdle_neck"],
+                **skin_kw,
             )
         elif openpose:
             folder = base / "openpose_json"
