@@ -226,12 +226,8 @@ class SkinTracker:
         head = _first_head(cands)
         rest = [b for b in cands if b is not head]
         labelled: dict[str, Blob] = {"head": head}
-        waist = [
-            b for b in rest
-            if b.centre[1] > head.centre[1] + head.major and abs(b.direction[1]) < 0.5
-        ]  # fmt: skip
-        if waist and (len(rest) >= 3 or self.belt):
-            w = max(waist, key=lambda b: b.centre[1])
+        w = _waist_below(head, rest)
+        if w is not None and (len(rest) >= 3 or self.belt):
             labelled["waist"] = w
             rest = [b for b in rest if b is not w]
         hands = sorted(rest[:2], key=lambda b: b.centre[0])
@@ -283,14 +279,10 @@ class SkinTracker:
         if head is None or not free:
             return
         if self.belt and "waist" not in labelled:
-            w = [
-                b for b in free
-                if b.centre[1] > head.centre[1] + head.major and abs(b.direction[1]) < 0.5
-            ]  # fmt: skip
-            if w:
-                best = max(w, key=lambda b: b.centre[1])
-                labelled["waist"] = best
-                free = [b for b in free if b is not best]
+            w = _waist_below(head, free)
+            if w is not None:
+                labelled["waist"] = w
+                free = [b for b in free if b is not w]
         for side, sign in (("left_hand", 1.0), ("right_hand", -1.0)):
             if side in labelled or not self.reacquire:
                 continue
@@ -298,6 +290,16 @@ class SkinTracker:
             if mine:
                 labelled[side] = mine[0]
                 free = [b for b in free if b is not mine[0]]
+
+
+def _waist_below(head: Blob, blobs: list[Blob]) -> Blob | None:
+    """The lowest of ``blobs`` that could be the waist: below the head by more than its
+    semi-major axis and lying within 30 deg of the horizontal; None if there is none."""
+    flat = [
+        b for b in blobs
+        if b.centre[1] > head.centre[1] + head.major and abs(b.direction[1]) < 0.5
+    ]  # fmt: skip
+    return max(flat, key=lambda b: b.centre[1]) if flat else None
 
 
 def _first_head(cands: list[Blob]) -> Blob:
