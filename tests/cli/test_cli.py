@@ -188,8 +188,10 @@ def test_track_mono_costume_sets_the_skin_tracker(
 ) -> None:
     """``--costume`` passes that costume's `SKIN_SETTINGS` to `track_mono`; ``--bare-from``
     overrides where the arms' skin starts; without either, the paper's printed rules."""
+    from dataclasses import replace
+
     import mocapkit.pipelines.mono as mono
-    from mocapkit.pipelines.mono import SKIN_SETTINGS
+    from mocapkit.pipelines.mono import SKIN_SETTINGS, SkinOptions
 
     seen: dict[str, object] = {}
 
@@ -204,13 +206,16 @@ def test_track_mono_costume_sets_the_skin_tracker(
     with pytest.raises(Called):
         main(["track", "mono", str(tmp_path), "--out", str(tmp_path / "out"), "--skin", *extra])
     assert seen["skin"] is True
+    options = seen["skin_options"]
+    assert isinstance(options, SkinOptions)
     for key, value in expected.items():
-        assert seen[f"skin_{key}"] == value
+        assert getattr(options, key) == value
     if "--costume" in extra:
         costume = extra[extra.index("--costume") + 1]
-        assert {k for k in seen if k.startswith("skin_")} == {
-            f"skin_{k}" for k in SKIN_SETTINGS[costume]
-        }
+        arms = {"bare_from": expected["bare_from"]} if "--bare-from" in extra else {}
+        assert options == replace(SKIN_SETTINGS[costume], **arms)
+    else:
+        assert options == SkinOptions(bare_from=None)
 
 
 def test_track_mono_costume_needs_skin(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

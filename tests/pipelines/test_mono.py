@@ -390,13 +390,13 @@ def test_girdle_neck_lies_below_the_shoulders_by_the_girdle_rule() -> None:
     np.testing.assert_allclose(neck[1], (131.0, 99.0))
 
 
-def test_skin_keywords_are_the_costumes_settings_with_overrides() -> None:
-    from mocapkit.pipelines.mono import SKIN_SETTINGS, skin_keywords
+def test_costume_skin_options_are_the_costumes_settings_with_overrides() -> None:
+    from mocapkit.pipelines.mono import SKIN_SETTINGS, SkinOptions, costume_skin_options
 
-    paper = skin_keywords("paper")
-    assert paper == {f"skin_{k}": v for k, v in SKIN_SETTINGS["paper"].items()}
-    assert paper["skin_belt"] is True and paper["skin_bare_from"] == "elbow"
-    assert skin_keywords("everyday", bare_from=None)["skin_bare_from"] is None
-    assert skin_keywords("everyday", bare_from=None)["skin_trunk_from_head"] is True
+    paper = costume_skin_options("paper")
+    assert paper == SKIN_SETTINGS["paper"]
+    assert paper.belt is True and paper.bare_from == "elbow" and paper.girdle_neck is True
+    everyday = costume_skin_options("everyday", bare_from=None)
+    assert everyday == SkinOptions(bare_from=None, trunk_from_head=True)
     with pytest.raises(ConfigError, match="costume: expected one of paper, everyday, found 'gala'"):
-        skin_keywords("gala")
+        costume_skin_options("gala")

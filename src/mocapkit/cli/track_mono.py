@@ -96,7 +96,12 @@ def add_mono_parser(methods: Any) -> None:
 
 
 def _run_mono(args: argparse.Namespace) -> int:
-    from mocapkit.pipelines.mono import initial_pose_from, skin_keywords, track_mono
+    from mocapkit.pipelines.mono import (
+        SkinOptions,
+        costume_skin_options,
+        initial_pose_from,
+        track_mono,
+    )
     from mocapkit.pipelines.run import find_gaps
     from mocapkit.tracking.mono.stick import stick_model
     from mocapkit.tracking.mono.tracker import MonoConfig
@@ -123,10 +128,10 @@ def _run_mono(args: argparse.Namespace) -> int:
         start = initial_pose_from(names, joints[0], stick_model(cfg.legs, cfg.limits))
     # the costume's settings, else track_mono's defaults (the paper's printed rules)
     own_arms = {} if args.bare_from is None else {"bare_from": args.bare_from}
-    skin_settings = (
-        skin_keywords(args.costume, **own_arms)
+    skin_options = (
+        costume_skin_options(args.costume, **own_arms)
         if args.costume is not None
-        else {"skin_bare_from": args.bare_from}
+        else SkinOptions(bare_from=args.bare_from)
     )
     run = track_mono(
         args.session,
@@ -137,7 +142,7 @@ def _run_mono(args: argparse.Namespace) -> int:
         use_session_lengths=args.session_lengths,
         skin=args.skin,
         initial_pose=start,
-        **skin_settings,
+        skin_options=skin_options,
     )
     summary = run.summary()
     if not args.json:  # limbs unseen past the bridge: NaN joints, status in fit.csv

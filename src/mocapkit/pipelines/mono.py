@@ -46,38 +46,55 @@ from mocapkit.tracking.mono.tracker import MonoConfig, MonoFrame, MonoTracker
 FloatArray = NDArray[np.float64]
 
 
-#: `SkinTracker` settings each costume implies, as `track_mono`'s ``skin_*`` keywords
-#: (``mocapkit track mono --skin --costume``, ``mocapkit accuracy mono --skin``). Paper
-#: (its §3.3 costume: a dress to the elbows, bare forearms, a golden belt): the skin runs
-#: from the elbow to the fingertips (``bare_from`` elbow: the elbow and wrist on the blob
-#: at the visible lengths' fractions); the trunk from the belt, no drawn trunk
-#: (``trunk_from_head`` off: frames without the belt have none); the waist labelled
-#: among fewer than four blobs and taken up again (``belt``); lost hands given to blobs
-#: on their side (``reacquire``); the neck moved from the shoulders' level to the stick's
-#: neck base (``girdle_neck``). Everyday: the skin from the middle of the upper arm
-#: (short sleeves) and the trunk drawn from the head (no belt). docs/mono.md, eighth
-#: round.
-SKIN_SETTINGS: dict[str, dict[str, Any]] = {
-    "paper": {
-        "bare_from": "elbow",
-        "trunk_from_head": False,
-        "belt": True,
-        "reacquire": True,
-        "girdle_neck": True,
-    },
-    "everyday": {
-        "bare_from": "mid_upper_arm",
-        "trunk_from_head": True,
-        "belt": False,
-        "reacquire": False,
-        "girdle_neck": False,
-    },
+@dataclass(frozen=True)
+class SkinOptions:
+    """How `skin_keypoints` reads the stick's 2-D joints off a video by skin blobs.
+
+    Attributes
+    ----------
+    bare_from : {None, "elbow", "mid_upper_arm", "shoulder"}
+        Where the arms' skin starts (`SkinTracker`'s ``bare_from``); None: the paper's
+        rule, the arm ellipse's ends are the elbow and wrist.
+    trunk_from_head : bool
+        In frames without a waist blob (the paper's belt), draw an upright trunk from
+        the head ellipse (`SkinTracker`'s ``trunk_from_head``); False: those frames have
+        no pelvis and shoulders.
+    belt, reacquire : bool
+        The subject wears the paper's belt, and lost hand labels are taken up again
+        (`SkinTracker`'s ``belt`` and ``reacquire``).
+    girdle_neck : bool
+        The neck moved from the head blob's lower end down to the stick's neck base
+        (`girdle_neck_px`, where the shoulders and pelvis are seen).
+    """
+
+    bare_from: str | None = None
+    trunk_from_head: bool = True
+    belt: bool = False
+    reacquire: bool = False
+    girdle_neck: bool = False
+
+
+#: The `SkinOptions` each costume implies (``mocapkit track mono --skin --costume``,
+#: ``mocapkit accuracy mono --skin``). Paper (its §3.3 costume: a dress to the elbows,
+#: bare forearms, a golden belt): the skin runs from the elbow to the fingertips
+#: (``bare_from`` elbow: the elbow and wrist on the blob at the visible lengths'
+#: fractions); the trunk from the belt, no drawn trunk (``trunk_from_head`` off: frames
+#: without the belt have none); the waist labelled among fewer than four blobs and taken
+#: up again (``belt``); lost hands given to blobs on their side (``reacquire``); the neck
+#: moved from the shoulders' level to the stick's neck base (``girdle_neck``). Everyday:
+#: the skin from the middle of the upper arm (short sleeves) and the trunk drawn from the
+#: head (no belt). docs/mono.md, eighth round.
+SKIN_SETTINGS: dict[str, SkinOptions] = {
+    "paper": SkinOptions(
+        bare_from="elbow", trunk_from_head=False, belt=True, reacquire=True, girdle_neck=True
+    ),
+    "everyday": SkinOptions(bare_from="mid_upper_arm", trunk_from_head=True),
 }
 
 
-def skin_keywords(costume: str, **overrides: Any) -> dict[str, Any]:
-    """`track_mono`'s ``skin_*`` keywords for a costume: its `SKIN_SETTINGS`, with
-    ``overrides`` (settings by their short names, e.g. ``bare_from="shoulder"``) on top.
+def costume_skin_options(costume: str, **overrides: Any) -> SkinOptions:
+    """A costume's `SKIN_SETTINGS` with ``overrides`` (fields of `SkinOptions`, e.g.
+    ``bare_from="shoulder"``) on top.
 
     Raises
     ------
@@ -86,7 +103,7 @@ def skin_keywords(costume: str, **overrides: Any) -> dict[str, Any]:
     """
     if costume not in SKIN_SETTINGS:
         raise ConfigError(f"costume: expected one of {', '.join(SKIN_SETTINGS)}, found {costume!r}")
-    return {f"skin_{k}": v for k, v in {**SKIN_SETTINGS[costume], **overrides}.items()}
+    return replace(SKIN_SETTINGS[costume], **overrides)
 
 
 @dataclass
@@ -181,30 +198,23 @@ def detector_config(config: MonoConfig) -> MonoConfig:
     return replace(config, rebuilt_joints=REBUILT_JOINTS, girdle_cosine=GIRDLE_COSINE)
 
 
-def skin_keypoints(
-    session: Session,
-    camera: str,
-    trunk_from_head: bool = True,
-    bare_from: str | None = None,
-    belt: bool = False,
-    reacquire: bool = False,
-    girdle_neck: bool = False,
-) -> Keypoints:
+def skin_keypoints(session: Session, camera: str, options: SkinOptions | None = None) -> Keypoints:
     """2-D joints of the stick from the camera's video by skin blobs (paper §3.3).
 
-    `mocapkit.tracking.mono.skin_tracking.SkinTracker` on every frame. A waist blob (the
-    paper's belt) gives the pelvis and shoulders; without one, ``trunk_from_head`` draws
-    an upright trunk from the head ellipse (the synthetic sessions and the real videos
-    have no belt), else those joints are NaN. ``bare_from``: where the arms' skin starts
-    (`SkinTracker`; None: the paper's ellipse ends). ``belt``, ``reacquire``: as
-    `SkinTracker`'s. ``girdle_neck``: the neck moved from the head blob's lower end down
-    to the stick's neck base by `girdle_neck_px` (where the shoulders are seen).
+    `mocapkit.tracking.mono.skin_tracking.SkinTracker` on every frame, set by ``options``
+    (default `SkinOptions()`: the paper's rules, and without a waist blob an upright
+    trunk drawn from the head; the synthetic sessions in everyday clothing and the real
+    videos have no belt).
     """
     from mocapkit.tracking.mono.skin_tracking import SKIN_JOINTS, SkinTracker
 
+    opt = options or SkinOptions()
     video = session.video(camera)
     tracker = SkinTracker(
-        trunk_from_head=trunk_from_head, bare_from=bare_from, belt=belt, reacquire=reacquire
+        trunk_from_head=opt.trunk_from_head,
+        bare_from=opt.bare_from,
+        belt=opt.belt,
+        reacquire=opt.reacquire,
     )
     px = np.full((video.n_frames, len(SKIN_JOINTS), 2), np.nan)
     stream = video.open()
@@ -216,7 +226,7 @@ def skin_keypoints(
                 prog.update()
     finally:
         stream.close()
-    if girdle_neck:
+    if opt.girdle_neck:
         px[:, SKIN_JOINTS.index("neck")] = girdle_neck_px(px, SKIN_JOINTS)
     return Keypoints(video.time_s, SKIN_JOINTS, px, f"{video.path} (skin blobs)")
 
@@ -595,11 +605,7 @@ def track_mono(
     length_passes: int = 2,
     skin: bool = False,
     initial_pose: FloatArray | None = None,
-    skin_bare_from: str | None = None,
-    skin_trunk_from_head: bool = True,
-    skin_belt: bool = False,
-    skin_reacquire: bool = False,
-    skin_girdle_neck: bool = False,
+    skin_options: SkinOptions | None = None,
 ) -> MonoRun:
     """Track a session with the monocular tracker and write the result folder.
 
@@ -621,18 +627,9 @@ def track_mono(
     skin : bool
         Read the 2-D joints off the camera's video by skin blobs (`skin_keypoints`)
         instead of keypoints.
-    skin_bare_from : {None, "elbow", "mid_upper_arm", "shoulder"}
-        With ``skin``: where the arms' skin starts (`SkinTracker`'s ``bare_from``; None:
-        the paper's rule, the arm ellipse's ends are the elbow and wrist).
-    skin_trunk_from_head : bool
-        With ``skin``: in frames without a waist blob (the paper's belt), draw an upright
-        trunk from the head ellipse (`SkinTracker`'s ``trunk_from_head``); False: those
-        frames have no pelvis and shoulders.
-    skin_belt, skin_reacquire : bool
-        With ``skin``: the subject wears the paper's belt, and lost hand labels are taken
-        up again (`SkinTracker`'s ``belt`` and ``reacquire``).
-    skin_girdle_neck : bool
-        With ``skin``: the neck rebuilt below the shoulders (`girdle_neck_px`).
+    skin_options : SkinOptions, optional
+        With ``skin``: how the blobs are read (`skin_keypoints`; default `SkinOptions()`,
+        the paper's rules; `SKIN_SETTINGS` per costume).
     length_passes : int
         With video lengths and the perspective model: track this many times, each pass
         measuring the lengths again from the previous pass's poses (`refined_lengths`,
@@ -667,15 +664,7 @@ def track_mono(
     if skin:
         session.require(video=True, cameras=[cam_name])
     kp = (
-        skin_keypoints(
-            session,
-            cam_name,
-            trunk_from_head=skin_trunk_from_head,
-            bare_from=skin_bare_from,
-            belt=skin_belt,
-            reacquire=skin_reacquire,
-            girdle_neck=skin_girdle_neck,
-        )
+        skin_keypoints(session, cam_name, skin_options)
         if skin
         else load_keypoints(session, cam_name, keypoints)
     )

@@ -32,7 +32,12 @@ from mocapkit.errors import ConfigError
 from mocapkit.eval.metrics import evaluate_result
 from mocapkit.io.openpose import openpose_from_canonical, write_openpose_frame
 from mocapkit.io.session import load_session
-from mocapkit.pipelines.mono import MonoRun, initial_pose_from, skin_keywords, track_mono
+from mocapkit.pipelines.mono import (
+    MonoRun,
+    costume_skin_options,
+    initial_pose_from,
+    track_mono,
+)
 from mocapkit.skeleton.model import UPPER_BODY_JOINTS
 from mocapkit.synth.session_writer import SynthOptions, synthesize_session
 from mocapkit.tracking.mono.stick import StickModel
@@ -244,7 +249,7 @@ def mono_accuracy(
 
     With ``skin`` the sessions are rendered in ``costume`` (default `SKIN_COSTUME`, the
     paper's; ``"everyday"``: shirt with `SKIN_SLEEVE` sleeves and trousers) and the skin
-    tracker runs with that costume's settings (`mocapkit.pipelines.mono.skin_keywords`);
+    tracker runs with that costume's settings (`mocapkit.pipelines.mono.SKIN_SETTINGS`);
     ``skin_bare_from`` overrides where it takes the arms' skin to start
     (`mocapkit.pipelines.mono.track_mono`;
     ``"costume"``: the costume's; None: the paper's rule, the arm ellipse's ends). The
@@ -260,7 +265,7 @@ def mono_accuracy(
         raise ConfigError("mono_accuracy: a costume is chosen for skin tracking only")
     dress = (costume or SKIN_COSTUME) if skin else "everyday"
     own_arms = {} if skin_bare_from == "costume" else {"bare_from": skin_bare_from}
-    skin_kw = skin_keywords(dress, **own_arms)
+    skin_options = costume_skin_options(dress, **own_arms)
     cfg = config or MonoConfig()
     source = "skin" if skin else "openpose" if openpose else "keypoints"
     rows = []
@@ -282,7 +287,7 @@ def mono_accuracy(
                 config=cfg,
                 skin=True,
                 initial_pose=first_pose,
-                **skin_kw,
+                skin_options=skin_options,
             )
         elif openpose:
             folder = base / "openpose_json"
