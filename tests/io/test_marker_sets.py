@@ -62,6 +62,9 @@ def test_parse_turning_markers() -> None:
     assert s.spec == "left_hand=LWRA+LWRB/LFRM"
     assert parse_marker_set(s.spec) == s
     assert parse_marker_set("left_hand=LWRA+LWRB").turning == ()
+    # one placing marker and one turning marker orient a set; one marker alone does not
+    assert parse_marker_set("left_hand=HandL/ForearmL").orientable
+    assert not parse_marker_set("left_hand=HandL").orientable
 
 
 def test_turning_markers_do_not_move_the_centre() -> None:

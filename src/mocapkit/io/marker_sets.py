@@ -73,6 +73,11 @@ class MarkerSet:
         """``members`` then ``turning``: every marker whose offset the tracker uses."""
         return self.members + self.turning
 
+    @property
+    def orientable(self) -> bool:
+        """Two or more markers in all: their offsets, once calibrated, orient the set."""
+        return len(self.all_members) >= 2
+
     def __post_init__(self) -> None:
         members = tuple(self.members)
         object.__setattr__(self, "members", members)

@@ -886,7 +886,7 @@ def track_hybrid_marker_file(
     # the sets whose orientation will drive the IK (members given, or calibrated)
     given_members = frozenset(config.member_offsets_mm) if config is not None else frozenset()
     oriented = given_members or (
-        frozenset(s.name for s in sets if len(s.all_members) >= 2)
+        frozenset(s.name for s in sets if s.orientable)
         if calibration != "none"
         else frozenset()
     )
@@ -1076,7 +1076,7 @@ def _calibrate_static(
     ``static`` (whole trial) or of ``world``'s first seconds; None and why when none."""
     from mocapkit.io.marker_sets import evaluate_marker_sets
 
-    multi = [s for s in sets if len(s.all_members) >= 2]
+    multi = [s for s in sets if s.orientable]
     if not multi:
         return None, "no marker set has two or more members"
     source = world if static is None else to_world(static, frame)
@@ -1120,7 +1120,7 @@ def _calibrate_dynamic(
     fits on enough frames."""
     from mocapkit.io.marker_sets import evaluate_marker_sets
 
-    multi = [s for s in sets if len(s.all_members) >= 2]
+    multi = [s for s in sets if s.orientable]
     if not multi:
         return None, "no marker set has two or more members"
     pos = evaluate_marker_sets(world, sets)
