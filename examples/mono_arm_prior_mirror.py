@@ -24,7 +24,12 @@ import numpy as np
 
 from mocapkit.io.session import load_session
 from mocapkit.pipelines.demo import find_shared_data
-from mocapkit.pipelines.mono_accuracy import FLIP_MIN_SINE, MONO_CLIPS, mono_session
+from mocapkit.pipelines.mono_accuracy import (
+    FLIP_MIN_SINE,
+    MONO_CLIPS,
+    mono_session,
+    truth_in_camera,
+)
 from mocapkit.tracking.mono.arm_prior import arm_features, default_arm_prior
 from mocapkit.tracking.mono.stick import stick_model
 
@@ -42,10 +47,7 @@ def main(work: str, *clips: str) -> None:
             raise SystemExit("../shared/data/mocap not found")
         session = mono_session(data / "mocap", work, clip)  # rendered unless already there
         s = load_session(session)
-        truth = s.truth
-        assert truth is not None
-        idx = [truth.joint_names.index(n) for n in model.joint_names]
-        cam = s.camera(s.cameras[0].name).to_camera(truth.joints_mm[:, idx])
+        cam = truth_in_camera(s, s.cameras[0].name, model)
         for arm, side in enumerate(("left", "right")):
             sh, el, wr = (
                 model.joint_names.index(f"{side}_{j}") for j in ("shoulder", "elbow", "wrist")

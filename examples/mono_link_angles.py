@@ -34,7 +34,7 @@ from mono_openpose_substitute import clip_input
 
 from mocapkit.eval.metrics import evaluate_result
 from mocapkit.pipelines.mono import detector_config, track_mono
-from mocapkit.pipelines.mono_accuracy import flip_accuracy
+from mocapkit.pipelines.mono_accuracy import flip_accuracy, truth_in_camera
 from mocapkit.skeleton.model import UPPER_BODY_JOINTS
 from mocapkit.tracking.mono.stick import StickModel, stick_model
 from mocapkit.tracking.mono.tracker import MonoConfig
@@ -75,9 +75,7 @@ def main(work: str, variant: str, clips: str, *rest: str) -> None:
         cfg = replace(detector_config(MonoConfig()) if rebuilt else MonoConfig(), **extra)
         run = track_mono(base / "session", out, camera=cam, config=cfg, pixels=use)
         rep = evaluate_result(out, base / "session", joints=UPPER_BODY_JOINTS)
-        t = s.truth
-        tj = t.joints_mm[:, [t.joint_names.index(n) for n in model.joint_names]]
-        tj = s.camera(cam).to_camera(tj)
+        tj = truth_in_camera(s, cam, model)
         flips, per_link = flip_accuracy(run, tj)
         est = np.stack([f.joints_in_camera for f in run.frames])
         codes = np.array([f.code for f in run.frames])

@@ -38,6 +38,7 @@ from mocapkit.pipelines.mono_accuracy import (
     flip_accuracy,
     mono_session,
     noisy_keypoints,
+    truth_in_camera,
 )
 from mocapkit.skeleton.model import UPPER_BODY_JOINTS
 from mocapkit.tracking.mono.stick import stick_model
@@ -78,9 +79,7 @@ def main(work: str, variants: str, *args: str) -> None:
             out = out_root / f"{variant}_{Path(clip).stem}"
             run = track_mono(session, out, camera=cam, config=cfg, pixels=p)
             rep = evaluate_result(out, session, joints=UPPER_BODY_JOINTS)
-            assert s.truth is not None
-            tj = s.truth.joints_mm[:, [s.truth.joint_names.index(n) for n in joints]]
-            tc = s.camera(cam).to_camera(tj)
+            tc = truth_in_camera(s, cam, model)
             flips, per_link = flip_accuracy(run, tc)
             summ = run.summary()
             pa.append(rep.pa_mpjpe_mm)

@@ -42,6 +42,7 @@ from mocapkit.pipelines.mono_accuracy import (
     flip_accuracy,
     mono_session,
     noisy_keypoints,
+    truth_in_camera,
     write_openpose_with_bystander,
 )
 from mocapkit.skeleton.model import UPPER_BODY_JOINTS
@@ -120,9 +121,7 @@ def main(work: str, variant: str, *clips: str) -> None:
         cfg = detector_config(MonoConfig()) if rebuilt else MonoConfig()
         run = track_mono(base / "session", out, camera=cam, config=cfg, pixels=use)
         rep = evaluate_result(out, base / "session", joints=UPPER_BODY_JOINTS)
-        t = s.truth
-        tj = t.joints_mm[:, [t.joint_names.index(n) for n in model.joint_names]]
-        flips, per_link = flip_accuracy(run, s.camera(cam).to_camera(tj))
+        flips, per_link = flip_accuracy(run, truth_in_camera(s, cam, model))
         ratio = run.lengths / np.array([s.bone_lengths_mm[x] for x in model.segments])
         rows.append((clip, rep.pa_mpjpe_mm, flips))
         print(

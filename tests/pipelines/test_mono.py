@@ -400,3 +400,20 @@ def test_costume_skin_options_are_the_costumes_settings_with_overrides() -> None
     assert everyday == SkinOptions(bare_from=None, trunk_from_head=True)
     with pytest.raises(ConfigError, match="costume: expected one of paper, everyday, found 'gala'"):
         costume_skin_options("gala")
+
+
+def test_truth_in_camera_is_the_stick_joints_seen_from_the_camera(tmp_path: Path) -> None:
+    from mocapkit.io.session import load_session
+    from mocapkit.pipelines.mono_accuracy import truth_in_camera
+
+    folder = _session(tmp_path / "s")
+    joints, names, _ = stick_motion(N)
+    model = stick_model()
+    cam = camera()
+    got = truth_in_camera(load_session(folder), cam.name, model)
+    idx = [list(names).index(n) for n in model.joint_names]
+    np.testing.assert_allclose(got, cam.to_camera(joints[:, idx]))
+    assert got.shape == (N, model.n_joints, 3)
+    (folder / "truth.npz").unlink()
+    with pytest.raises(SessionError, match="expected truth.npz to measure against, found none"):
+        truth_in_camera(load_session(folder), cam.name, model)

@@ -28,10 +28,10 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from mocapkit.errors import ConfigError
+from mocapkit.errors import ConfigError, SessionError
 from mocapkit.eval.metrics import evaluate_result
 from mocapkit.io.openpose import openpose_from_canonical, write_openpose_frame
-from mocapkit.io.session import load_session
+from mocapkit.io.session import Session, load_session
 from mocapkit.pipelines.mono import (
     MonoRun,
     costume_skin_options,
@@ -89,6 +89,21 @@ class MonoClipAccuracy:
     input_seen: float = float("nan")
     input_px_by_joint: dict[str, float] = field(default_factory=dict)
     costume: str = ""
+
+
+def truth_in_camera(session: Session, camera: str, model: StickModel) -> FloatArray:
+    """The truth's joints of ``model`` (T, K, 3) in ``camera``'s frame (mm).
+
+    Raises
+    ------
+    SessionError
+        The session has no truth (``truth.npz``).
+    """
+    truth = session.truth
+    if truth is None:
+        raise SessionError(f"{session.path}: expected truth.npz to measure against, found none")
+    idx = [truth.joint_names.index(n) for n in model.joint_names]
+    return session.camera(camera).to_camera(truth.joints_mm[:, idx])
 
 
 def flip_accuracy(run: MonoRun, truth_in_camera: FloatArray) -> tuple[float, FloatArray]:
@@ -301,10 +316,7 @@ def mono_accuracy(
                 session, out, camera=cam, config=cfg, pixels=px[:, idx], initial_pose=first_pose
             )
         rep = evaluate_result(out, session, joints=UPPER_BODY_JOINTS)
-        truth = s.truth
-        assert truth is not None
-        tj = truth.joints_mm[:, [truth.joint_names.index(n) for n in run.model.joint_names]]
-        flips, _ = flip_accuracy(run, s.camera(cam).to_camera(tj))
+        flips, _ = flip_accuracy(run, truth_in_camera(s, cam, run.model))
         true_px = s.keypoints[cam].pixels[:, [names.index(n) for n in run.model.joint_names]]
         med, seen, by_joint = input_error(run, true_px)
         summ = run.summary()
