@@ -35,8 +35,12 @@ from __future__ import annotations
 
 import json
 import sys
+from pathlib import Path
 
 import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+from mono_truth_pruning import _enumerate, _enumerate_both, _process_noting_frame, _record
 
 import mocapkit.tracking.mono.tracker as tracker_module
 from mocapkit.pipelines.demo import find_shared_data
@@ -46,6 +50,7 @@ from mocapkit.pipelines.mono_accuracy import (
     flip_accuracy,
     mono_session,
     noisy_keypoints,
+    truth_in_camera,
 )
 from mocapkit.tracking.mono.arm_prior import arm_features, default_arm_prior
 from mocapkit.tracking.mono.flips import _fails
@@ -53,23 +58,6 @@ from mocapkit.tracking.mono.motion_cost import pair_omegas
 from mocapkit.tracking.mono.priors import clavicle_forward_cost
 from mocapkit.tracking.mono.stick import LimitConfig, StickModel, stick_model
 from mocapkit.tracking.mono.tracker import MonoConfig
-
-_record: dict[int, tuple] = {}
-_current = {"frame": -1}
-_process = tracker_module.MonoTracker._process
-_enumerate = tracker_module.enumerate_poses
-
-
-def _process_noting_frame(self, k):  # type: ignore[no-untyped-def]
-    _current["frame"] = k
-    return _process(self, k)
-
-
-def _enumerate_both(model, lengths, obs, root, perspective=False, prune=True, reach_tolerance=0.0):  # type: ignore[no-untyped-def]
-    kw = {"perspective": perspective, "reach_tolerance": reach_tolerance}
-    full = _enumerate(model, lengths, obs, root, prune=False, **kw)
-    _record[_current["frame"]] = (full, np.asarray(lengths))  # the last pass overwrites
-    return _enumerate(model, lengths, obs, root, prune=prune, **kw)
 
 
 def config_from(settings: dict) -> MonoConfig:
@@ -128,11 +116,9 @@ def main(work: str, clip: str = "charleston1.amc", link: str = "left_upper_arm",
     model = stick_model(cfg.legs, cfg.limits)
     s, cam, names, px = noisy_keypoints(session, model, 2.0, 0)
     px = px[:, [names.index(n) for n in model.joint_names]]
+    true_cam = truth_in_camera(s, cam, model)
     truth = s.truth
-    assert truth is not None
-    true_cam = s.camera(cam).to_camera(
-        truth.joints_mm[:, [truth.joint_names.index(n) for n in model.joint_names]]
-    )
+    assert truth is not None  # truth_in_camera has refused a session without one
     tracker_module.MonoTracker._process = _process_noting_frame  # type: ignore[method-assign]
     tracker_module.enumerate_poses = _enumerate_both  # type: ignore[assignment]
     run: MonoRun = track_mono(session, None, camera=cam, config=cfg, pixels=px)
@@ -156,7 +142,7 @@ def main(work: str, clip: str = "charleston1.amc", link: str = "left_upper_arm",
         if not counted[k, li] or bool((f.code >> li) & 1) == want[k, li]:
             continue
         wrong += 1
-        full, lengths = _record[k]
+        _, full, lengths = _record[k]
         hit = np.flatnonzero(full.codes == (f.code ^ (1 << li)))
         if not hit.size:
             absent += 1

@@ -42,6 +42,7 @@ from mocapkit.pipelines.mono_accuracy import (
     flip_accuracy,
     mono_session,
     noisy_keypoints,
+    truth_in_camera,
 )
 from mocapkit.tracking.mono.flips import _fails
 from mocapkit.tracking.mono.stick import (
@@ -69,11 +70,13 @@ def _process_noting_frame(self, k):  # type: ignore[no-untyped-def]
     return _process(self, k)
 
 
-def _enumerate_both(model, lengths, obs, root, perspective=False, prune=True, reach_tolerance=0.0):  # type: ignore[no-untyped-def]
-    kw = {"perspective": perspective, "reach_tolerance": reach_tolerance}
+def _enumerate_both(model, lengths, obs, root, prune=True, **kw):  # type: ignore[no-untyped-def]
+    """`enumerate_poses` as the tracker calls it, recording per frame the pruned and the
+    unpruned candidates and the lengths (the last pass overwrites); `mono_path_costs.py`
+    records through it too."""
     fp = _enumerate(model, lengths, obs, root, prune=prune, **kw)
     full = _enumerate(model, lengths, obs, root, prune=False, **kw)
-    _record[_current["frame"]] = (fp.codes, full.codes, full.positions, np.asarray(lengths))
+    _record[_current["frame"]] = (fp, full, np.asarray(lengths))
     return fp
 
 
@@ -93,10 +96,7 @@ def clip_report(work: Path, clip: str) -> dict:
     _record.clear()
     run = track_mono(session, None, camera=cam, config=cfg,
                      pixels=px[:, [names.index(n) for n in model.joint_names]])  # fmt: skip
-    truth = s.truth
-    assert truth is not None
-    tj = truth.joints_mm[:, [truth.joint_names.index(n) for n in model.joint_names]]
-    true_cam = s.camera(cam).to_camera(tj)
+    true_cam = truth_in_camera(s, cam, model)
     flips, per_link = flip_accuracy(run, true_cam)
     true_len = session_lengths(s, model)
     vec = model.link_vectors(true_cam)
@@ -114,7 +114,8 @@ def clip_report(work: Path, clip: str) -> dict:
     pruned_by: dict[str, int] = {}
     absent_links: dict[str, int] = {}
     bits = np.arange(model.n_links)
-    for k, (codes, all_codes, all_pos, lengths) in _record.items():
+    for k, (fp, full, lengths) in _record.items():
+        codes, all_codes, all_pos = fp.codes, full.codes, full.positions
         if k >= true_cam.shape[0]:
             continue
         frames += 1
