@@ -886,9 +886,7 @@ def track_hybrid_marker_file(
     # the sets whose orientation will drive the IK (members given, or calibrated)
     given_members = frozenset(config.member_offsets_mm) if config is not None else frozenset()
     oriented = given_members or (
-        frozenset(s.name for s in sets if s.orientable)
-        if calibration != "none"
-        else frozenset()
+        frozenset(s.name for s in sets if s.orientable) if calibration != "none" else frozenset()
     )
 
     def model(stature_mm: float, oriented: frozenset[str]) -> Skeleton:
