@@ -1,4 +1,6 @@
-"""Camera calibration files: mocapkit's ``cameras.json``, OpenCV YAML/XML, Qualisys ``.qca.txt``.
+"""Camera calibration files: ``cameras.json``, OpenCV YAML/XML, Qualisys ``.qca.txt``.
+
+``Calib.toml`` (Pose2Sim, anipose, FreeMoCap) has its own module, `mocapkit.io.calib_toml`.
 
 ``cameras.json`` (format 1)::
 
@@ -52,7 +54,8 @@ def _numbers_only(value: Any) -> bool:
     return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
 
 
-def _matrix(value: Any, shape: tuple[int, ...], where: str) -> NDArray[np.float64]:
+def number_array(value: Any, shape: tuple[int, ...], where: str) -> NDArray[np.float64]:
+    """``value`` as a finite float array of ``shape``; `FormatError` naming ``where``."""
     if not _numbers_only(value):
         # numpy would turn "532" into 532.0: a string is a mistake to name, not a number
         raise FormatError(f"{where}: expected a {shape} array of numbers, found {value!r}")
@@ -77,7 +80,8 @@ def _check_rotation(rot: NDArray[np.float64], where: str, tol: float = _ROTATION
         )
 
 
-def _camera_from_dict(entry: Any, where: str) -> Camera:
+def camera_from_entry(entry: Any, where: str) -> Camera:
+    """One camera from a ``cameras.json`` entry, every check applied (``where`` names it)."""
     if not isinstance(entry, dict):
         raise FormatError(f"{where}: expected an object, found {type(entry).__name__}")
     missing = [k for k in _KEYS if k not in entry]
@@ -99,7 +103,7 @@ def _camera_from_dict(entry: Any, where: str) -> Camera:
         raise FormatError(
             f"{where}.image_size: expected [width, height] positive integers, found {size!r}"
         )
-    k = _matrix(entry["K"], (3, 3), f"{where}.K")
+    k = number_array(entry["K"], (3, 3), f"{where}.K")
     if not np.allclose(k[2], [0.0, 0.0, 1.0]) or k[0, 0] <= 0 or k[1, 1] <= 0 or k[1, 0] != 0:
         raise FormatError(
             f"{where}.K: expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, "
@@ -108,7 +112,7 @@ def _camera_from_dict(entry: Any, where: str) -> Camera:
     dist_raw = entry["dist"]
     if not isinstance(dist_raw, list):
         raise FormatError(f"{where}.dist: expected a list of numbers, found {dist_raw!r}")
-    dist = _matrix(dist_raw, (len(dist_raw),), f"{where}.dist")
+    dist = number_array(dist_raw, (len(dist_raw),), f"{where}.dist")
     if dist.shape[0] not in _DIST_LENGTHS:
         raise FormatError(
             f"{where}.dist: expected {', '.join(map(str, _DIST_LENGTHS))} OpenCV coefficients, "
@@ -120,7 +124,7 @@ def _camera_from_dict(entry: Any, where: str) -> Camera:
                 f"{where}.dist[{i}] (k{i + 1}): expected a radial coefficient within "
                 f"+-{MAX_RADIAL_DISTORTION:g}, found {dist[i]:g}"
             )
-    m = _matrix(entry["camera_from_world"], (4, 4), f"{where}.camera_from_world")
+    m = number_array(entry["camera_from_world"], (4, 4), f"{where}.camera_from_world")
     if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0]):
         raise FormatError(
             f"{where}.camera_from_world: expected last row [0, 0, 0, 1], found {m[3].tolist()}"
@@ -161,12 +165,13 @@ def cameras_from_document(doc: Any, source: str) -> list[Camera]:
     entries = doc["cameras"]
     if not isinstance(entries, list) or not entries:
         raise FormatError(f"{source}: cameras: expected a non-empty list, found {entries!r}")
-    cameras = [_camera_from_dict(e, f"{source}: cameras[{i}]") for i, e in enumerate(entries)]
-    _check_unique([c.name for c in cameras], source)
+    cameras = [camera_from_entry(e, f"{source}: cameras[{i}]") for i, e in enumerate(entries)]
+    check_unique_names([c.name for c in cameras], source)
     return cameras
 
 
-def _check_unique(names: Sequence[str], source: str) -> None:
+def check_unique_names(names: Sequence[str], source: str) -> None:
+    """Raise `FormatError` naming ``source`` when two cameras share a name."""
     seen: set[str] = set()
     dups = sorted({n for n in names if n in seen or seen.add(n)})  # type: ignore[func-returns-value]
     if dups:
@@ -211,7 +216,7 @@ def write_cameras(path: PathLike, cameras: Sequence[Camera]) -> None:
     for i, c in enumerate(cams):
         if not isinstance(c, Camera):
             raise FormatError(f"{path}: cameras[{i}]: expected a Camera, found {type(c).__name__}")
-    _check_unique([c.name for c in cams], str(path))
+    check_unique_names([c.name for c in cams], str(path))
     blocks = []
     for c in cams:
         k_rows = ",\n        ".join(_row(r) for r in c.K)
@@ -289,7 +294,7 @@ def read_opencv_calibration(
             raise FormatError(
                 f"{p}: missing camera matrix; expected one of the keys {', '.join(_K_KEYS)}"
             )
-        k = _matrix(found_k[1], (3, 3), f"{p}: {found_k[0]}")
+        k = number_array(found_k[1], (3, 3), f"{p}: {found_k[0]}")
         found_d = node_mat(_DIST_KEYS)
         dist = np.zeros(0) if found_d is None else np.ravel(found_d[1])
         if dist.shape[0] not in _DIST_LENGTHS:
@@ -325,9 +330,9 @@ def read_opencv_calibration(
             r_raw = r_found[1]
             if r_raw.size == 3:
                 r_raw = np.asarray(cv2.Rodrigues(r_raw.reshape(3, 1))[0], dtype=float)
-            r = _matrix(r_raw, (3, 3), f"{p}: R")
+            r = number_array(r_raw, (3, 3), f"{p}: R")
             _check_rotation(r, f"{p}: R", tol=1e-5)
-            t = _matrix(np.ravel(t_found[1]), (3,), f"{p}: T") * translation_mm_per_unit
+            t = number_array(np.ravel(t_found[1]), (3,), f"{p}: T") * translation_mm_per_unit
             m = make_transform(r, t)
     finally:
         fs.release()
@@ -501,24 +506,40 @@ def read_qualisys(path: PathLike, binning_factor: int = 1) -> list[Camera]:
         )
     if not cameras:
         raise FormatError(f"{p}: no active cameras (every <camera> has active != 1)")
-    _check_unique([c.name for c in cameras], str(p))
+    check_unique_names([c.name for c in cameras], str(p))
     return cameras
 
 
-def load_cameras(path: PathLike) -> list[Camera]:
+def load_cameras(path: PathLike, unit: str | None = None) -> list[Camera]:
     """Read cameras from any supported file, chosen by name.
 
-    ``*.json`` -> `read_cameras`; ``*.qca.txt`` / ``*.qca`` -> `read_qualisys`;
-    ``*.yml`` / ``*.yaml`` / ``*.xml`` -> one camera from `read_opencv_calibration`.
+    ``*.json`` -> `read_cameras`; ``*.toml`` -> `mocapkit.io.calib_toml.read_calib_toml`
+    (Pose2Sim, anipose, FreeMoCap; ``unit`` is its translations' unit, ``"m"`` or
+    ``"mm"``, read from their size when None); ``*.qca.txt`` / ``*.qca`` ->
+    `read_qualisys`; ``*.yml`` / ``*.yaml`` / ``*.xml`` -> one camera from
+    `read_opencv_calibration`, named by the file's stem.
     """
     p = Path(path)
+    if p.is_dir():
+        raise FormatError(f"{p}: expected a calibration file, found a folder")
     low = p.name.lower()
+    if not low.endswith((".toml", ".json", ".qca.txt", ".qca", ".yml", ".yaml", ".xml")):
+        raise FormatError(
+            f"{p}: unknown camera file type; expected .json, .toml, .qca.txt, .yml, .yaml or .xml"
+        )
+    if not p.exists():
+        raise FormatError(f"{p}: calibration file not found")
+    if low.endswith(".toml"):
+        from mocapkit.io.calib_toml import read_calib_toml
+
+        return read_calib_toml(p, unit)
+    if unit is not None:
+        raise FormatError(
+            f"{p}: a translation unit ({unit!r}) is only read for Calib.toml files; this "
+            "format states its own"
+        )
     if low.endswith(".json"):
         return read_cameras(p)
     if low.endswith((".qca.txt", ".qca")):
         return read_qualisys(p)
-    if low.endswith((".yml", ".yaml", ".xml")):
-        return [read_opencv_calibration(p)]
-    raise FormatError(
-        f"{p}: unknown camera file type; expected .json, .qca.txt, .yml, .yaml or .xml"
-    )
+    return [read_opencv_calibration(p)]  # .yml, .yaml, .xml
