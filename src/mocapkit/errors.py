@@ -56,5 +56,13 @@ def unknown_name(kind: str, name: str, valid: Iterable[str], where: str = "") ->
     return UnknownNameError(f"unknown {kind} {name!r}{origin}; expected one of: {shown}")
 
 
+class InputWarning(UserWarning):
+    """Input taken with a change the user must know of (dropped samples, a padded size).
+
+    The CLI prints it as ``mocapkit COMMAND: warning: ...``; the message names the file,
+    what was found and what was done with it.
+    """
+
+
 class ConfigError(MocapError, ValueError):
     """A setting is out of range, or two settings or options conflict."""

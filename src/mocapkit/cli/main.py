@@ -45,6 +45,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run the command line; returns the process exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
+    _show_input_warnings(args.command)
     try:
         return int(args.func(args) or 0)
     except MocapError as exc:
@@ -58,6 +59,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"mocapkit {args.command}: interrupted", file=sys.stderr)
         return 130
+
+
+def _show_input_warnings(command: str) -> None:
+    """Print `InputWarning`s as ``mocapkit COMMAND: warning: ...`` (no source line)."""
+    import warnings
+
+    from mocapkit.errors import InputWarning
+
+    shown = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        if issubclass(category, InputWarning):
+            print(f"mocapkit {command}: warning: {message}", file=sys.stderr)
+        else:
+            shown(message, category, filename, lineno, file, line)
+
+    warnings.showwarning = show
 
 
 def _os_error_text(exc: OSError) -> str:

@@ -42,7 +42,7 @@ from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import FormatError
 from mocapkit.geometry.transforms import make_transform
 from mocapkit.io.atomic import atomic_write
-from mocapkit.io.cameras import camera_from_entry, check_unique_names, number_array
+from mocapkit.io.camera_checks import camera_from_entry, check_unique_names, number_array
 from mocapkit.io.files import read_text
 
 FloatArray = NDArray[np.float64]

@@ -29,108 +29,21 @@ from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import FormatError
 from mocapkit.geometry.transforms import make_transform
 from mocapkit.io.atomic import atomic_write
+from mocapkit.io.calib_toml import read_calib_toml
+from mocapkit.io.camera_checks import (
+    DIST_LENGTHS,
+    camera_from_entry,
+    check_rotation,
+    check_unique_names,
+    number_array,
+)
 from mocapkit.io.files import read_text
 
 FORMAT_VERSION = 1
-_KEYS = ("name", "image_size", "K", "dist", "camera_from_world")
-_DIST_LENGTHS = (0, 4, 5, 8, 12, 14)
-_ROTATION_TOL = 1e-6
-#: Largest |k1|, |k2| accepted: real lenses, fisheye-like wide angles included, stay
-#: within a few units under OpenCV's model (larger values fold the image on itself).
-MAX_RADIAL_DISTORTION = 10.0
-
 PathLike = str | os.PathLike[str]
 
 
 # ----------------------------------------------------------------------------- cameras.json
-
-
-def _numbers_only(value: Any) -> bool:
-    """Whether a nested list holds JSON numbers only (no strings, booleans or nulls)."""
-    if isinstance(value, np.ndarray):  # from cv2.FileStorage
-        return value.dtype.kind in "iuf"
-    if isinstance(value, list | tuple):
-        return all(_numbers_only(v) for v in value)
-    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
-
-
-def number_array(value: Any, shape: tuple[int, ...], where: str) -> NDArray[np.float64]:
-    """``value`` as a finite float array of ``shape``; `FormatError` naming ``where``."""
-    if not _numbers_only(value):
-        # numpy would turn "532" into 532.0: a string is a mistake to name, not a number
-        raise FormatError(f"{where}: expected a {shape} array of numbers, found {value!r}")
-    try:
-        arr = np.array(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        raise FormatError(f"{where}: expected a {shape} array of numbers, found {value!r}") from exc
-    if arr.shape != shape:
-        raise FormatError(f"{where}: expected shape {shape}, found {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise FormatError(f"{where}: expected finite numbers, found NaN or infinity")
-    return arr
-
-
-def _check_rotation(rot: NDArray[np.float64], where: str, tol: float = _ROTATION_TOL) -> None:
-    err = float(np.max(np.abs(rot @ rot.T - np.eye(3))))
-    det = float(np.linalg.det(rot))
-    if err > tol or det < 0:
-        raise FormatError(
-            f"{where}: expected a proper rotation (R R^T = I within {tol:g}, det +1), "
-            f"found max |R R^T - I| = {err:.3g}, det = {det:.6g}"
-        )
-
-
-def camera_from_entry(entry: Any, where: str) -> Camera:
-    """One camera from a ``cameras.json`` entry, every check applied (``where`` names it)."""
-    if not isinstance(entry, dict):
-        raise FormatError(f"{where}: expected an object, found {type(entry).__name__}")
-    missing = [k for k in _KEYS if k not in entry]
-    if missing:
-        raise FormatError(f"{where}: missing key(s) {', '.join(missing)}; expected {list(_KEYS)}")
-    extra = sorted(set(entry) - set(_KEYS))
-    if extra:
-        raise FormatError(f"{where}: unknown key(s) {', '.join(extra)}; expected {list(_KEYS)}")
-    name = entry["name"]
-    if not isinstance(name, str) or not name:
-        raise FormatError(f"{where}.name: expected a non-empty string, found {name!r}")
-    where = f"{where} ({name!r})"
-    size = entry["image_size"]
-    if (
-        not isinstance(size, list)
-        or len(size) != 2
-        or not all(isinstance(v, int) and not isinstance(v, bool) and v > 0 for v in size)
-    ):
-        raise FormatError(
-            f"{where}.image_size: expected [width, height] positive integers, found {size!r}"
-        )
-    k = number_array(entry["K"], (3, 3), f"{where}.K")
-    if not np.allclose(k[2], [0.0, 0.0, 1.0]) or k[0, 0] <= 0 or k[1, 1] <= 0 or k[1, 0] != 0:
-        raise FormatError(
-            f"{where}.K: expected [[fx, s, cx], [0, fy, cy], [0, 0, 1]] with fx, fy > 0, "
-            f"found {k.tolist()}"
-        )
-    dist_raw = entry["dist"]
-    if not isinstance(dist_raw, list):
-        raise FormatError(f"{where}.dist: expected a list of numbers, found {dist_raw!r}")
-    dist = number_array(dist_raw, (len(dist_raw),), f"{where}.dist")
-    if dist.shape[0] not in _DIST_LENGTHS:
-        raise FormatError(
-            f"{where}.dist: expected {', '.join(map(str, _DIST_LENGTHS))} OpenCV coefficients, "
-            f"found {dist.shape[0]}"
-        )
-    for i in (0, 1):  # k1, k2
-        if dist.shape[0] > i and abs(dist[i]) > MAX_RADIAL_DISTORTION:
-            raise FormatError(
-                f"{where}.dist[{i}] (k{i + 1}): expected a radial coefficient within "
-                f"+-{MAX_RADIAL_DISTORTION:g}, found {dist[i]:g}"
-            )
-    m = number_array(entry["camera_from_world"], (4, 4), f"{where}.camera_from_world")
-    if not np.allclose(m[3], [0.0, 0.0, 0.0, 1.0]):
-        raise FormatError(
-            f"{where}.camera_from_world: expected last row [0, 0, 0, 1], found {m[3].tolist()}"
-        )
-    _check_rotation(m[:3, :3], f"{where}.camera_from_world rotation part")
-    return Camera(name, (size[0], size[1]), k, dist, m)
 
 
 def cameras_from_document(doc: Any, source: str) -> list[Camera]:
@@ -168,16 +81,6 @@ def cameras_from_document(doc: Any, source: str) -> list[Camera]:
     cameras = [camera_from_entry(e, f"{source}: cameras[{i}]") for i, e in enumerate(entries)]
     check_unique_names([c.name for c in cameras], source)
     return cameras
-
-
-def check_unique_names(names: Sequence[str], source: str) -> None:
-    """Raise `FormatError` naming ``source`` when two cameras share a name."""
-    seen: set[str] = set()
-    dups = sorted({n for n in names if n in seen or seen.add(n)})  # type: ignore[func-returns-value]
-    if dups:
-        raise FormatError(
-            f"{source}: duplicate camera name(s) {', '.join(map(repr, dups))}; names must be unique"
-        )
 
 
 def read_cameras(path: PathLike) -> list[Camera]:
@@ -297,10 +200,10 @@ def read_opencv_calibration(
         k = number_array(found_k[1], (3, 3), f"{p}: {found_k[0]}")
         found_d = node_mat(_DIST_KEYS)
         dist = np.zeros(0) if found_d is None else np.ravel(found_d[1])
-        if dist.shape[0] not in _DIST_LENGTHS:
+        if dist.shape[0] not in DIST_LENGTHS:
             raise FormatError(
                 f"{p}: {found_d[0] if found_d else 'distortion'}: expected "
-                f"{', '.join(map(str, _DIST_LENGTHS))} coefficients, found {dist.shape[0]}"
+                f"{', '.join(map(str, DIST_LENGTHS))} coefficients, found {dist.shape[0]}"
             )
         w_node, h_node = fs.getNode("image_width"), fs.getNode("image_height")
         size_node = fs.getNode("image_size")
@@ -331,7 +234,7 @@ def read_opencv_calibration(
             if r_raw.size == 3:
                 r_raw = np.asarray(cv2.Rodrigues(r_raw.reshape(3, 1))[0], dtype=float)
             r = number_array(r_raw, (3, 3), f"{p}: R")
-            _check_rotation(r, f"{p}: R", tol=1e-5)
+            check_rotation(r, f"{p}: R", tol=1e-5)
             t = number_array(np.ravel(t_found[1]), (3,), f"{p}: T") * translation_mm_per_unit
             m = make_transform(r, t)
     finally:
@@ -462,7 +365,7 @@ def read_qualisys(path: PathLike, binning_factor: int = 1) -> list[Camera]:
         r_qtm = np.array(
             [[_attr_float(tr, f"r{a}{b}", f"{where} <transform>") for b in "123"] for a in "123"]
         )
-        _check_rotation(r_qtm, f"{where} <transform> r11..r33", tol=1e-5)
+        check_rotation(r_qtm, f"{where} <transform> r11..r33", tol=1e-5)
         centre_mm = np.array([_attr_float(tr, k, f"{where} <transform>") for k in "xyz"])
         intr = _child(cam, "intrinsic", where)
         factor = _subpixel_factor(cam, intr, where)
@@ -530,8 +433,6 @@ def load_cameras(path: PathLike, unit: str | None = None) -> list[Camera]:
     if not p.exists():
         raise FormatError(f"{p}: calibration file not found")
     if low.endswith(".toml"):
-        from mocapkit.io.calib_toml import read_calib_toml
-
         return read_calib_toml(p, unit)
     if unit is not None:
         raise FormatError(

@@ -121,6 +121,24 @@ def probe_video(path: Path, camera: str) -> tuple[int, float]:
     return n, fps
 
 
+def frame_size(path: Path, camera: str) -> tuple[int, int]:
+    """``(width, height)`` in px of a video file or of an image folder's first image."""
+    if path.is_dir():
+        probe_video(path, camera)  # refuses a folder without images
+        h, w = read_image(image_files(path)[0]).shape[:2]
+        return int(w), int(h)
+    cap = cv2.VideoCapture(str(path))
+    try:
+        if not cap.isOpened():
+            raise SessionError(f"{path}: cannot open video of camera {camera!r}")
+        w, h = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+    finally:
+        cap.release()
+    if w <= 0 or h <= 0:
+        raise SessionError(f"{path}: video of camera {camera!r} has no frame size")
+    return w, h
+
+
 class FrameStream:
     """Sequential frame access: `advance_to` grabs the next frame, `retrieve` decodes it."""
 
@@ -180,6 +198,7 @@ __all__ = [
     "FrameStream",
     "LazyFrame",
     "VideoSource",
+    "frame_size",
     "image_files",
     "probe_video",
     "read_image",
