@@ -120,7 +120,7 @@ def test_bad_files_are_refused(tmp_path: Path) -> None:
         read_openpose_folder(empty, np.zeros(1))
     one = tmp_path / "one"
     one.mkdir()
-    write_openpose_frame(one / "x.json", [])
+    write_openpose_frame(one / "x_0.json", [])
     with pytest.raises(SessionError, match="one JSON file per video frame"):
         read_openpose_folder(one, np.zeros(3))
 

@@ -7,7 +7,8 @@ frame::
                                  "pose_keypoints_2d": [x0, y0, c0, x1, y1, c1, ...]}, ...]}
 
 with 25 (BODY_25) or 18 (COCO-18) keypoints per person, pixel positions and a confidence
-in [0, 1]. Files are taken in name order (OpenPose pads the frame number with zeros).
+in [0, 1]. Files are taken in the order of the frame number in their names
+(`mocapkit.io.frame_files`: ``frame_2`` before ``frame_10``; gaps and repeats refused).
 A point whose confidence is below ``min_confidence`` (or written as 0, 0, 0) is missing.
 
 Mapping onto canonical joints (`CANONICAL_JOINTS`):
@@ -68,6 +69,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import ConfigError, FormatError, SessionError, ShapeError
 from mocapkit.io.files import read_text
+from mocapkit.io.frame_files import in_frame_order
 from mocapkit.io.session_csv import Keypoints
 
 FloatArray = NDArray[np.float64]
@@ -130,14 +132,19 @@ MAPPED_JOINTS: tuple[str, ...] = (
 
 
 def openpose_files(folder: str | os.PathLike[str]) -> list[Path]:
-    """The JSON files of a keypoint folder, in name (= frame) order."""
+    """The JSON files of a keypoint folder in frame order: by the number in their names,
+    without gaps or repeats (`mocapkit.io.frame_files`)."""
     p = Path(folder)
     if not p.is_dir():
-        raise SessionError(f"{p}: OpenPose keypoint folder not found")
-    files = sorted(f for f in p.iterdir() if f.suffix.lower() == ".json")
+        raise SessionError(
+            f"{p}: expected an OpenPose keypoint folder, found a file"
+            if p.exists()
+            else f"{p}: OpenPose keypoint folder not found"
+        )
+    files = [f for f in p.iterdir() if f.suffix.lower() == ".json"]
     if not files:
         raise SessionError(f"{p}: expected OpenPose JSON files (one per frame), found none")
-    return files
+    return in_frame_order(files, p, "OpenPose JSON files")
 
 
 def read_openpose_frame(path: str | os.PathLike[str]) -> tuple[str, FloatArray]:

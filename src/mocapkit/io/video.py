@@ -1,4 +1,4 @@
-"""Video frames of one camera: an mp4 read through OpenCV or a folder of images, read in order.
+"""Video frames of one camera: an mp4 read through OpenCV or a folder of images in frame order.
 
 `VideoSource` gives random access by index; `VideoSource.open` gives a sequential
 `FrameStream` (cheap ``grab``, decode on demand) whose frames are handed out as
@@ -14,6 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.errors import SessionError
+from mocapkit.io.frame_files import in_frame_order
 
 FloatArray = NDArray[np.float64]
 #: File extensions of the images in an image-folder video (lower case).
@@ -74,8 +75,10 @@ def read_image(path: Path) -> NDArray[np.uint8]:
 
 
 def image_files(folder: Path) -> list[Path]:
-    """The images of an image-folder video (`IMAGE_EXTENSIONS`), sorted by name."""
-    return sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_EXTENSIONS)
+    """The images of an image-folder video (`IMAGE_EXTENSIONS`) in frame order: by the
+    number in their names, without gaps or repeats (`mocapkit.io.frame_files`)."""
+    images = [p for p in folder.iterdir() if p.suffix.lower() in IMAGE_EXTENSIONS]
+    return in_frame_order(images, folder, "images")
 
 
 def probe_video(path: Path, camera: str) -> tuple[int, float]:
