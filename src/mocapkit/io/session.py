@@ -54,6 +54,12 @@ from mocapkit.errors import FormatError, SessionError
 from mocapkit.io.atomic import atomic_write
 from mocapkit.io.cameras import read_cameras
 from mocapkit.io.files import read_text
+from mocapkit.io.keypoint_checks import (
+    check_keypoint_clock,
+    drop_outside_image,
+    keypoints_at,
+    max_age_s,
+)
 from mocapkit.io.marker_files import read_markers
 from mocapkit.io.marker_sets import MarkerSet, evaluate_marker_sets
 from mocapkit.io.markers import MarkerData, check_plausible_markers
@@ -94,7 +100,9 @@ class SessionSample:
     marker_sets_mm : mapping of str to (3,) float array
         Marker-set centres of that sample (NaN when unseen).
     keypoints_px : mapping of str to (K, 2) float array
-        Per camera, the keypoints row at this frame (when the session has keypoints).
+        Per camera with keypoints, the row observed at this frame: the nearest in time,
+        or NaN when it is more than one sampling interval away (an old sample is no
+        observation, `mocapkit.io.keypoint_checks`).
     """
 
     index: int
@@ -336,6 +344,19 @@ class Session:
         tpath = self.path / "truth.npz"
         self.truth: Truth | None = load_truth(tpath) if tpath.is_file() else None
         self._check_lengths()
+        for cam, kp in self.keypoints.items():
+            self.keypoints[cam] = self.checked_keypoints(cam, kp, kp.source)
+
+    def checked_keypoints(self, camera: str, kp: Keypoints, where: str) -> Keypoints:
+        """``kp`` of ``camera`` after the load-time keypoint rules
+        (`mocapkit.io.keypoint_checks`): points far outside the image dropped (with a
+        warning), a clock that never overlaps the camera's video (else the first video)
+        refused."""
+        checked = drop_outside_image(kp, self.camera(camera).image_size, where)
+        video = self._videos.get(camera) or next(iter(self._videos.values()), None)
+        if video is not None and kp.time_s.shape[0]:
+            check_keypoint_clock(kp, video.time_s, f"{where} (video of camera {video.camera!r})")
+        return checked
 
     def _check_lengths(self) -> None:
         """Refuse streams that cannot belong to one recording.
@@ -533,6 +554,14 @@ class Session:
         m = self.markers
         mt = m.time_s if m is not None else np.zeros(0)
         set_pos = self.marker_set_positions() if (m is not None and self.marker_sets) else None
+        # the keypoints' age rule (`mocapkit.io.keypoint_checks`): a row further than one
+        # sampling interval from the frame is no observation of it
+        kp_streams = {
+            c: self.keypoints[c]
+            for c in cams
+            if c in self.keypoints and self.keypoints[c].time_s.shape[0]
+        }
+        kp_ages = {c: max_age_s(k.time_s, self._videos[c].time_s) for c, k in kp_streams.items()}
         try:
             for i, t in enumerate(primary.time_s.tolist()):
                 frames: dict[str, LazyFrame] = {}
@@ -542,11 +571,8 @@ class Session:
                     st.advance_to(j)
                     frames[src.camera] = LazyFrame(st, j, float(src.time_s[j]))
                 kp = {}
-                for c in cams:
-                    k = self.keypoints.get(c)
-                    if k is not None and k.time_s.shape[0]:
-                        r = int(np.argmin(np.abs(k.time_s - t)))
-                        kp[c] = k.pixels[r]
+                for c, k in kp_streams.items():
+                    kp[c] = keypoints_at(k, t, kp_ages[c])
                 mi = int(np.searchsorted(mt, t, side="right")) - 1
                 if m is not None and mi >= 0:
                     sets = (

@@ -175,8 +175,8 @@ def load_keypoints(
                 f"{session.path}: no frame times for camera {camera!r} (no video, no keypoints "
                 "CSV) to stamp the OpenPose frames with"
             )
-        return read_openpose_folder(p, times)
-    return read_keypoints_csv(p)
+        return session.checked_keypoints(camera, read_openpose_folder(p, times), str(p))
+    return session.checked_keypoints(camera, read_keypoints_csv(p), str(p))
 
 
 def detector_config(config: MonoConfig) -> MonoConfig:
