@@ -37,7 +37,7 @@ from mocapkit.io.camera_checks import (
     check_unique_names,
     number_array,
 )
-from mocapkit.io.files import read_text
+from mocapkit.io.files import read_text, require_file
 
 FORMAT_VERSION = 1
 PathLike = str | os.PathLike[str]
@@ -169,9 +169,7 @@ def read_opencv_calibration(
     """
     import cv2
 
-    p = Path(path)
-    if not p.is_file():
-        raise FormatError(f"{p}: OpenCV calibration file not found")
+    p = require_file(path, "OpenCV calibration file")
     try:
         fs = cv2.FileStorage(str(p), cv2.FILE_STORAGE_READ)
     except cv2.error as exc:
@@ -339,10 +337,9 @@ def read_qualisys(path: PathLike, binning_factor: int = 1) -> list[Camera]:
         raise FormatError(
             f"{p}: binning_factor: expected a positive integer, found {binning_factor}"
         )
+    require_file(p, "Qualisys calibration file")
     try:
         root = ET.parse(p).getroot()
-    except FileNotFoundError as exc:
-        raise FormatError(f"{p}: Qualisys calibration file not found") from exc
     except ET.ParseError as exc:
         raise FormatError(f"{p}: not valid XML ({exc})") from exc
     if root.tag != "calibration":

@@ -168,16 +168,26 @@ def read_openpose_frame(path: str | os.PathLike[str]) -> tuple[str, FloatArray]:
     layout = ""
     for i, person in enumerate(doc["people"]):
         flat = person.get("pose_keypoints_2d") if isinstance(person, dict) else None
-        if not isinstance(flat, list) or not all(isinstance(v, int | float) for v in flat):
-            raise FormatError(
-                f"{p}: people[{i}].pose_keypoints_2d: expected a list of numbers, found "
-                f"{type(flat).__name__}"
-            )
+        where = f"{p}: people[{i}].pose_keypoints_2d"
+        if not isinstance(flat, list):
+            raise FormatError(f"{where}: expected a list of numbers, found {type(flat).__name__}")
+        for k, v in enumerate(flat):
+            if isinstance(v, bool) or not isinstance(v, int | float):
+                raise FormatError(
+                    f"{where}[{k}]: expected a number, found {v!r} ({type(v).__name__})"
+                )
         n = len(flat) // 3
         if len(flat) % 3 or n not in LAYOUTS:
             raise FormatError(
-                f"{p}: people[{i}].pose_keypoints_2d: expected 75 (BODY_25) or 54 (COCO-18) "
-                f"numbers, found {len(flat)}"
+                f"{where}: expected 75 (BODY_25) or 54 (COCO-18) numbers, found {len(flat)}"
+            )
+        conf = flat[2::3]
+        bad = [k for k, c in enumerate(conf) if not 0.0 <= c <= 1.0]
+        if bad:
+            k = bad[0]
+            raise FormatError(
+                f"{where}: keypoint {k} ({LAYOUTS[n][1][k]}) confidence: expected a number in "
+                f"[0, 1], found {conf[k]!r} ({len(bad)} such keypoints in this person)"
             )
         name = LAYOUTS[n][0]
         if layout and name != layout:
@@ -450,6 +460,17 @@ def read_openpose_folder(
             else np.zeros((0, len(MAPPED_JOINTS), 2))
         )
     px = follow_person(frames, max_jump=max_jump, start_px=start_px)
+    if not np.isfinite(px).any():
+        people = sum(f.shape[0] for f in frames)
+        raise SessionError(
+            f"{folder}: expected a person's keypoints, found "
+            + (
+                f"nobody detected in any of its {len(files)} OpenPose files"
+                if people == 0
+                else f"no confident keypoints (confidence >= {min_confidence:g}) in any of its "
+                f"{len(files)} OpenPose files"
+            )
+        )
     if fractions is None:
         fractions = trunk_fractions(px, MAPPED_JOINTS)
     px = place_trunk_joints(px, MAPPED_JOINTS, fractions)

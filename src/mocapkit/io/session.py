@@ -147,7 +147,15 @@ class Session:
     def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
         if not self.path.is_dir():
-            raise SessionError(f"{self.path}: session folder not found")
+            raise SessionError(
+                f"{self.path}: expected a session folder, found a file"
+                if self.path.exists()
+                else f"{self.path}: session folder not found"
+            )
+        for name in ("session.json", "cameras.json", "truth.npz", *MARKER_FILES):
+            _refuse_non_file(self.path / name)
+        for name in ("video", "keypoints"):
+            _refuse_non_folder(self.path / name)
         info_path = self.path / "session.json"
         if not info_path.is_file():
             raise SessionError(
@@ -255,6 +263,7 @@ class Session:
                 f"{info_path}: field 'cameras': expected a file name, found {cam_file!r}"
             )
         cam_path = self.path / cam_file
+        _refuse_non_file(cam_path)
         self.cameras: list[Camera] = read_cameras(cam_path) if cam_path.is_file() else []
         if not cam_path.is_file() and "cameras" in info:
             raise SessionError(
@@ -597,6 +606,20 @@ class Session:
         finally:
             for st in streams:
                 st.close()
+
+
+def _refuse_non_file(path: Path) -> None:
+    """A session file that exists as a folder (or anything but a file) is named, not
+    taken as missing."""
+    if path.exists() and not path.is_file():
+        what = "a folder" if path.is_dir() else "something that is not a regular file"
+        raise SessionError(f"{path}: expected a file, found {what}")
+
+
+def _refuse_non_folder(path: Path) -> None:
+    """A session folder (``video/``, ``keypoints/``) that exists as a file is named."""
+    if path.exists() and not path.is_dir():
+        raise SessionError(f"{path}: expected a folder, found a file")
 
 
 def load_session(path: str | os.PathLike[str]) -> Session:
