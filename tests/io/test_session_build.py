@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
 import cv2
@@ -16,7 +15,8 @@ from mocapkit.io.calib_toml import write_calib_toml
 from mocapkit.io.cameras import read_cameras
 from mocapkit.io.openpose import write_openpose_frame
 from mocapkit.io.session import load_session
-from mocapkit.io.session_build import build_session, match_image_size
+from mocapkit.io.session_build import build_session
+from mocapkit.io.video import padding_px
 
 DEMO = Path("video/pose2sim_demo_singleperson")
 
@@ -24,7 +24,7 @@ DEMO = Path("video/pose2sim_demo_singleperson")
 def _video(path: Path, n: int, size: tuple[int, int] = (64, 48), fps: float = 30.0) -> Path:
     w = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"MJPG"), fps, size)
     for i in range(n):
-        w.write(np.full((size[1], size[0], 3), 10 * i % 255, np.uint8))
+        w.write(np.full((size[1], size[0], 3), 50 + 10 * i, np.uint8))
     w.release()
     return path
 
@@ -113,29 +113,52 @@ def test_refuses_missing_keypoint_folder(tmp_path: Path) -> None:
 
 
 def test_padding_rule() -> None:
-    cam = _camera("c", (1088, 1920))
-    with pytest.warns(InputWarning, match=r"last 8 columns and 0 rows cut off"):
-        assert match_image_size(cam, (1080, 1920), Path("c.mp4")).image_size == (1080, 1920)
-    assert match_image_size(cam, (1088, 1920), Path("c.mp4")) is cam
+    assert padding_px((1080, 1920), (1088, 1920), "c.mp4", "c") == (8, 0)
+    assert padding_px((1088, 1920), (1088, 1920), "c.mp4", "c") == (0, 0)
+    assert padding_px((1920, 1080), (1920, 1088), "c.mp4", "c") == (0, 8)
+    assert padding_px((160, 120), (160, 120), "c.mp4", "c") == (0, 0)
     for size in ((544, 960), (1920, 1088), (1070, 1920)):  # scaled, rotated, cropped
         with pytest.raises(SessionError, match=r"expected the same size \(or the calibration's"):
-            match_image_size(cam, size, Path("c.mp4"))
+            padding_px(size, (1088, 1920), "c.mp4", "c")
+
+
+def test_padded_video_is_read_at_the_calibrated_size(tmp_path: Path) -> None:
+    vids = [_video(tmp_path / "cam1.avi", 5, size=(60, 48)), _video(tmp_path / "cam2.avi", 5)]
+    cal = tmp_path / "Calib.toml"
+    write_calib_toml(cal, [_camera("cam1"), _camera("cam2")])  # both 64x48
+    with pytest.warns(InputWarning, match=r"cam1\.avi: the video is 4 columns and 0 rows smaller"):
+        build_session(vids, [cal], tmp_path / "s")
+    with pytest.warns(InputWarning, match=r"cam1\.avi: the video's frames are 4 columns"):
+        s = load_session(tmp_path / "s")
+    assert s.camera("cam1").image_size == (64, 48)
+    for smp in s.samples():
+        img = smp.image("cam1")
+        assert img.shape == (48, 64, 3) and img[:, 60:].max() == 0 and img[:, :60].max() > 0
+        assert smp.image("cam2").shape == (48, 64, 3)
+    assert s.video("cam1").read(4).shape == (48, 64, 3)
+    with pytest.raises(SessionError, match=r"cam2\.avi: the video is 32x24 px, the calibration"):
+        _video(tmp_path / "s" / "video" / "cam2.avi", 5, size=(32, 24))
+        load_session(tmp_path / "s")
 
 
 def test_pose2sim_demo(shared_data: Path, tmp_path: Path) -> None:
     """The real demo: 1080 px videos against a 1088 px Qualisys calibration."""
     data = shared_data / DEMO
     vids = sorted((data / "videos").glob("cam0*.mp4"))
-    with pytest.warns(InputWarning, match=r"cam0[12]\.mp4: the video is 1080x1920 px") as rec:
+    with pytest.warns(InputWarning, match=r"cam0[12]\.mp4: the video is 8 columns") as rec:
         build_session(vids, [data / "calibration" / "Calib.qca.txt"], tmp_path / "s")
     assert len([w for w in rec if issubclass(w.category, InputWarning)]) == 2  # cam01, cam02
-    s = load_session(tmp_path / "s")
-    assert [c.image_size for c in s.cameras] == [(1080, 1920)] * 2 + [(1088, 1920)] * 2
+    with pytest.warns(InputWarning, match=r"cam0[12]\.mp4: the video's frames are 8 columns"):
+        s = load_session(tmp_path / "s")
+    assert [c.image_size for c in s.cameras] == [(1088, 1920)] * 4
     assert s.video("cam03").n_frames == 100 and s.rates["video_hz"] == 60.0
-    cams = [dataclasses.replace(c, image_size=(1088, 1920)) for c in s.cameras]
-    write_calib_toml(tmp_path / "Calib.toml", cams)  # the same rig again, from a Calib.toml
+    stream = s.samples()
+    smp = next(stream)
+    assert {smp.image(c).shape for c in s.video_cameras} == {(1920, 1088, 3)}
+    stream.close()
+    write_calib_toml(tmp_path / "Calib.toml", s.cameras)  # the same rig again, from a Calib.toml
     with pytest.warns(InputWarning):
         build_session(vids, [tmp_path / "Calib.toml"], tmp_path / "s2")
-    np.testing.assert_allclose(
-        load_session(tmp_path / "s2").camera("cam04").K, s.camera("cam04").K, atol=1e-9
-    )
+    with pytest.warns(InputWarning):
+        k4 = load_session(tmp_path / "s2").camera("cam04").K
+    np.testing.assert_allclose(k4, s.camera("cam04").K, atol=1e-9)

@@ -6,7 +6,8 @@ import argparse
 
 from mocapkit.cli.args import number, output_folder
 from mocapkit.io.calib_toml import UNITS_MM
-from mocapkit.io.session_build import PAD_MULTIPLE_PX, build_session
+from mocapkit.io.session_build import build_session
+from mocapkit.io.video import PAD_MULTIPLE_PX
 
 _EPILOG = f"""\
 Each video's file name names its camera (cam01.mp4 is camera cam01), which must be in the
@@ -15,8 +16,8 @@ Pose2Sim/anipose/FreeMoCap Calib.toml, Qualisys .qca.txt, OpenCV YAML/XML (one f
 camera, named by its stem; give --calibration once per file) and cameras.json.
 A video smaller than its calibration by an encoder's padding (the calibrated size is the
 video's rounded up to a multiple of {PAD_MULTIPLE_PX} px, e.g. 1080 -> 1088) is taken with a
-warning; other size differences, different frame counts and different frame rates are
-refused before anything is written.
+warning, its frames padded back in black on the right and bottom; other size differences,
+different frame counts and different frame rates are refused before anything is written.
 --keypoints DIR holds one OpenPose JSON folder per camera, named <camera> or
 <camera>_json (as Pose2Sim's pose/ folder), one file per video frame.
 """

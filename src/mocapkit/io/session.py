@@ -41,6 +41,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import warnings
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -50,7 +51,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
-from mocapkit.errors import FormatError, SessionError
+from mocapkit.errors import FormatError, InputWarning, SessionError
 from mocapkit.io.atomic import atomic_write
 from mocapkit.io.cameras import read_cameras
 from mocapkit.io.files import read_text
@@ -65,7 +66,7 @@ from mocapkit.io.marker_sets import MarkerSet, evaluate_marker_sets
 from mocapkit.io.markers import MarkerData, check_plausible_markers
 from mocapkit.io.session_csv import Keypoints, read_keypoints_csv, read_timestamps_csv
 from mocapkit.io.truth import Truth, load_truth
-from mocapkit.io.video import LazyFrame, VideoSource, probe_video
+from mocapkit.io.video import LazyFrame, VideoSource, frame_size, padding_px, probe_video
 from mocapkit.skeleton.model import CANONICAL_JOINTS, CANONICAL_SEGMENTS, TRUNK_SEGMENTS
 
 FloatArray = NDArray[np.float64]
@@ -424,7 +425,18 @@ class Session:
                     f"{entry}: no frame times: add {ts_path.name} or rates.video_hz to session.json"
                 )
             t = np.arange(n) / rate
-        return VideoSource(cam, entry, t)
+        cal_size = self.camera(cam).image_size
+        pad = padding_px(frame_size(entry, cam), cal_size, str(entry), cam)
+        if pad != (0, 0):
+            warnings.warn(
+                f"{entry}: the video's frames are {pad[0]} columns and {pad[1]} rows smaller "
+                f"than the calibrated image of camera {cam!r} ({cal_size[0]}x{cal_size[1]} px): "
+                "taken as that image cut on the right and bottom (encoder padding), padded "
+                "back in black",
+                InputWarning,
+                stacklevel=3,
+            )
+        return VideoSource(cam, entry, t, pad)
 
     # ------------------------------------------------------------------ queries
 

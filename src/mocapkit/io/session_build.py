@@ -11,13 +11,13 @@ check runs before anything is written:
   the name with case, ``_``, ``-``, ``.`` and the leading zeros of numbers ignored
   (``cam_01`` = ``cam01`` = ``Cam1``), when that is unique. Calibrated cameras without a
   video are left out, with a warning.
-- **Image size** (`match_image_size`). A video the size of the calibration's image is
-  taken as it is. A video smaller than the calibration's image by what an encoder pads
-  (the calibration's width and height are the video's rounded up to a multiple of
-  ``PAD_MULTIPLE_PX`` = 16, e.g. 1080 -> 1088) is that image with its last columns or rows
-  cut off: the principal point, counted from the top-left corner, stays, and the camera
-  takes the video's size (`InputWarning`). Any other difference (a scaled or cropped
-  video, portrait against landscape) is refused.
+- **Image size** (`mocapkit.io.video.padding_px`, the session loader's rule). A video the
+  size of the calibration's image is taken as it is. A video smaller than the
+  calibration's image by what an encoder pads (the calibration's width and height are the
+  video's rounded up to a multiple of 16, e.g. 1080 -> 1088) is that image with its last
+  columns or rows cut off: the camera keeps its calibration, the session pads the frames
+  back in black on the right and bottom when it reads them (`InputWarning`). Any other
+  difference (a scaled or cropped video, portrait against landscape) is refused.
 - **Frames.** Every video has the same frame count and frame rate (within
   ``RATE_TOLERANCE``); otherwise refused: the trackers pair frames by time, and videos of
   different lengths are not one synchronised recording.
@@ -46,13 +46,10 @@ from mocapkit.io.cameras import load_cameras, write_cameras
 from mocapkit.io.openpose import read_openpose_folder
 from mocapkit.io.session import Session, load_session, write_session_json
 from mocapkit.io.session_csv import write_keypoints_csv
-from mocapkit.io.video import frame_size, probe_video
+from mocapkit.io.video import frame_size, padding_px, probe_video
 
 PathLike = str | os.PathLike[str]
 
-#: Video encoders pad frames to whole 16 x 16 macroblocks; a calibration made on the
-#: padded frames is this much larger than the video that a player shows.
-PAD_MULTIPLE_PX = 16
 #: Largest relative difference between two videos' frame rates taken as the same rate.
 RATE_TOLERANCE = 1e-3
 
@@ -110,35 +107,6 @@ def match_cameras(
     used = {_name_key(n) for n in names} | set(names)
     unused = [c.name for c in cameras if c.name not in used and _name_key(c.name) not in used]
     return chosen, unused
-
-
-def match_image_size(camera: Camera, video_size: tuple[int, int], video: Path) -> Camera:
-    """The camera for a video of ``video_size`` px (module docstring: padding rule).
-
-    Raises `SessionError` for a size that is not the calibration's nor its padding.
-    """
-    cal = camera.image_size
-    if tuple(video_size) == tuple(cal):
-        return camera
-    padded = all(
-        v <= c and c == -(-v // PAD_MULTIPLE_PX) * PAD_MULTIPLE_PX for v, c in zip(video_size, cal)
-    )
-    if not padded:
-        raise SessionError(
-            f"{video}: the video is {video_size[0]}x{video_size[1]} px, the calibration of "
-            f"camera {camera.name!r} {cal[0]}x{cal[1]} px; expected the same size (or the "
-            f"calibration's as the video's rounded up to a multiple of {PAD_MULTIPLE_PX} px, "
-            "an encoder's padding); a scaled or cropped video needs its own calibration"
-        )
-    warnings.warn(
-        f"{video}: the video is {video_size[0]}x{video_size[1]} px, the calibration of camera "
-        f"{camera.name!r} {cal[0]}x{cal[1]} px: taken as the calibrated image with its last "
-        f"{cal[0] - video_size[0]} columns and {cal[1] - video_size[1]} rows cut off "
-        "(encoder padding; the principal point is kept)",
-        InputWarning,
-        stacklevel=2,
-    )
-    return dataclasses.replace(camera, image_size=(int(video_size[0]), int(video_size[1])))
 
 
 def keypoint_folder(folder: Path, camera: str) -> Path:
@@ -234,12 +202,16 @@ def build_session(
     if unused:
         notes.append(f"{source}: camera(s) {unused} have no video and are left out")
         warnings.warn(notes[-1], InputWarning, stacklevel=2)
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", InputWarning)
-        cams = [match_image_size(c, frame_size(p, c.name), p) for c, p in zip(cams, paths)]
-    for w in caught:
-        notes.append(str(w.message))
-        warnings.warn(str(w.message), InputWarning, stacklevel=2)
+    for cam, p in zip(cams, paths):
+        pad = padding_px(frame_size(p, cam.name), cam.image_size, str(p), cam.name)
+        if pad != (0, 0):
+            notes.append(
+                f"{p}: the video is {pad[0]} columns and {pad[1]} rows smaller than the "
+                f"calibrated image of camera {cam.name!r} ({cam.image_size[0]}x"
+                f"{cam.image_size[1]} px): taken as that image cut on the right and bottom "
+                "(encoder padding); the session pads its frames back in black"
+            )
+            warnings.warn(notes[-1], InputWarning, stacklevel=2)
     rate = _frames(paths, names, rate_hz)
     kp_dir = Path(keypoints) if keypoints is not None else None
     kp_folders: list[Path] = []
@@ -271,25 +243,31 @@ def build_session(
                 },
             },
         )
-        if kp_folders:
-            (tmp / "keypoints").mkdir()
-            first: Session = load_session(tmp)
-            for n, folder in zip(names, kp_folders):
-                kp = read_openpose_folder(folder, first.video(n).time_s)
-                write_keypoints_csv(
-                    tmp / "keypoints" / f"{n}.csv", kp.time_s, kp.joint_names, kp.pixels
-                )
-        session = load_session(tmp)  # every session check, before the swap
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", InputWarning)
+            if kp_folders:
+                (tmp / "keypoints").mkdir()
+                first: Session = load_session(tmp)
+                for n, folder in zip(names, kp_folders):
+                    kp = read_openpose_folder(folder, first.video(n).time_s)
+                    write_keypoints_csv(
+                        tmp / "keypoints" / f"{n}.csv", kp.time_s, kp.joint_names, kp.pixels
+                    )
+            session = load_session(tmp)  # every session check, before the swap
         n_frames = session.video(names[0]).n_frames
+    for w in caught:  # the keypoints' warnings (the padding is said above), as of ``out``
+        text = str(w.message).replace(str(tmp), str(target))
+        if issubclass(w.category, InputWarning) and "encoder padding" not in text:
+            if text not in notes:
+                notes.append(text)
+                warnings.warn(text, InputWarning, stacklevel=2)
     return BuiltSession(target, tuple(names), n_frames, rate, bool(kp_folders), tuple(notes))
 
 
 __all__ = [
-    "PAD_MULTIPLE_PX",
     "RATE_TOLERANCE",
     "BuiltSession",
     "build_session",
     "keypoint_folder",
     "match_cameras",
-    "match_image_size",
 ]

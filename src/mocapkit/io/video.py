@@ -33,12 +33,25 @@ class VideoSource:
         Frame times (from ``timestamps.csv`` or the nominal rate).
     """
 
-    def __init__(self, camera: str, path: Path, time_s: FloatArray) -> None:
+    def __init__(
+        self, camera: str, path: Path, time_s: FloatArray, pad_px: tuple[int, int] = (0, 0)
+    ) -> None:
         self.camera = camera
         self.path = path
         self.time_s = time_s
+        self.pad_px = pad_px
         self.is_folder = path.is_dir()
         self._files: list[Path] = image_files(path) if self.is_folder else []
+
+    def padded(self, image: NDArray[np.uint8]) -> NDArray[np.uint8]:
+        """``image`` with ``pad_px`` = (right, bottom) black columns and rows added."""
+        right, bottom = self.pad_px
+        if not (right or bottom):
+            return image
+        return np.asarray(
+            cv2.copyMakeBorder(image, 0, bottom, 0, right, cv2.BORDER_CONSTANT, value=0),
+            dtype=np.uint8,
+        )
 
     @property
     def n_frames(self) -> int:
@@ -50,7 +63,7 @@ class VideoSource:
         if not 0 <= index < self.n_frames:
             raise SessionError(f"{self.path}: frame {index} out of range [0, {self.n_frames})")
         if self.is_folder:
-            return read_image(self._files[index])
+            return self.padded(read_image(self._files[index]))
         cap = cv2.VideoCapture(str(self.path))
         try:
             cap.set(cv2.CAP_PROP_POS_FRAMES, index)
@@ -59,7 +72,7 @@ class VideoSource:
             cap.release()
         if not ok:
             raise SessionError(f"{self.path}: cannot decode frame {index}")
-        return np.asarray(img, dtype=np.uint8)
+        return self.padded(np.asarray(img, dtype=np.uint8))
 
     def open(self) -> FrameStream:
         """A sequential reader (cheap `grab`, decode on demand)."""
@@ -142,6 +155,38 @@ def frame_size(path: Path, camera: str) -> tuple[int, int]:
     return w, h
 
 
+#: Video encoders pad frames to whole 16 x 16 macroblocks; a calibration made on the
+#: padded frames is larger than the video that a player shows.
+PAD_MULTIPLE_PX = 16
+
+
+def padding_px(
+    video_size: tuple[int, int], image_size: tuple[int, int], where: str, camera: str
+) -> tuple[int, int]:
+    """The (right, bottom) px that turn a video's frames into its camera's calibrated image.
+
+    ``(0, 0)`` when the sizes are equal. When the calibration's width and height are the
+    video's rounded up to a multiple of `PAD_MULTIPLE_PX` (an encoder's padding: a 1080 px
+    wide video, a 1088 px calibration), the video is the calibrated image with its last
+    columns or rows cut off: the principal point, counted from the top-left corner, is
+    unchanged, and black columns and rows on the right and bottom give the frames back
+    the calibrated size. Any other difference (a scaled, cropped or rotated video) raises
+    `SessionError`.
+    """
+    padded = all(
+        v == c or (v < c and c == -(-v // PAD_MULTIPLE_PX) * PAD_MULTIPLE_PX)
+        for v, c in zip(video_size, image_size)
+    )
+    if not padded:
+        raise SessionError(
+            f"{where}: the video is {video_size[0]}x{video_size[1]} px, the calibration of "
+            f"camera {camera!r} {image_size[0]}x{image_size[1]} px; expected the same size (or "
+            f"the calibration's as the video's rounded up to a multiple of {PAD_MULTIPLE_PX} "
+            "px, an encoder's padding); a scaled or cropped video needs its own calibration"
+        )
+    return image_size[0] - video_size[0], image_size[1] - video_size[1]
+
+
 class FrameStream:
     """Sequential frame access: `advance_to` grabs the next frame, `retrieve` decodes it."""
 
@@ -174,6 +219,7 @@ class FrameStream:
             if not ok:
                 raise SessionError(f"{self.source.path}: cannot decode frame {index}")
             img = np.asarray(raw, dtype=np.uint8)
+        img = self.source.padded(img)
         self._cache = (index, img)
         return img
 
@@ -198,11 +244,13 @@ class LazyFrame:
 
 __all__ = [
     "IMAGE_EXTENSIONS",
+    "PAD_MULTIPLE_PX",
     "FrameStream",
     "LazyFrame",
     "VideoSource",
     "frame_size",
     "image_files",
+    "padding_px",
     "probe_video",
     "read_image",
 ]
