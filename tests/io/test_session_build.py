@@ -162,3 +162,25 @@ def test_pose2sim_demo(shared_data: Path, tmp_path: Path) -> None:
     with pytest.warns(InputWarning):
         k4 = load_session(tmp_path / "s2").camera("cam04").K
     np.testing.assert_allclose(k4, s.camera("cam04").K, atol=1e-9)
+
+
+def test_one_opencv_yaml_per_camera(tmp_path: Path) -> None:
+    """OpenCV calibrations come one file per camera, named by its stem."""
+    vids = [_video(tmp_path / "cam1.avi", 5), _video(tmp_path / "cam2.avi", 5)]
+    files = []
+    for cam in (_camera("cam1", x_mm=-500.0), _camera("cam2", x_mm=500.0)):
+        path = tmp_path / f"{cam.name}.yml"
+        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+        fs.write("image_width", cam.image_size[0])
+        fs.write("image_height", cam.image_size[1])
+        fs.write("camera_matrix", cam.K)
+        fs.write("distortion_coefficients", np.zeros((5, 1)))
+        fs.write("R", cam.camera_from_world[:3, :3])
+        fs.write("T", cam.camera_from_world[:3, 3].reshape(3, 1))
+        fs.release()
+        files.append(path)
+    build_session(vids, files, tmp_path / "s")
+    s = load_session(tmp_path / "s")
+    np.testing.assert_allclose(
+        s.camera("cam2").camera_from_world, _camera("cam2", x_mm=500.0).camera_from_world
+    )
