@@ -19,6 +19,7 @@ from mocapkit.errors import ConfigError, SessionError, UnknownNameError
 from mocapkit.pipelines import registry
 from mocapkit.pipelines.batch import (
     STUDY_COLUMNS,
+    STUDY_FILE,
     TAKE_FILE,
     Take,
     TakeJob,
@@ -376,3 +377,45 @@ def test_raw_marker_files_tracked_by_hybrid_ik(study, tmp_path, client):
         study, out, client=client, markers_glob="**/*.trc", marker_sets=sets[::-1], joints="all"
     )
     assert {r.take: r.status for r in again.rows} == {"raw/serve": "done", "s1/t1": "skipped"}
+
+
+# ---------------------------------------------------------------- bad input (issue 30)
+
+
+def test_batch_refuses_a_folder_it_did_not_write_before_any_work(study, tmp_path, capsys):
+    """`mocapkit batch STUDY --out DIR` deleted whatever DIR held (notes.txt, a thesis/
+    folder): a folder that is not a results folder is refused, its files kept."""
+    from mocapkit.cli.main import main
+
+    mine = tmp_path / "mine"
+    (mine / "thesis").mkdir(parents=True)
+    (mine / "notes.txt").write_text("keep me")
+    with pytest.raises(
+        ConfigError,
+        match=r"mine: mocapkit batch replaces its results folder "
+        r"whole, but this folder is not a results folder \(no study.csv; it "
+        r"holds notes.txt, thesis\)",
+    ):
+        batch(study, mine)
+    assert main(["batch", str(study), "--out", str(mine), "--in-process"]) == 2
+    assert "not a results folder" in capsys.readouterr().err
+    assert sorted(p.name for p in mine.rglob("*")) == ["notes.txt", "thesis"]
+    # a take's folder holding a user's files inside a results folder: refused too
+    results = tmp_path / "results"
+    (results / "s1" / "t1").mkdir(parents=True)
+    (results / STUDY_FILE).write_text("take\n")
+    (results / "s1" / "t1" / "notes.txt").write_text("keep me")
+    with pytest.raises(ConfigError, match=r"t1: mocapkit batch replaces its take result folder"):
+        batch(study, results)
+    assert (results / "s1" / "t1" / "notes.txt").read_text() == "keep me"
+
+
+def test_batch_out_inside_a_take_of_the_study_is_refused(study, tmp_path):
+    """`batch --out study/a` silently dropped that subfolder's take."""
+    for out in (study / "s1" / "t1", study / "s1" / "t1" / "results"):
+        with pytest.raises(ConfigError, match=r"lies inside .*t1, the take 's1/t1' of the study"):
+            batch(study, out)
+    assert not (study / "s1" / "t1" / "results").exists()
+    # a folder holding takes is not empty and holds no study.csv
+    with pytest.raises(ConfigError, match=r"s1: mocapkit batch replaces its results folder"):
+        batch(study, study / "s1")

@@ -36,7 +36,12 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from mocapkit.errors import ConfigError, SessionError
-from mocapkit.io.atomic import atomic_folder, atomic_write, remove_stale_temporaries
+from mocapkit.io.atomic import (
+    atomic_folder,
+    atomic_write,
+    check_own_folder,
+    remove_stale_temporaries,
+)
 from mocapkit.pipelines.registry import AUTO, choose_method, session_tracker
 from mocapkit.progress import Progress, silenced
 
@@ -501,6 +506,36 @@ def _dashboard(client: Any) -> str:
     return str(client.dashboard_link)
 
 
+def _check_results_folder(out: Path, study: Path) -> None:
+    """Refuse, before any work, a results folder that is, or lies inside, a session (of
+    the study: that take would be left out; elsewhere: a recording would be written
+    into) or that holds files `batch` did not write (it replaces take folders whole)."""
+    session = next((p for p in (out, *out.parents) if (p / "session.json").is_file()), None)
+    if session is not None:
+        what = (
+            f"the take {session.relative_to(study).as_posix() or study.name!r} of the study"
+            if session == study or study in session.parents
+            else "a session"
+        )
+        raise ConfigError(
+            f"batch: the results folder {out} is or lies inside {session}, {what}, which "
+            "would not be tracked or would be written into; give a results folder outside "
+            "every session"
+        )
+    check_own_folder(out, (STUDY_FILE,), "results folder", "mocapkit batch")
+
+
+def _check_take_folders(out: Path, takes: Sequence[Take]) -> None:
+    """Refuse, before any work, a take's result folder that holds something else than a
+    result (it would be replaced whole)."""
+    from mocapkit.pipelines.run import RESULT_MARKER_FILE
+
+    for t in takes:
+        check_own_folder(
+            out / t.name, (TAKE_FILE, RESULT_MARKER_FILE), "take result folder", "mocapkit batch"
+        )
+
+
 def batch(
     study_dir: str | os.PathLike[str],
     out_dir: str | os.PathLike[str],
@@ -594,12 +629,14 @@ def batch(
     out = Path(out_dir).resolve()
     if out == Path(study_dir).resolve():
         raise ConfigError(f"batch: the results folder {out_dir} is the study folder; give another")
+    _check_results_folder(out, Path(study_dir).resolve())
     takes = discover_takes(study_dir, markers_glob, exclude=[out])
     if not takes:
         raise SessionError(
             f"{study_dir}: no take found (no folder with session.json"
             + (f", no file matching {markers_glob!r})" if markers_glob else ")")
         )
+    _check_take_folders(out, takes)
     options = {"method": method, "joints": joints}
     rows: dict[str, TakeRow] = {}
     jobs: list[TakeJob] = []
