@@ -347,8 +347,9 @@ def test_camera_that_cannot_see_the_subject_is_refused(wave_session, tmp_path, c
     path.write_text(json.dumps(doc))
     with pytest.raises(
         SessionError,
-        match=r"camera 'mono' does not see the subject: of \d+ marker-set positions in the "
-        r"first 1 s, \d+ lie in front of it \(median depth -?\d+ mm\) and 0 inside its 320x240",
+        match=r"camera 'mono' \(in front\): does not see the subject: of \d+ marker-set "
+        r"positions in the first 1 s, \d+ lie in front of it \(median depth -?\d+ mm\) and "
+        r"0 inside its 320x240",
     ):
         track_hybrid_session(copy, tmp_path / "out")
     assert not (tmp_path / "out").exists()

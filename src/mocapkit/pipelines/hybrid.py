@@ -16,13 +16,13 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import ConfigError, SessionError, ShapeError, unknown_name
 from mocapkit.ik.sdls import IKConfig, SDLSSolver
 from mocapkit.io.lab_frame import LabFrame, detect_lab_frame, to_world
 from mocapkit.io.marker_sets import MarkerSet
 from mocapkit.io.markers import MarkerData
 from mocapkit.io.motion import Motion
+from mocapkit.pipelines.camera_check import check_session_cameras
 from mocapkit.pipelines.run import (
     RunResult,
     check_result_folder,
@@ -252,59 +252,6 @@ def require_observed_sets(
         )
 
 
-#: Seconds of markers at the start over which `check_camera_sees` judges a camera.
-CAMERA_CHECK_S = 1.0
-
-
-def check_camera_sees(
-    camera: Camera, time_s: ArrayLike, points_mm: ArrayLike, where: str | os.PathLike[str]
-) -> None:
-    """Refuse a camera that cannot see the subject over the first `CAMERA_CHECK_S`.
-
-    The subject's marker-set positions (head, hands) must lie in front of the camera
-    and project inside its image for at least half of the seen samples; a camera placed
-    behind the subject, or whose translation was written in metres (3 mm from the
-    origin instead of 3 m), fails. The video refinement would otherwise fit the arms to
-    edges of an image the subject is not in.
-
-    Parameters
-    ----------
-    camera : Camera
-    time_s : array_like, shape (T,)
-        Marker sample times (s).
-    points_mm : array_like, shape (T, S, 3)
-        Marker-set positions in the world (NaN where unseen).
-    where : path or str
-        The session, for the message.
-
-    Raises
-    ------
-    SessionError
-        With the counts, the median depth and the median pixel.
-    """
-    t = np.asarray(time_s, dtype=float)
-    pts = np.asarray(points_mm, dtype=float)
-    first = pts[t <= t[0] + CAMERA_CHECK_S].reshape(-1, 3) if t.size else pts.reshape(-1, 3)
-    seen = first[np.all(np.isfinite(first), axis=1)]
-    if seen.shape[0] == 0:
-        return
-    depth = camera.to_camera(seen)[:, 2]
-    px = camera.project(seen)
-    inside = camera.in_image(px) & (depth > 0)
-    if np.count_nonzero(inside) * 2 >= seen.shape[0]:
-        return
-    w, h = camera.image_size
-    shown = np.nanmedian(px, axis=0) if np.any(np.isfinite(px)) else np.full(2, np.nan)
-    raise SessionError(
-        f"{where}: camera {camera.name!r} does not see the subject: of {seen.shape[0]} "
-        f"marker-set positions in the first {CAMERA_CHECK_S:g} s, "
-        f"{np.count_nonzero(depth > 0)} lie in front of it (median depth "
-        f"{np.median(depth):.0f} mm) and {np.count_nonzero(inside)} inside its {w}x{h} "
-        f"image (median pixel ({shown[0]:.0f}, {shown[1]:.0f})); expected at least half. "
-        "Check its pose in cameras.json (translations in mm, camera_from_world)"
-    )
-
-
 def track_hybrid_session(
     session_dir: str | os.PathLike[str],
     out_dir: str | os.PathLike[str] | None,
@@ -465,8 +412,10 @@ def track_hybrid_session_run(
             f"{session.path}: no camera with a video; the hybrid tracker's time line is the video's"
         )
     camera = session.camera(cams[0])
-    if cfg.use_video:
-        check_camera_sees(camera, session.markers.time_s, positions, session.path)
+    if cfg.use_video:  # the one camera check of every tracker, on the marker sets
+        check_session_cameras(
+            session, [cams[0]], subject_points=(session.markers.time_s, positions)
+        )
     # the camera also sets the initial facing, so it is passed even without video
     tracker = HybridTracker(sk, camera, cfg, timer=timer)
     n = session.video(cams[0]).n_frames
