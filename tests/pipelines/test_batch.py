@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -419,3 +420,38 @@ def test_batch_out_inside_a_take_of_the_study_is_refused(study, tmp_path):
     # a folder holding takes is not empty and holds no study.csv
     with pytest.raises(ConfigError, match=r"s1: mocapkit batch replaces its results folder"):
         batch(study, study / "s1")
+
+
+def test_ctrl_c_stops_the_cluster_quietly_and_says_what_finished(study, tmp_path):
+    """Ctrl-C in `batch` printed the Dask workers' tracebacks: the workers (separate
+    processes, which the terminal's Ctrl-C reaches too) ignore it; the batch stops them,
+    says what finished and exits 130."""
+    out = tmp_path / "results"
+    cmd = [sys.executable, "-m", "mocapkit.cli.main", "batch", str(study), "--out", str(out)]
+    proc = subprocess.Popen(
+        [*cmd, "--workers", "2"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    try:
+        deadline = time.monotonic() + 300.0
+        while not any(out.glob(".*.new-*")) and not any(out.glob("*/.*.new-*")):
+            assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+            assert time.monotonic() < deadline, "no take started within 300 s"
+            time.sleep(0.05)
+        os.killpg(proc.pid, signal.SIGINT)  # a take is running in a worker
+        _, err = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, err[-3000:]
+    assert "Traceback" not in err and "WARNING" not in err, err[-3000:]
+    assert re.search(r"interrupted: \d+ of 4 takes finished \(0 failed\) and are in .*study.csv",
+                     err), err  # fmt: skip
+    assert err.strip().splitlines()[-1] == "mocapkit batch: interrupted"
+    table = {r["take"]: r["status"] for r in _read_csv(out / "study.csv")}
+    assert set(table) == set(TAKES) and "pending" in table.values()

@@ -482,13 +482,33 @@ def _dask_client(
             yield own
         return
     # one thread per worker: tracking is CPU-bound Python/Numba, threads would share a GIL
-    with (
-        LocalCluster(
-            n_workers=n_workers or default_workers(), threads_per_worker=1, processes=processes
-        ) as cluster,
-        Client(cluster) as own,
-    ):
+    cluster = LocalCluster(
+        n_workers=n_workers or default_workers(),
+        threads_per_worker=1,
+        processes=processes,
+        # worker processes ignore Ctrl-C (it reaches the whole process group): this
+        # process stops them and says what finished, without their tracebacks
+        **({"preload": ["mocapkit.pipelines.batch_worker"]} if processes else {}),
+    )
+    with cluster, Client(cluster) as own:
         yield own
+
+
+def _quiet_logs() -> None:
+    import logging
+
+    for name in ("distributed", "tornado"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+
+
+def _quiet_cluster_shutdown(client: Any, own: bool) -> None:
+    """After Ctrl-C, before the local cluster this batch started is closed: its closing
+    (the scheduler, nannies and workers stopping takes midway) logs nothing."""
+    if not own:
+        return
+    _quiet_logs()
+    with contextlib.suppress(Exception):  # a worker that cannot answer is closed anyway
+        client.run(_quiet_logs)
 
 
 def _dashboard(client: Any) -> str:
@@ -688,22 +708,32 @@ def batch(
             ) as prog:
                 prog.status = f"0 failed, {len(jobs)} remaining"
                 prog.update(0)  # the line shows from the start, not from the first take
-                for future in as_completed(futures):
-                    job = futures[future]
-                    try:
-                        row = future.result()
-                    except Exception as exc:  # the worker died (killed, out of memory)
-                        row = TakeRow(
-                            job.take.name,
-                            job.take.kind,
-                            status="failed",
-                            error=" ".join(f"{type(exc).__name__}: {exc}".split()),
-                        )
-                    rows[row.take] = row
-                    n_failed += row.status == "failed"
-                    write_study_csv(study_csv, ordered())
-                    prog.status = f"{n_failed} failed, {len(jobs) - prog.done - 1} remaining"
-                    prog.update()
+                try:
+                    for future in as_completed(futures):
+                        job = futures[future]
+                        try:
+                            row = future.result()
+                        except Exception as exc:  # the worker died (killed, out of memory)
+                            row = TakeRow(
+                                job.take.name,
+                                job.take.kind,
+                                status="failed",
+                                error=" ".join(f"{type(exc).__name__}: {exc}".split()),
+                            )
+                        rows[row.take] = row
+                        n_failed += row.status == "failed"
+                        write_study_csv(study_csv, ordered())
+                        prog.status = f"{n_failed} failed, {len(jobs) - prog.done - 1} remaining"
+                        prog.update()
+                except KeyboardInterrupt:
+                    _quiet_cluster_shutdown(dask_client, own=client is None and not scheduler)
+                    finished = sum(r.status in ("done", "failed") for r in rows.values())
+                    say(
+                        f"interrupted: {finished} of {len(jobs)} takes finished "
+                        f"({n_failed} failed) and are in {study_csv}; the next run redoes "
+                        f"the {len(jobs) - finished} pending"
+                    )
+                    raise
     result_rows = ordered()
     counts = {s: sum(r.status == s for r in result_rows) for s in ("done", "skipped", "failed")}
     return StudyResult(result_rows, study_csv, time.perf_counter() - start, dashboard, counts)
