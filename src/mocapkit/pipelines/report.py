@@ -262,8 +262,8 @@ def _accuracy_tables(report: EvalReport) -> list[Table]:
             ("jitter (mm/s²)", f"{f(report.jitter_mm_s2)} (truth {f(report.truth_jitter_mm_s2)})"),
             (
                 "coverage",
-                f"{report.coverage:.3f} ({report.n_matched_frames}/{report.n_truth_frames} "
-                "truth frames)",
+                f"{report.coverage:.3f} of the joints estimated ({report.n_matched_frames}/"
+                f"{report.n_truth_frames} truth frames with a pose)",
             ),
         ),
     )
