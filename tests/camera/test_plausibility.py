@@ -3,6 +3,8 @@ passes the good one."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -66,6 +68,20 @@ def test_good_rig_passes_every_check(rng):
         assert pose_findings(c) == []
 
 
+@pytest.mark.parametrize("noise_px", [4.0, 8.0])
+def test_a_narrow_pair_with_a_detectors_noise_passes(rng, noise_px):
+    """90 mm apart at 3 m: a joint's depth from one frame is off by a quarter or more,
+    the checks that use depth use the subject's median depth and still pass."""
+    cams = [_camera(name, (x, -3000.0, 1300.0), None) for name, x in (("l", -45.0), ("r", 45.0))]
+    cams = [  # parallel: both look along +y
+        Camera(c.name, c.image_size, c.K, c.dist, look_at((x, -3000.0, 1300.0), (x, 0.0, 1100.0)))
+        for c, x in zip(cams, (-45.0, 45.0))
+    ]
+    pts = _points(rng, 30)
+    px = np.stack([c.project(pts) for c in cams]) + rng.normal(0.0, noise_px, (2, 30, 5, 2))
+    assert [f for f in view_findings(cams, px, NAMES, REST) if f.refuse] == []
+
+
 def test_views_that_disagree_are_refused_with_the_error(rng):
     cams = _rig()
     pts = _points(rng)
@@ -89,7 +105,7 @@ def test_limb_lengths_off_by_a_factor_are_refused(rng):
     half = {k: v * 2.0 for k, v in REST.items()}  # the subject twice as tall as the views say
     found = view_findings(cams, px, NAMES, half)
     assert [f.check for f in found] == ["limb lengths"]
-    assert "are 0.5 times the subject's" in found[0].text
+    assert re.search(r"are 0\.(49|50)\d* times the subject's", found[0].text), found[0].text
 
 
 def test_keypoints_outside_the_image_and_subject_behind(rng):

@@ -86,8 +86,9 @@ def _focal_doubled(cams: Cameras) -> None:
 BEHIND = r"camera 'stereo_left' \(in front\): the joints triangulated from cameras stereo_left, "
 STEREO_REFUSED = [
     # translation in metres (the probe: error 1.7e8 mm)
-    ("metres", _metres, False, r"\(limb lengths\): limbs triangulated from cameras stereo_left, "
-     r"stereo_right are 0.001 times the subject's .*expected 0.7-1.4 \(translations in metres"),
+    ("metres", _metres, False, r"\(limb lengths\): limbs seen by cameras stereo_left, "
+     r"stereo_right at the depth triangulated from them are 0.00(09|10)\d* times the subject's "
+     r".*expected 0.6-1.5 \(translations in metres"),
     # a camera behind the subject (2.5e5 mm)
     ("behind", _turned_round, False, BEHIND + r"stereo_right lie behind it \(\d+ of \d+"),
     # left and right extrinsics swapped (5.5 m)
@@ -126,8 +127,8 @@ def test_track_stereo_focal_lengths_doubled_is_warned(rendered, tmp_path, capsys
     check_session_cameras(s, s.video_cameras, skeleton=sk, warn=lines.append)
     assert len(lines) == 1
     assert (
-        "(floor): the subject's ankles, triangulated from cameras stereo_left, stereo_right, "
-        "lie at z = -" in lines[0]
+        "(floor): the subject's ankles, placed from cameras stereo_left, stereo_right, lie "
+        "at z = -" in lines[0]
     )
     # the unchanged session: no finding at all
     good = load_session(rendered["stereo"])

@@ -50,9 +50,10 @@ VIEW_CHECK_FRAMES = 30
 #: Largest median reprojection error of triangulated joints, as a share of the image
 #: width (2.5 % = 16 px at 640 px; detectors err by a few px, a swap by 100s).
 MAX_REPROJECTION_SHARE = 0.025
-#: Plausible ratio of limb lengths seen by the views to the subject's (outside it: wrong
-#: units, doubled focal lengths).
-LIMB_RATIO_RANGE = (0.7, 1.4)
+#: Plausible ratio of limb lengths seen by the views (across the line of sight, at the
+#: triangulated depth) to the subject's (outside it: translations in the wrong unit, a
+#: baseline or a subject's height far off).
+LIMB_RATIO_RANGE = (0.6, 1.5)
 #: Near-rigid pairs of canonical joints whose distance is compared with the subject's.
 RIGID_PAIRS: tuple[tuple[str, str], ...] = (
     ("left_shoulder", "left_elbow"),
@@ -246,14 +247,22 @@ def view_findings(
             )
     if out:
         return out
+    # limb lengths across the line of sight: each view's limb in normalised image
+    # coordinates times the subject's median depth there. The depth of one joint from a
+    # narrow baseline is noisy (4 px of detector noise on a 90 mm pair at 3 m doubles
+    # the limbs triangulated in 3-D), the median depth of all of them is not; a limb
+    # seen foreshortened is shorter, so the 90th percentile over the frames is compared.
     ratios = []
-    for a, b in RIGID_PAIRS:
-        if a in names and b in names and a in rest_joints_mm and b in rest_joints_mm:
-            d = np.linalg.norm(pts[:, names.index(a)] - pts[:, names.index(b)], axis=-1)
-            d = d[np.isfinite(d)]
-            rest = float(np.linalg.norm(np.subtract(rest_joints_mm[a], rest_joints_mm[b])))
-            if d.size and rest > 0:
-                ratios.append(float(np.median(d)) / rest)
+    for i, c in enumerate(cameras):
+        depth = float(np.median(c.to_camera(pts[ok])[:, 2]))
+        norm = c.undistort_pixels(px[i])  # (T, K, 2)
+        for a, b in RIGID_PAIRS:
+            if a in names and b in names and a in rest_joints_mm and b in rest_joints_mm:
+                d = np.linalg.norm(norm[:, names.index(a)] - norm[:, names.index(b)], axis=-1)
+                d = d[np.isfinite(d)] * depth
+                rest = float(np.linalg.norm(np.subtract(rest_joints_mm[a], rest_joints_mm[b])))
+                if d.size and rest > 0:
+                    ratios.append(float(np.percentile(d, 90.0)) / rest)
     if ratios:
         r = float(np.median(ratios))
         lo, hi = LIMB_RATIO_RANGE
@@ -262,15 +271,23 @@ def view_findings(
                 CameraFinding(
                     all_names,
                     "limb lengths",
-                    f"limbs triangulated from cameras {all_names} are {r:.3g} times the "
-                    f"subject's (median over {len(ratios)} limbs); expected {lo}-{hi} "
+                    f"limbs seen by cameras {all_names} at the depth triangulated from them "
+                    f"are {r:.3g} times the subject's (median over {len(ratios)} limbs and "
+                    f"views); expected {lo}-{hi} "
                     "(translations in metres instead of mm? fx and fy of another image "
                     "size? the subject's height in session.json?)",
                 )
             )
     ankles = [names.index(n) for n in ("left_ankle", "right_ankle") if n in names]
-    if not out and ankles:
-        out += floor_findings(all_names, pts[:, ankles], f"triangulated from cameras {all_names}")
+    if not out and ankles and _depth_is_steady(cameras[0], pts):
+        # on each view's rays at the subject's median depth (as the limbs above)
+        placed = []
+        for i, c in enumerate(cameras):
+            depth = float(np.median(c.to_camera(pts[ok])[:, 2]))
+            n = c.undistort_pixels(px[i][:, ankles]).reshape(-1, 2)
+            in_cam = np.column_stack([n * depth, np.full(n.shape[0], depth)])
+            placed.append(in_cam @ np.asarray(c.world_from_camera)[:3, :3].T + c.center_in_world)
+        out += floor_findings(all_names, np.concatenate(placed), f"placed from cameras {all_names}")
     return out
 
 
@@ -338,6 +355,27 @@ def pose_findings(camera: Camera) -> list[CameraFinding]:
                 )
             )
     return out
+
+
+#: Largest spread (median absolute deviation over frames, as a share of the median) of
+#: the subject's per-frame median depth for the depth to be trusted by the floor check:
+#: a narrow baseline with a detector's noise (8 px on a 90 mm pair at 3 m) moves it by
+#: a quarter; exact keypoints, by a few per cent as the subject moves.
+MAX_DEPTH_SPREAD = 0.05
+
+
+def _depth_is_steady(camera: Camera, points_mm: FloatArray) -> bool:
+    """Whether the triangulated subject's depth from ``camera`` holds steady over the
+    frames (`MAX_DEPTH_SPREAD`), so that where it places the subject can be trusted."""
+    z = camera.to_camera(points_mm.reshape(-1, 3))[:, 2].reshape(points_mm.shape[:-1])
+    with np.errstate(all="ignore"):
+        per_frame = np.nanmedian(np.where(np.isfinite(z), z, np.nan), axis=-1)
+    per_frame = per_frame[np.isfinite(per_frame)]
+    if per_frame.size < 3:
+        return False
+    mid = float(np.median(per_frame))
+    spread = float(np.median(np.abs(per_frame - mid)))
+    return mid > 0 and spread <= MAX_DEPTH_SPREAD * mid
 
 
 def refuse_or_warn(
