@@ -254,12 +254,12 @@ def view_findings(
     # seen foreshortened is shorter, so the 90th percentile over the frames is compared.
     ratios = []
     for i, c in enumerate(cameras):
-        depth = float(np.median(c.to_camera(pts[ok])[:, 2]))
+        subject_depth = float(np.median(c.to_camera(pts[ok])[:, 2]))
         norm = c.undistort_pixels(px[i])  # (T, K, 2)
         for a, b in RIGID_PAIRS:
             if a in names and b in names and a in rest_joints_mm and b in rest_joints_mm:
                 d = np.linalg.norm(norm[:, names.index(a)] - norm[:, names.index(b)], axis=-1)
-                d = d[np.isfinite(d)] * depth
+                d = d[np.isfinite(d)] * subject_depth
                 rest = float(np.linalg.norm(np.subtract(rest_joints_mm[a], rest_joints_mm[b])))
                 if d.size and rest > 0:
                     ratios.append(float(np.percentile(d, 90.0)) / rest)
@@ -283,9 +283,9 @@ def view_findings(
         # on each view's rays at the subject's median depth (as the limbs above)
         placed = []
         for i, c in enumerate(cameras):
-            depth = float(np.median(c.to_camera(pts[ok])[:, 2]))
+            subject_depth = float(np.median(c.to_camera(pts[ok])[:, 2]))
             n = c.undistort_pixels(px[i][:, ankles]).reshape(-1, 2)
-            in_cam = np.column_stack([n * depth, np.full(n.shape[0], depth)])
+            in_cam = np.column_stack([n * subject_depth, np.full(n.shape[0], subject_depth)])
             placed.append(in_cam @ np.asarray(c.world_from_camera)[:3, :3].T + c.center_in_world)
         out += floor_findings(all_names, np.concatenate(placed), f"placed from cameras {all_names}")
     return out
