@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
 
 from mocapkit.cli.main import main
-from mocapkit.errors import SessionError, ShapeError
+from mocapkit.errors import ConfigError, SessionError, ShapeError
 from mocapkit.eval.metrics import (
     evaluate_joints,
     evaluate_result,
+    joint_subset,
     match_by_time,
     similarity_align,
 )
@@ -232,3 +234,30 @@ def test_best_swivel_elbow_floor_and_degenerate() -> None:
     assert np.all(np.isnan(straight))
     with pytest.raises(ShapeError, match="expected shoulder, elbow, wrist and target"):
         best_swivel_elbow(np.zeros((2, 3)), np.zeros((3, 3)), np.zeros((2, 3)), np.zeros((2, 3)))
+
+
+def test_nan_joints_count_against_coverage(truth):
+    """`eval` reported coverage 1.000 with the right arm NaN in 79 % of the frames."""
+    t, names, j = truth
+    est = j.copy()
+    arm = [names.index(n) for n in ("right_elbow", "right_wrist")]
+    n_nan = round(0.79 * len(t))
+    est[:n_nan, arm] = np.nan
+    r = evaluate_joints(t, names, est, t, names, j)
+    share = n_nan / len(t)
+    assert r.per_joint_coverage["right_elbow"] == pytest.approx(1.0 - share)
+    assert r.per_joint_coverage["left_elbow"] == 1.0
+    assert r.coverage == pytest.approx(1.0 - share * len(arm) / len(names))
+    assert r.n_matched_frames == len(t)  # every frame has a pose, not every joint
+    assert re.search(r"right_elbow\s+0\.0\s+0\.2\d\d", r.table())
+
+
+def test_empty_joint_list_is_refused(capsys):
+    """`eval --joints ''` was accepted (and compared no joint, or every joint)."""
+    with pytest.raises(ConfigError, match=r"--joints: expected 'all', 'upper' or a comma"):
+        joint_subset("")
+    with pytest.raises(ConfigError, match="found ' , '"):
+        joint_subset(" , ")
+    with pytest.raises(SystemExit):
+        main(["eval", "r", "--truth", "s", "--joints", ""])
+    assert "argument --joints: " in capsys.readouterr().err

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -19,6 +20,7 @@ from mocapkit.errors import ConfigError, SessionError, UnknownNameError
 from mocapkit.pipelines import registry
 from mocapkit.pipelines.batch import (
     STUDY_COLUMNS,
+    STUDY_FILE,
     TAKE_FILE,
     Take,
     TakeJob,
@@ -376,3 +378,80 @@ def test_raw_marker_files_tracked_by_hybrid_ik(study, tmp_path, client):
         study, out, client=client, markers_glob="**/*.trc", marker_sets=sets[::-1], joints="all"
     )
     assert {r.take: r.status for r in again.rows} == {"raw/serve": "done", "s1/t1": "skipped"}
+
+
+# ---------------------------------------------------------------- bad input (issue 30)
+
+
+def test_batch_refuses_a_folder_it_did_not_write_before_any_work(study, tmp_path, capsys):
+    """`mocapkit batch STUDY --out DIR` deleted whatever DIR held (notes.txt, a thesis/
+    folder): a folder that is not a results folder is refused, its files kept."""
+    from mocapkit.cli.main import main
+
+    mine = tmp_path / "mine"
+    (mine / "thesis").mkdir(parents=True)
+    (mine / "notes.txt").write_text("keep me")
+    with pytest.raises(
+        ConfigError,
+        match=r"mine: mocapkit batch replaces its results folder "
+        r"whole, but this folder is not a results folder \(no study.csv; it "
+        r"holds notes.txt, thesis\)",
+    ):
+        batch(study, mine)
+    assert main(["batch", str(study), "--out", str(mine), "--in-process"]) == 2
+    assert "not a results folder" in capsys.readouterr().err
+    assert sorted(p.name for p in mine.rglob("*")) == ["notes.txt", "thesis"]
+    # a take's folder holding a user's files inside a results folder: refused too
+    results = tmp_path / "results"
+    (results / "s1" / "t1").mkdir(parents=True)
+    (results / STUDY_FILE).write_text("take\n")
+    (results / "s1" / "t1" / "notes.txt").write_text("keep me")
+    with pytest.raises(ConfigError, match=r"t1: mocapkit batch replaces its take result folder"):
+        batch(study, results)
+    assert (results / "s1" / "t1" / "notes.txt").read_text() == "keep me"
+
+
+def test_batch_out_inside_a_take_of_the_study_is_refused(study, tmp_path):
+    """`batch --out study/a` silently dropped that subfolder's take."""
+    for out in (study / "s1" / "t1", study / "s1" / "t1" / "results"):
+        with pytest.raises(ConfigError, match=r"lies inside .*t1, the take 's1/t1' of the study"):
+            batch(study, out)
+    assert not (study / "s1" / "t1" / "results").exists()
+    # a folder holding takes is not empty and holds no study.csv
+    with pytest.raises(ConfigError, match=r"s1: mocapkit batch replaces its results folder"):
+        batch(study, study / "s1")
+
+
+def test_ctrl_c_stops_the_cluster_quietly_and_says_what_finished(study, tmp_path):
+    """Ctrl-C in `batch` printed the Dask workers' tracebacks: the workers (separate
+    processes, which the terminal's Ctrl-C reaches too) ignore it; the batch stops them,
+    says what finished and exits 130."""
+    out = tmp_path / "results"
+    cmd = [sys.executable, "-m", "mocapkit.cli.main", "batch", str(study), "--out", str(out)]
+    proc = subprocess.Popen(
+        [*cmd, "--workers", "2"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
+        env={**os.environ, "PYTHONUNBUFFERED": "1"},
+    )
+    try:
+        deadline = time.monotonic() + 300.0
+        while not any(out.glob(".*.new-*")) and not any(out.glob("*/.*.new-*")):
+            assert proc.poll() is None, proc.stderr.read() if proc.stderr else ""
+            assert time.monotonic() < deadline, "no take started within 300 s"
+            time.sleep(0.05)
+        os.killpg(proc.pid, signal.SIGINT)  # a take is running in a worker
+        _, err = proc.communicate(timeout=300)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 130, err[-3000:]
+    assert "Traceback" not in err and "WARNING" not in err, err[-3000:]
+    assert re.search(r"interrupted: \d+ of 4 takes finished \(0 failed\) and are in .*study.csv",
+                     err), err  # fmt: skip
+    assert err.strip().splitlines()[-1] == "mocapkit batch: interrupted"
+    table = {r["take"]: r["status"] for r in _read_csv(out / "study.csv")}
+    assert set(table) == set(TAKES) and "pending" in table.values()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -347,8 +349,9 @@ def test_camera_that_cannot_see_the_subject_is_refused(wave_session, tmp_path, c
     path.write_text(json.dumps(doc))
     with pytest.raises(
         SessionError,
-        match=r"camera 'mono' does not see the subject: of \d+ marker-set positions in the "
-        r"first 1 s, \d+ lie in front of it \(median depth -?\d+ mm\) and 0 inside its 320x240",
+        match=r"camera 'mono' \(in front\): does not see the subject: of \d+ marker-set "
+        r"positions in the first 1 s, \d+ lie in front of it \(median depth -?\d+ mm\) and "
+        r"0 inside its 320x240",
     ):
         track_hybrid_session(copy, tmp_path / "out")
     assert not (tmp_path / "out").exists()
@@ -379,3 +382,49 @@ def test_cli_lists_the_gaps(wave_session, tmp_path, capsys):
     out = capsys.readouterr().out
     for name in ("head", "left_hand", "right_hand"):
         assert f"gap: {name} released " in out
+
+
+def _head_and_hands_file(wave_session, path, lift_mm=900.0):
+    """The session's head and hand markers alone, as a raw file whose floor lies at
+    ``lift_mm`` along z (so no floor at 0 can be snapped to)."""
+    from mocapkit.io.marker_files import read_markers, write_markers
+    from mocapkit.io.markers import MarkerData
+
+    m = read_markers(wave_session / "markers.csv")
+    keep = [i for i, n in enumerate(m.names) if n in ("head", "left_hand", "right_hand")]
+    pos = m.positions_mm[:, keep].copy()
+    pos[..., 2] += lift_mm
+    write_markers(path, MarkerData(m.time_s, tuple(m.names[i] for i in keep), pos, m.rate_hz))
+    return path
+
+
+SETS = ["--marker-set", "head=head", "--marker-set", "left_hand=left_hand"]
+SETS += ["--marker-set", "right_hand=right_hand"]
+
+
+def test_head_and_hands_file_names_the_floor_and_takes_floor_mm(wave_session, tmp_path, capsys):
+    """A head-and-hands marker file was refused with a "seated posture" message where the
+    real problem is the floor guess, with no option to give the floor."""
+    f = _head_and_hands_file(wave_session, tmp_path / "hh.csv")
+    floor_cause = (
+        r"the floor \(\d+ mm along z\) was found from the lowest markers, but the lowest is "
+        r"a hand set's on 100 % of the frames \(no marker near the floor, only head and "
+        r"hands\?\), so it lies at hand height; give the floor's coordinate along the up "
+        r"axis with --floor-mm"
+    )
+    # seated at a given stature: the seat lands below that floor, and the message says why
+    args = ["track", "hybrid", "--markers", str(f), *SETS, "--out", str(tmp_path / "r")]
+    assert main([*args, "--posture", "seated", "--height-mm", "2600"]) == 2
+    err = capsys.readouterr().err
+    assert re.search(r"error: seated posture: .* the likely cause: " + floor_cause, err), err
+    # any posture: the floor guess is warned about
+    assert main([*args, "--posture", "standing"]) == 0
+    assert re.search(r"WARNING: .*hh.csv: " + floor_cause, capsys.readouterr().err)
+    # the floor given: used, said, no warning
+    assert main([*args, "--posture", "standing", "--floor-mm", "900"]) == 0
+    out = capsys.readouterr()
+    assert "floor at 900 mm (given, --floor-mm)" in out.out
+    assert "hand height" not in out.err
+    with pytest.raises(SystemExit):
+        main([*args, "--floor-mm", "nan"])
+    assert "argument --floor-mm: expected a number, found nan" in capsys.readouterr().err

@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import numpy as np
@@ -168,3 +169,70 @@ def test_ctrl_c_during_track_exits_130_and_keeps_the_earlier_result(
     assert "mocapkit track: interrupted" in capsys.readouterr().err
     assert _snapshot(out) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["r", "s"]
+
+
+def _interrupt_after(cmd: list[str], delay_s: float) -> subprocess.CompletedProcess[str]:
+    """Run ``cmd``, send it SIGINT (as Ctrl-C does) after ``delay_s``, wait for it."""
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+    )
+    time.sleep(delay_s)
+    os.killpg(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=300)
+    return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
+
+
+def test_ctrl_c_anywhere_in_track_mono_is_one_line_and_exit_130(tmp_path) -> None:
+    """Ctrl-C during `track mono` gave a `SystemError` traceback and exit 1: wherever it
+    lands (loading the commands, tracking), one line, exit 130, the earlier result kept."""
+    from tests.pipelines.test_mono import _session
+
+    session = _session(tmp_path / "s", lengths=True)
+    out = tmp_path / "r"
+    cmd = [sys.executable, "-m", "mocapkit.cli.main", "track", "mono", str(session)]
+    cmd += ["--out", str(out), "--session-lengths"]
+    assert subprocess.run(cmd, capture_output=True, timeout=300).returncode == 0
+    before = _snapshot(out)
+    interrupted = 0
+    for delay_s in (0.3, 1.5):
+        done = _interrupt_after(cmd, delay_s)
+        if done.returncode == 0:  # finished before the signal: nothing to check
+            continue
+        interrupted += 1
+        assert done.returncode == 130, done.stderr[-2000:]
+        assert "Traceback" not in done.stderr
+        assert done.stderr.strip().splitlines()[-1].endswith(": interrupted")
+        assert _snapshot(out) == before
+    assert interrupted >= 1, "every run finished before its Ctrl-C"
+
+
+def test_ctrl_c_inside_compiled_code_is_reported_as_an_interruption(tmp_path) -> None:
+    """A KeyboardInterrupt raised inside a Numba kernel reaches Python as `SystemError`
+    ("returned a result with an exception set"); after a Ctrl-C it is the interruption."""
+    from tests.pipelines.test_mono import _session
+
+    session = _session(tmp_path / "s", lengths=True)
+    script = f"""
+import os, signal, sys, time
+import mocapkit.pipelines.mono as mono
+
+def compiled(*args, **kwargs):
+    try:
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(30)
+    except KeyboardInterrupt as exc:
+        raise SystemError("<kernel> returned a result with an exception set") from exc
+
+mono.track_mono = compiled
+from mocapkit.cli.main import main
+sys.exit(main(["track", "mono", {str(session)!r}, "--out", {str(tmp_path / "r")!r}]))
+"""
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                          timeout=300)  # fmt: skip
+    assert done.returncode == 130, done.stderr[-2000:]
+    assert done.stderr.strip() == "mocapkit track: interrupted"
+    # without a Ctrl-C, a SystemError is a bug and keeps its traceback
+    bug = script.replace("os.kill(os.getpid(), signal.SIGINT)", "raise KeyboardInterrupt")
+    done = subprocess.run([sys.executable, "-c", bug], capture_output=True, text=True,
+                          timeout=300)  # fmt: skip
+    assert done.returncode == 1 and "SystemError" in done.stderr

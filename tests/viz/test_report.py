@@ -239,3 +239,72 @@ def test_jpeg_fallback_without_web_codec(npz_result, small_session, tmp_path, mo
     assert img == "overlay_mono/000000.jpg"
     assert len(frames) == load_session(small_session).video("mono").n_frames
     assert "truth" not in trace_names(page)  # --session alone brings no truth
+
+
+# ---------------------------------------------------------------- bad input (issue 30)
+
+
+def test_view_refuses_a_folder_it_did_not_write_before_any_work(csv_result, tmp_path, capsys):
+    """`mocapkit view R --out DIR` deleted whatever DIR held (notes.txt, a thesis/
+    folder): a folder that is not a report folder is refused, its files kept."""
+    mine = tmp_path / "mine"
+    (mine / "thesis").mkdir(parents=True)
+    (mine / "notes.txt").write_text("keep me")
+    (mine / "thesis" / "ch1.tex").write_text("keep me too")
+    with pytest.raises(
+        ConfigError,
+        match=r"mine: mocapkit view replaces its report folder "
+        r"whole, but this folder is not a report folder \(no index.html; it "
+        r"holds notes.txt, thesis\)",
+    ):
+        build_report(csv_result, out_dir=mine)
+    assert main(["view", str(csv_result), "--out", str(mine)]) == 2
+    assert "not a report folder" in capsys.readouterr().err
+    assert (mine / "notes.txt").read_text() == "keep me"
+    assert (mine / "thesis" / "ch1.tex").read_text() == "keep me too"
+    assert sorted(p.name for p in mine.iterdir()) == ["notes.txt", "thesis"]
+    # its own earlier report is replaced
+    page = build_report(csv_result, out_dir=tmp_path / "rep")
+    assert build_report(csv_result, out_dir=tmp_path / "rep") == page
+
+
+def test_view_clears_what_a_killed_view_left(csv_result, tmp_path):
+    """A kill mid-build left `.report.new-*` beside the report: the next view removes it."""
+    stale = csv_result / ".report.new-abc123"
+    stale.mkdir()
+    (stale / "index.html").write_text("half")
+    build_report(csv_result)
+    assert sorted(p.name for p in csv_result.iterdir()) == ["joints.csv", "report"]
+
+
+def test_view_says_when_a_folder_mixes_two_runs(npz_result, tmp_path, capsys):
+    """`view` showed a folder mixing two runs without a word."""
+    mixed = tmp_path / "mixed"
+    shutil.copytree(npz_result, mixed)
+    lines = (mixed / "joints.csv").read_text().splitlines(keepends=True)
+    (mixed / "joints.csv").write_text("".join(lines[:11]))  # another, shorter run's
+    (mixed / "fit.csv").write_text(
+        "time_s,head_status\n" + "".join(f"{i / 30:.9f},seen\n" for i in range(5))
+    )
+    assert main(["view", str(mixed), "--out", str(tmp_path / "r")]) == 0
+    err = capsys.readouterr().err
+    assert re.search(
+        r"warning: .*joints.csv and motion.npz are not from the same run "
+        r"\(10 vs 31 frames",
+        err,
+    ), err
+    assert re.search(r"warning: .*fit.csv: not from the same run as the result \(5 frames", err)
+    assert "not from the same run" in (tmp_path / "r" / "index.html").read_text(encoding="utf-8")
+    # one run's folder: no warning
+    assert main(["view", str(npz_result), "--out", str(tmp_path / "r2")]) == 0
+    assert "warning" not in capsys.readouterr().err
+
+
+def test_view_truth_on_a_session_without_truth_says_so(npz_result, small_session, tmp_path, capsys):
+    no_truth = tmp_path / "no_truth"
+    shutil.copytree(small_session, no_truth)
+    (no_truth / "truth.npz").unlink()
+    code = main(["view", str(npz_result), "--truth", str(no_truth), "--out", str(tmp_path / "r")])
+    assert code == 2
+    assert re.search(r"mocapkit view: error: .*no_truth.*truth.npz", capsys.readouterr().err)
+    assert not (tmp_path / "r").exists()

@@ -11,8 +11,11 @@ from __future__ import annotations
 import argparse
 import importlib
 import pkgutil
+import signal
 import sys
 from collections.abc import Sequence
+from types import FrameType
+from typing import Any
 
 import mocapkit.cli as cli_package
 from mocapkit import __version__
@@ -41,24 +44,73 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _Interrupts:
+    """Records that Ctrl-C (SIGINT) came, then raises `KeyboardInterrupt` as Python does.
+
+    A `KeyboardInterrupt` raised inside compiled code (a Numba kernel, a C extension, a
+    generator being closed) may reach `main` as another exception (``SystemError: ...
+    returned a result with an exception set``); with the record, whatever ends the
+    command after a Ctrl-C is reported as the interruption it is.
+    """
+
+    def __init__(self) -> None:
+        self.seen = False
+        self._previous: Any = None
+
+    def __enter__(self) -> _Interrupts:
+        try:
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+        except ValueError:  # not the main thread (an embedding application): leave it
+            self._previous = None
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+
+    def _handle(self, signum: int, frame: FrameType | None) -> None:
+        self.seen = True
+        raise KeyboardInterrupt
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the command line; returns the process exit code."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    _show_input_warnings(args.command)
-    try:
-        return int(args.func(args) or 0)
-    except MocapError as exc:
-        print(f"mocapkit {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        # a missing, unreadable or unwritable path: say which, without a traceback; an
-        # OSError raised with a message only has no strerror/filename to show
-        print(f"mocapkit {args.command}: error: {_os_error_text(exc)}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"mocapkit {args.command}: interrupted", file=sys.stderr)
-        return 130
+    """Run the command line; returns the process exit code.
+
+    Errors of the input (`MocapError`, `OSError`) print one line and return 2; Ctrl-C,
+    wherever it lands (loading the subcommands included), prints one line and returns
+    130, results written before it intact (they are written atomically).
+    """
+    command = "mocapkit"
+    with _Interrupts() as interrupts:
+        try:
+            parser = build_parser()
+            args = parser.parse_args(argv)
+            command = f"mocapkit {args.command}"
+            _show_input_warnings(args.command)
+            return int(args.func(args) or 0)
+        except MocapError as exc:
+            if interrupts.seen:
+                return _interrupted(command)
+            print(f"{command}: error: {exc}", file=sys.stderr)
+            return 2
+        except OSError as exc:
+            if interrupts.seen:
+                return _interrupted(command)
+            # a missing, unreadable or unwritable path: say which, without a traceback; an
+            # OSError raised with a message only has no strerror/filename to show
+            print(f"{command}: error: {_os_error_text(exc)}", file=sys.stderr)
+            return 2
+        except KeyboardInterrupt:
+            return _interrupted(command)
+        except BaseException:
+            if interrupts.seen and not isinstance(sys.exc_info()[1], SystemExit):
+                return _interrupted(command)
+            raise
+
+
+def _interrupted(command: str) -> int:
+    print(f"{command}: interrupted", file=sys.stderr)
+    return 130
 
 
 def _show_input_warnings(command: str) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from mocapkit.cli.args import output_folder
+from mocapkit.cli.args import number, output_folder
 from mocapkit.cli.track_stereo import register_method as register_stereo
 
 
@@ -77,6 +77,15 @@ def register(subparsers: Any) -> None:
         metavar="AXIS",
         help="with --markers: the file's up axis (x, y, z, -x, -y, -z; default: found from "
         "the head markers, printed)",
+    )
+    hyb.add_argument(
+        "--floor-mm",
+        type=number(float),
+        default=None,
+        metavar="MM",
+        help="with --markers: the floor's coordinate along the up axis in the file (mm; "
+        "default: found from the lowest markers, printed; give it for a file with no marker "
+        "near the floor, such as head and hands only)",
     )
     hyb.add_argument(
         "--world-frame",
@@ -198,6 +207,7 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             args.out,
             plant_feet=not args.free_feet,
             up=args.up,
+            floor_mm=args.floor_mm,
             world_output=args.world_frame,
             posture=args.posture,
             calibration=calibration,
@@ -208,6 +218,8 @@ def _run_hybrid(args: argparse.Namespace) -> int:
         if run.posture is not None:
             print(_posture_line(run.posture))
         print(f"member calibration: {run.calibration_note}")
+        if run.floor_warning:
+            print(f"WARNING: {args.markers}: {run.floor_warning}", file=sys.stderr)
         if not run.frame.sure:
             print(
                 f"WARNING: the up axis {run.frame.up!r} of {args.markers} is a guess; "
@@ -227,6 +239,7 @@ def _run_hybrid(args: argparse.Namespace) -> int:
                 ("--height-mm", args.height_mm is not None),
                 ("--free-feet", args.free_feet),
                 ("--up", args.up is not None),
+                ("--floor-mm", args.floor_mm is not None),
                 ("--world-frame", args.world_frame),
                 ("--static", args.static is not None),
                 ("--no-static-calibration", args.no_static_calibration),

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 from mocapkit.cli.args import output_folder
 from mocapkit.pipelines.report import build_report
@@ -40,7 +41,12 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 def run(args: argparse.Namespace) -> int:
     """Build the report and print the page's path."""
     page = build_report(
-        args.result, args.truth, args.out, session=args.session, markers=args.markers
+        args.result,
+        args.truth,
+        args.out,
+        session=args.session,
+        markers=args.markers,
+        say=lambda line: print(f"mocapkit view: warning: {line}", file=sys.stderr),
     )
     print(page)
     return 0

@@ -2,7 +2,9 @@
 
 Samples are matched by time stamp, never by frame index: each truth frame takes the
 nearest result sample if it lies within half the truth's frame interval (median spacing);
-truth frames without a match, or whose matched pose is all NaN, count against coverage.
+coverage is the share of (truth frame, joint) pairs with an estimate, so a truth frame
+without a match, or a joint that is NaN (an arm released while its hand was unseen),
+counts against it; per joint too.
 Errors are Euclidean distances (mm) averaged over the matched frames where both sides
 have the joint. PA-MPJPE aligns each result frame to the truth by the similarity
 transform (rotation, translation and scale) minimising the squared error (Umeyama 1991).
@@ -16,13 +18,13 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mocapkit.errors import FormatError, SessionError, ShapeError, unknown_name
+from mocapkit.errors import ConfigError, FormatError, SessionError, ShapeError, unknown_name
 from mocapkit.skeleton.model import CANONICAL_JOINTS, UPPER_BODY_JOINTS
 
 FloatArray = NDArray[np.float64]
@@ -42,6 +44,7 @@ class EvalReport:
     n_truth_frames: int
     n_matched_frames: int
     joints: tuple[str, ...]
+    per_joint_coverage: dict[str, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, object]:
         """A JSON-ready dict (NaN becomes None)."""
@@ -67,8 +70,11 @@ class EvalReport:
         def f(v: float) -> str:
             return "n/a" if not np.isfinite(v) else f"{v:.1f}"
 
-        lines = [f"{'joint':<16}{'error_mm':>10}"]
-        lines += [f"{n:<16}{f(v):>10}" for n, v in self.per_joint_mm.items()]
+        lines = [f"{'joint':<16}{'error_mm':>10}{'coverage':>10}"]
+        lines += [
+            f"{n:<16}{f(v):>10}{self.per_joint_coverage.get(n, float('nan')):>10.3f}"
+            for n, v in self.per_joint_mm.items()
+        ]
         lines += [
             "",
             f"{'mpjpe_mm':<22}{f(self.mpjpe_mm):>10}",
@@ -77,7 +83,8 @@ class EvalReport:
             f"{'jitter_mm_s2':<22}{f(self.jitter_mm_s2):>10}"
             f"   (truth {f(self.truth_jitter_mm_s2)})",
             f"{'coverage':<22}{self.coverage:>10.3f}   "
-            f"({self.n_matched_frames}/{self.n_truth_frames} truth frames)",
+            f"(joints estimated; {self.n_matched_frames}/{self.n_truth_frames} truth frames "
+            "with a pose)",
         ]
         return "\n".join(lines)
 
@@ -275,7 +282,8 @@ def evaluate_joints(
     est = np.full((tt.shape[0], len(common), 3), np.nan)
     est[matched] = rj[match[matched]][:, ri]
     ref = tj[:, ti]
-    has_pose = matched & np.any(np.all(np.isfinite(est), axis=-1), axis=-1)
+    estimated = matched[:, None] & np.all(np.isfinite(est), axis=-1)  # (T, K)
+    has_pose = np.any(estimated, axis=-1)
     err = np.linalg.norm(est - ref, axis=-1)  # (T, K), NaN where missing
     with np.errstate(invalid="ignore"):
         per_joint = {
@@ -306,10 +314,13 @@ def evaluate_joints(
         elbow_mm=float(np.mean(elbows)) if elbows else float("nan"),
         jitter_mm_s2=jit,
         truth_jitter_mm_s2=truth_jit,
-        coverage=float(has_pose.sum()) / tt.shape[0] if tt.shape[0] else 0.0,
+        coverage=float(estimated.mean()) if estimated.size else 0.0,
         n_truth_frames=int(tt.shape[0]),
         n_matched_frames=int(has_pose.sum()),
         joints=common,
+        per_joint_coverage={
+            n: float(estimated[:, k].mean()) if tt.shape[0] else 0.0 for k, n in enumerate(common)
+        },
     )
 
 
@@ -324,6 +335,11 @@ def joint_subset(spec: str) -> tuple[str, ...] | None:
     if spec == "upper":
         return UPPER_BODY_JOINTS
     names = tuple(n.strip() for n in spec.split(",") if n.strip())
+    if not names:
+        raise ConfigError(
+            f"--joints: expected 'all', 'upper' or a comma-separated list of canonical "
+            f"joints, found {spec!r}"
+        )
     for n in names:
         if n not in CANONICAL_JOINTS:
             raise unknown_name(

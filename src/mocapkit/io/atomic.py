@@ -11,9 +11,11 @@ import errno
 import os
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import IO, Any
+
+from mocapkit.errors import ConfigError
 
 
 @contextlib.contextmanager
@@ -103,6 +105,49 @@ def atomic_folder(path: str | os.PathLike[str]) -> Iterator[Path]:
     os.replace(tmp, target)
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)
+
+
+def check_own_folder(
+    path: str | os.PathLike[str], own_files: Sequence[str], what: str, writer: str
+) -> Path:
+    """Refuse a folder that a command would replace whole but did not write; call it
+    before the work.
+
+    The one rule of every command that swaps a folder in whole (`atomic_folder`): an
+    existing ``path`` must be empty or hold one of ``own_files`` (the files that mark it
+    as this command's own output); any other folder with files in it (a session, a
+    user's notes, a thesis) is refused rather than deleted. Hidden entries (the
+    temporaries of an interrupted swap) do not count.
+
+    Parameters
+    ----------
+    path : path-like
+    own_files : sequence of str
+        Names of which at least one marks the folder as the command's own.
+    what : str
+        What the folder is, for the message (``"result folder"``, ``"report folder"``).
+    writer : str
+        Who replaces it, for the message (``"a run"``, ``"mocapkit view"``).
+
+    Raises
+    ------
+    ConfigError
+        ``path`` is a file, or a folder with files but none of ``own_files``.
+    """
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"{out}: expected a {what}, found an existing file")
+    if out.is_dir() and not any((out / f).is_file() for f in own_files):
+        found = sorted(p.name for p in out.iterdir() if not p.name.startswith("."))
+        if found:
+            shown = ", ".join(found[:5]) + (", ..." if len(found) > 5 else "")
+            marks = " or ".join(own_files)
+            raise ConfigError(
+                f"{out}: {writer} replaces its {what} whole, but this folder is not a "
+                f"{what} (no {marks}; it holds {shown}); give a new or empty folder, or a "
+                f"previous {what}"
+            )
+    return out
 
 
 def remove_stale_temporaries(folder: str | os.PathLike[str], name: str) -> None:

@@ -9,8 +9,9 @@ results back to the file's frame.
 
 from __future__ import annotations
 
+import math
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -52,6 +53,8 @@ class LabFrame:
         Whether the detection passed its margins (always True when given).
     detail : str
         The figures behind the choice, for the terminal.
+    floor_given : bool
+        The floor was given (``--floor-mm``), not found from the lowest markers.
     """
 
     up: str
@@ -59,6 +62,7 @@ class LabFrame:
     method: str
     sure: bool
     detail: str = ""
+    floor_given: bool = False
 
     @property
     def world_from_lab(self) -> FloatArray:
@@ -95,8 +99,10 @@ class LabFrame:
             if self.method == "given"
             else (" sure" if self.sure else " NOT SURE, check it or give --up")
         )
-        return f"lab frame: up = {self.up} ({how};{certainty}), floor at {self.floor_mm:.0f} mm" + (
-            f"; {self.detail}" if self.detail else ""
+        floor = " (given, --floor-mm)" if self.floor_given else ""
+        return (
+            f"lab frame: up = {self.up} ({how};{certainty}), floor at {self.floor_mm:.0f} mm"
+            f"{floor}" + (f"; {self.detail}" if self.detail else "")
         )
 
 
@@ -126,7 +132,10 @@ def _floor_mm(markers: MarkerData, up: str) -> float:
 
 
 def detect_lab_frame(
-    markers: MarkerData, head_mm: ArrayLike | None = None, up: str | None = None
+    markers: MarkerData,
+    head_mm: ArrayLike | None = None,
+    up: str | None = None,
+    floor_mm: float | None = None,
 ) -> LabFrame:
     """Find the file's vertical axis and floor from the markers (or take ``up`` as given).
 
@@ -152,11 +161,23 @@ def detect_lab_frame(
         Head set centre per frame (NaN when unseen).
     up : str, optional
         One of `UP_AXES`: skip the detection of the axis (the floor is still found).
+    floor_mm : float, optional
+        The floor's coordinate along the up axis (mm; ``--floor-mm``): skip the floor's
+        detection (a file with no marker near the floor, only head and hands).
 
     Returns
     -------
     LabFrame
     """
+    if floor_mm is not None and not math.isfinite(floor_mm):
+        raise ConfigError(f"--floor-mm: expected a finite height (mm), found {floor_mm}")
+    frame = _detect(markers, head_mm, up)
+    if floor_mm is None:
+        return frame
+    return replace(frame, floor_mm=float(floor_mm), floor_given=True)
+
+
+def _detect(markers: MarkerData, head_mm: ArrayLike | None, up: str | None) -> LabFrame:
     if up is not None:
         up = parse_up(up)
         return LabFrame(up, _floor_mm(markers, up), "given", True)

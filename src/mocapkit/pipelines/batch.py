@@ -36,7 +36,12 @@ from pathlib import Path
 from typing import Any, TextIO
 
 from mocapkit.errors import ConfigError, SessionError
-from mocapkit.io.atomic import atomic_folder, atomic_write, remove_stale_temporaries
+from mocapkit.io.atomic import (
+    atomic_folder,
+    atomic_write,
+    check_own_folder,
+    remove_stale_temporaries,
+)
 from mocapkit.pipelines.registry import AUTO, choose_method, session_tracker
 from mocapkit.progress import Progress, silenced
 
@@ -477,13 +482,33 @@ def _dask_client(
             yield own
         return
     # one thread per worker: tracking is CPU-bound Python/Numba, threads would share a GIL
-    with (
-        LocalCluster(
-            n_workers=n_workers or default_workers(), threads_per_worker=1, processes=processes
-        ) as cluster,
-        Client(cluster) as own,
-    ):
+    cluster = LocalCluster(
+        n_workers=n_workers or default_workers(),
+        threads_per_worker=1,
+        processes=processes,
+        # worker processes ignore Ctrl-C (it reaches the whole process group): this
+        # process stops them and says what finished, without their tracebacks
+        **({"preload": ["mocapkit.pipelines.batch_worker"]} if processes else {}),
+    )
+    with cluster, Client(cluster) as own:
         yield own
+
+
+def _quiet_logs() -> None:
+    import logging
+
+    for name in ("distributed", "tornado"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+
+
+def _quiet_cluster_shutdown(client: Any, own: bool) -> None:
+    """After Ctrl-C, before the local cluster this batch started is closed: its closing
+    (the scheduler, nannies and workers stopping takes midway) logs nothing."""
+    if not own:
+        return
+    _quiet_logs()
+    with contextlib.suppress(Exception):  # a worker that cannot answer is closed anyway
+        client.run(_quiet_logs)
 
 
 def _dashboard(client: Any) -> str:
@@ -499,6 +524,36 @@ def _dashboard(client: Any) -> str:
     if "dashboard" not in services or (local and importlib.util.find_spec("bokeh") is None):
         return ""
     return str(client.dashboard_link)
+
+
+def _check_results_folder(out: Path, study: Path) -> None:
+    """Refuse, before any work, a results folder that is, or lies inside, a session (of
+    the study: that take would be left out; elsewhere: a recording would be written
+    into) or that holds files `batch` did not write (it replaces take folders whole)."""
+    session = next((p for p in (out, *out.parents) if (p / "session.json").is_file()), None)
+    if session is not None:
+        what = (
+            f"the take {session.relative_to(study).as_posix() or study.name!r} of the study"
+            if session == study or study in session.parents
+            else "a session"
+        )
+        raise ConfigError(
+            f"batch: the results folder {out} is or lies inside {session}, {what}, which "
+            "would not be tracked or would be written into; give a results folder outside "
+            "every session"
+        )
+    check_own_folder(out, (STUDY_FILE,), "results folder", "mocapkit batch")
+
+
+def _check_take_folders(out: Path, takes: Sequence[Take]) -> None:
+    """Refuse, before any work, a take's result folder that holds something else than a
+    result (it would be replaced whole)."""
+    from mocapkit.pipelines.run import RESULT_MARKER_FILE
+
+    for t in takes:
+        check_own_folder(
+            out / t.name, (TAKE_FILE, RESULT_MARKER_FILE), "take result folder", "mocapkit batch"
+        )
 
 
 def batch(
@@ -594,12 +649,14 @@ def batch(
     out = Path(out_dir).resolve()
     if out == Path(study_dir).resolve():
         raise ConfigError(f"batch: the results folder {out_dir} is the study folder; give another")
+    _check_results_folder(out, Path(study_dir).resolve())
     takes = discover_takes(study_dir, markers_glob, exclude=[out])
     if not takes:
         raise SessionError(
             f"{study_dir}: no take found (no folder with session.json"
             + (f", no file matching {markers_glob!r})" if markers_glob else ")")
         )
+    _check_take_folders(out, takes)
     options = {"method": method, "joints": joints}
     rows: dict[str, TakeRow] = {}
     jobs: list[TakeJob] = []
@@ -651,22 +708,32 @@ def batch(
             ) as prog:
                 prog.status = f"0 failed, {len(jobs)} remaining"
                 prog.update(0)  # the line shows from the start, not from the first take
-                for future in as_completed(futures):
-                    job = futures[future]
-                    try:
-                        row = future.result()
-                    except Exception as exc:  # the worker died (killed, out of memory)
-                        row = TakeRow(
-                            job.take.name,
-                            job.take.kind,
-                            status="failed",
-                            error=" ".join(f"{type(exc).__name__}: {exc}".split()),
-                        )
-                    rows[row.take] = row
-                    n_failed += row.status == "failed"
-                    write_study_csv(study_csv, ordered())
-                    prog.status = f"{n_failed} failed, {len(jobs) - prog.done - 1} remaining"
-                    prog.update()
+                try:
+                    for future in as_completed(futures):
+                        job = futures[future]
+                        try:
+                            row = future.result()
+                        except Exception as exc:  # the worker died (killed, out of memory)
+                            row = TakeRow(
+                                job.take.name,
+                                job.take.kind,
+                                status="failed",
+                                error=" ".join(f"{type(exc).__name__}: {exc}".split()),
+                            )
+                        rows[row.take] = row
+                        n_failed += row.status == "failed"
+                        write_study_csv(study_csv, ordered())
+                        prog.status = f"{n_failed} failed, {len(jobs) - prog.done - 1} remaining"
+                        prog.update()
+                except KeyboardInterrupt:
+                    _quiet_cluster_shutdown(dask_client, own=client is None and not scheduler)
+                    finished = sum(r.status in ("done", "failed") for r in rows.values())
+                    say(
+                        f"interrupted: {finished} of {len(jobs)} takes finished "
+                        f"({n_failed} failed) and are in {study_csv}; the next run redoes "
+                        f"the {len(jobs) - finished} pending"
+                    )
+                    raise
     result_rows = ordered()
     counts = {s: sum(r.status == s for r in result_rows) for s in ("done", "skipped", "failed")}
     return StudyResult(result_rows, study_csv, time.perf_counter() - start, dashboard, counts)

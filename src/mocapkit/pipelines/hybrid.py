@@ -16,13 +16,13 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import ConfigError, SessionError, ShapeError, unknown_name
 from mocapkit.ik.sdls import IKConfig, SDLSSolver
 from mocapkit.io.lab_frame import LabFrame, detect_lab_frame, to_world
 from mocapkit.io.marker_sets import MarkerSet
 from mocapkit.io.markers import MarkerData
 from mocapkit.io.motion import Motion
+from mocapkit.pipelines.camera_check import check_session_cameras
 from mocapkit.pipelines.run import (
     RunResult,
     check_result_folder,
@@ -252,59 +252,6 @@ def require_observed_sets(
         )
 
 
-#: Seconds of markers at the start over which `check_camera_sees` judges a camera.
-CAMERA_CHECK_S = 1.0
-
-
-def check_camera_sees(
-    camera: Camera, time_s: ArrayLike, points_mm: ArrayLike, where: str | os.PathLike[str]
-) -> None:
-    """Refuse a camera that cannot see the subject over the first `CAMERA_CHECK_S`.
-
-    The subject's marker-set positions (head, hands) must lie in front of the camera
-    and project inside its image for at least half of the seen samples; a camera placed
-    behind the subject, or whose translation was written in metres (3 mm from the
-    origin instead of 3 m), fails. The video refinement would otherwise fit the arms to
-    edges of an image the subject is not in.
-
-    Parameters
-    ----------
-    camera : Camera
-    time_s : array_like, shape (T,)
-        Marker sample times (s).
-    points_mm : array_like, shape (T, S, 3)
-        Marker-set positions in the world (NaN where unseen).
-    where : path or str
-        The session, for the message.
-
-    Raises
-    ------
-    SessionError
-        With the counts, the median depth and the median pixel.
-    """
-    t = np.asarray(time_s, dtype=float)
-    pts = np.asarray(points_mm, dtype=float)
-    first = pts[t <= t[0] + CAMERA_CHECK_S].reshape(-1, 3) if t.size else pts.reshape(-1, 3)
-    seen = first[np.all(np.isfinite(first), axis=1)]
-    if seen.shape[0] == 0:
-        return
-    depth = camera.to_camera(seen)[:, 2]
-    px = camera.project(seen)
-    inside = camera.in_image(px) & (depth > 0)
-    if np.count_nonzero(inside) * 2 >= seen.shape[0]:
-        return
-    w, h = camera.image_size
-    shown = np.nanmedian(px, axis=0) if np.any(np.isfinite(px)) else np.full(2, np.nan)
-    raise SessionError(
-        f"{where}: camera {camera.name!r} does not see the subject: of {seen.shape[0]} "
-        f"marker-set positions in the first {CAMERA_CHECK_S:g} s, "
-        f"{np.count_nonzero(depth > 0)} lie in front of it (median depth "
-        f"{np.median(depth):.0f} mm) and {np.count_nonzero(inside)} inside its {w}x{h} "
-        f"image (median pixel ({shown[0]:.0f}, {shown[1]:.0f})); expected at least half. "
-        "Check its pose in cameras.json (translations in mm, camera_from_world)"
-    )
-
-
 def track_hybrid_session(
     session_dir: str | os.PathLike[str],
     out_dir: str | os.PathLike[str] | None,
@@ -465,8 +412,10 @@ def track_hybrid_session_run(
             f"{session.path}: no camera with a video; the hybrid tracker's time line is the video's"
         )
     camera = session.camera(cams[0])
-    if cfg.use_video:
-        check_camera_sees(camera, session.markers.time_s, positions, session.path)
+    if cfg.use_video:  # the one camera check of every tracker, on the marker sets
+        check_session_cameras(
+            session, [cams[0]], subject_points=(session.markers.time_s, positions)
+        )
     # the camera also sets the initial facing, so it is passed even without video
     tracker = HybridTracker(sk, camera, cfg, timer=timer)
     n = session.video(cams[0]).n_frames
@@ -506,19 +455,55 @@ def track_hybrid_session_run(
 
 
 def _seat(
-    sk: Skeleton, head_z_mm: ArrayLike, choice: PostureChoice
+    sk: Skeleton, head_z_mm: ArrayLike, choice: PostureChoice, floor_warning: str = ""
 ) -> tuple[Skeleton, PostureChoice]:
     """``sk`` sat on the seat estimated from the head set's heights, and the choice
-    with that seat's height."""
+    with that seat's height; ``floor_warning`` (`_floor_from_hands`) names the likelier
+    cause when the seat lands below the floor."""
     head_point = default_marker_effectors(sk)["head"].point_mm
     seat_mm = estimate_seat_height_mm(sk, head_point, head_z_mm)
     if not seat_mm > 0:
+        cause = (
+            f"the likely cause: {floor_warning}"
+            if floor_warning
+            else "check the floor (--floor-mm), the up axis (--up) and --height-mm"
+        )
         raise ConfigError(
             f"seated posture: the seat estimated from the head set lies {seat_mm:.0f} mm "
             f"above the floor at a stature of {choice.height_mm:.0f} mm; expected above the "
-            "floor: check --height-mm and the lab axes"
+            f"floor; {cause}"
         )
     return seat_skeleton(sk, seat_mm), replace(choice, seat_height_mm=seat_mm)
+
+
+#: Share of frames on which a hand set's marker is the lowest of a file beyond which its
+#: floor, found from the lowest markers, is taken to lie at hand height.
+HANDS_LOWEST_SHARE = 0.5
+
+
+def _floor_from_hands(markers: MarkerData, sets: Sequence[MarkerSet], frame: LabFrame) -> str:
+    """Why the floor found from the lowest markers is likely wrong, or "": the lowest
+    marker is a hand set's on most frames (a file with head and hand markers only), so
+    the floor was put at hand height, the subject about 0.8 m shorter than they are."""
+    hand_members = {m for s in sets if s.name in HAND_SETS for m in s.all_members}
+    if not hand_members:
+        return ""
+    a, sign = "xyz".index(frame.up[-1]), (-1.0 if frame.up.startswith("-") else 1.0)
+    h = sign * markers.positions_mm[:, :, a]
+    seen = ~np.all(np.isnan(h), axis=1)
+    if not seen.any():
+        return ""
+    lowest = np.nanargmin(np.where(np.isnan(h[seen]), np.inf, h[seen]), axis=1)
+    is_hand = np.array([n in hand_members for n in markers.names])
+    share = float(is_hand[lowest].mean())
+    if share <= HANDS_LOWEST_SHARE:
+        return ""
+    return (
+        f"the floor ({frame.floor_mm:.0f} mm along {frame.up}) was found from the lowest "
+        f"markers, but the lowest is a hand set's on {100 * share:.0f} % of the frames (no "
+        "marker near the floor, only head and hands?), so it lies at hand height; give the "
+        "floor's coordinate along the up axis with --floor-mm (and --up if the axis is wrong)"
+    )
 
 
 #: Arm re-seed trigger (mm) for raw marker files (`HybridConfig.reseed_arm_mm`). The
@@ -736,6 +721,9 @@ class MarkerFileRun:
         ran.
     calibration_note : str
         Which calibration was used and what it did, or why none ran.
+    floor_warning : str
+        Why the floor found from the markers is likely wrong (`_floor_from_hands`), or
+        empty.
     """
 
     motion: Motion
@@ -744,6 +732,7 @@ class MarkerFileRun:
     posture: PostureChoice | None = None
     calibration: MemberCalibration | DynamicCalibration | None = None
     calibration_note: str = ""
+    floor_warning: str = ""
 
 
 def track_hybrid_markers(
@@ -780,6 +769,7 @@ def track_hybrid_marker_file(
     calibration: str = "auto",
     static: MarkerData | None = None,
     proportions: str = "anthropometric",
+    floor_mm: float | None = None,
 ) -> MarkerFileRun:
     """Run the hybrid tracker's IK on raw marker data (C3D, TRC, CSV) without a session.
 
@@ -842,6 +832,10 @@ def track_hybrid_marker_file(
         file gives no segment lengths, and Table 1's forearm is 0.207 of the stature
         against a population's 0.146; `mocapkit.skeleton.scaling.fit_anthropometric`)
         or ``"preset"`` (Table 1's, scaled by the stature).
+    floor_mm : float, optional
+        The floor's coordinate along the file's up axis (mm); default: found from the
+        lowest markers (`mocapkit.io.lab_frame.detect_lab_frame`), which a file with
+        head and hand markers only does not allow (``floor_warning`` then says so).
 
     Notes
     -----
@@ -876,7 +870,8 @@ def track_hybrid_marker_file(
     except ShapeError as exc:
         raise ConfigError(str(exc)) from None
     head = sets[names.index("head")]
-    frame = detect_lab_frame(markers, evaluate_marker_sets(markers, head)[:, 0], up)
+    frame = detect_lab_frame(markers, evaluate_marker_sets(markers, head)[:, 0], up, floor_mm)
+    floor_warning = "" if frame.floor_given else _floor_from_hands(markers, sets, frame)
     world = to_world(markers, frame)
     pos = evaluate_marker_sets(world, sets)
     require_observed_sets({n: pos[:, i] for i, n in enumerate(names)}, markers.source, ConfigError)
@@ -929,7 +924,9 @@ def track_hybrid_marker_file(
             )
         elif choice.posture == "seated":
             height_mm = stature
-            skeleton, choice = _seat(model(height_mm, oriented), head_pos[:, 2], choice)
+            skeleton, choice = _seat(
+                model(height_mm, oriented), head_pos[:, 2], choice, floor_warning
+            )
     assert height_mm is not None
     if skeleton is None:
         skeleton = model(height_mm, oriented)
@@ -954,7 +951,7 @@ def track_hybrid_marker_file(
         # and offsets calibrated on it stand)
         plain = model(height_mm, frozenset())
         if choice.posture == "seated":
-            plain = _seat(plain, head_pos[:, 2], choice)[0]
+            plain = _seat(plain, head_pos[:, 2], choice, floor_warning)[0]
         if calibration in ("auto", "static"):
             calib, note = _calibrate_static(skeleton, cfg, sets, world, static, frame)
             note = f"static: {note}"
@@ -1009,7 +1006,7 @@ def track_hybrid_marker_file(
     if out_dir is not None:
         with timer.stage("write"):
             write_run_folder(out_dir, motion, poses)
-    return MarkerFileRun(motion, frame, list(poses), choice, calib, note)
+    return MarkerFileRun(motion, frame, list(poses), choice, calib, note, floor_warning)
 
 
 def _blind_turn_note(sets: Sequence[MarkerSet], oriented: frozenset[str]) -> str:

@@ -26,6 +26,7 @@ from mocapkit.errors import ConfigError, SessionError, ShapeError
 from mocapkit.io.motion import Motion
 from mocapkit.io.session import Session, load_session
 from mocapkit.io.session_csv import Keypoints, read_keypoints_csv
+from mocapkit.pipelines.camera_check import check_session_cameras, warn_placed_subject
 from mocapkit.pipelines.run import check_result_folder, run_tracker
 from mocapkit.progress import Progress
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
@@ -668,6 +669,7 @@ def track_mono(
         if skin
         else load_keypoints(session, cam_name, keypoints)
     )
+    check_session_cameras(session, [cam_name], keypoints={cam_name: kp})  # before the work
     if kp.rebuilt_joints and not cfg.rebuilt_joints:
         cfg = detector_config(cfg)
     px = stick_pixels(kp, model) if pixels is None else np.asarray(pixels, dtype=float)
@@ -743,4 +745,5 @@ def track_mono(
     )
     results = [r for r in run.results if isinstance(r, MonoResult)]
     frames = [r.frame for r in results if r.frame is not None]
+    warn_placed_subject(session, cam_name, run.motion.joints_mm, run.motion.joint_names)
     return MonoRun(run.motion, frames, lengths, model, scale, results, px)

@@ -11,10 +11,11 @@ other.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,7 +24,7 @@ from numpy.typing import NDArray
 
 from mocapkit.errors import ConfigError, FormatError, SessionError
 from mocapkit.eval.metrics import EvalReport, evaluate_joints, match_by_time
-from mocapkit.io.atomic import atomic_folder
+from mocapkit.io.atomic import atomic_folder, check_own_folder, remove_stale_temporaries
 from mocapkit.io.joints_csv import read_joints_csv
 from mocapkit.io.marker_files import read_markers
 from mocapkit.io.markers import MarkerData
@@ -137,6 +138,48 @@ def load_result(folder: str | os.PathLike[str]) -> ResultData:
     )
 
 
+def mixed_runs(result: ResultData) -> list[str]:
+    """Warnings for a result folder whose files do not come from one run.
+
+    A tracker writes ``motion.npz``, ``joints.csv`` and ``fit.csv`` together, over the
+    same frames; a folder where they disagree (a file copied in from another run, or
+    left from one) is reported as it is, with these lines saying which files disagree
+    and how.
+    """
+    lines: list[str] = []
+    folder = result.folder
+    times = {"motion.npz": result.time_s} if (folder / "motion.npz").is_file() else {}
+    joints_csv = folder / "joints.csv"
+    if times and joints_csv.is_file():
+        t, names, joints = read_joints_csv(joints_csv)
+        same = t.shape == result.time_s.shape and np.allclose(t, result.time_s, atol=1e-6)
+        if same and tuple(names) == tuple(result.joint_names):
+            d = np.abs(joints - result.joints_mm)
+            finite = np.isfinite(joints) == np.isfinite(result.joints_mm)
+            same = bool(np.all(finite) and np.all(d[np.isfinite(d)] < 0.01))
+        if not same:
+            lines.append(
+                f"{folder}: joints.csv and motion.npz are not from the same run "
+                f"({t.shape[0]} vs {result.time_s.shape[0]} frames, or different joints); "
+                "the report shows motion.npz"
+            )
+    fit_path = folder / FIT_FILE
+    if fit_path.is_file():
+        with contextlib.suppress(FormatError):
+            ft = read_fit_table(fit_path).time_s
+            n = result.time_s.shape[0]
+            if ft.shape[0] != n or not np.allclose(ft, result.time_s, atol=1e-6):
+                span = f"{ft[0]:.3f}-{ft[-1]:.3f} s" if ft.size else "none"
+                lines.append(
+                    f"{fit_path}: not from the same run as the result ({ft.shape[0]} frames, "
+                    f"{span}, vs {n} frames, {result.time_s[0]:.3f}-{result.time_s[-1]:.3f} s"
+                    "); its fit plots describe another run"
+                    if n
+                    else f"{fit_path}: not from the same run as the (empty) result"
+                )
+    return lines
+
+
 def read_fit_table(path: str | os.PathLike[str]) -> FitTable:
     """Read a per-frame fit file: a ``time_s`` column, then any columns.
 
@@ -219,8 +262,8 @@ def _accuracy_tables(report: EvalReport) -> list[Table]:
             ("jitter (mm/s²)", f"{f(report.jitter_mm_s2)} (truth {f(report.truth_jitter_mm_s2)})"),
             (
                 "coverage",
-                f"{report.coverage:.3f} ({report.n_matched_frames}/{report.n_truth_frames} "
-                "truth frames)",
+                f"{report.coverage:.3f} of the joints estimated ({report.n_matched_frames}/"
+                f"{report.n_truth_frames} truth frames with a pose)",
             ),
         ),
     )
@@ -327,6 +370,7 @@ def build_report(
     *,
     session: str | os.PathLike[str] | None = None,
     markers: str | os.PathLike[str] | None = None,
+    say: Callable[[str], None] = lambda line: None,
 ) -> Path:
     """Write the report of a result folder; returns the path of its ``index.html``.
 
@@ -348,13 +392,17 @@ def build_report(
     markers : path-like, optional
         A marker file (.c3d, .trc, .csv) to show as points, for a result tracked from raw
         markers without a session (default: the session's markers).
+    say : callable, optional
+        Receives one-line warnings (a result folder whose files come from different
+        runs, `mixed_runs`); they are also shown on the page.
 
     Raises
     ------
     SessionError
         ``result_dir`` is not a result folder; a session lacks ``truth.npz``.
     ConfigError
-        ``out_dir`` would replace the result or the session.
+        ``out_dir`` would replace the result or the session, or is a folder that is not
+        a report folder (`mocapkit.io.atomic.check_own_folder`: no ``index.html``).
     """
     result = load_result(result_dir)
     truth: Truth | None = None
@@ -376,6 +424,10 @@ def build_report(
     )
     out = Path(out_dir) if out_dir is not None else result.folder / REPORT_FOLDER
     _check_out_dir(out, [result.folder] + ([sess.path] if sess is not None else []))
+    check_own_folder(out, (PAGE_NAME,), "report folder", "mocapkit view")
+    mixed = mixed_runs(result)
+    for line in mixed:
+        say(line)
 
     n = result.time_s.shape[0]
     facts = [
@@ -389,6 +441,10 @@ def build_report(
     if truth is not None:
         facts.append(("truth", str(Path(truth_session or "").resolve())))
 
+    if mixed:
+        facts.append(("warning", " ".join(mixed)))
+
+    remove_stale_temporaries(out.parent, out.name)  # what a killed earlier view left
     with atomic_folder(out) as tmp:
         sections: list[Section] = []
         if sess is not None and sess.video_cameras:
@@ -448,5 +504,6 @@ __all__ = [
     "ResultData",
     "build_report",
     "load_result",
+    "mixed_runs",
     "read_fit_table",
 ]

@@ -26,8 +26,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mocapkit.errors import ConfigError, ShapeError, unknown_name
-from mocapkit.io.atomic import atomic_folder, atomic_write, remove_stale_temporaries
+from mocapkit.errors import ShapeError, unknown_name
+from mocapkit.io.atomic import (
+    atomic_folder,
+    atomic_write,
+    check_own_folder,
+    remove_stale_temporaries,
+)
 from mocapkit.io.motion import Motion
 from mocapkit.io.motion_files import write_result_folder
 from mocapkit.progress import Progress
@@ -316,19 +321,7 @@ def check_result_folder(out_dir: str | os.PathLike[str]) -> Path:
     ConfigError
         ``out_dir`` is a file, or a folder with files but no ``motion.npz``.
     """
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"{out}: expected a result folder, found an existing file")
-    if out.is_dir() and not (out / RESULT_MARKER_FILE).is_file():
-        found = sorted(p.name for p in out.iterdir())
-        if found:
-            shown = ", ".join(found[:5]) + (", ..." if len(found) > 5 else "")
-            raise ConfigError(
-                f"{out}: a run replaces its result folder whole, but this folder is not a "
-                f"result folder (no {RESULT_MARKER_FILE}; it holds {shown}); give a new or "
-                "empty folder, or a previous result folder"
-            )
-    return out
+    return check_own_folder(out_dir, (RESULT_MARKER_FILE,), "result folder", "a run")
 
 
 def write_run_folder(

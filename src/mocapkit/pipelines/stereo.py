@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from mocapkit.errors import ConfigError, SessionError, unknown_name
 from mocapkit.io.motion import Motion
+from mocapkit.pipelines.camera_check import check_session_cameras
 from mocapkit.pipelines.run import run_tracker
 from mocapkit.timing import StageTimer
 from mocapkit.tracking.stereo.arm_filter import ArmFilterConfig
@@ -105,6 +106,7 @@ def _open_session(
             )
         kp_names = tuple(session.keypoints[names[0]].joint_names)
     sk = azad_skeleton(session.bone_lengths_mm, session.segment_vectors_mm)
+    check_session_cameras(session, names, skeleton=sk)  # before any tracker is built
     cams = [session.camera(c) for c in names]
     return session, names, StereoTracker(sk, cams, cfg, keypoint_names=kp_names)
 

@@ -62,6 +62,7 @@ the ones with the lowest first-order forward cost are kept (a beam; exact below 
 
 from __future__ import annotations
 
+import math
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -254,10 +255,20 @@ class MonoConfig:
                 "MonoConfig.rebuilt_in_plane_from: expected >= 0 (inf: off), found "
                 f"{self.rebuilt_in_plane_from}"
             )
-        if not self.girdle_weight >= 0.0:
-            raise ConfigError(
-                f"MonoConfig.girdle_weight: expected >= 0, found {self.girdle_weight}"
-            )
+        for name in (
+            "residual_weight",
+            "elbow_flex_weight",
+            "depth_velocity_weight",
+            "joint_acceleration_weight",
+            "clavicle_weight",
+            "arm_prior_weight",
+            "girdle_weight",
+        ):  # a negative weight rewards what the cost penalises; NaN poisons every path
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ConfigError(
+                    f"MonoConfig.{name}: expected a finite weight >= 0 (0: off), found {value}"
+                )
         if self.depth_window < 1 or self.max_pair_states < 1 or self.smooth_lag < 0:
             raise ConfigError(
                 "MonoConfig: depth_window and max_pair_states must be >= 1, smooth_lag >= 0"

@@ -1,0 +1,417 @@
+"""Is a camera plausible for the data it comes with? Checked before any tracker runs.
+
+One set of checks for every tracker (hybrid, stereo / multi-view, mono); each looks only at
+what the data allow:
+
+- **intrinsics** (`intrinsic_findings`): the principal point inside the image, square-ish
+  pixels (``fx`` and ``fy`` within a factor `MAX_PIXEL_ASPECT`);
+- **the subject in front of the camera and inside its image** (`sees_findings`), from 3-D
+  points of the subject that the session gives independently of the camera (the
+  hybrid's marker sets);
+- **2-D detections inside the image** (`keypoint_findings`);
+- **views that agree** (`view_findings`, two or more cameras with 2-D keypoints): the
+  confident joints of the first frames are triangulated from all views; the points must
+  lie in front of every camera, reproject onto every view's keypoints (a pair of swapped
+  keypoint files or swapped extrinsics gives errors of tens to hundreds of px, or points
+  behind the cameras) and give the subject's limb lengths (a translation in metres makes
+  the subject a thousand times smaller, doubled ``fx`` and ``fy`` about half as tall).
+
+Each check returns `CameraFinding` items; `refuse_or_warn` raises `SessionError` for the
+refusals and hands the warnings to a callback. Thresholds are wide: they catch a wrong
+unit, a swap or a turned camera, never a calibration that is merely imperfect.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mocapkit.camera.pinhole import Camera
+from mocapkit.camera.triangulation import reprojection_errors_px, triangulate_views
+from mocapkit.errors import SessionError
+
+FloatArray = NDArray[np.float64]
+
+#: Largest ratio between ``fx`` and ``fy`` taken as square pixels (anamorphic lenses
+#: aside, calibrations give 1.00-1.02).
+MAX_PIXEL_ASPECT = 1.25
+#: Share of 2-D detections (or marker-set positions) that must fall inside the image
+#: (with `IMAGE_MARGIN` of its size around it) and of triangulated points in front of a
+#: camera.
+MIN_SHARE = 0.5
+#: Margin around the image, as a share of its width and height, within which a detection
+#: still counts as inside (a detector may place a joint just off the frame).
+IMAGE_MARGIN = 0.1
+#: Frames (from the first with keypoints in two views) over which the views are compared.
+VIEW_CHECK_FRAMES = 30
+#: Largest median reprojection error of triangulated joints, as a share of the image
+#: width (2.5 % = 16 px at 640 px; detectors err by a few px, a swap by 100s).
+MAX_REPROJECTION_SHARE = 0.025
+#: Plausible ratio of limb lengths seen by the views (across the line of sight, at the
+#: triangulated depth) to the subject's (outside it: translations in the wrong unit, a
+#: baseline or a subject's height far off).
+LIMB_RATIO_RANGE = (0.6, 1.5)
+#: Near-rigid pairs of canonical joints whose distance is compared with the subject's.
+RIGID_PAIRS: tuple[tuple[str, str], ...] = (
+    ("left_shoulder", "left_elbow"),
+    ("left_elbow", "left_wrist"),
+    ("right_shoulder", "right_elbow"),
+    ("right_elbow", "right_wrist"),
+    ("left_shoulder", "right_shoulder"),
+    ("left_hip", "right_hip"),
+    ("left_hip", "left_knee"),
+    ("left_knee", "left_ankle"),
+    ("right_hip", "right_knee"),
+    ("right_knee", "right_ankle"),
+    ("neck", "pelvis"),
+)
+
+
+@dataclass(frozen=True)
+class CameraFinding:
+    """One implausible thing found about a camera.
+
+    Attributes
+    ----------
+    camera : str
+        The camera's name (several for a check of the views together).
+    check : str
+        ``intrinsics``, ``in front``, ``in image``, ``views agree``, ``limb lengths``,
+        ``floor`` or ``scale``.
+    text : str
+        What was found and what was expected, with the numbers.
+    refuse : bool
+        True: tracking would give garbage, refuse; False: ambiguous, warn.
+    """
+
+    camera: str
+    check: str
+    text: str
+    refuse: bool = True
+
+
+def intrinsic_findings(camera: Camera) -> list[CameraFinding]:
+    """Principal point outside the image (refused); non-square pixels (warned)."""
+    k = np.asarray(camera.K)
+    fx, fy, cx, cy = float(k[0, 0]), float(k[1, 1]), float(k[0, 2]), float(k[1, 2])
+    w, h = camera.image_size
+    out: list[CameraFinding] = []
+    if not (0.0 <= cx <= w and 0.0 <= cy <= h):
+        out.append(
+            CameraFinding(
+                camera.name,
+                "intrinsics",
+                f"principal point (cx, cy) = ({cx:.1f}, {cy:.1f}) px lies outside its {w}x{h} "
+                f"image; expected inside it, near ({w / 2:.0f}, {h / 2:.0f}) (K in px of this "
+                "image size?)",
+            )
+        )
+    aspect = max(fx, fy) / min(fx, fy) if min(fx, fy) > 0 else np.inf
+    if aspect > MAX_PIXEL_ASPECT:
+        out.append(
+            CameraFinding(
+                camera.name,
+                "intrinsics",
+                f"fx = {fx:.1f} px and fy = {fy:.1f} px differ by a factor {aspect:.2f}; "
+                f"expected square pixels (within {MAX_PIXEL_ASPECT})",
+                refuse=False,
+            )
+        )
+    return out
+
+
+def sees_findings(camera: Camera, points_mm: ArrayLike, what: str) -> list[CameraFinding]:
+    """The subject's 3-D points (any shape (..., 3), NaN where unseen) in front of the
+    camera and inside its image for at least `MIN_SHARE` of them; else refused.
+
+    ``what`` names the points for the message (e.g. "marker-set positions in the first
+    1 s"). A camera behind the subject, or whose translation was written in metres, fails.
+    """
+    pts = np.asarray(points_mm, dtype=float).reshape(-1, 3)
+    seen = pts[np.all(np.isfinite(pts), axis=1)]
+    if seen.shape[0] == 0:
+        return []
+    depth = camera.to_camera(seen)[:, 2]
+    px = camera.project(seen)
+    inside = camera.in_image(px) & (depth > 0)
+    if np.count_nonzero(inside) >= MIN_SHARE * seen.shape[0]:
+        return []
+    w, h = camera.image_size
+    shown = np.nanmedian(px, axis=0) if np.any(np.isfinite(px)) else np.full(2, np.nan)
+    return [
+        CameraFinding(
+            camera.name,
+            "in front",
+            f"does not see the subject: of {seen.shape[0]} {what}, "
+            f"{np.count_nonzero(depth > 0)} lie in front of it (median depth "
+            f"{np.median(depth):.0f} mm) and {np.count_nonzero(inside)} inside its {w}x{h} "
+            f"image (median pixel ({shown[0]:.0f}, {shown[1]:.0f})); expected at least half. "
+            "Check its pose (translations in mm, camera_from_world)",
+        )
+    ]
+
+
+def keypoint_findings(camera: Camera, pixels: ArrayLike) -> list[CameraFinding]:
+    """2-D detections (..., 2) of this camera inside its image (with `IMAGE_MARGIN`) for
+    at least `MIN_SHARE` of them; else refused (keypoints of another image size or
+    camera, or an image size wrong in cameras.json)."""
+    px = np.asarray(pixels, dtype=float).reshape(-1, 2)
+    px = px[np.all(np.isfinite(px), axis=1)]
+    if px.shape[0] == 0:
+        return []
+    w, h = camera.image_size
+    mx, my = IMAGE_MARGIN * w, IMAGE_MARGIN * h
+    inside = (px[:, 0] >= -mx) & (px[:, 0] <= w + mx) & (px[:, 1] >= -my) & (px[:, 1] <= h + my)
+    if np.count_nonzero(inside) >= MIN_SHARE * px.shape[0]:
+        return []
+    med = np.median(px, axis=0)
+    return [
+        CameraFinding(
+            camera.name,
+            "in image",
+            f"{px.shape[0] - np.count_nonzero(inside)} of {px.shape[0]} keypoints lie outside "
+            f"its {w}x{h} image (median ({med[0]:.0f}, {med[1]:.0f}) px); expected at least "
+            "half inside (keypoints of another camera or image size?)",
+        )
+    ]
+
+
+def view_findings(
+    cameras: Sequence[Camera],
+    pixels: ArrayLike,
+    joint_names: Sequence[str],
+    rest_joints_mm: Mapping[str, ArrayLike],
+) -> list[CameraFinding]:
+    """Do two or more views agree on the subject? Triangulate and check.
+
+    Parameters
+    ----------
+    cameras : sequence of Camera, length V
+    pixels : array_like, shape (V, T, K, 2)
+        Each view's keypoints of the same frames (NaN where unseen), the first frames of
+        the recording (`VIEW_CHECK_FRAMES` are enough).
+    joint_names : sequence of str, length K
+        Canonical names of the keypoints.
+    rest_joints_mm : mapping of str to (3,)
+        The subject's canonical joints in any one pose (the body model at rest): the
+        limb lengths the views must give.
+
+    Returns
+    -------
+    list of CameraFinding
+        Refused: triangulated points behind a camera, a view's median reprojection error
+        above `MAX_REPROJECTION_SHARE` of its width, limb lengths outside
+        `LIMB_RATIO_RANGE` of the subject's.
+    """
+    px = np.asarray(pixels, dtype=float)
+    names = list(joint_names)
+    pts = triangulate_views(cameras, px)  # (T, K, 3); NaN where fewer than 2 views see it
+    ok = np.all(np.isfinite(pts), axis=-1)
+    if np.count_nonzero(ok) < 3:
+        return []
+    out: list[CameraFinding] = []
+    all_names = ", ".join(c.name for c in cameras)
+    for c in cameras:
+        depth = c.to_camera(pts[ok])[:, 2]
+        if np.count_nonzero(depth > 0) < MIN_SHARE * depth.shape[0]:
+            out.append(
+                CameraFinding(
+                    c.name,
+                    "in front",
+                    f"the joints triangulated from cameras {all_names} lie behind it "
+                    f"({np.count_nonzero(depth <= 0)} of {depth.shape[0]}, median depth "
+                    f"{np.median(depth):.0f} mm); expected the subject in front of every "
+                    "camera (left and right extrinsics or keypoint files swapped? a camera "
+                    "turned round?)",
+                )
+            )
+    if out:
+        return out
+    err = reprojection_errors_px(cameras, pts, px)  # (V, T, K)
+    for i, c in enumerate(cameras):
+        e = err[i][ok & np.isfinite(err[i])]
+        limit = MAX_REPROJECTION_SHARE * c.image_size[0]
+        if e.size and float(np.median(e)) > limit:
+            out.append(
+                CameraFinding(
+                    c.name,
+                    "views agree",
+                    f"its keypoints disagree with the other views: joints triangulated from "
+                    f"cameras {all_names} reproject {np.median(e):.1f} px (median) from its "
+                    f"keypoints; expected at most {limit:.0f} px (keypoint files of two "
+                    "cameras swapped? extrinsics or intrinsics of another camera?)",
+                )
+            )
+    if out:
+        return out
+    # limb lengths across the line of sight: each view's limb in normalised image
+    # coordinates times the subject's median depth there. The depth of one joint from a
+    # narrow baseline is noisy (4 px of detector noise on a 90 mm pair at 3 m doubles
+    # the limbs triangulated in 3-D), the median depth of all of them is not; a limb
+    # seen foreshortened is shorter, so the 90th percentile over the frames is compared.
+    ratios = []
+    for i, c in enumerate(cameras):
+        subject_depth = float(np.median(c.to_camera(pts[ok])[:, 2]))
+        norm = c.undistort_pixels(px[i])  # (T, K, 2)
+        for a, b in RIGID_PAIRS:
+            if a in names and b in names and a in rest_joints_mm and b in rest_joints_mm:
+                d = np.linalg.norm(norm[:, names.index(a)] - norm[:, names.index(b)], axis=-1)
+                d = d[np.isfinite(d)] * subject_depth
+                rest = float(np.linalg.norm(np.subtract(rest_joints_mm[a], rest_joints_mm[b])))
+                if d.size and rest > 0:
+                    ratios.append(float(np.percentile(d, 90.0)) / rest)
+    if ratios:
+        r = float(np.median(ratios))
+        lo, hi = LIMB_RATIO_RANGE
+        if not lo <= r <= hi:
+            out.append(
+                CameraFinding(
+                    all_names,
+                    "limb lengths",
+                    f"limbs seen by cameras {all_names} at the depth triangulated from them "
+                    f"are {r:.3g} times the subject's (median over {len(ratios)} limbs and "
+                    f"views); expected {lo}-{hi} "
+                    "(translations in metres instead of mm? fx and fy of another image "
+                    "size? the subject's height in session.json?)",
+                )
+            )
+    ankles = [names.index(n) for n in ("left_ankle", "right_ankle") if n in names]
+    if not out and ankles and _depth_is_steady(cameras[0], pts):
+        # on each view's rays at the subject's median depth (as the limbs above)
+        placed = []
+        for i, c in enumerate(cameras):
+            subject_depth = float(np.median(c.to_camera(pts[ok])[:, 2]))
+            n = c.undistort_pixels(px[i][:, ankles]).reshape(-1, 2)
+            in_cam = np.column_stack([n * subject_depth, np.full(n.shape[0], subject_depth)])
+            placed.append(in_cam @ np.asarray(c.world_from_camera)[:3, :3].T + c.center_in_world)
+        out += floor_findings(all_names, np.concatenate(placed), f"placed from cameras {all_names}")
+    return out
+
+
+#: Largest distance (mm) of the subject's lowest joints (ankles) from the world's z = 0
+#: before a warning: a session's floor is usually at 0 (`docs/conventions.md`), and a
+#: subject placed too far or too near (doubled focal lengths, translations in metres)
+#: stands above or below it.
+MAX_FLOOR_OFFSET_MM = 300.0
+#: Camera centres nearer than this to the world origin (mm) are taken for translations
+#: written in metres (a camera 3 m away read as 3 mm).
+MIN_CAMERA_DISTANCE_MM = 50.0
+
+
+def floor_findings(camera: str, ankles_mm: ArrayLike, how: str) -> list[CameraFinding]:
+    """Warn when the subject's ankles (..., 3), as placed by ``how``, lie far from z = 0."""
+    a = np.asarray(ankles_mm, dtype=float).reshape(-1, 3)
+    z = a[np.isfinite(a[:, 2]), 2]
+    if z.size == 0:
+        return []
+    lowest = float(np.median(z))
+    if abs(lowest) <= MAX_FLOOR_OFFSET_MM:
+        return []
+    return [
+        CameraFinding(
+            camera,
+            "floor",
+            f"the subject's ankles, {how}, lie at z = {lowest:.0f} mm (median); expected near "
+            f"the floor, within {MAX_FLOOR_OFFSET_MM:.0f} mm of z = 0 (focal lengths or "
+            "translations in the wrong unit? ignore this if the session's floor is not at 0)",
+            refuse=False,
+        )
+    ]
+
+
+def pose_findings(camera: Camera) -> list[CameraFinding]:
+    """Warnings on a camera's pose alone (one camera and no 3-D data to check it by): a
+    centre within `MIN_CAMERA_DISTANCE_MM` of the world origin (translations in metres?),
+    the world origin behind the camera (a lab's origin usually lies in the capture
+    volume: a camera turned round?)."""
+    out: list[CameraFinding] = []
+    centre = np.asarray(camera.center_in_world, dtype=float)
+    dist = float(np.linalg.norm(centre))
+    if 0.0 < dist < MIN_CAMERA_DISTANCE_MM:
+        out.append(
+            CameraFinding(
+                camera.name,
+                "scale",
+                f"its centre lies {dist:.3g} mm from the world origin; expected a camera "
+                f"at least {MIN_CAMERA_DISTANCE_MM:.0f} mm away (translations in metres "
+                "instead of mm?)",
+                refuse=False,
+            )
+        )
+    elif dist > 0.0:
+        depth = float(camera.to_camera(np.zeros((1, 3)))[0, 2])
+        if depth <= 0.0:
+            out.append(
+                CameraFinding(
+                    camera.name,
+                    "in front",
+                    f"the world origin lies behind it (depth {depth:.0f} mm); expected the "
+                    "capture volume, where a lab's origin usually is, in front of it (a "
+                    "camera turned round, camera_from_world inverted?)",
+                    refuse=False,
+                )
+            )
+    return out
+
+
+#: Largest spread (median absolute deviation over frames, as a share of the median) of
+#: the subject's per-frame median depth for the depth to be trusted by the floor check:
+#: a narrow baseline with a detector's noise (8 px on a 90 mm pair at 3 m) moves it by
+#: a quarter; exact keypoints, by a few per cent as the subject moves.
+MAX_DEPTH_SPREAD = 0.05
+
+
+def _depth_is_steady(camera: Camera, points_mm: FloatArray) -> bool:
+    """Whether the triangulated subject's depth from ``camera`` holds steady over the
+    frames (`MAX_DEPTH_SPREAD`), so that where it places the subject can be trusted."""
+    z = camera.to_camera(points_mm.reshape(-1, 3))[:, 2].reshape(points_mm.shape[:-1])
+    with np.errstate(all="ignore"):
+        per_frame = np.nanmedian(np.where(np.isfinite(z), z, np.nan), axis=-1)
+    per_frame = per_frame[np.isfinite(per_frame)]
+    if per_frame.size < 3:
+        return False
+    mid = float(np.median(per_frame))
+    spread = float(np.median(np.abs(per_frame - mid)))
+    return mid > 0 and spread <= MAX_DEPTH_SPREAD * mid
+
+
+def refuse_or_warn(
+    findings: Sequence[CameraFinding],
+    where: str,
+    warn: Callable[[str], None] = lambda line: None,
+) -> None:
+    """Raise `SessionError` listing every refusal; pass each warning to ``warn``."""
+    refusals = [f for f in findings if f.refuse]
+    for f in findings:
+        if not f.refuse:
+            warn(f"{where}: camera {f.camera!r} ({f.check}): {f.text}")
+    if refusals:
+        lines = [f"camera {f.camera!r} ({f.check}): {f.text}" for f in refusals]
+        raise SessionError(
+            f"{where}: the cameras do not fit the data; check cameras.json and the keypoints "
+            "before tracking:\n  " + "\n  ".join(lines)
+        )
+
+
+__all__ = [
+    "IMAGE_MARGIN",
+    "LIMB_RATIO_RANGE",
+    "MAX_FLOOR_OFFSET_MM",
+    "MAX_PIXEL_ASPECT",
+    "MAX_REPROJECTION_SHARE",
+    "MIN_CAMERA_DISTANCE_MM",
+    "MIN_SHARE",
+    "RIGID_PAIRS",
+    "VIEW_CHECK_FRAMES",
+    "CameraFinding",
+    "floor_findings",
+    "intrinsic_findings",
+    "keypoint_findings",
+    "pose_findings",
+    "refuse_or_warn",
+    "sees_findings",
+    "view_findings",
+]

@@ -1,0 +1,134 @@
+"""The camera checks on a known rig: each refuses its bad case with the numbers, and
+passes the good one."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
+from mocapkit.camera.plausibility import (
+    CameraFinding,
+    intrinsic_findings,
+    keypoint_findings,
+    pose_findings,
+    refuse_or_warn,
+    sees_findings,
+    view_findings,
+)
+from mocapkit.errors import SessionError
+
+NAMES = ("left_shoulder", "left_elbow", "left_wrist", "right_shoulder", "right_elbow")
+REST = {
+    "left_shoulder": np.array([-180.0, 0.0, 1400.0]),
+    "left_elbow": np.array([-180.0, 0.0, 1100.0]),
+    "left_wrist": np.array([-180.0, 0.0, 830.0]),
+    "right_shoulder": np.array([180.0, 0.0, 1400.0]),
+    "right_elbow": np.array([180.0, 0.0, 1100.0]),
+}
+
+
+def _camera(name: str, eye: tuple[float, float, float], k: np.ndarray | None = None) -> Camera:
+    size = (640, 480)
+    return Camera(
+        name,
+        size,
+        intrinsics_from_fov(size, 60.0) if k is None else k,
+        np.zeros(5),
+        look_at(eye, (0.0, 0.0, 1100.0)),
+    )
+
+
+def _rig() -> list[Camera]:  # two cameras 40 deg apart, 3 m from the subject
+    a = np.deg2rad(20.0)
+    return [
+        _camera("left", (-3000.0 * np.sin(a), -3000.0 * np.cos(a), 1300.0)),
+        _camera("right", (3000.0 * np.sin(a), -3000.0 * np.cos(a), 1300.0)),
+    ]
+
+
+def _points(rng: np.random.Generator, n: int = 20) -> np.ndarray:
+    """(n, K, 3): the rest joints swaying a little."""
+    rest = np.stack([REST[k] for k in NAMES])
+    return rest + rng.normal(0.0, 20.0, (n, 1, 3))
+
+
+def test_good_rig_passes_every_check(rng):
+    cams = _rig()
+    pts = _points(rng)
+    px = np.stack([c.project(pts) for c in cams])
+    px += rng.normal(0.0, 1.0, px.shape)  # a detector's noise
+    assert view_findings(cams, px, NAMES, REST) == []
+    for i, c in enumerate(cams):
+        assert intrinsic_findings(c) == []
+        assert keypoint_findings(c, px[i]) == []
+        assert sees_findings(c, pts, "joints") == []
+        assert pose_findings(c) == []
+
+
+@pytest.mark.parametrize("noise_px", [4.0, 8.0])
+def test_a_narrow_pair_with_a_detectors_noise_passes(rng, noise_px):
+    """90 mm apart at 3 m: a joint's depth from one frame is off by a quarter or more,
+    the checks that use depth use the subject's median depth and still pass."""
+    cams = [_camera(name, (x, -3000.0, 1300.0), None) for name, x in (("l", -45.0), ("r", 45.0))]
+    cams = [  # parallel: both look along +y
+        Camera(c.name, c.image_size, c.K, c.dist, look_at((x, -3000.0, 1300.0), (x, 0.0, 1100.0)))
+        for c, x in zip(cams, (-45.0, 45.0))
+    ]
+    pts = _points(rng, 30)
+    px = np.stack([c.project(pts) for c in cams]) + rng.normal(0.0, noise_px, (2, 30, 5, 2))
+    assert [f for f in view_findings(cams, px, NAMES, REST) if f.refuse] == []
+
+
+def test_views_that_disagree_are_refused_with_the_error(rng):
+    cams = _rig()
+    pts = _points(rng)
+    px = np.stack([c.project(pts) for c in cams])
+    px[1, ..., 1] += 80.0  # the right view's keypoints 80 px off its epipolar lines
+    found = view_findings(cams, px, NAMES, REST)
+    assert [f.check for f in found] == ["views agree", "views agree"]
+    assert "reproject" in found[1].text and "expected at most 16 px" in found[1].text
+    with pytest.raises(
+        SessionError,
+        match=r"camera 'right' \(views agree\): its keypoints "
+        r"disagree with the other views: .* reproject [\d.]+ px \(median\)",
+    ):
+        refuse_or_warn(found, "S")
+
+
+def test_limb_lengths_off_by_a_factor_are_refused(rng):
+    cams = _rig()
+    pts = _points(rng)
+    px = np.stack([c.project(pts) for c in cams])
+    half = {k: v * 2.0 for k, v in REST.items()}  # the subject twice as tall as the views say
+    found = view_findings(cams, px, NAMES, half)
+    assert [f.check for f in found] == ["limb lengths"]
+    assert re.search(r"are 0\.(49|50)\d* times the subject's", found[0].text), found[0].text
+
+
+def test_keypoints_outside_the_image_and_subject_behind(rng):
+    cam = _rig()[0]
+    pts = _points(rng)
+    px = cam.project(pts) + np.array([2000.0, 0.0])
+    (f,) = keypoint_findings(cam, px)
+    assert f.check == "in image" and f"{px.size // 2} of {px.size // 2} keypoints" in f.text
+    turned = Camera(cam.name, cam.image_size, cam.K, cam.dist,
+                    np.diag([-1.0, 1.0, -1.0, 1.0]) @ cam.camera_from_world)  # fmt: skip
+    (f,) = sees_findings(turned, pts, "joints")
+    assert f.check == "in front" and "0 inside its 640x480 image" in f.text
+    (w,) = pose_findings(turned)
+    assert not w.refuse and "the world origin lies behind it" in w.text
+
+
+def test_warnings_go_to_the_callback_and_refusals_raise():
+    lines: list[str] = []
+    refuse_or_warn([CameraFinding("c", "floor", "low", refuse=False)], "S", lines.append)
+    assert lines == ["S: camera 'c' (floor): low"]
+    with pytest.raises(
+        SessionError,
+        match=r"S: the cameras do not fit the data.*\n  camera "
+        r"'c' \(intrinsics\): bad",
+    ):
+        refuse_or_warn([CameraFinding("c", "intrinsics", "bad")], "S", lines.append)
