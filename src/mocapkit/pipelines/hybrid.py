@@ -520,7 +520,7 @@ def track_hybrid_session_run(
         out_dir,
         "track hybrid",
         source=f"hybrid tracker ({mode}, video="
-        f"{'on' if cfg.use_video else 'off'}{seated}) on {session.path}",
+        f"{'on' if cfg.use_video else 'off'}{seated}, camera {cams[0]}) on {session.path}",
         timer=timer,
     )
 

@@ -738,7 +738,7 @@ def track_mono(
         len(t),
         out_dir,
         label="track mono",
-        source=f"mono tracker on {session.path}",
+        source=f"mono tracker (camera {cam_name}) on {session.path}",
         joint_names=stream.joint_names,
     )
     results = [r for r in run.results if isinstance(r, MonoResult)]
