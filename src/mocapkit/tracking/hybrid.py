@@ -58,7 +58,7 @@ from mocapkit.tracking.base import (
     FrameResult,
     canonical_joints_mm,
     fit_summary,
-    unobserved_part,
+    nan_unobserved,
 )
 from mocapkit.tracking.posture import SEATED_LEFT_OUT
 
@@ -1060,11 +1060,7 @@ class HybridTracker:
             # the legs are held bent under a seat: no marker sees them
             for joint in SEATED_LEFT_OUT:
                 out[CANONICAL_JOINTS.index(joint)] = np.nan
-        for name in released:
-            part = unobserved_part(name)
-            for joint in part[1] if part is not None else ():
-                out[CANONICAL_JOINTS.index(joint)] = np.nan
-        return out
+        return nan_unobserved(out, dict.fromkeys(released, "released"))
 
     def _no_pose(
         self, sample: HybridSample, bridged: Sequence[str], released: Sequence[str]
