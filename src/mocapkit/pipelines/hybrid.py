@@ -1036,7 +1036,7 @@ def _blind_turn_note(sets: Sequence[MarkerSet], oriented: frozenset[str]) -> str
     """A note for the oriented hand sets of two members and no turning marker: both
     members and the set's centre lie on one line (a wrist bar), so the forearm may turn
     about that line unseen, and a serve's elbow flips round to the other side there
-    (docs/hybrid.md, "Raw files: the wrist bar's blind turn"). Empty where none."""
+    (docs/design-notes/hybrid.md). Empty where none."""
     blind = [
         s.name
         for s in sets

@@ -124,7 +124,7 @@ class StereoConfig:
         shoulders, while the ``azad14`` shoulders sit 40 mm below its neck: on a session
         without the subject's vectors the ``"neck"`` anchor puts the shoulders about 100
         mm too low (Pose2Sim demo: shoulders 153/142 mm from the triangulated keypoints,
-        41.6/38.8 mm with ``"shoulders"``, docs/stereo.md). On the synthetic accuracy
+        41.6/38.8 mm with ``"shoulders"``, docs/design-notes/stereo.md). On the synthetic accuracy
         clips, whose sessions carry the exact vectors, both are alike (32.3 and 32.1 mm).
     reach_pad_mm : float
         Margin of the arms' reach box.
