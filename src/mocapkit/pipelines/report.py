@@ -470,7 +470,10 @@ def build_report(
                 truth.joints_mm,
             )
             every = evaluate_joints(*args)
-            reports = [(f"all {len(every.joints)} joints", every)]
+            n_all = len(every.joints)
+            upper_only = set(every.joints) == set(UPPER_BODY_JOINTS)
+            label = f"upper body ({n_all} joints)" if upper_only else f"all {n_all} joints"
+            reports = [(label, every)]
             if set(UPPER_BODY_JOINTS) & set(every.joints) != set(every.joints):
                 upper = evaluate_joints(*args, joints=UPPER_BODY_JOINTS)
                 reports.insert(0, (f"upper body ({len(upper.joints)} joints)", upper))
