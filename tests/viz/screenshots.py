@@ -45,12 +45,12 @@ _NEAREST_STEP = (
     " best = st; } }); return [best.args[0][0], parseFloat(best.label)]; })"
 )
 # pause every video on the frame shown at time t (s), the middle of that frame, and wait
-# until that frame is presented
+# until that frame is presented (at most 3 s: a seek onto the frame shown presents none)
 _SEEK_VIDEOS = (
     "(function (t) { return Promise.all(Array.from(document.querySelectorAll('video'))"
     ".map(function (v) { v.pause(); var fps = parseFloat(v.dataset.fps) || 30;"
     " return new Promise(function (done) {"
-    " v.addEventListener('seeked', function () {"
+    " v.addEventListener('seeked', function () { setTimeout(done, 3000);"
     " if (v.requestVideoFrameCallback) { v.requestVideoFrameCallback(function () { done(); });"
     " } else { done(); } }, {once: true});"
     " v.currentTime = Math.round(t * fps) / fps + 0.5 / fps; }); }))"
