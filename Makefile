@@ -27,6 +27,7 @@ lint: $(STAMP_TEST)
 	$(BIN)/mypy
 
 test: lint
+	tools/install-test-browser
 	$(BIN)/python -m pytest
 
 bench: $(STAMP_DEMO)

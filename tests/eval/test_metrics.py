@@ -73,6 +73,44 @@ def test_constant_offset_and_similarity_transform(truth):
     assert r2.pa_mpjpe_mm == pytest.approx(0.0, abs=1e-6)
 
 
+def _pa_and_mpjpe(est: np.ndarray, ref: np.ndarray) -> tuple[float, float, float, float]:
+    """Per-frame mean and RMS error of one frame, before and after alignment."""
+    err = np.linalg.norm(est - ref, axis=-1)
+    aligned = np.linalg.norm(similarity_align(est, ref) - ref, axis=-1)
+    return (
+        float(aligned.mean()),
+        float(err.mean()),
+        float(np.sqrt((aligned**2).mean())),
+        float(np.sqrt((err**2).mean())),
+    )
+
+
+def test_pa_mpjpe_is_the_least_squares_alignment_on_the_same_joints(truth, rng):
+    """PA-MPJPE is MPJPE after each frame's least-squares similarity alignment, on the
+    same joints and frames: it never exceeds MPJPE in the RMS it minimises, and is below
+    MPJPE when the errors are spread over the joints; one joint's large error, spread
+    over the others by least squares, can put it above MPJPE (what the report explains)."""
+    t, names, j = truth
+    for f in range(0, j.shape[0], 5):  # RMS: never above, whatever the errors
+        est = j[f] + rng.normal(scale=30.0, size=j[f].shape) * rng.uniform(0, 3, (len(names), 1))
+        _, _, pa_rms, rms = _pa_and_mpjpe(est, j[f])
+        assert pa_rms <= rms + 1e-9
+    noisy = j + rng.normal(scale=15.0, size=j.shape)  # errors spread over the joints
+    r = evaluate_joints(t, names, noisy, t, names, j)
+    assert r.pa_mpjpe_mm <= r.mpjpe_mm
+    per_frame = [_pa_and_mpjpe(noisy[f], j[f])[0] for f in range(j.shape[0])]
+    assert r.pa_mpjpe_mm == pytest.approx(float(np.mean(per_frame)))
+    upper = evaluate_joints(t, names, noisy, t, names, j, joints=("head", "neck", "pelvis"))
+    per_frame = [_pa_and_mpjpe(noisy[f, :3], j[f, :3])[0] for f in range(j.shape[0])]
+    assert upper.joints == ("head", "neck", "pelvis") == tuple(names[:3])
+    assert upper.pa_mpjpe_mm == pytest.approx(float(np.mean(per_frame)))
+    one_off = j.copy()  # a known case: one joint 200 mm off, the others exact
+    one_off[:, names.index("pelvis"), 2] += 200.0
+    r = evaluate_joints(t, names, one_off, t, names, j)
+    assert r.mpjpe_mm == pytest.approx(200.0 / len(names))
+    assert r.pa_mpjpe_mm > r.mpjpe_mm
+
+
 def test_similarity_align_recovers_points(rng):
     pts = rng.normal(size=(10, 3)) * 300
     rot = matrix_from_rotvec(rng.normal(size=3))

@@ -428,3 +428,26 @@ def test_head_and_hands_file_names_the_floor_and_takes_floor_mm(wave_session, tm
     with pytest.raises(SystemExit):
         main([*args, "--floor-mm", "nan"])
     assert "argument --floor-mm: expected a number, found nan" in capsys.readouterr().err
+
+
+def test_session_config_keeps_the_session_offsets_under_a_given_config() -> None:
+    """A config passed to the session run keeps its own settings and gets the session's
+    marker offsets (``config or HybridConfig(...)`` used to drop them)."""
+    from types import SimpleNamespace
+
+    from mocapkit.pipelines.hybrid import session_config
+    from mocapkit.tracking.hybrid import HybridConfig
+
+    session = SimpleNamespace(
+        path="s",
+        marker_offsets={"head": ("head", np.array([0.0, 10.0, 90.0]))},
+        marker_member_offsets={"head": {"HF": np.array([0.0, 60.0, 80.0])}},
+    )
+    given = HybridConfig(use_video=False, paper=True)
+    cfg = session_config(session, given)  # type: ignore[arg-type]
+    assert cfg.use_video is False and cfg.paper is True
+    assert cfg.marker_offsets_mm == {"head": (0.0, 10.0, 90.0)}
+    assert cfg.member_offsets_mm == {"head": {"HF": (0.0, 60.0, 80.0)}}
+    assert session_config(session, given, oriented_sets=()).member_offsets_mm == {}  # type: ignore[arg-type]
+    own = HybridConfig(marker_offsets_mm={"head": (1.0, 2.0, 3.0)})
+    assert session_config(session, own).marker_offsets_mm == {"head": (1.0, 2.0, 3.0)}  # type: ignore[arg-type]

@@ -60,3 +60,31 @@ def test_hybrid_tracker_answers_frame_results() -> None:
     finite = {k: v for k, v in late.residual_mm.items() if math.isfinite(v)}
     assert late.worst == max(finite, key=lambda k: finite[k])
     assert late.fit["max_mm"] == pytest.approx(max(finite.values()))
+
+
+def test_observation_status_the_one_rule() -> None:
+    from mocapkit.tracking.base import BRIDGE_S, observation_status
+
+    assert observation_status(math.inf, False) == "missing"
+    assert observation_status(0.0, True) == "seen"
+    assert observation_status(BRIDGE_S, True) == "bridged"
+    assert observation_status(BRIDGE_S + 1e-9, True) == "released"
+    assert observation_status(0.5, True, bridge_s=1.0) == "bridged"
+
+
+def test_unobserved_joints_to_nan_the_one_rule() -> None:
+    from mocapkit.tracking.base import nan_unobserved, unobserved_joints
+
+    status = {"head": "seen", "left_hand": "released", "right_arm": "missing", "x": "released"}
+    assert unobserved_joints(status) == ("left_elbow", "left_wrist", "right_elbow", "right_wrist")
+    assert unobserved_joints({"left_leg": "bridged", "right_foot": "released"}) == (
+        "right_knee",
+        "right_ankle",
+    )
+    joints = np.arange(45.0).reshape(15, 3)
+    out = nan_unobserved(joints, status)
+    gone = [CANONICAL_JOINTS.index(j) for j in unobserved_joints(status)]
+    assert np.isnan(out[gone]).all()
+    kept = [k for k in range(15) if k not in gone]
+    np.testing.assert_array_equal(out[kept], joints[kept])
+    assert not np.isnan(joints).any()  # the input is left as it was

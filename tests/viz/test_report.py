@@ -18,7 +18,14 @@ from mocapkit.io.joints_csv import read_joints_csv
 from mocapkit.io.marker_files import read_markers
 from mocapkit.io.session import load_session
 from mocapkit.pipelines.report import build_report, read_fit_table
-from mocapkit.viz.report.figures import PointLayer, fit_figures, skeleton_animation
+from mocapkit.skeleton.model import CANONICAL_JOINTS
+from mocapkit.viz.report.figures import (
+    STATUS_COLOURS,
+    PointLayer,
+    error_figure,
+    fit_figures,
+    skeleton_animation,
+)
 from mocapkit.viz.web_video import JPEG_SEQUENCE, WebVideoWriter, web_codec
 
 
@@ -82,8 +89,9 @@ def test_report_with_truth_video_and_markers(npz_result, small_session, tmp_path
     _, jn, joints = read_joints_csv(npz_result / "joints.csv")
     assert trc.names == jn
     np.testing.assert_allclose(trc.positions_mm, joints, atol=1e-5)
-    # the accuracy table holds the evaluation's figures
+    # the accuracy table holds the evaluation's figures, each column naming its joints
     assert "MPJPE (mm)" in text and "Error per joint" in text
+    assert "upper body (9 joints)" in text and "all 15 joints" in text
 
 
 def test_report_without_truth_or_video(csv_result, tmp_path):
@@ -193,6 +201,34 @@ def test_fit_figures_one_trace_per_column_and_state():
     states = {tr.name: (list(tr.x), list(tr.y)) for tr in figs[1].data}
     assert states == {"lost": ([0.2], ["x_status"]), "seen": ([0.0, 0.3], ["x_status"] * 2)}
     assert fit_figures(t, {}, {}) == []
+
+
+def test_fit_figures_units_on_labelled_axes_and_status_colours():
+    """mm, px and unitless columns on separate labelled axes; statuses in their own
+    colours, apart from other text columns (a marker set's name)."""
+    t = np.arange(3) / 10.0
+    ones = np.ones(3)
+    figs = fit_figures(
+        t,
+        {"rms_mm": ones, "residual_px": ones, "head_mm": ones, "candidates": ones},
+        {"head_status": ["seen", "bridged", "released"], "worst": ["head", "seen", "head"]},
+    )
+    axes = [f.layout.yaxis.title.text for f in figs[:3]]
+    assert axes == ["mm", "px", "value (no unit)"]
+    assert [tr.name for tr in figs[0].data] == ["rms_mm", "head_mm"]
+    status = {tr.name: tr.marker.color for tr in figs[3].data}
+    assert status == {n: STATUS_COLOURS[n] for n in ("bridged", "released", "seen")}
+    labels = {tr.name: tr.marker.color for tr in figs[4].data}
+    assert set(labels) == {"head", "seen"}  # 'seen' as a label is not a status colour
+    assert not set(labels.values()) & set(STATUS_COLOURS.values())
+
+
+def test_error_lines_of_every_canonical_joint_differ_in_colour():
+    t = np.arange(3) / 10.0
+    names = list(CANONICAL_JOINTS)
+    fig = error_figure(t, names, np.zeros((3, len(names))), "e")
+    colours = [tr.line.color for tr in fig.data]
+    assert len(set(colours)) == len(names) == 15
 
 
 def test_web_video_round_trip_and_interruption(tmp_path):

@@ -14,7 +14,8 @@ from .chromium import Chromium, find_chromium
 CHROMIUM = find_chromium()
 pytestmark = pytest.mark.skipif(
     CHROMIUM is None,
-    reason="no chromium on PATH (Debian: apt-get install -y chromium); .ci/run installs it",
+    reason="no chromium on PATH (Debian: apt-get install -y chromium); make test installs it "
+    "where it may (tools/install-test-browser)",
 )
 
 _RECT = (

@@ -7,23 +7,19 @@ from typing import Any
 
 from mocapkit.cli.accuracy_stereo import register_method as register_stereo
 from mocapkit.cli.args import mocap_folder, number, parsed_by
-from mocapkit.pipelines.accuracy import (
-    JITTER_MM,
-    format_rows,
-    hybrid_accuracy_repeats,
-    repeat_summary,
-    repeats_to_json,
-    summary,
-    to_json,
-)
-from mocapkit.pipelines.hybrid import parse_oriented_sets
+
+# the line of `mocapkit --help` (shown without importing this module's pipeline)
+HELP = "render sessions from real motion clips, track them and report the accuracy"
 
 
 def register(subparsers: Any) -> None:
     """Add ``accuracy hybrid``."""
+    from mocapkit.pipelines.accuracy import JITTER_MM
+    from mocapkit.pipelines.hybrid import parse_oriented_sets
+
     p = subparsers.add_parser(
         "accuracy",
-        help="render sessions from real motion clips, track them and report the accuracy",
+        help=HELP,
     )
     methods = p.add_subparsers(dest="method", metavar="METHOD")
     methods.required = True
@@ -74,6 +70,15 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the accuracy study and print it."""
+    from mocapkit.pipelines.accuracy import (
+        format_rows,
+        hybrid_accuracy_repeats,
+        repeat_summary,
+        repeats_to_json,
+        summary,
+        to_json,
+    )
+
     mocap = mocap_folder(args.mocap)
     say = (lambda _line: None) if args.json else print
     if not args.json:

@@ -8,8 +8,6 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-import numpy as np
-
 
 def add_mono_accuracy_parser(methods: Any) -> None:
     """Add ``accuracy mono`` to the ``accuracy`` methods."""
@@ -72,6 +70,8 @@ def add_mono_accuracy_parser(methods: Any) -> None:
 
 
 def _run(args: argparse.Namespace) -> int:
+    import numpy as np
+
     from mocapkit.cli.args import mocap_folder
     from mocapkit.pipelines.mono_accuracy import format_rows, mono_accuracy, to_json
     from mocapkit.tracking.mono.tracker import MonoConfig

@@ -6,9 +6,11 @@ import argparse
 import sys
 
 from mocapkit.cli.args import checked_by, number, output_folder
-from mocapkit.eval.metrics import joint_subset
-from mocapkit.io.marker_sets import parse_marker_set
 from mocapkit.pipelines.registry import AUTO, TRACKERS
+
+# the line of `mocapkit --help` (shown without importing this module's pipeline)
+HELP = "track and evaluate a whole study (every session under a folder) on Dask"
+
 
 _EPILOG = """\
 A take is a folder holding session.json (at any depth under STUDY_DIR) or, with
@@ -23,9 +25,12 @@ row has its error and the others go on. Exit code: the number of failed takes (a
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``batch`` subcommand."""
+    from mocapkit.eval.metrics import joint_subset
+    from mocapkit.io.marker_sets import parse_marker_set
+
     p = subparsers.add_parser(
         "batch",
-        help="track and evaluate a whole study (every session under a folder) on Dask",
+        help=HELP,
         description="Track every take of a study with one method (or the one each session "
         "suits), evaluate it where it has truth, and write one result folder per take and "
         "study.csv.",

@@ -5,14 +5,17 @@ from __future__ import annotations
 import argparse
 import json
 
-from mocapkit.pipelines.bench import BENCHMARKS, format_table, run_benchmarks, save_results
+# the line of `mocapkit --help` (shown without importing this module's pipeline)
+HELP = "time the kinematics and the hybrid, stereo and mono trackers"
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``bench`` subcommand."""
+    from mocapkit.pipelines.bench import BENCHMARKS
+
     p = subparsers.add_parser(
         "bench",
-        help="time the kinematics and the hybrid, stereo and mono trackers",
+        help=HELP,
         description="Run a speed benchmark (after a warm-up; medians over repeats) and print "
         "a table, or JSON with --json.",
     )
@@ -39,6 +42,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 def run(args: argparse.Namespace) -> int:
     """Run the benchmark(s), print, optionally save."""
+    from mocapkit.pipelines.bench import format_table, run_benchmarks, save_results
+
     results = run_benchmarks(args.name, repeats=args.repeats, work_dir=args.work)
     if args.save is not None:
         save_results(results, args.save)

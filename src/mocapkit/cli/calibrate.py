@@ -4,14 +4,11 @@ from __future__ import annotations
 
 import argparse
 
-from mocapkit.camera.calibration import parse_board
 from mocapkit.cli.args import checked_by, number, output_file
-from mocapkit.io.cameras import write_cameras
-from mocapkit.pipelines.calibrate import (
-    DEFAULT_MAX_RMS_PX,
-    DEFAULT_MIN_BOARDS,
-    calibrate_from_images,
-)
+
+# the line of `mocapkit --help` (shown without importing this module's pipeline)
+HELP = "calibrate one camera or a stereo pair from chessboard images"
+
 
 _EPILOG = """\
 One image set (a folder or a quoted glob such as 'shots/left*.jpg') calibrates one
@@ -27,9 +24,12 @@ image's first-corner pixel to check which corner OpenCV took as origin.
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``calibrate`` subcommand."""
+    from mocapkit.camera.calibration import parse_board
+    from mocapkit.pipelines.calibrate import DEFAULT_MAX_RMS_PX, DEFAULT_MIN_BOARDS
+
     p = subparsers.add_parser(
         "calibrate",
-        help="calibrate one camera or a stereo pair from chessboard images",
+        help=HELP,
         description="Calibrate one camera or a stereo pair from chessboard images and "
         "write cameras.json (mm, camera_from_world).",
         epilog=_EPILOG,
@@ -73,6 +73,10 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 def run(args: argparse.Namespace) -> int:
     """Calibrate, print the report, write the cameras file."""
+    from mocapkit.camera.calibration import parse_board
+    from mocapkit.io.cameras import write_cameras
+    from mocapkit.pipelines.calibrate import calibrate_from_images
+
     report = calibrate_from_images(
         args.images,
         parse_board(args.board, args.square_mm),

@@ -6,15 +6,19 @@ import argparse
 from typing import Any
 
 from mocapkit.cli.args import number, output_folder
-from mocapkit.pipelines.demo import run_demo
+
+# the line of `mocapkit --help` (shown without importing this module's pipeline)
+HELP = (
+    "render a built-in table-tennis rally, track it with hybrid, stereo and mono, "
+    "compare them and write an HTML report"
+)
 
 
 def register(subparsers: Any) -> None:
     """Add the ``demo`` subcommand."""
     p = subparsers.add_parser(
         "demo",
-        help="render a built-in table-tennis rally, track it with hybrid, stereo and mono, "
-        "compare them and write an HTML report",
+        help=HELP,
         description="Renders builtin:table-tennis as a synthetic session seen by a mono camera "
         "and a stereo pair (video, head and hand markers, 2-D keypoints), tracks it with the "
         "hybrid (markers + mono video), stereo (stereo pair + keypoints) and mono (mono "
@@ -40,5 +44,7 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the demo."""
+    from mocapkit.pipelines.demo import run_demo
+
     run_demo(args.out, seconds=args.seconds, quiet=args.quiet)
     return 0

@@ -5,14 +5,18 @@ from __future__ import annotations
 import argparse
 
 from mocapkit.cli.args import parsed_by
-from mocapkit.eval.metrics import evaluate_result, joint_subset
+
+# the line of `mocapkit --help` (shown without importing this module's pipeline)
+HELP = "compare a tracking result with a session's ground truth"
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``eval`` subcommand."""
+    from mocapkit.eval.metrics import joint_subset
+
     p = subparsers.add_parser(
         "eval",
-        help="compare a tracking result with a session's ground truth",
+        help=HELP,
         description="Per-joint error, MPJPE, PA-MPJPE, elbow error, jitter and coverage of a "
         "result (motion.npz or joints.csv) against truth.npz, matched by time stamp.",
     )
@@ -33,6 +37,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 def run(args: argparse.Namespace) -> int:
     """Evaluate and print."""
+    from mocapkit.eval.metrics import evaluate_result
+
     report = evaluate_result(args.result, args.truth, joints=args.joints)
     print(report.to_json() if args.json else report.table())
     return 0

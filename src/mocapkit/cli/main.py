@@ -4,6 +4,12 @@ Each subcommand lives in its own module of this package and exposes
 ``register(subparsers)``, which adds its parser and sets ``func`` to a function
 taking the parsed arguments and returning an exit code. Subcommands parse
 arguments, call one library function and write its output; they hold no logic.
+
+The command starts fast: a subcommand module imports its pipeline inside its handler
+(and ``register``), and states its one-line ``HELP`` at module level. Only the command
+named on the command line is registered in full; the others appear in the top-level
+help by their ``HELP`` alone, so ``mocapkit --help`` or a usage error loads none of
+numpy, OpenCV, Numba or Dask.
 """
 
 from __future__ import annotations
@@ -24,8 +30,15 @@ from mocapkit.errors import MocapError
 _NOT_SUBCOMMANDS = {"main", "args"}
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """The full argument parser with every subcommand module registered."""
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The argument parser with its subcommand modules registered.
+
+    Parameters
+    ----------
+    command : str, optional
+        Register only this subcommand in full (the one on the command line); the others
+        get a help-only entry from their module's ``HELP``. Default: all in full.
+    """
     parser = argparse.ArgumentParser(
         prog="mocapkit",
         description="Human motion capture from markers plus one camera, one video, "
@@ -39,9 +52,19 @@ def build_parser() -> argparse.ArgumentParser:
             continue
         module = importlib.import_module(f"mocapkit.cli.{info.name}")
         register = getattr(module, "register", None)
-        if register is not None:
+        if register is None:
+            continue
+        help_line = getattr(module, "HELP", None)
+        if command is None or info.name == command or help_line is None:
             register(sub)
+        else:
+            sub.add_parser(info.name, help=help_line, add_help=False)
     return parser
+
+
+def _command_in(argv: Sequence[str]) -> str:
+    """The subcommand named in ``argv`` ('' when none: the top-level options only)."""
+    return next((a for a in argv if not a.startswith("-")), "")
 
 
 class _Interrupts:
@@ -80,10 +103,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     wherever it lands (loading the subcommands included), prints one line and returns
     130, results written before it intact (they are written atomically).
     """
+    argv = sys.argv[1:] if argv is None else list(argv)
     command = "mocapkit"
     with _Interrupts() as interrupts:
         try:
-            parser = build_parser()
+            parser = build_parser(_command_in(argv))
             args = parser.parse_args(argv)
             command = f"mocapkit {args.command}"
             _show_input_warnings(args.command)

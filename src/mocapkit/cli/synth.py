@@ -6,16 +6,10 @@ import argparse
 from collections.abc import Callable
 
 from mocapkit.cli.args import checked_by, number, output_folder
-from mocapkit.synth.realism import BACKGROUNDS, REALISM_RANGES, RealismOptions
-from mocapkit.synth.render import COSTUMES, SLEEVES, parse_colour
-from mocapkit.synth.rigs import RIG_NAMES
-from mocapkit.synth.session_writer import (
-    FPS_RANGE,
-    IMAGE_SIDE_RANGE_PX,
-    MARKER_RATE_RANGE_HZ,
-    SynthOptions,
-    synthesize_session,
-)
+
+# the line of `mocapkit --help` (shown without importing this module's pipeline)
+HELP = "render a synthetic session from a motion file or a built-in motion"
+
 
 _EPILOG = """\
 MOTION is a BVH or AMC file (an AMC takes its skeleton from --asf, else from an .asf
@@ -28,6 +22,8 @@ excerpt and the floor is z = 0; cameras face the subject's initial facing direct
 
 def _size(text: str) -> tuple[int, int]:
     """``--size``: ``WIDTHxHEIGHT`` in pixels, each side within `IMAGE_SIDE_RANGE_PX`."""
+    from mocapkit.synth.session_writer import IMAGE_SIDE_RANGE_PX
+
     try:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
@@ -56,15 +52,22 @@ def _blackout(text: str) -> tuple[float, float]:
 
 def _realism(name: str) -> Callable[[str], float]:
     """The ``type=`` of a realism option: a number in its `REALISM_RANGES` range."""
+    from mocapkit.synth.realism import REALISM_RANGES
+
     lo, hi = REALISM_RANGES[name]
     return number(at_least=lo, at_most=hi)
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``synth`` subcommand."""
+    from mocapkit.synth.realism import BACKGROUNDS, RealismOptions
+    from mocapkit.synth.render import COSTUMES, SLEEVES, parse_colour
+    from mocapkit.synth.rigs import RIG_NAMES
+    from mocapkit.synth.session_writer import FPS_RANGE, MARKER_RATE_RANGE_HZ
+
     p = subparsers.add_parser(
         "synth",
-        help="render a synthetic session from a motion file or a built-in motion",
+        help=HELP,
         description="Render a session folder (cameras.json, video, markers.csv, keypoints, "
         "truth.npz) from real or procedural motion.",
         epilog=_EPILOG,
@@ -170,6 +173,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 def run(args: argparse.Namespace) -> int:
     """Render the session and print a summary."""
+    from mocapkit.synth.realism import RealismOptions
+    from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+
     realism = RealismOptions(
         noise=args.noise,
         blur=args.blur,

@@ -8,10 +8,13 @@ from typing import Any
 from mocapkit.cli.args import number, output_folder
 from mocapkit.cli.track_stereo import register_method as register_stereo
 
+# the line of `mocapkit --help` (shown without importing this module's pipeline)
+HELP = "track a recording with one of the methods"
+
 
 def register(subparsers: Any) -> None:
     """Add ``track`` with its ``hybrid`` sub-subcommand."""
-    parser = subparsers.add_parser("track", help="track a recording with one of the methods")
+    parser = subparsers.add_parser("track", help=HELP)
     methods = parser.add_subparsers(dest="method", metavar="METHOD")
     methods.required = True
     hyb = methods.add_parser(

@@ -6,14 +6,16 @@ import argparse
 import sys
 
 from mocapkit.cli.args import output_folder
-from mocapkit.pipelines.report import build_report
+
+# the line of `mocapkit --help` (shown without importing this module's pipeline)
+HELP = "write an HTML report of a result: overlay videos, 3D view, errors, files"
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``view`` subcommand."""
     p = subparsers.add_parser(
         "view",
-        help="write an HTML report of a result: overlay videos, 3D view, errors, files",
+        help=HELP,
         description="Write RESULT/report/index.html (or --out DIR): the overlay video per "
         "camera of the session, an animated 3D view of the captured skeleton (with the "
         "truth and the markers), error and fit-quality plots, the accuracy table and links "
@@ -40,6 +42,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 def run(args: argparse.Namespace) -> int:
     """Build the report and print the page's path."""
+    from mocapkit.pipelines.report import build_report
+
     page = build_report(
         args.result,
         args.truth,

@@ -149,7 +149,7 @@ def best_swivel_elbow(
     lengths and hand placement), so its distance to ``target`` (an elbow marker) is the
     error no swivel could remove (the *best-swivel floor*), and ``turn_rad`` is how far
     the tracked swivel is from it. With positions-only hand sets nothing but the IK's
-    relaxed-pose task chooses the swivel (docs/hybrid.md, "Raw files: where the elbow
+    relaxed-pose task chooses the swivel (docs/design-notes/hybrid.md, "Raw files: where the elbow
     error comes from").
 
     Parameters

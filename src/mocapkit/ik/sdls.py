@@ -54,7 +54,7 @@ response to round-off, 10-20 % cheaper an iteration, and much cheaper where most
 are frozen (foot re-planting). With exact zeros a locked DoF would stay locked for the
 rest of the solve (measured: solves stall short of their targets); releasing it by the
 sign of ``J^T e`` (the gradient at the start of the step) let the scaled iteration
-cycle between release and clip (docs/hybrid.md, Speed).
+cycle between release and clip (docs/design-notes/hybrid.md).
 
 `IKConfig.lock_release` ``"kkt"`` (the tracker's) releases by the active-set rule
 instead: the locked columns are left out of the SVD like the frozen ones (exact zeros,
@@ -199,7 +199,7 @@ class IKConfig:
         the DoFs not frozen (`sdls_nb`): the same response to round-off, cheaper (module
         doc); iterations with a locked DoF still take dgesdd, whose round-off releases
         the lock. Trajectories differ from ``"gesdd"`` by round-off, which the chaotic
-        cases amplify (docs/hybrid.md, Speed).
+        cases amplify (docs/design-notes/hybrid.md).
     lock_release : {"roundoff", "kkt"}
         How a DoF locked at a joint limit (its column zeroed) is released.
         ``"roundoff"``: when its step, which is round-off from the SVD's singular

@@ -61,7 +61,7 @@ class MarkerSet:
         position stays the mean of ``members``. A wrist bar's two markers and its
         centre lie on one line, which leaves the forearm free to turn about that line; a
         forearm marker off it fixes that turn while the set's point stays the wrist
-        (docs/hybrid.md, "Raw files: the wrist bar's blind turn").
+        (docs/design-notes/hybrid.md).
     """
 
     name: str

@@ -32,7 +32,7 @@ Mapping onto canonical joints (`CANONICAL_JOINTS`):
   ``PELVIS_ABOVE_HIPS`` = 0.277 shoulder widths above M_h, along the trunk (per clip
   0.178-0.237 and 0.249-0.304 over the ten CMU clips, lambada's neck 0.100 aside; the
   same subject's 01_01 as BVH and as AMC gives f_n 0.811 and 0.854 but 0.205 and 0.204
-  W; docs/mono.md, sixth round). So `read_openpose_folder`
+  W; docs/design-notes/mono.md). So `read_openpose_folder`
   places them per take (`trunk_fractions`): f_n = 1 - 0.205 W / H, f_p = 0.277 W / H,
   with W and H (the length M_h-M_s) the 90th percentiles of their projected lengths
   over the frames that see both shoulders and both hips, as the link lengths are read

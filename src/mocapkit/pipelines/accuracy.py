@@ -6,7 +6,7 @@ session's truth (`mocapkit eval`). The figures the hybrid issue asks for are the
 the per-clip elbow and upper-body MPJPE errors and the share by which the video cuts the
 IK-only elbow error.
 
-The tracker's figures are chaotic in round-off (docs/hybrid.md, Speed): moving every
+The tracker's figures are chaotic in round-off (docs/design-notes/hybrid.md): moving every
 marker by 1e-9 mm moves a clip's mean elbow error by up to a few millimetres. So a
 comparison to 1 mm can average over jittered repeats (`hybrid_accuracy_repeats`): each
 repeat tracks a copy of every session whose marker positions are moved by a seeded

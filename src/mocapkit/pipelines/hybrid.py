@@ -12,6 +12,7 @@ import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -71,6 +72,9 @@ from mocapkit.tracking.static_calibration import (
     calibrate_member_offsets,
     find_static_interval,
 )
+
+if TYPE_CHECKING:
+    from mocapkit.io.session import Session
 
 FloatArray = NDArray[np.float64]
 
@@ -222,6 +226,25 @@ def member_offsets(
     return out
 
 
+def session_config(
+    session: Session, config: HybridConfig, oriented_sets: Sequence[str] = ORIENTED_SETS
+) -> HybridConfig:
+    """The configuration of a run on ``session``: ``config`` over the session's settings.
+
+    The session's marker offsets (``marker_offsets_mm``) and the member-marker offsets of
+    the ``oriented_sets`` fill the fields ``config`` leaves empty; a config that gives
+    its own keeps them.
+    """
+    fill: dict[str, Any] = {}
+    if not config.marker_offsets_mm:
+        fill["marker_offsets_mm"] = effector_offsets(session.marker_offsets, session.path)
+    if not config.member_offsets_mm:
+        fill["member_offsets_mm"] = member_offsets(
+            session.marker_member_offsets, session.marker_offsets, oriented_sets, session.path
+        )
+    return replace(config, **fill) if fill else config
+
+
 def require_observed_sets(
     sets_mm: Mapping[str, ArrayLike], where: str | os.PathLike[str], error: type[Exception]
 ) -> None:
@@ -280,7 +303,8 @@ def track_hybrid_session(
     paper : bool
         Follow the paper literally (no smoothing, proportional balance).
     config : HybridConfig, optional
-        Overrides ``paper``, ``use_video`` and ``oriented_sets`` when given.
+        Overrides ``paper`` and ``use_video`` when given; the session's marker offsets
+        fill the offsets it leaves empty (`session_config`).
     oriented_sets : sequence of str, optional
         Marker sets whose member markers drive the IK too, so that their orientation
         is seen (where ``session.json`` declares their ``members_mm``); default
@@ -373,14 +397,10 @@ def track_hybrid_session_run(
             if max_elbow_speed_mm_per_s == 0
             else RefineConfig(elbow_speed_mm_per_s=float(max_elbow_speed_mm_per_s))
         )
-    cfg = config or HybridConfig(
-        paper=paper,
-        use_video=use_video,
-        refine_config=refine_config,
-        marker_offsets_mm=effector_offsets(session.marker_offsets, session.path),
-        member_offsets_mm=member_offsets(
-            session.marker_member_offsets, session.marker_offsets, oriented_sets, session.path
-        ),
+    cfg = session_config(
+        session,
+        config or HybridConfig(paper=paper, use_video=use_video, refine_config=refine_config),
+        oriented_sets,
     )
     wanted = {m for members in cfg.member_offsets_mm.values() for m in members}
     sk = hybrid_skeleton(
@@ -449,7 +469,7 @@ def track_hybrid_session_run(
         out_dir,
         "track hybrid",
         source=f"hybrid tracker ({mode}, video="
-        f"{'on' if cfg.use_video else 'off'}{seated}) on {session.path}",
+        f"{'on' if cfg.use_video else 'off'}{seated}, camera {cams[0]}) on {session.path}",
         timer=timer,
     )
 
@@ -1013,7 +1033,7 @@ def _blind_turn_note(sets: Sequence[MarkerSet], oriented: frozenset[str]) -> str
     """A note for the oriented hand sets of two members and no turning marker: both
     members and the set's centre lie on one line (a wrist bar), so the forearm may turn
     about that line unseen, and a serve's elbow flips round to the other side there
-    (docs/hybrid.md, "Raw files: the wrist bar's blind turn"). Empty where none."""
+    (docs/design-notes/hybrid.md). Empty where none."""
     blind = [
         s.name
         for s in sets

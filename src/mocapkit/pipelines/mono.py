@@ -84,7 +84,7 @@ class SkinOptions:
 #: up again (``belt``); lost hands given to blobs on their side (``reacquire``); the neck
 #: moved from the shoulders' level to the stick's neck base (``girdle_neck``). Everyday:
 #: the skin from the middle of the upper arm (short sleeves) and the trunk drawn from the
-#: head (no belt). docs/mono.md, eighth round.
+#: head (no belt). docs/design-notes/mono.md.
 SKIN_SETTINGS: dict[str, SkinOptions] = {
     "paper": SkinOptions(
         bare_from="elbow", trunk_from_head=False, belt=True, reacquire=True, girdle_neck=True
@@ -187,7 +187,7 @@ def detector_config(config: MonoConfig) -> MonoConfig:
     pelvis; both are placed on the hip-to-shoulder midpoint line, so the two clavicles are
     mirror images of each other in the image and a few px of the neck's error (its offset
     across the line, its fraction along it) change their 40 px projected lengths by up to
-    10 %, which decides their flips near the image plane (docs/mono.md, seventh round).
+    10 %, which decides their flips near the image plane (docs/design-notes/mono.md).
     The tracker then widens the reach band of the clavicles
     (``rebuilt_reach_tolerance``: both flips kept, each some way out of the plane) and
     lets the rigid girdle choose between them (``girdle_weight``, the angle between the
@@ -638,14 +638,14 @@ def track_mono(
         Every pass but the last runs without the soft priors of `MonoConfig`
         (`mocapkit.tracking.mono.priors`) and without its ``reach_tolerance`` (M5
         exactly; with it there too the five accuracy clips got worse, 45.2 -> 46.4 mm,
-        docs/mono.md sixth round); the last one with them.
+        docs/design-notes/mono.md); the last one with them.
     initial_pose : (K, 3) float, optional
         The subject's known pose in the first posed frame (the paper's assumption 3):
         the stick's joints (``stick_model(config.legs).joint_names``, e.g. picked by
         `initial_pose_from`) in the world frame, mm, NaN where unknown. The last pass
         starts from the candidate nearest to it (`MonoTracker`); the length passes, like
         the priors, leave it out (given to them too, it changed 01_09's refined lengths
-        online and cost 16 mm there, docs/mono.md fifth round). None: the start is free.
+        online and cost 16 mm there, docs/design-notes/mono.md). None: the start is free.
     """
     if out_dir is not None:
         check_result_folder(out_dir)  # before the work (the length passes), not after it
@@ -710,8 +710,8 @@ def track_mono(
     # The length passes run the paper's graph (no soft priors, no initial pose, which
     # changed 01_09's online lengths, 36 -> 52 mm): the refined lengths follow
     # the first pass's poses, and with the clavicle prior there they changed enough to
-    # turn 01_09 from OpenPose JSON from 62 to 113 mm (docs/mono.md). The reach tolerance
-    # too (in every pass it changed the refined lengths: 45.2 -> 46.4 mm, sixth round), and
+    # turn one clip from OpenPose JSON from 62 to 113 mm (docs/design-notes/mono.md). The
+    # reach tolerance too (in every pass it changed the refined lengths: 45.2 -> 46.4 mm), and
     # the clavicles' wider band for a rebuilt neck with it; the girdle cost of a rebuilt
     # neck stays (a rigid bone triangle, not a prior on the pose: without it in the length
     # passes, at girdle weight 300, 01_09 from OpenPose JSON 41.5 -> 42.6 mm, 91.2 -> 86.6 %,
@@ -740,7 +740,7 @@ def track_mono(
         len(t),
         out_dir,
         label="track mono",
-        source=f"mono tracker on {session.path}",
+        source=f"mono tracker (camera {cam_name}) on {session.path}",
         joint_names=stream.joint_names,
     )
     results = [r for r in run.results if isinstance(r, MonoResult)]

@@ -15,6 +15,7 @@ import contextlib
 import csv
 import math
 import os
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,7 +33,7 @@ from mocapkit.io.motion_npz import load_motion_npz
 from mocapkit.io.session import Session, load_session
 from mocapkit.io.trc import write_trc
 from mocapkit.io.truth import Truth, load_truth
-from mocapkit.skeleton.model import Skeleton
+from mocapkit.skeleton.model import UPPER_BODY_JOINTS, Skeleton
 from mocapkit.viz.overlay_video import OverlayLayer, write_overlay_video
 from mocapkit.viz.report.figures import (
     CAPTURED_COLOUR,
@@ -243,31 +244,80 @@ def _error_over_time(result: ResultData, truth: Truth) -> tuple[tuple[str, ...],
     return common, np.linalg.norm(est - truth.joints_mm[:, ti], axis=-1)
 
 
-def _accuracy_tables(report: EvalReport) -> list[Table]:
+#: A joint whose mean error is below this equals the truth: the tracker placed it on an
+#: input (on a synthetic session, a noise-free keypoint), so it is not an estimate.
+PLACED_ON_INPUT_MM = 0.05
+
+
+def _accuracy_tables(reports: Sequence[tuple[str, EvalReport]]) -> list[Table]:
+    """The summary (one column per joint set) and the error per joint of the widest set."""
+
     def f(v: float) -> str:
         return "n/a" if not np.isfinite(v) else f"{v:.1f}"
 
-    per_joint = Table(
-        "Error per joint",
-        ("joint", "mean error (mm)"),
-        tuple((n, f(v)) for n, v in report.per_joint_mm.items()),
-    )
+    def jitter(r: EvalReport) -> str:
+        return f"{f(r.jitter_mm_s2)} (truth {f(r.truth_jitter_mm_s2)})"
+
+    rows = [
+        ("joints", lambda r: f"{len(r.joints)}"),
+        ("MPJPE (mm)", lambda r: f(r.mpjpe_mm)),
+        ("PA-MPJPE (mm)", lambda r: f(r.pa_mpjpe_mm)),
+        ("elbow error (mm)", lambda r: f(r.elbow_mm)),
+        ("jitter (mm/s²)", jitter),
+        (
+            "coverage",
+            lambda r: (
+                f"{r.coverage:.3f} of the joints estimated ({r.n_matched_frames}/"
+                f"{r.n_truth_frames} truth frames with a pose)"
+            ),
+        ),
+    ]
     summary = Table(
         "Summary",
-        ("measure", "value"),
-        (
-            ("MPJPE (mm)", f(report.mpjpe_mm)),
-            ("PA-MPJPE (mm)", f(report.pa_mpjpe_mm)),
-            ("elbow error (mm)", f(report.elbow_mm)),
-            ("jitter (mm/s²)", f"{f(report.jitter_mm_s2)} (truth {f(report.truth_jitter_mm_s2)})"),
-            (
-                "coverage",
-                f"{report.coverage:.3f} of the joints estimated ({report.n_matched_frames}/"
-                f"{report.n_truth_frames} truth frames with a pose)",
-            ),
+        ("measure", *(name for name, _ in reports)),
+        tuple((label, *(cell(r) for _, r in reports)) for label, cell in rows),
+    )
+    widest = reports[-1][1]
+    per_joint = Table(
+        f"Error per joint ({reports[-1][0]})",
+        ("joint", "mean error (mm)"),
+        tuple(
+            (n, f(v) + (" (placed on its input, not estimated)" if v < PLACED_ON_INPUT_MM else ""))
+            for n, v in widest.per_joint_mm.items()
         ),
     )
     return [summary, per_joint]
+
+
+def _accuracy_notes(reports: Sequence[tuple[str, EvalReport]]) -> list[str]:
+    notes = [
+        "Joints matched to the truth by time stamp (mocapkit eval). Upper body: "
+        + ", ".join(UPPER_BODY_JOINTS)
+        + " (the joint set of mocapkit demo's table and mocapkit accuracy)."
+    ]
+    for name, r in reports:
+        if np.isfinite(r.pa_mpjpe_mm) and r.pa_mpjpe_mm > r.mpjpe_mm:
+            worst = max(r.per_joint_mm, key=lambda n: r.per_joint_mm[n])
+            notes.append(
+                f"PA-MPJPE ({name}) is above MPJPE: each frame is aligned to the truth by "
+                "the least-squares rotation, translation and scale, which spreads one "
+                f"joint's large error (here {worst}, {r.per_joint_mm[worst]:.1f} mm) over "
+                "the others; it lowers the RMS error, not always the mean."
+            )
+    placed = [n for n, v in reports[-1][1].per_joint_mm.items() if v < PLACED_ON_INPUT_MM]
+    if placed:
+        notes.append(
+            f"{', '.join(placed)}: equal to the truth (mean error under "
+            f"{PLACED_ON_INPUT_MM} mm): the tracker placed {'it' if len(placed) == 1 else 'them'}"
+            " on its input (a keypoint), so the figure measures the input, not the tracker."
+        )
+    return notes
+
+
+def _cameras_used(source: str) -> tuple[str, ...] | None:
+    """The cameras a result's source names (``camera A`` or ``cameras A,B``); None if none."""
+    m = re.search(r"\bcameras? ([\w.-]+(?:,[\w.-]+)*)", source)
+    return None if m is None else tuple(m.group(1).split(","))
 
 
 def _check_out_dir(out: Path, protected: Sequence[Path]) -> None:
@@ -283,7 +333,11 @@ def _check_out_dir(out: Path, protected: Sequence[Path]) -> None:
 
 
 def _video_section(
-    folder: Path, session: Session, result: ResultData, truth: Truth | None
+    folder: Path,
+    session: Session,
+    result: ResultData,
+    truth: Truth | None,
+    used: tuple[str, ...] | None,
 ) -> Section:
     videos: list[tuple[str, WebVideo]] = []
     notes: list[str] = []
@@ -318,12 +372,23 @@ def _video_section(
                 "No web video codec (VP8, VP9) works in this OpenCV: the overlays are JPEG "
                 "frames flipped by the page."
             )
-        videos.append((f"camera {cam}", video))
+        if used is None:
+            videos.append((f"camera {cam}", video))
+        elif cam in used:
+            videos.append((f"camera {cam} (used by the tracker)", video))
+        else:
+            videos.append((f"camera {cam} (not used by the tracker: its result projected)", video))
     notes.insert(
         0,
         "The camera images with the captured canonical joints (orange sticks over the body "
         "model's limbs)" + (" and the truth (green)" if truth is not None else "") + ".",
     )
+    if used is not None and any(c not in used for c in session.video_cameras):
+        notes.insert(
+            1,
+            f"The tracker used camera(s) {', '.join(used)}; in the other cameras the overlay "
+            "shows its result projected, where a one-camera result's depth errors show.",
+        )
     return Section("Overlay video", videos=videos, notes=notes)
 
 
@@ -436,6 +501,8 @@ def build_report(
         ("frames", f"{n} over {result.time_s[-1] - result.time_s[0]:.2f} s" if n else "0"),
         ("joints", ", ".join(result.joint_names)),
     ]
+    used = _cameras_used(result.source)
+    facts.append(("cameras used", ", ".join(used) if used else "not named by the result"))
     if sess is not None:
         facts.append(("session", str(sess.path.resolve())))
     if truth is not None:
@@ -448,12 +515,12 @@ def build_report(
     with atomic_folder(out) as tmp:
         sections: list[Section] = []
         if sess is not None and sess.video_cameras:
-            sections.append(_video_section(tmp, sess, result, truth))
+            sections.append(_video_section(tmp, sess, result, truth, used))
         if n:
             sections.append(_skeleton_section(result, truth, marker_data))
         if truth is not None:
             names, err = _error_over_time(result, truth)
-            report = evaluate_joints(
+            args = (
                 result.time_s,
                 result.joint_names,
                 result.joints_mm,
@@ -461,12 +528,21 @@ def build_report(
                 truth.joint_names,
                 truth.joints_mm,
             )
+            every = evaluate_joints(*args)
+            n_all = len(every.joints)
+            upper_only = set(every.joints) == set(UPPER_BODY_JOINTS)
+            label = f"upper body ({n_all} joints)" if upper_only else f"all {n_all} joints"
+            reports = [(label, every)]
+            if set(UPPER_BODY_JOINTS) & set(every.joints) != set(every.joints):
+                upper = evaluate_joints(*args, joints=UPPER_BODY_JOINTS)
+                reports.insert(0, (f"upper body ({len(upper.joints)} joints)", upper))
+            title = f"Error per joint over time (all {len(names)} joints)"
             sections.append(
                 Section(
                     "Accuracy against the truth",
-                    figures=[error_figure(truth.time_s, names, err, "Error per joint over time")],
-                    tables=_accuracy_tables(report),
-                    notes=["Joints matched to the truth by time stamp (mocapkit eval)."],
+                    figures=[error_figure(truth.time_s, names, err, title)],
+                    tables=_accuracy_tables(reports),
+                    notes=_accuracy_notes(reports),
                 )
             )
         fit_path = result.folder / FIT_FILE

@@ -44,6 +44,7 @@ from mocapkit.tracking.base import (
     DelayedTracker,
     FrameResult,
     Tracker,
+    unobserved_joints,
     unobserved_part,
 )
 
@@ -192,11 +193,9 @@ def unobserved_to_nan(motion: Motion, results: Sequence[FrameResult]) -> Motion:
             for k, row in enumerate(rows):
                 if row >= 0 and np.isnan(rj[row]).any():
                     joints[i, k] = np.nan
-        for name, st in r.status.items():
-            part = unobserved_part(name) if st in UNOBSERVED else None
-            for joint in part[1] if part is not None else ():
-                if joint in col:
-                    joints[i, col[joint]] = np.nan
+        for joint in unobserved_joints(r.status):
+            if joint in col:
+                joints[i, col[joint]] = np.nan
     if np.array_equal(joints, motion.joints_mm, equal_nan=True):
         return motion
     return Motion(

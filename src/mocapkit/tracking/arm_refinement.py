@@ -50,7 +50,7 @@ minima from one frame to the next, 200-500 mm at a time. The cost therefore adds
 plausible speed, so it does not hold on to an old swivel the way a quadratic prior on
 the angles did). 3 m/s covers the clips' true elbow speeds (99th percentiles
 0.5-3.7 m/s); sports with faster arms (a serve, a throw) need a higher speed or the
-weight 0. Measured in ``docs/hybrid.md``.
+weight 0. Measured in ``docs/design-notes/hybrid.md``.
 """
 
 from __future__ import annotations
@@ -117,7 +117,7 @@ class RefineConfig:
         chamfer, which ``EdgeConfig()`` gives and ``paper=True`` uses): on the five
         accuracy clips with marker positions only and no elbow-jump penalty, the mean
         elbow error with video is 97 mm against 136 mm with the plain chamfer (144 mm IK
-        only; docs/hybrid.md).
+        only; docs/design-notes/hybrid.md).
         8 bins was chosen on an earlier version of the tracker, where 4 bins gave
         116 mm and 8 or 12 bins 100 mm.
     hand_weight_px_per_mm : float

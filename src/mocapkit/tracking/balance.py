@@ -32,7 +32,7 @@ Modes
     ``cog_tol_mm``, in 2-5 solves, the last of which is kept. The secant is not the
     default: its leans differ from bisection's by less than a millimetre of CoG, but
     the video refinement downstream (with its elbow-jump penalty) is sensitive to
-    such differences: on the accuracy clip zombie with positions only the elbow error
+    such differences: on one accuracy clip with positions only the elbow error
     with video went from 41.0 to 76.8 mm.
     With ``search="newton"`` the first lean is a Newton step from the analytic slope
     of the restored CoG (`restored_lean_slope`: the CoG Jacobian along the lean with the restore's
@@ -43,7 +43,7 @@ Modes
     checked on the pose itself (no restore at zero lean unless they are off by more
     than twice the IK tolerance). Not the tracker's default: its leans differ from
     bisection's by a few millimetres of CoG, and the arm-refining configurations moved
-    by it (positions only, elbow with video 65.3 -> 85.6 mm; docs/hybrid.md, "Speed").
+    by it (positions only, elbow with video 65.3 -> 85.6 mm; docs/design-notes/hybrid.md).
     ``restore_without_lean=False`` (the tracker's default,
     `mocapkit.tracking.hybrid.TRACKING_BALANCE`, with any search) skips the restore
     solve wherever no lean is applied, unless an effector is more than

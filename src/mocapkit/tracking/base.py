@@ -56,6 +56,50 @@ def unobserved_part(name: str) -> tuple[str, tuple[str, ...]] | None:
     return None
 
 
+def observation_status(unseen_s: float, ever_seen: bool, bridge_s: float = BRIDGE_S) -> str:
+    """The status of an effector or limb (`STATUSES`), the one rule of every tracker.
+
+    Parameters
+    ----------
+    unseen_s : float
+        Time since it was last observed (s): 0 when observed this frame.
+    ever_seen : bool
+        Whether it has been observed at all (on this frame or before).
+    bridge_s : float
+        Longest gap bridged (`BRIDGE_S` by default).
+
+    Returns
+    -------
+    str
+        ``missing`` (never observed), ``seen`` (observed now), ``bridged`` (unseen for
+        at most ``bridge_s``) or ``released`` (longer).
+    """
+    if not ever_seen:
+        return "missing"
+    if unseen_s <= 0.0:
+        return "seen"
+    return "bridged" if unseen_s <= bridge_s else "released"
+
+
+def unobserved_joints(status: Mapping[str, str]) -> tuple[str, ...]:
+    """The canonical joints with no observation behind them, the one NaN rule of every
+    tracker: for each effector or limb whose status is in `UNOBSERVED`, the joints that
+    it alone places (`unobserved_part`)."""
+    out: list[str] = []
+    for name, st in status.items():
+        part = unobserved_part(name) if st in UNOBSERVED else None
+        out += [j for j in (part[1] if part is not None else ()) if j not in out]
+    return tuple(out)
+
+
+def nan_unobserved(joints_mm: FloatArray, status: Mapping[str, str]) -> FloatArray:
+    """Canonical joints (15, 3) with the `unobserved_joints` of ``status`` set to NaN."""
+    out = np.array(joints_mm, dtype=float, copy=True)
+    for joint in unobserved_joints(status):
+        out[CANONICAL_JOINTS.index(joint)] = np.nan
+    return out
+
+
 @dataclass
 class FrameResult:
     """What a tracker reports for one sample.
@@ -171,5 +215,8 @@ __all__ = [
     "Tracker",
     "canonical_joints_mm",
     "fit_summary",
+    "nan_unobserved",
+    "observation_status",
+    "unobserved_joints",
     "unobserved_part",
 ]

@@ -31,7 +31,7 @@ calibration's bar, the consensus 0.5 deg. Frames where the assumption holds all 
 same layout; frames where it fails each give their own, so they scatter (RANSAC's
 maximum consensus, with `CONSENSUS_DEG`). Elbows, mean left / right over eight copies
 of the tennis serve jittered by 1e-6 mm (the tracker is chaotic in round-off;
-docs/hybrid.md): median 97 / 107 mm, consensus 94 / 98, static calibration 92 / 93; on
+docs/design-notes/hybrid.md): median 97 / 107 mm, consensus 94 / 98, static calibration 92 / 93; on
 the ezc3d Qualisys take, which moves throughout, 87 / 40 -> 52 / 32 (at 10-12.5 deg
 only: its left elbow has two states, about 50 and 89 mm; positions only 105 / 39).
 Offsets are from the effector's default point, as ``HybridConfig.member_offsets_mm``.

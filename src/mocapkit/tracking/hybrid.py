@@ -58,7 +58,7 @@ from mocapkit.tracking.base import (
     FrameResult,
     canonical_joints_mm,
     fit_summary,
-    unobserved_part,
+    nan_unobserved,
 )
 from mocapkit.tracking.posture import SEATED_LEFT_OUT
 
@@ -105,11 +105,11 @@ def foot_effectors(skeleton: Skeleton) -> list[Effector]:
 #: The tracker's IK settings: each iteration does the work of three of the paper's
 #: (`IKConfig.term_clamp_scale`, `IKConfig.relax_substeps`), 30 iterations a solve instead
 #: of 100 (see `HybridConfig.ik`), and LAPACK's dgesvd without U where no DoF is locked at
-#: a joint limit (``IKConfig.svd="gesvd"``). A single run had moved charleston1's
+#: a joint limit (``IKConfig.svd="gesvd"``). A single run had moved one accuracy clip's
 #: default-configuration elbow 43 -> 55 mm (round-off chaos); averaged over four jittered
 #: repeats (`mocapkit accuracy hybrid --jitter-repeats 4`) every figure of the three
-#: configurations is within 0.3 mm of dgesdd's or better (docs/hybrid.md, Speed, fifth
-#: round). The active-set release of locked DoFs (``lock_release="kkt"``: deterministic,
+#: configurations is within 0.3 mm of dgesdd's or better (docs/design-notes/hybrid.md,
+#: Speed). The active-set release of locked DoFs (``lock_release="kkt"``: deterministic,
 #: 165 frames/s) moved the default's MPJPE by 1.6-4 mm and is left out.
 TRACKING_IK = IKConfig(max_iterations=30, term_clamp_scale=3.0, relax_substeps=3, svd="gesvd")
 #: Bisection steps of the balance lean (`BalanceConfig.bisection_steps`) in ``"solve"`` mode.
@@ -121,7 +121,7 @@ TRACKING_BISECTION_STEPS = 6
 #: anyway): 2.4 ms a frame against 6.0 (bench, same load). The bisection is guided
 #: (`BalanceConfig.guided_bisection`: the same leans from 62 restore solves instead of 107
 #: on the bench sessions). ``search="newton"`` is faster still (1.2 ms) but moves the
-#: arm-refining configurations (see docs/hybrid.md, "Speed").
+#: arm-refining configurations (see docs/design-notes/hybrid.md).
 TRACKING_BALANCE = BalanceConfig(
     mode="solve",
     bisection_steps=TRACKING_BISECTION_STEPS,
@@ -164,13 +164,13 @@ class HybridConfig:
         ``max_iterations``, and the later iterations matter: they cross the flat valley
         of the least-squares problem along terms of small singular value, which SDLS
         bounds to a few milliradians per iteration (the same with the secondary task
-        off; `IKConfig.term_clamp_scale`). Measured on lambada (accuracy clip, oriented
+        off; `IKConfig.term_clamp_scale`). Measured on one accuracy clip (oriented
         sets, IK only, the paper's iteration): stopping when the error stalls (4
         iterations, 1 %) gave elbow 38.1 mm and MPJPE 43.8 mm against 20.4 and 33.1; at
         least 50 iterations, 21.4 and 35.3 mm. `TRACKING_IK` does the work of three
         iterations in one (30 a solve), which keeps the accuracy; ten in one (10 a
-        solve) was better on lambada and 01_09 (elbow 15.7 and 15.8 mm against 17.4 and
-        15.9) but let zombie's trunk turn 40 deg off in the flat valley and flip the
+        solve) was better on two accuracy clips (elbow 15.7 and 15.8 mm against 17.4 and
+        15.9) but let a third's trunk turn 40 deg off in the flat valley and flip the
         left arm (MPJPE 26.6 -> 39.5 mm), and five in one did the same (38.6 mm).
     paper : bool
         Follow the paper literally: no temporal smoothing, proportional balance rule.
@@ -201,14 +201,14 @@ class HybridConfig:
         The polish also stops when the largest error has not dropped by 1 % in this
         many iterations (0: never): with member markers the error settles near the
         tolerance and half the polishes ran their 100 iterations for nothing. Measured
-        (accuracy clips lambada and 01_09, oriented sets, IK only): elbow 20.4 and
+        (two accuracy clips, oriented sets, IK only): elbow 20.4 and
         15.8 mm without the stop, 20.5 and 16.3 mm with it; 25 % less time per frame.
         Default 3: of the polish's 14 iterations a frame (154 of 363 polishes on the
         bench sessions ran to the 30-iteration cap, the error stalled above the
         tolerance, the pose crawling along the redundant DoFs, i.e. undoing the
         smoothing) 4.7 remain; smoothing 1.77 -> 0.67 ms a frame, the accuracy within
         0.5 mm in the default configuration and 1 mm in the other two
-        (docs/hybrid.md, "Speed", third round).
+        (docs/design-notes/hybrid.md, Speed).
     member_offsets_mm : mapping of str to mapping of str to (3,) array_like
         Per marker set, its member markers' offsets (mm) in the effector joint's frame,
         from the default effector point (as ``marker_offsets_mm``). Each member then
@@ -1060,11 +1060,7 @@ class HybridTracker:
             # the legs are held bent under a seat: no marker sees them
             for joint in SEATED_LEFT_OUT:
                 out[CANONICAL_JOINTS.index(joint)] = np.nan
-        for name in released:
-            part = unobserved_part(name)
-            for joint in part[1] if part is not None else ():
-                out[CANONICAL_JOINTS.index(joint)] = np.nan
-        return out
+        return nan_unobserved(out, dict.fromkeys(released, "released"))
 
     def _no_pose(
         self, sample: HybridSample, bridged: Sequence[str], released: Sequence[str]

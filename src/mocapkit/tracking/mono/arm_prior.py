@@ -27,8 +27,7 @@ The shipped table (`mocapkit.tracking.mono.arm_prior_table`) is fitted by
 ``mocapkit accuracy mono`` (its provenance is in that module's docstring): 12 components,
 0.03 added to each covariance's diagonal. Both were chosen on the training clips alone, by
 leave-one-clip-out log-likelihood; with a floor of 1e-3 the density was so narrow that
-the accuracy clips' true arms cost the full cap in most frames (docs/mono.md, third
-round).
+the accuracy clips' true arms cost the full cap in most frames (docs/design-notes/mono.md).
 """
 
 from __future__ import annotations

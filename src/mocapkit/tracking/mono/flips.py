@@ -22,8 +22,8 @@ length along its projected direction (dz = 0), so its pixel moves by the excess.
 there are 2^(L-1) distinct poses, not 2^L with duplicates.
 
 Reach tolerance (beyond the paper; ``reach_tolerance``, 0 by default here): with lengths
-estimated from the video a link is often a few per cent short (docs/mono.md, fourth
-round), so a child that truly lies 12-20 deg out of the image plane falls just beyond
+estimated from the video a link is often a few per cent short (docs/design-notes/mono.md),
+so a child that truly lies 12-20 deg out of the image plane falls just beyond
 its parent's reach and M5 leaves the link one configuration in the plane: its true flip
 is absent from every candidate. With a tolerance t the link's length is taken as
 uncertain by the share t: for a parent at distance D from the child's ray in the band
@@ -403,8 +403,8 @@ def enumerate_poses(
         nearest the parent (orthographic: at the parent's depth; dz = 0, the band's
         far-edge placement; its code sets bit ``L + l``, not bit l). The band alone
         places a link that looks as long as itself about ``sqrt(t)`` rad out of the image
-        plane, so a link truly in the plane has no pose there (docs/mono.md, eighth
-        round). inf (default): no third candidate, the paper's two flips.
+        plane, so a link truly in the plane has no pose there (docs/design-notes/mono.md).
+        inf (default): no third candidate, the paper's two flips.
 
     Returns
     -------

@@ -25,7 +25,7 @@ plain cost; a weight of 0 leaves the tracker as the paper's.
 - `girdle_angle_cost` (unary, 0-2): the neck and both shoulders are one rigid triangle;
   the departure of the cosine of the angle between the clavicles from the girdle's. Used
   where the neck is rebuilt from a detector's shoulders and hips (its clavicles mirror
-  images in 2-D, their flips undecided by their own lengths; docs/mono.md seventh round).
+  images in 2-D, their flips undecided by their own lengths; docs/design-notes/mono.md).
 - `depth_velocity_cost` (pair, mm^2/s^2): the sum over joints of the squared change of
   each joint's depth relative to the root between consecutive frames over dt^2 (per-link
   depth continuity).

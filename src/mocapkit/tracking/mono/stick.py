@@ -40,8 +40,8 @@ them (01_12, 11_01, 131_01, 131_03: 62.6 -> 57.8 mm, 65.9 -> 70.0 %; 131_03 got 
 clips break them (0-1.3 % with the old values); charleston1 breaks the 30 deg elbow
 angle in 24.8 % of its frames either way.
 
-A tolerance on the limits was measured and not adopted (docs/mono.md, fourth round;
-``examples/mono_truth_pruning.py``): with the estimated lengths and noisy 2-D, the
+A tolerance on the limits was measured and not adopted (docs/design-notes/mono.md,
+the true flips' pruning): with the estimated lengths and noisy 2-D, the
 tracker pruned every candidate with the truth's flips in 0-9 % of the frames of eight of
 those nine clips (the elbow-plane limit, the clavicle-trunk angle, shoulder extension)
 and in 26 % of charleston1's (its elbow closes to 25-30 deg). Loosening the elbow to 20

@@ -18,7 +18,7 @@ Per frame (streaming, `MonoTracker.push`):
    (``arm_prior_weight``, `mocapkit.tracking.mono.arm_prior`), and where the neck is
    rebuilt (a detector's, ``rebuilt_joints``) the rigid girdle's clavicle angle
    (``girdle_weight``) with a wider reach band on the clavicles; the image residual, elbow
-   flex, depth velocity and joint-acceleration terms are off (measured in docs/mono.md);
+   flex, depth velocity and joint-acceleration terms are off (docs/design-notes/mono.md);
 5. Viterbi picks the path (§4.3): offline (``lag=None``) exactly at the end, online with
    a fixed lag (`mocapkit.tracking.mono.viterbi.Decoder`). The online latency is
    ``smooth_lag + lag`` frames.
@@ -53,7 +53,7 @@ the path starts in that pose's flips. Without it the offline path chooses its st
 freely: a link and its mirror through the image plane cost nearly the same in eq. 3
 (a reflection keeps every |alpha|; only perspective breaks the tie), so where the limits
 and priors allow both, the start decides which of the two the path follows
-(docs/mono.md, fifth round: charleston1's left arm).
+(docs/design-notes/mono.md).
 
 A frame whose poses are all pruned keeps its unpruned set (recipe M). Pair-state
 decoding is O(N^3) per frame; where a frame has more than ``max_pair_states`` survivors,
@@ -140,17 +140,17 @@ class MonoConfig:
         Unary cost per unit of `mocapkit.tracking.mono.priors.clavicle_forward_cost`
         (eq. 3 costs ~450 rad/s^2 per frame on 13_26); 0: the paper's. Default 300,
         chosen on the five accuracy clips and checked on four held-out clips
-        (docs/mono.md).
+        (docs/design-notes/mono.md).
     arm_prior_weight : float
         Unary cost per nat of the arm prior
         (`mocapkit.tracking.mono.arm_prior.ArmPrior.cost`, both arms); 0: off. Default
         30: weights 10-100 all lowered the mean error of the five accuracy clips and of
-        four held-out clips (each tracked with a prior fitted without it); docs/mono.md.
+        four held-out clips (each tracked with a prior fitted without it; design notes).
     short_link_weight : float
         With video lengths and the perspective model: after each length pass, links
         shorter than the body's proportions at the video's stature are moved this share
         of the way up (`mocapkit.tracking.mono.lengths.raise_short_links`); 0: off.
-        Default 0.5 (docs/mono.md, fourth round).
+        Default 0.5 (docs/design-notes/mono.md).
     reach_tolerance : float
         Length band of errata M5 (`mocapkit.tracking.mono.flips`, ``reach_tolerance``):
         a link whose parent lies within ``L (1 +- reach_tolerance)`` of its child's ray
@@ -158,7 +158,7 @@ class MonoConfig:
         ``L (1 + reach_tolerance)`` across the band; 0: M5 exactly. Default 0.02 (in
         `mocapkit.pipelines.mono.track_mono` the last pass only): 0.015-0.025 lowered
         the error and raised the flips of the five accuracy clips and of four held-out
-        clips, over three noise seeds (docs/mono.md, sixth round).
+        clips, over three noise seeds (docs/design-notes/mono.md).
     rebuilt_joints : tuple of str
         Joints of the 2-D input that were not observed but rebuilt from others (a
         detector's neck and pelvis, placed on the hip-to-shoulder midpoint line by
@@ -170,7 +170,7 @@ class MonoConfig:
         clavicle's projected length by up to 10 %, so a clavicle 15-20 deg out of the
         plane can look longer than its link and lose both flips to the in-plane one.
         Default 0.1 (0.08-0.1 with the girdle cost kept both sets' figures; 0.15 and
-        0.06 did not, docs/mono.md seventh round).
+        0.06 did not, docs/design-notes/mono.md).
     rebuilt_reach_links : tuple of str
         Links the wider band applies to: the clavicles (also the trunk and head: worse).
     rebuilt_in_plane_from : float
@@ -182,7 +182,7 @@ class MonoConfig:
         so one truly in the plane (zombie's) had no pose there. Default inf (off): 0.95
         with the band 0.1 gave zombie 35.5 -> 27.6 mm and the held-out clips 39.6 ->
         37.4 mm, but online (``lag`` 10) it mirrored zombie's left arm (75 mm) and with
-        another noise seed it cost lambada 9 mm; 1.0 cost 01_09 5 mm (docs/mono.md,
+        another noise seed it cost lambada 9 mm; 1.0 cost 01_09 5 mm (docs/design-notes/mono.md,
         eighth round).
     girdle_weight : float
         Unary cost per unit of `mocapkit.tracking.mono.priors.girdle_angle_cost` where

@@ -59,15 +59,15 @@ from mocapkit.errors import ConfigError, SessionError, ShapeError
 from mocapkit.geometry.rotations import rotvec_from_matrix
 from mocapkit.skeleton.kinematics import canonical_positions, joint_positions
 from mocapkit.skeleton.limbs import arm
-from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
+from mocapkit.skeleton.model import Skeleton
 from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.base import (
     BRIDGE_S,
-    UNOBSERVED,
     FrameResult,
     canonical_joints_mm,
     fit_summary,
-    unobserved_part,
+    nan_unobserved,
+    observation_status,
 )
 from mocapkit.tracking.stereo.arm_filter import (
     ArmEstimate,
@@ -124,7 +124,7 @@ class StereoConfig:
         shoulders, while the ``azad14`` shoulders sit 40 mm below its neck: on a session
         without the subject's vectors the ``"neck"`` anchor puts the shoulders about 100
         mm too low (Pose2Sim demo: shoulders 153/142 mm from the triangulated keypoints,
-        41.6/38.8 mm with ``"shoulders"``, docs/stereo.md). On the synthetic accuracy
+        41.6/38.8 mm with ``"shoulders"``, docs/design-notes/stereo.md). On the synthetic accuracy
         clips, whose sessions carry the exact vectors, both are alike (32.3 and 32.1 mm).
     reach_pad_mm : float
         Margin of the arms' reach box.
@@ -577,12 +577,8 @@ class StereoTracker:
             limb = self.limbs[s]
             q[limb.translation_dofs] = ests[s].state[4:]
             q[limb.dofs] = ests[s].state[:4]
-        joints = canonical_joints_mm(sk, canonical_positions(sk, q))
         status = self._status(time_s, meas)
-        for name, st in status.items():
-            part = unobserved_part(name) if st in UNOBSERVED else None
-            for joint in part[1] if part is not None else ():
-                joints[CANONICAL_JOINTS.index(joint)] = np.nan
+        joints = nan_unobserved(canonical_joints_mm(sk, canonical_positions(sk, q)), status)
         dist = {
             f"{s}_hand": ests[s].dist_mm if np.all(np.isfinite(meas[1 + i])) else math.nan
             for i, s in enumerate(SIDES)
@@ -608,15 +604,9 @@ class StereoTracker:
         for name, p in zip(MEASURED, meas):
             if np.all(np.isfinite(p)):
                 self.last_seen_s[name] = time_s
-                out[name] = "seen"
-                continue
             last = self.last_seen_s[name]
-            if last is None:
-                out[name] = "missing"
-            elif time_s - last <= self.config.gap_limit_s:
-                out[name] = "bridged"
-            else:
-                out[name] = "released"
+            unseen_s = math.inf if last is None else time_s - last
+            out[name] = observation_status(unseen_s, last is not None, self.config.gap_limit_s)
         return out
 
 

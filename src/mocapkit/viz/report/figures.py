@@ -17,10 +17,28 @@ from mocapkit.skeleton.model import CANONICAL_SEGMENTS
 
 FloatArray = NDArray[np.float64]
 
-#: Trace colours (CSS): captured, truth, markers; joints' error lines use plotly's palette.
+#: Trace colours (CSS): captured, truth, markers.
 CAPTURED_COLOUR = "#ff8c1a"
 TRUTH_COLOUR = "#2ca02c"
 MARKER_COLOUR = "#1f77b4"
+#: Line colours of per-joint and per-column plots: 20 distinct colours (Kelly's
+#: contrast set without white and black), so that the 15 canonical joints differ.
+LINE_COLOURS = (
+    "#e6194b", "#3cb44b", "#4363d8", "#f58231", "#911eb4", "#42d4f4", "#f032e6",
+    "#9a6324", "#469990", "#800000", "#808000", "#000075", "#bfef45", "#fabed4",
+    "#dcbeff", "#ffe119", "#aaffc3", "#ffd8b1", "#a9a9a9", "#000000",
+)  # fmt: skip
+#: Colours of the tracker statuses in ``fit.csv`` (`mocapkit.tracking.base`): a traffic
+#: light; other text columns (e.g. ``worst``, a marker set's name) are plotted apart.
+STATUS_COLOURS = {
+    "seen": "#2ca02c",
+    "bridged": "#f2b701",
+    "released": "#d62728",
+    "missing": "#7f7f7f",
+}
+#: Unit suffixes of ``fit.csv`` column names and their axis titles; a column without
+#: one is unitless (a ratio, a count or an edge cost).
+UNIT_SUFFIXES = {"_mm": "mm", "_px": "px", "_deg": "degrees", "_s": "s"}
 
 
 @dataclass(frozen=True)
@@ -170,7 +188,8 @@ def skeleton_animation(
             "aspectmode": "manual",
             "aspectratio": {"x": float(ratio[0]), "y": float(ratio[1]), "z": float(ratio[2])},
             # a view from the front left, a little above (the subject faces +Y, Z up)
-            "camera": {"eye": {"x": -1.0, "y": 1.25, "z": 0.4}, "up": {"x": 0, "y": 0, "z": 1}},
+            # far enough that the box and its axis titles fit inside the scene
+            "camera": {"eye": {"x": -1.3, "y": 1.6, "z": 0.5}, "up": {"x": 0, "y": 0, "z": 1}},
         },
         legend={"x": 0.01, "y": 0.98},
         updatemenus=[
@@ -264,7 +283,8 @@ def error_figure(
     fig = go.Figure()
     for k, name in enumerate(joint_names):
         y = [None if not np.isfinite(v) else round(float(v), 2) for v in err[:, k]]
-        fig.add_trace(go.Scatter(x=t, y=y, name=name, mode="lines"))
+        colour = LINE_COLOURS[k % len(LINE_COLOURS)]
+        fig.add_trace(go.Scatter(x=t, y=y, name=name, mode="lines", line={"color": colour}))
     fig.update_layout(
         title={"text": title},
         xaxis={"title": {"text": "time (s)"}},
@@ -273,6 +293,45 @@ def error_figure(
         margin={"t": 50},
     )
     return fig
+
+
+def _states_figure(
+    t: FloatArray, columns: Mapping[str, Sequence[str]], title: str, colours: Mapping[str, str]
+) -> go.Figure:
+    """One row per text column, one square per frame coloured by its value (``colours``,
+    else the line colours in turn); empty cells left out."""
+    fig = go.Figure()
+    values = sorted({v for col in columns.values() for v in col if v})
+    others = iter(LINE_COLOURS * (1 + len(values) // len(LINE_COLOURS)))
+    for value in values:
+        xs: list[float] = []
+        ys: list[str] = []
+        for name, col in columns.items():
+            if len(col) != t.shape[0]:
+                raise ShapeError(
+                    f"fit_figures: column {name!r}: expected {t.shape[0]} values, found {len(col)}"
+                )
+            hit = [i for i, v in enumerate(col) if v == value]
+            xs += [float(t[i]) for i in hit]
+            ys += [name] * len(hit)
+        colour = colours.get(value) or next(others)
+        fig.add_trace(
+            go.Scatter(
+                x=xs, y=ys, name=value, mode="markers", marker={"symbol": "square", "color": colour}
+            )
+        )
+    fig.update_layout(
+        title={"text": title},
+        xaxis={"title": {"text": "time (s)"}},
+        height=140 + 30 * len(columns),
+        margin={"t": 50},
+    )
+    return fig
+
+
+def column_unit(name: str) -> str:
+    """The unit of a ``fit.csv`` column by its name's suffix (`UNIT_SUFFIXES`); '' if none."""
+    return next((u for suffix, u in UNIT_SUFFIXES.items() if name.endswith(suffix)), "")
 
 
 def fit_figures(
@@ -289,76 +348,67 @@ def fit_figures(
     numeric : mapping column name -> ndarray (T,)
         One line per column (NaN leaves a gap).
     text : mapping column name -> sequence of str (T,)
-        Categorical columns (e.g. an effector's ``seen``/``bridged``/``missing`` status):
-        one row per column, one marker colour per value; empty cells are left out.
+        Categorical columns (``*_status``: an effector's ``seen``/``bridged``/``missing``
+        status; others such as ``worst``): one row per column, one marker colour per
+        value; empty cells are left out.
     title : str
 
     Returns
     -------
     list of Figure
-        The numeric figure (when there is a numeric column) then the states figure (when
-        there is a text column).
+        One figure per unit of the numeric columns (`column_unit`: mm, px, ... and the
+        unitless ones apart, each on its labelled axis), then the states figure (when
+        there is a ``*_status`` column; statuses in `STATUS_COLOURS`), then one of the
+        other text columns (e.g. ``worst``).
     """
     t = np.asarray(time_s, dtype=float)
     out: list[go.Figure] = []
-    if numeric:
+    by_unit: dict[str, dict[str, FloatArray]] = {}
+    for name, column in numeric.items():
+        v = np.asarray(column, dtype=float)
+        if v.shape != t.shape:
+            raise ShapeError(
+                f"fit_figures: column {name!r}: expected {t.shape[0]} values, found {v.shape}"
+            )
+        by_unit.setdefault(column_unit(name), {})[name] = v
+    for unit, columns in by_unit.items():
         fig = go.Figure()
-        for name, column in numeric.items():
-            v = np.asarray(column, dtype=float)
-            if v.shape != t.shape:
-                raise ShapeError(
-                    f"fit_figures: column {name!r}: expected {t.shape[0]} values, found {v.shape}"
-                )
+        for k, (name, v) in enumerate(columns.items()):
             fig.add_trace(
                 go.Scatter(
                     x=t,
                     y=[None if not np.isfinite(x) else float(x) for x in v],
                     name=name,
                     mode="lines",
+                    line={"color": LINE_COLOURS[k % len(LINE_COLOURS)]},
                 )
             )
         fig.update_layout(
-            title={"text": title},
+            title={"text": f"{title}: {'unitless values' if unit == '' else unit}"},
             xaxis={"title": {"text": "time (s)"}},
-            yaxis={"title": {"text": "value (units as in the column name)"}},
+            yaxis={"title": {"text": unit or "value (no unit)"}},
             height=380,
             margin={"t": 50},
         )
         out.append(fig)
-    if text:
-        fig = go.Figure()
-        values = sorted({v for col in text.values() for v in col if v})
-        for value in values:
-            xs: list[float] = []
-            ys: list[str] = []
-            for name, col in text.items():
-                if len(col) != t.shape[0]:
-                    raise ShapeError(
-                        f"fit_figures: column {name!r}: expected {t.shape[0]} values, "
-                        f"found {len(col)}"
-                    )
-                hit = [i for i, v in enumerate(col) if v == value]
-                xs += [float(t[i]) for i in hit]
-                ys += [name] * len(hit)
-            fig.add_trace(
-                go.Scatter(x=xs, y=ys, name=value, mode="markers", marker={"symbol": "square"})
-            )
-        fig.update_layout(
-            title={"text": "Status per frame"},
-            xaxis={"title": {"text": "time (s)"}},
-            height=140 + 30 * len(text),
-            margin={"t": 50},
-        )
-        out.append(fig)
+    status = {n: c for n, c in text.items() if n.endswith("_status")}
+    labels = {n: c for n, c in text.items() if not n.endswith("_status")}
+    if status:
+        out.append(_states_figure(t, status, "Status per frame", STATUS_COLOURS))
+    if labels:
+        out.append(_states_figure(t, labels, "Labels per frame", {}))
     return out
 
 
 __all__ = [
     "CAPTURED_COLOUR",
+    "LINE_COLOURS",
     "MARKER_COLOUR",
+    "STATUS_COLOURS",
     "TRUTH_COLOUR",
     "PointLayer",
     "animation_options",
+    "column_unit",
     "error_figure",
     "fit_figures",
     "skeleton_animation",

@@ -154,7 +154,8 @@ def _video_html(label: str, video: WebVideo, folder: Path) -> str:
     else:
         body = (
             f'<video src="{rel}" width="{w}" height="{h}" controls loop muted autoplay '
-            f'playsinline preload="auto" data-codec="{html.escape(video.codec)}"></video>'
+            f'playsinline preload="auto" data-codec="{html.escape(video.codec)}" '
+            f'data-fps="{video.fps:.6g}"></video>'
         )
     return f"<figure>{body}<figcaption>{cap}</figcaption></figure>"
 

@@ -1,9 +1,9 @@
 """CPU time of the mono tracker on fixed frames, for before/after comparisons of checkouts.
 
-    python examples/mono_speed_compare.py write /tmp/mono_bench_frames.npz
-    PYTHONPATH=/path/to/other/checkout/src python examples/mono_speed_compare.py time \
+    python tools/mono_speed_compare.py write /tmp/mono_bench_frames.npz
+    PYTHONPATH=/path/to/other/checkout/src python tools/mono_speed_compare.py time \
         /tmp/mono_bench_frames.npz before
-    python examples/mono_speed_compare.py time /tmp/mono_bench_frames.npz after
+    python tools/mono_speed_compare.py time /tmp/mono_bench_frames.npz after
 
 ``write`` (needs this checkout) stores the `mocapkit bench mono` sequence's noisy 2-D
 joints and its drawn 640x480 skin frames; ``time`` runs whatever ``mocapkit`` is
