@@ -5,17 +5,16 @@ from __future__ import annotations
 import argparse
 
 from mocapkit.cli.args import number, output_folder
-from mocapkit.io.calib_toml import UNITS_MM
-from mocapkit.io.session_build import build_session
-from mocapkit.io.video import PAD_MULTIPLE_PX
 
-_EPILOG = f"""\
+HELP = "make a session folder from videos, a calibration and OpenPose keypoints"
+
+_EPILOG = """\
 Each video's file name names its camera (cam01.mp4 is camera cam01), which must be in the
 calibration (case, '_', '-' and leading zeros aside: cam_01 = cam01). Calibrations read:
 Pose2Sim/anipose/FreeMoCap Calib.toml, Qualisys .qca.txt, OpenCV YAML/XML (one file per
 camera, named by its stem; give --calibration once per file) and cameras.json.
 A video smaller than its calibration by an encoder's padding (the calibrated size is the
-video's rounded up to a multiple of {PAD_MULTIPLE_PX} px, e.g. 1080 -> 1088) is taken with a
+video's rounded up to a multiple of {pad} px, e.g. 1080 -> 1088) is taken with a
 warning, its frames padded back in black on the right and bottom; other size differences,
 different frame counts and different frame rates are refused before anything is written.
 --keypoints DIR holds one OpenPose JSON folder per camera, named <camera> or
@@ -25,13 +24,16 @@ different frame counts and different frame rates are refused before anything is 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``session`` subcommand."""
+    from mocapkit.io.calib_toml import UNITS_MM
+    from mocapkit.io.video import PAD_MULTIPLE_PX
+
     p = subparsers.add_parser(
         "session",
-        help="make a session folder from videos, a calibration and OpenPose keypoints",
+        help=HELP,
         description="Make a session folder (session.json, cameras.json, video/, "
         "keypoints/) from one video per camera, a calibration file and, optionally, "
         "OpenPose JSON keypoints; every check runs before anything is written.",
-        epilog=_EPILOG,
+        epilog=_EPILOG.format(pad=PAD_MULTIPLE_PX),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("videos", nargs="+", metavar="VIDEO", help="one video per camera")
@@ -64,6 +66,8 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 def run(args: argparse.Namespace) -> int:
     """Build the session and say what it holds."""
+    from mocapkit.io.session_build import build_session
+
     built = build_session(
         args.videos,
         args.calibration,
