@@ -1,0 +1,253 @@
+"""Run a detector over a video or a session: OpenPose JSON per frame, keypoints CSV, 3-D.
+
+`detect_frames` runs a `Detector` frame by frame and follows one person
+(`mocapkit.detect.follow.PersonFollower`); a backend that finds one person per call
+(MediaPipe) is asked again on the region round the followed person's last box whenever
+the whole frame gives someone else or nobody. Only the followed person enters the
+result; bystanders never do.
+
+`detect_video` writes, for one video (a file or an image folder)::
+
+    <json_dir>/<frame:06d>_keypoints.json   OpenPose BODY_25, the followed person or nobody
+    <world_path>                             (.npz, when the backend gives 3-D) time_s (T,),
+                                             names (25,), world_mm (T, 25, 3) NaN where none
+
+`detect_session` does so for every camera of a session and converts each camera's JSON
+into the session's ``keypoints/<camera>.csv`` (`mocapkit.io.openpose.read_openpose_folder`,
+which also places the canonical neck and pelvis)::
+
+    keypoints/<camera>.csv               canonical keypoints every tracker reads
+    keypoints/openpose/<camera>/         the JSON per frame (what OpenPose would write)
+    keypoints3d/<camera>.npz             the backend's 3-D points, when it gives them
+    keypoints/detect.json                backend, followed person, frames with a person
+
+A camera whose ``keypoints/<camera>.csv`` exists is skipped (cached) unless
+``overwrite``. Every file is written atomically; the JSON folder is built under a
+temporary name and swapped in whole.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from mocapkit.detect.backend import (
+    N_BODY_25,
+    Detector,
+    FloatArray,
+    ImageArray,
+    PersonPose,
+    make_detector,
+)
+from mocapkit.detect.follow import PersonFollower
+from mocapkit.errors import SessionError
+from mocapkit.io.atomic import atomic_folder, atomic_save_npz, atomic_write
+from mocapkit.io.openpose import BODY_25, read_openpose_folder, write_openpose_frame
+from mocapkit.io.session_csv import write_keypoints_csv
+from mocapkit.io.video import VideoSource, probe_video
+from mocapkit.progress import Progress
+
+
+@dataclass
+class VideoDetections:
+    """The followed person over one video.
+
+    Attributes
+    ----------
+    keypoints : (T, 25, 3) float
+        BODY_25 x_px, y_px, confidence; all 0 in frames without the person.
+    world_mm : (T, 25, 3) float or None
+        The backend's 3-D points (NaN where none); None when it gives none.
+    followed : str
+        Which person was followed (`PersonFollower.describe`).
+    backend : str
+    """
+
+    keypoints: FloatArray
+    world_mm: FloatArray | None
+    followed: str
+    backend: str
+    roi_calls: int = 0
+
+    @property
+    def found(self) -> int:
+        """Frames with the person."""
+        return int(np.count_nonzero(self.keypoints[:, :, 2].max(axis=1) > 0))
+
+    def summary(self) -> dict[str, object]:
+        """What `detect_session` writes in ``detect.json`` for one camera."""
+        return {
+            "backend": self.backend,
+            "followed": self.followed,
+            "frames": int(self.keypoints.shape[0]),
+            "frames_with_person": self.found,
+        }
+
+
+def detect_frames(
+    frames: Iterable[ImageArray], detector: Detector, follower: PersonFollower
+) -> Iterator[tuple[PersonPose | None, bool]]:
+    """The followed person (or None) per frame, and whether the region was searched."""
+    for t, img in enumerate(frames):
+        people = detector.detect(img)
+        pick = follower.choose(t, people)
+        roi_used = False
+        if pick is None and not detector.multi_person:
+            region = follower.search_region(img.shape)
+            if region is not None:
+                try:
+                    people = detector.detect(img, roi=region)
+                except ValueError:  # a region off the image: nobody there
+                    people = []
+                roi_used = True
+                pick = follower.choose(t, people)
+        yield (people[pick] if pick is not None else None), roi_used
+
+
+def _frames(source: VideoSource) -> Iterator[ImageArray]:
+    stream = source.open()
+    try:
+        for i in range(source.n_frames):
+            stream.advance_to(i)
+            yield stream.retrieve(i)
+    finally:
+        stream.close()
+
+
+def detect_video(
+    source: VideoSource,
+    json_dir: str | os.PathLike[str],
+    detector: Detector,
+    *,
+    start_px: tuple[float, float] | None = None,
+    world_path: str | os.PathLike[str] | None = None,
+    label: str = "",
+) -> VideoDetections:
+    """Detect and follow one person through a video; write OpenPose JSON per frame.
+
+    Parameters
+    ----------
+    source : VideoSource
+    json_dir : path-like
+        Folder of the JSON files (replaced whole, atomically).
+    detector : Detector
+    start_px : (x, y), optional
+        Follow the person at this point of the first frame (default: the largest).
+    world_path : path-like, optional
+        Where to write the backend's 3-D points (.npz), when it gives them.
+    label : str
+        Shown before the progress counts.
+    """
+    n = source.n_frames
+    kp = np.zeros((n, N_BODY_25, 3))
+    world = np.full((n, N_BODY_25, 3), np.nan)
+    has_world = False
+    follower = PersonFollower(start_px=start_px)
+    roi_calls = 0
+    with atomic_folder(json_dir) as tmp, Progress(n, label or source.camera) as bar:
+        for t, (pose, roi_used) in enumerate(detect_frames(_frames(source), detector, follower)):
+            roi_calls += roi_used
+            if pose is not None:
+                kp[t] = pose.keypoints
+                if pose.world_mm is not None:
+                    world[t], has_world = pose.world_mm, True
+            write_openpose_frame(tmp / f"{t:06d}_keypoints.json", [kp[t]] if pose else [])
+            bar.status = f"person in {int(np.count_nonzero(kp[: t + 1, :, 2].max(axis=1)))}"
+            bar.update()
+    if has_world and world_path is not None:
+        atomic_save_npz(world_path, time_s=source.time_s, names=np.array(BODY_25),
+                        world_mm=world)  # fmt: skip
+    return VideoDetections(kp, world if has_world else None, follower.describe(),
+                           detector.name, roi_calls)  # fmt: skip
+
+
+@dataclass
+class SessionDetections:
+    """What `detect_session` did per camera."""
+
+    cameras: dict[str, VideoDetections] = field(default_factory=dict)
+    cached: list[str] = field(default_factory=list)
+
+
+def detect_session(
+    session_dir: str | os.PathLike[str],
+    detector: Detector | str | None = None,
+    *,
+    start_px: dict[str, tuple[float, float]] | tuple[float, float] | None = None,
+    overwrite: bool = False,
+    out_dir: str | os.PathLike[str] | None = None,
+) -> SessionDetections:
+    """Detect the followed person in every camera of a session; write its keypoints.
+
+    Parameters
+    ----------
+    session_dir : path-like
+    detector : Detector, backend name or None
+        None: the default installed backend (`make_detector`).
+    start_px : (x, y) or camera -> (x, y), optional
+        The person to follow (nearest this point on the first frame); default the largest.
+    overwrite : bool
+        Detect again where ``keypoints/<camera>.csv`` already exists.
+    out_dir : path-like, optional
+        Where to write (default: the session folder itself).
+    """
+    from mocapkit.io.session import load_session
+
+    session = load_session(session_dir)
+    if not session.video_cameras:
+        raise SessionError(f"{session.path}: no video to detect people in (video/<camera>)")
+    out = Path(out_dir) if out_dir is not None else session.path
+    todo = [c for c in session.video_cameras
+            if overwrite or not (out / "keypoints" / f"{c}.csv").is_file()]  # fmt: skip
+    result = SessionDetections(cached=[c for c in session.video_cameras if c not in todo])
+    if not todo:
+        return result
+    own = not (detector is None or isinstance(detector, str))
+    det = make_detector(detector) if detector is None or isinstance(detector, str) else detector
+    summary_path = out / "keypoints" / "detect.json"
+    try:
+        summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
+    except json.JSONDecodeError:
+        summary = {}
+    try:
+        for cam in todo:
+            src = session.video(cam)
+            sp = start_px.get(cam) if isinstance(start_px, dict) else start_px
+            json_dir = out / "keypoints" / "openpose" / cam
+            res = detect_video(src, json_dir, det, start_px=sp, label=cam,
+                               world_path=out / "keypoints3d" / f"{cam}.npz")  # fmt: skip
+            kp = read_openpose_folder(json_dir, src.time_s)
+            write_keypoints_csv(out / "keypoints" / f"{cam}.csv", kp.time_s, kp.joint_names,
+                                kp.pixels)  # fmt: skip
+            result.cameras[cam] = res
+            summary[cam] = res.summary()
+            with atomic_write(summary_path) as fh:
+                json.dump(summary, fh, indent=1)
+    finally:
+        if not own:
+            det.close()
+    return result
+
+
+def video_source(path: str | os.PathLike[str], camera: str | None = None) -> VideoSource:
+    """A video file or image folder outside a session, timed at its nominal rate (30 Hz
+    when it has none)."""
+    p = Path(path)
+    cam = camera or p.stem
+    n, fps = probe_video(p, cam)
+    return VideoSource(cam, p, np.arange(n) / (fps if fps > 0 else 30.0))
+
+
+__all__ = [
+    "SessionDetections",
+    "VideoDetections",
+    "detect_frames",
+    "detect_session",
+    "detect_video",
+    "video_source",
+]
