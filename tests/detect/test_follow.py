@@ -28,6 +28,7 @@ class TwoPeople:
 
     name = "fake"
     multi_person = True
+    roi_first = False
 
     def __init__(self, rng: np.random.Generator) -> None:
         self.rng = rng

@@ -70,11 +70,14 @@ class Detector(Protocol):
     backend runs on the region cropped out of the image (faster, and it finds the
     person there rather than the most prominent one in the frame); the keypoints come
     back in full-image pixels. ``multi_person`` says whether one call can return
-    several people (else at most one).
+    several people (else at most one); ``roi_first`` whether a one-person backend should
+    be given the followed person's region first (a top-down model: faster and sharper),
+    rather than the whole frame first (a backend that tracks on its own, as MediaPipe).
     """
 
     name: str
     multi_person: bool
+    roi_first: bool
 
     def detect(
         self, image: ImageArray, roi: tuple[float, float, float, float] | None = None

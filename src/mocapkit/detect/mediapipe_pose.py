@@ -87,6 +87,7 @@ class MediaPipePose:
 
     name = "mediapipe"
     multi_person = False
+    roi_first = False
 
     def __init__(
         self,

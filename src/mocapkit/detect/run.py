@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -45,7 +45,7 @@ from mocapkit.detect.backend import (
     make_detector,
 )
 from mocapkit.detect.follow import PersonFollower
-from mocapkit.errors import SessionError
+from mocapkit.errors import ConfigError, SessionError, ShapeError
 from mocapkit.io.atomic import atomic_folder, atomic_save_npz, atomic_write
 from mocapkit.io.openpose import BODY_25, read_openpose_folder, write_openpose_frame
 from mocapkit.io.session_csv import write_keypoints_csv
@@ -92,21 +92,33 @@ class VideoDetections:
 def detect_frames(
     frames: Iterable[ImageArray], detector: Detector, follower: PersonFollower
 ) -> Iterator[tuple[PersonPose | None, bool]]:
-    """The followed person (or None) per frame, and whether the region was searched."""
+    """The followed person (or None) per frame, and whether the region was searched.
+
+    A one-person backend is asked on the followed person's region (`PersonFollower.
+    search_region`) first when it prefers so (``roi_first``), else after the whole frame
+    gave nobody or somebody else.
+    """
     for t, img in enumerate(frames):
-        people = detector.detect(img)
+        region = None if detector.multi_person else follower.search_region(img.shape)
+        roi_used = region is not None and detector.roi_first
+        people = _detect(detector, img, region if roi_used else None)
         pick = follower.choose(t, people)
-        roi_used = False
-        if pick is None and not detector.multi_person:
-            region = follower.search_region(img.shape)
-            if region is not None:
-                try:
-                    people = detector.detect(img, roi=region)
-                except ValueError:  # a region off the image: nobody there
-                    people = []
-                roi_used = True
-                pick = follower.choose(t, people)
+        if pick is None and region is not None:
+            roi_used = not roi_used
+            people = _detect(detector, img, region if roi_used else None)
+            pick = follower.choose(t, people)
         yield (people[pick] if pick is not None else None), roi_used
+
+
+def _detect(
+    detector: Detector, img: ImageArray, region: tuple[float, float, float, float] | None
+) -> list[PersonPose]:
+    try:
+        return detector.detect(img, roi=region)
+    except ShapeError:  # a region off the image (`crop_box`): nobody there
+        if region is None:
+            raise
+        return []
 
 
 def _frames(source: VideoSource) -> Iterator[ImageArray]:
@@ -201,10 +213,26 @@ def detect_session(
     session = load_session(session_dir)
     if not session.video_cameras:
         raise SessionError(f"{session.path}: no video to detect people in (video/<camera>)")
+    sources = [session.video(c) for c in session.video_cameras]
     out = Path(out_dir) if out_dir is not None else session.path
-    todo = [c for c in session.video_cameras
-            if overwrite or not (out / "keypoints" / f"{c}.csv").is_file()]  # fmt: skip
-    result = SessionDetections(cached=[c for c in session.video_cameras if c not in todo])
+    return detect_sources(sources, out, detector, start_px=start_px, overwrite=overwrite)
+
+
+def detect_sources(
+    sources: Sequence[VideoSource],
+    out_dir: str | os.PathLike[str],
+    detector: Detector | str | None = None,
+    *,
+    start_px: dict[str, tuple[float, float]] | tuple[float, float] | None = None,
+    overwrite: bool = False,
+) -> SessionDetections:
+    """`detect_session` for videos given one by one (each `VideoSource.camera` names its
+    files); writes the session layout of the module docstring under ``out_dir``."""
+    out = Path(out_dir)
+    todo = [
+        s for s in sources if overwrite or not (out / "keypoints" / f"{s.camera}.csv").is_file()
+    ]
+    result = SessionDetections(cached=[s.camera for s in sources if s not in todo])
     if not todo:
         return result
     own = not (detector is None or isinstance(detector, str))
@@ -215,8 +243,8 @@ def detect_session(
     except json.JSONDecodeError:
         summary = {}
     try:
-        for cam in todo:
-            src = session.video(cam)
+        for src in todo:
+            cam = src.camera
             sp = start_px.get(cam) if isinstance(start_px, dict) else start_px
             json_dir = out / "keypoints" / "openpose" / cam
             res = detect_video(src, json_dir, det, start_px=sp, label=cam,
@@ -234,6 +262,43 @@ def detect_session(
     return result
 
 
+#: Suffixes of the video files `detect_path` takes from a folder (lower case).
+VIDEO_SUFFIXES = (".mp4", ".avi", ".mov", ".mkv", ".webm", ".m4v")
+
+
+def detect_path(
+    source: str | os.PathLike[str],
+    out_dir: str | os.PathLike[str] | None,
+    detector: Detector | str | None = None,
+    *,
+    start_px: tuple[float, float] | None = None,
+    overwrite: bool = False,
+) -> SessionDetections:
+    """What ``mocapkit detect SOURCE`` does: SOURCE is a session folder (``session.json``;
+    ``out_dir`` defaults to it), a video file, or a folder of video files (`VIDEO_SUFFIXES`;
+    ``out_dir`` required). Writes the layout of the module docstring under ``out_dir``,
+    one camera per video, named by its file's stem."""
+    src = Path(source)
+    if not src.exists():
+        raise SessionError(f"{src}: no such video, folder of videos or session folder")
+    if src.is_dir() and (src / "session.json").is_file():
+        return detect_session(src, detector, start_px=start_px, overwrite=overwrite,
+                              out_dir=out_dir)  # fmt: skip
+    if out_dir is None:
+        raise ConfigError(f"{src}: --out is needed for a video or a folder of videos")
+    if src.is_dir():
+        files = sorted(f for f in src.iterdir() if f.suffix.lower() in VIDEO_SUFFIXES)
+        if not files:
+            raise SessionError(
+                f"{src}: expected a session folder (session.json) or video files "
+                f"({', '.join(VIDEO_SUFFIXES)}), found neither"
+            )
+    else:
+        files = [src]
+    return detect_sources([video_source(f) for f in files], out_dir, detector,
+                          start_px=start_px, overwrite=overwrite)  # fmt: skip
+
+
 def video_source(path: str | os.PathLike[str], camera: str | None = None) -> VideoSource:
     """A video file or image folder outside a session, timed at its nominal rate (30 Hz
     when it has none)."""
@@ -244,10 +309,13 @@ def video_source(path: str | os.PathLike[str], camera: str | None = None) -> Vid
 
 
 __all__ = [
+    "VIDEO_SUFFIXES",
     "SessionDetections",
     "VideoDetections",
     "detect_frames",
+    "detect_path",
     "detect_session",
+    "detect_sources",
     "detect_video",
     "video_source",
 ]
