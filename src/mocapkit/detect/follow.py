@@ -3,12 +3,18 @@
 The person is chosen on the first frame with anyone in it: the largest (bounding box of
 the confident keypoints, the one nearest the camera, usually the subject) or, given an
 image point, the one whose box holds it (else the nearest box centre). In every later frame
-the candidate is taken whose box centre lies nearest the followed person's last box centre,
-if that distance is within ``max_jump`` box diagonals per frame since the person was last
-seen and the box's diagonal is within a factor ``max_scale`` of the last one; otherwise the
-frame has nobody (a bystander is never taken in the followed person's place). The last
-box, grown, is the region where a backend that finds one person per call
-(`mocapkit.detect.backend.Detector.multi_person` false) looks again.
+the candidate is taken whose keypoints lie nearest (mean distance over the keypoints
+confident in it and seen before) to the followed person's last seen ones, if that distance
+is within ``max_jump`` times the person's size per frame since they were last seen, and
+the spread of those keypoints about their mean is within a factor ``max_scale`` of the
+last (a nearer person at the same place is someone else); otherwise the frame has
+nobody, and a bystander is never taken in the followed person's place. The size is the
+diagonal of the box of every keypoint at its last seen place, so that a partial view
+(legs out of the image) neither shrinks it nor, being compared joint by joint, moves the
+person. That box is also where a backend that finds one person per call
+(`mocapkit.detect.backend.Detector.multi_person` false) looks again. The same rule as
+`mocapkit.io.openpose.follow_person` applies to OpenPose files, after the fact; this one
+runs during detection, which it steers.
 """
 
 from __future__ import annotations
@@ -55,23 +61,36 @@ class PersonFollower:
     start_px : (x, y) or None
         Follow the person at this image point on the first frame; None: the largest.
     max_jump : float
-        Largest move of the box centre per frame, in box diagonals.
+        Largest mean move of the keypoints per frame, in person sizes.
     max_scale : float
-        Largest change of the box diagonal between two sightings (factor).
+        Largest change of the keypoints' spread between two frames (factor; it grows
+        by a tenth per frame missed).
     min_confidence : float
-        Keypoints below this confidence do not count towards a box.
+        Keypoints below this confidence count as not seen.
+    min_common : int
+        Keypoints that must be seen in both frames for a comparison.
     """
 
     start_px: tuple[float, float] | None = None
     max_jump: float = 0.25
     max_scale: float = 1.6
     min_confidence: float = 0.3
+    min_common: int = 3
 
     def __post_init__(self) -> None:
-        self.last_box: Box | None = None
+        self.last_px: FloatArray | None = None
         self.first_box: Box | None = None
         self.first_frame: int | None = None
         self._last_t = 0
+
+    @property
+    def last_box(self) -> Box | None:
+        """Box of every keypoint at its last seen place (None before the first sighting)."""
+        if self.last_px is None:
+            return None
+        xy = self.last_px[np.isfinite(self.last_px).all(axis=1)]
+        return (float(xy[:, 0].min()), float(xy[:, 1].min()),
+                float(xy[:, 0].max()), float(xy[:, 1].max()))  # fmt: skip
 
     def choose(self, t: int, people: list[PersonPose]) -> int | None:
         """Index of the followed person among ``people`` at frame ``t``; None: not there.
@@ -82,7 +101,7 @@ class PersonFollower:
         idx = [i for i, b in enumerate(boxes) if b is not None]
         if not idx:
             return None
-        if self.last_box is None:
+        if self.last_px is None:
             if self.start_px is None:
                 pick = max(idx, key=lambda i: _diag(boxes[i]))  # type: ignore[arg-type]
             else:
@@ -90,18 +109,34 @@ class PersonFollower:
                 if not self._holds_start(boxes[pick]):  # type: ignore[arg-type]
                     return None
             self.first_box, self.first_frame = boxes[pick], t
+            self.last_px = np.full((people[pick].keypoints.shape[0], 2), np.nan)
         else:
-            last_c, last_d = _centre(self.last_box), _diag(self.last_box)
-            dist = {i: float(np.linalg.norm(_centre(boxes[i]) - last_c)) for i in idx}  # type: ignore[arg-type]
-            pick = min(idx, key=dist.__getitem__)
-            ratio = _diag(boxes[pick]) / max(last_d, 1e-9)  # type: ignore[arg-type]
             gap = max(t - self._last_t, 1)
-            if dist[pick] > self.max_jump * last_d * gap or not (
-                1 / self.max_scale <= ratio <= self.max_scale
-            ):
+            size = _diag(self.last_box)  # type: ignore[arg-type]
+            cost = {i: self._distance(people[i].keypoints) for i in idx}
+            pick = min(idx, key=lambda i: cost[i][0])
+            dist, ratio = cost[pick]
+            bound = self.max_scale * (1.0 + 0.1 * (gap - 1))
+            if not (dist <= self.max_jump * size * gap and 1 / bound <= ratio <= bound):
                 return None
-        self.last_box, self._last_t = boxes[pick], t
+        kp = people[pick].keypoints
+        seen = kp[:, 2] >= self.min_confidence
+        self.last_px[seen] = kp[seen, :2]
+        self._last_t = t
         return pick
+
+    def _distance(self, keypoints: FloatArray) -> tuple[float, float]:
+        """Mean distance to the last seen keypoints and the ratio of the spreads, over the
+        keypoints seen in both; (inf, 1) with fewer than ``min_common`` of them."""
+        assert self.last_px is not None
+        both = (keypoints[:, 2] >= self.min_confidence) & np.isfinite(self.last_px).all(axis=1)
+        if both.sum() < self.min_common:
+            return float("inf"), 1.0
+        a, b = keypoints[both, :2], self.last_px[both]
+        dist = float(np.linalg.norm(a - b, axis=1).mean())
+        spread_a = float(np.sqrt(((a - a.mean(axis=0)) ** 2).sum(axis=1).mean()))
+        spread_b = float(np.sqrt(((b - b.mean(axis=0)) ** 2).sum(axis=1).mean()))
+        return dist, spread_a / max(spread_b, 1e-9)
 
     def _start_cost(self, box: Box) -> float:
         assert self.start_px is not None

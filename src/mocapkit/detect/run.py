@@ -30,7 +30,8 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Iterable, Iterator, Sequence
+import sys
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,13 +43,16 @@ from mocapkit.detect.backend import (
     FloatArray,
     ImageArray,
     PersonPose,
+    default_backend,
+    install_hint,
     make_detector,
 )
 from mocapkit.detect.follow import PersonFollower
 from mocapkit.errors import ConfigError, SessionError, ShapeError
 from mocapkit.io.atomic import atomic_folder, atomic_save_npz, atomic_write
 from mocapkit.io.openpose import BODY_25, read_openpose_folder, write_openpose_frame
-from mocapkit.io.session_csv import write_keypoints_csv
+from mocapkit.io.session import Session, load_session
+from mocapkit.io.session_csv import read_keypoints_csv, write_keypoints_csv
 from mocapkit.io.video import VideoSource, probe_video
 from mocapkit.progress import Progress
 
@@ -208,8 +212,6 @@ def detect_session(
     out_dir : path-like, optional
         Where to write (default: the session folder itself).
     """
-    from mocapkit.io.session import load_session
-
     session = load_session(session_dir)
     if not session.video_cameras:
         raise SessionError(f"{session.path}: no video to detect people in (video/<camera>)")
@@ -299,6 +301,59 @@ def detect_path(
                           start_px=start_px, overwrite=overwrite)  # fmt: skip
 
 
+def ensure_keypoints(
+    session: Session,
+    cameras: Sequence[str],
+    detector: Detector | str | None = None,
+    say: Callable[[str], None] | None = None,
+) -> tuple[str, ...]:
+    """Give every named camera of a loaded session its ``keypoints/<camera>.csv``: the
+    ones missing are detected (`detect_session`, written into the session, so the next
+    run reuses them) and put into ``session.keypoints``; what was done is said.
+
+    The hook the trackers' pipelines call before they need keypoints.
+
+    Returns
+    -------
+    tuple of str
+        The cameras detected now (empty when all had keypoints).
+
+    Raises
+    ------
+    SessionError
+        Keypoints missing and no detector installed (the message says how to install one
+        or where to put OpenPose JSON), or a camera without keypoints and without video.
+    """
+    missing = [c for c in cameras if c not in session.keypoints]
+    if not missing:
+        return ()
+    no_video = [c for c in missing if c not in session.video_cameras]
+    if no_video:
+        raise SessionError(
+            f"{session.path}: no keypoints/<camera>.csv and no video to detect them in, for "
+            f"cameras {no_video}"
+        )
+    if detector is None and default_backend() is None:
+        raise SessionError(
+            f"{session.path}: no keypoints/<camera>.csv for cameras {missing}; " + install_hint()
+        )
+    tell = say if say is not None else (lambda line: print(line, file=sys.stderr))
+    name = detector if isinstance(detector, str) else getattr(detector, "name", "default")
+    tell(
+        f"{session.path}: no keypoints for {', '.join(missing)}: detecting them with "
+        f"{name or default_backend()} into keypoints/ (kept and reused next time)"
+    )
+    sources = [session.video(c) for c in missing]
+    res = detect_sources(sources, session.path, detector)
+    for cam in missing:
+        session.keypoints[cam] = read_keypoints_csv(session.path / "keypoints" / f"{cam}.csv")
+        d = res.cameras.get(cam)
+        if d is not None:
+            tell(f"{cam}: a person on {d.found} of {d.keypoints.shape[0]} frames; followed "
+                 f"{d.followed}")  # fmt: skip
+    return tuple(missing)
+
+
 def video_source(path: str | os.PathLike[str], camera: str | None = None) -> VideoSource:
     """A video file or image folder outside a session, timed at its nominal rate (30 Hz
     when it has none)."""
@@ -317,5 +372,6 @@ __all__ = [
     "detect_session",
     "detect_sources",
     "detect_video",
+    "ensure_keypoints",
     "video_source",
 ]
