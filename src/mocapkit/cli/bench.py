@@ -1,4 +1,4 @@
-"""``mocapkit bench kinematics|hybrid|mono|all``: speed figures (medians over repeats)."""
+"""``mocapkit bench NAME|all``: speed figures (medians over repeats)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     """Add the ``bench`` subcommand."""
     p = subparsers.add_parser(
         "bench",
-        help="time the kinematics and the hybrid, stereo and mono trackers",
+        help="time the kinematics, the hybrid, stereo and mono trackers and the 2-D detector",
         description="Run a speed benchmark (after a warm-up; medians over repeats) and print "
         "a table, or JSON with --json.",
     )

@@ -5,7 +5,8 @@ the confident keypoints, the one nearest the camera, usually the subject) or, gi
 image point, the one whose box holds it (else the nearest box centre). In every later frame
 the candidate is taken whose keypoints lie nearest (mean distance over the keypoints
 confident in it and seen before) to the followed person's last seen ones, if that distance
-is within ``max_jump`` times the person's size per frame since they were last seen, and
+is within ``max_jump`` times the person's size per frame since they were last seen (at most
+``max_reach`` sizes however long the gap), and
 the spread of those keypoints about their mean is within a factor ``max_scale`` of the
 last (a nearer person at the same place is someone else); otherwise the frame has
 nobody, and a bystander is never taken in the followed person's place. The size is the
@@ -69,6 +70,10 @@ class PersonFollower:
         Keypoints below this confidence count as not seen.
     min_common : int
         Keypoints that must be seen in both frames for a comparison.
+    max_reach : float
+        Cap of the allowed move after a gap, in person sizes: a person unseen for long
+        is taken again only near where they were lost (else someone entering elsewhere
+        after the subject left the image would be taken for them).
     """
 
     start_px: tuple[float, float] | None = None
@@ -76,6 +81,7 @@ class PersonFollower:
     max_scale: float = 1.6
     min_confidence: float = 0.3
     min_common: int = 3
+    max_reach: float = 2.0
 
     def __post_init__(self) -> None:
         self.last_px: FloatArray | None = None
@@ -117,7 +123,8 @@ class PersonFollower:
             pick = min(idx, key=lambda i: cost[i][0])
             dist, ratio = cost[pick]
             bound = self.max_scale * (1.0 + 0.1 * (gap - 1))
-            if not (dist <= self.max_jump * size * gap and 1 / bound <= ratio <= bound):
+            reach = min(self.max_jump * gap, self.max_reach) * size
+            if not (dist <= reach and 1 / bound <= ratio <= bound):
                 return None
         kp = people[pick].keypoints
         seen = kp[:, 2] >= self.min_confidence
