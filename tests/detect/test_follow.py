@@ -111,6 +111,9 @@ def test_a_bystander_far_off_is_never_taken(rng: np.random.Generator) -> None:
     assert follower.choose(2, [_person(108, 240, 200, rng)]) == 0
     # right place, but twice the size: someone else (nearer the camera)
     assert follower.choose(3, [_person(110, 240, 420, rng)]) is None
+    # the subject leaves the image; long after, someone enters far away: not them
+    assert follower.choose(60, [_person(600, 240, 200, rng)]) is None
+    assert follower.choose(61, [_person(150, 240, 200, rng)]) == 0
 
 
 def test_detect_video_writes_the_followed_person_only(
