@@ -21,8 +21,11 @@ World landmarks (metres, origin between the hips) come back as ``world_mm``.
 
 from __future__ import annotations
 
+import contextlib
 import importlib.util
 import os
+import sys
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -73,6 +76,31 @@ def body25_from_landmarks(landmarks: FloatArray) -> FloatArray:
     return out
 
 
+@contextlib.contextmanager
+def _native_output_quiet() -> Iterator[None]:
+    """Silence file descriptors 1 and 2 in the block: MediaPipe's C++ start-up messages
+    (absl warnings about feedback tensors; TensorFlow Lite's "Created delegate" line, on
+    C's buffered stdout) are not the user's business. Python's own errors are raised,
+    not printed, so none are lost."""
+    import ctypes
+
+    libc = ctypes.CDLL(None)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = [os.dup(1), os.dup(2)]
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 1)
+            os.dup2(null.fileno(), 2)
+            yield
+            libc.fflush(None)  # what C buffered goes to the null device too
+    finally:
+        os.dup2(saved[0], 1)
+        os.dup2(saved[1], 2)
+        for fd in saved:
+            os.close(fd)
+
+
 class MediaPipePose:
     """The MediaPipe Pose backend (`mocapkit.detect.backend.Detector`).
 
@@ -95,7 +123,6 @@ class MediaPipePose:
         min_detection_confidence: float = 0.5,
         min_tracking_confidence: float = 0.5,
     ) -> None:
-        os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's start-up chatter
         from mediapipe.python.solutions import pose as mp_pose
 
         kw: dict[str, Any] = dict(
@@ -103,8 +130,10 @@ class MediaPipePose:
             min_detection_confidence=min_detection_confidence,
             min_tracking_confidence=min_tracking_confidence,
         )
-        self._video = mp_pose.Pose(static_image_mode=False, **kw)
-        self._still = mp_pose.Pose(static_image_mode=True, **kw)
+        with _native_output_quiet():
+            self._video = mp_pose.Pose(static_image_mode=False, **kw)
+            self._still = mp_pose.Pose(static_image_mode=True, **kw)
+        self._used: set[int] = set()
 
     def detect(
         self, image: ImageArray, roi: tuple[float, float, float, float] | None = None
@@ -120,7 +149,13 @@ class MediaPipePose:
             crop = image[y0:y1, x0:x1]
             graph = self._still
         h, w = crop.shape[:2]
-        res = graph.process(cv2.cvtColor(np.ascontiguousarray(crop), cv2.COLOR_BGR2RGB))
+        rgb = cv2.cvtColor(np.ascontiguousarray(crop), cv2.COLOR_BGR2RGB)
+        if id(graph) in self._used:
+            res = graph.process(rgb)
+        else:  # each graph's first call logs its set-up (TensorFlow Lite, XNNPACK) natively
+            with _native_output_quiet():
+                res = graph.process(rgb)
+            self._used.add(id(graph))
         if res.pose_landmarks is None:
             return []
         lm = np.array([[p.x * w + x0 - 0.5, p.y * h + y0 - 0.5, p.visibility]
