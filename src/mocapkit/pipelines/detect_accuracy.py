@@ -10,7 +10,9 @@ with the session's true ones (``keypoints/<camera>.csv`` of a rendered session):
   left/right pairs' distances is smaller with every pair exchanged) and any one limb pair
   (elbows, wrists, knees or ankles, exchanged, nearer the truth by at least
   ``SWAP_MARGIN_PX``);
-- the share of frames with no person (no detected shoulder or hip).
+- the share of frames with no person (no detected shoulder or hip) among the frames where
+  the subject is in view (both true shoulders and hips inside the image; a subject who
+  walks out of the picture is not a miss).
 
 The detector's neck and pelvis are rebuilt from its shoulders and hips
 (`mocapkit.io.openpose`) and its head is the middle of the ears: the errors of those three
@@ -46,6 +48,7 @@ class DetectErrors:
     joint_names: tuple[str, ...]
     errors_px: list[np.ndarray]  # per joint, the distances of every frame with both
     frames: int = 0
+    in_view: int = 0
     no_person: int = 0
     body_swaps: int = 0
     limb_swaps: int = 0
@@ -63,10 +66,11 @@ class DetectErrors:
         ]
 
     def shares(self) -> dict[str, float]:
-        """Shares of frames: no person, body swapped, a limb pair swapped."""
+        """Shares of frames: no person (of the frames with the subject in view), body
+        swapped, a limb pair swapped."""
         n = max(self.frames, 1)
         return {
-            "no_person": self.no_person / n,
+            "no_person": self.no_person / max(self.in_view, 1),
             "body_swapped": self.body_swaps / n,
             "limb_pair_swapped": self.limb_swaps / n,
         }
@@ -76,15 +80,29 @@ def _side(pixels: np.ndarray, names: Sequence[str], side: str, part: str) -> np.
     return pixels[:, list(names).index(f"{side}_{part}")]
 
 
-def compare(det: np.ndarray, truth: np.ndarray, names: Sequence[str], acc: DetectErrors) -> None:
-    """Add one view's frames (T, K, 2 each; NaN where missing) to ``acc``."""
+def compare(
+    det: np.ndarray,
+    truth: np.ndarray,
+    names: Sequence[str],
+    acc: DetectErrors,
+    image_size: tuple[int, int],
+) -> None:
+    """Add one view's frames (T, K, 2 each; NaN where missing) to ``acc``; ``image_size``
+    (W, H) tells when the subject is in view."""
     for k, n in enumerate(acc.joint_names):
         j = list(names).index(n)
         d = np.linalg.norm(det[:, j] - truth[:, j], axis=-1)
         acc.errors_px[k] = np.concatenate([acc.errors_px[k], d[np.isfinite(d)]])
     acc.frames += det.shape[0]
     trunk = [list(names).index(f"{s}_{p}") for s in ("left", "right") for p in ("shoulder", "hip")]
-    acc.no_person += int(np.count_nonzero(~np.isfinite(det[:, trunk]).any(axis=(1, 2))))
+    tt = truth[:, trunk]
+    w, h = image_size
+    with np.errstate(invalid="ignore"):
+        inside = (tt[..., 0] >= 0) & (tt[..., 0] < w) & (tt[..., 1] >= 0) & (tt[..., 1] < h)
+    in_view = np.all(inside, axis=1)
+    acc.in_view += int(np.count_nonzero(in_view))
+    nobody = ~np.isfinite(det[:, trunk]).any(axis=(1, 2))
+    acc.no_person += int(np.count_nonzero(nobody & in_view))
     straight = np.zeros(det.shape[0])
     crossed = np.zeros(det.shape[0])
     limb = np.zeros(det.shape[0], dtype=bool)
@@ -127,7 +145,8 @@ def detect_accuracy(
                 acc = DetectErrors(common, [np.zeros(0) for _ in common])
             idx_d = [det.joint_names.index(n) for n in acc.joint_names]
             idx_t = [truth.joint_names.index(n) for n in acc.joint_names]
-            compare(det.pixels[:, idx_d], truth.pixels[:, idx_t], acc.joint_names, acc)
+            compare(det.pixels[:, idx_d], truth.pixels[:, idx_t], acc.joint_names, acc,
+                    session.camera(cam).image_size)  # fmt: skip
     if acc is None:
         raise ValueError("detect_accuracy: expected at least one session")
     return acc
@@ -141,7 +160,8 @@ def format_table(acc: DetectErrors, label: str) -> str:
     sh = acc.shares()
     lines.append("")
     lines.append(
-        f"frames {acc.frames}: no person {100 * sh['no_person']:.1f} %, body swapped "
+        f"frames {acc.frames} ({acc.in_view} with the subject in view): no person "
+        f"{100 * sh['no_person']:.1f} % of those in view, body swapped "
         f"left/right {100 * sh['body_swapped']:.1f} %, a limb pair swapped "
         f"{100 * sh['limb_pair_swapped']:.1f} %"
     )
