@@ -130,10 +130,12 @@ class MediaPipePose:
             min_detection_confidence=min_detection_confidence,
             min_tracking_confidence=min_tracking_confidence,
         )
-        with _native_output_quiet():
+        with _native_output_quiet():  # set-up logs natively; a blank frame runs it here
             self._video = mp_pose.Pose(static_image_mode=False, **kw)
             self._still = mp_pose.Pose(static_image_mode=True, **kw)
-        self._used: set[int] = set()
+            blank = np.zeros((64, 64, 3), dtype=np.uint8)
+            self._video.process(blank)
+            self._still.process(blank)
 
     def detect(
         self, image: ImageArray, roi: tuple[float, float, float, float] | None = None
@@ -149,13 +151,7 @@ class MediaPipePose:
             crop = image[y0:y1, x0:x1]
             graph = self._still
         h, w = crop.shape[:2]
-        rgb = cv2.cvtColor(np.ascontiguousarray(crop), cv2.COLOR_BGR2RGB)
-        if id(graph) in self._used:
-            res = graph.process(rgb)
-        else:  # each graph's first call logs its set-up (TensorFlow Lite, XNNPACK) natively
-            with _native_output_quiet():
-                res = graph.process(rgb)
-            self._used.add(id(graph))
+        res = graph.process(cv2.cvtColor(np.ascontiguousarray(crop), cv2.COLOR_BGR2RGB))
         if res.pose_landmarks is None:
             return []
         lm = np.array([[p.x * w + x0 - 0.5, p.y * h + y0 - 0.5, p.visibility]
