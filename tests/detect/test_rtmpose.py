@@ -131,3 +131,23 @@ def test_halpe26_keeps_its_own_neck_and_feet() -> None:
     assert body[BODY_25.index("RHeel"), 0] == 25
     with pytest.raises(FormatError, match="17 or 26 keypoints"):
         to_body25(np.zeros((133, 3)))
+
+
+def test_top_down_model_runs_through_detect_video_on_the_followed_region(tmp_path: Path) -> None:
+    import cv2
+
+    from mocapkit.detect.run import detect_video, video_source
+
+    wh = (48, 64)
+    pts_in = np.column_stack([np.linspace(14, 34, 17), np.linspace(8, 56, 17)])
+    path = tmp_path / "rtmpose.onnx"
+    _constant_model(path, (64, 48), _simcc(pts_in, wh))
+    folder = tmp_path / "cam"
+    folder.mkdir()
+    for t in range(4):
+        cv2.imwrite(str(folder / f"{t:03d}.png"), np.zeros((240, 320, 3), dtype=np.uint8))
+    det = make_detector("rtmpose", model_path=path)
+    res = detect_video(video_source(folder), tmp_path / "json", det)
+    assert res.found == 4 and res.backend == "rtmpose"
+    assert res.roi_calls == 3  # the whole image first, then the followed person's box
+    assert len(list((tmp_path / "json").glob("*_keypoints.json"))) == 4

@@ -63,7 +63,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         help="whom to follow: the largest person on the first frame (auto, default) or the "
         "one nearest X,Y px",
     )
-    p.add_argument("--model", help="model file of the rtmpose backend (.onnx)")
+    p.add_argument("--model", help="model file of the rtmpose backend (.onnx; implies it)")
     p.add_argument("--overwrite", action="store_true", help="detect again where keypoints exist")
     p.set_defaults(func=_run)
 
@@ -73,6 +73,8 @@ def _run(args: argparse.Namespace) -> int:
     from mocapkit.detect.run import detect_path
     from mocapkit.errors import ConfigError
 
+    if args.model is not None and args.detector is None:
+        args.detector = "rtmpose"  # a model file names its backend
     if args.model is not None and args.detector != "rtmpose":
         raise ConfigError(f"--model {args.model}: only the rtmpose detector takes a model file")
     options = {"model_path": args.model} if args.model is not None else {}
