@@ -155,4 +155,7 @@ def test_ensure_keypoints_detects_once_and_says_so(
     assert ensure_keypoints(session, ["mono"], TwoPeople(rng), say=said.append) == ("mono",)
     assert "no keypoints for mono: detecting them with fake" in said[0]
     assert (folder / "keypoints" / "mono.csv").is_file() and "mono" in session.keypoints
-    assert ensure_keypoints(load_session(folder), ["mono"], TwoPeople(rng), say=said.append) == ()
+    again = load_session(folder)
+    assert ensure_keypoints(again, ["mono"], TwoPeople(rng), say=said.append) == ()
+    # detected keypoints carry their rebuilt neck and pelvis (the CSV cannot say it)
+    assert again.keypoints["mono"].rebuilt_joints == ("neck", "pelvis")

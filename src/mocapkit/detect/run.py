@@ -32,7 +32,7 @@ import json
 import os
 import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -50,7 +50,12 @@ from mocapkit.detect.backend import (
 from mocapkit.detect.follow import PersonFollower
 from mocapkit.errors import ConfigError, SessionError, ShapeError
 from mocapkit.io.atomic import atomic_folder, atomic_save_npz, atomic_write
-from mocapkit.io.openpose import BODY_25, read_openpose_folder, write_openpose_frame
+from mocapkit.io.openpose import (
+    BODY_25,
+    REBUILT_JOINTS,
+    read_openpose_folder,
+    write_openpose_frame,
+)
 from mocapkit.io.session import Session, load_session
 from mocapkit.io.session_csv import read_keypoints_csv, write_keypoints_csv
 from mocapkit.io.video import VideoSource, probe_video
@@ -326,6 +331,7 @@ def ensure_keypoints(
     """
     missing = [c for c in cameras if c not in session.keypoints]
     if not missing:
+        _mark_detected(session, cameras)
         return ()
     no_video = [c for c in missing if c not in session.video_cameras]
     if no_video:
@@ -351,7 +357,27 @@ def ensure_keypoints(
         if d is not None:
             tell(f"{cam}: a person on {d.found} of {d.keypoints.shape[0]} frames; followed "
                  f"{d.followed}")  # fmt: skip
+    _mark_detected(session, cameras)
     return tuple(missing)
+
+
+def _mark_detected(session: Session, cameras: Sequence[str]) -> None:
+    """Keypoints that `detect_session` wrote (``keypoints/detect.json`` lists their camera)
+    carry a rebuilt neck and pelvis (`mocapkit.io.openpose.REBUILT_JOINTS`), which the CSV
+    cannot say: set it on the session's `Keypoints`, so the trackers treat them as a
+    detector's."""
+    path = session.path / "keypoints" / "detect.json"
+    try:
+        done = json.loads(path.read_text()) if path.is_file() else {}
+    except (OSError, json.JSONDecodeError):
+        return
+    for cam in cameras:
+        kp = session.keypoints.get(cam)
+        if kp is not None and cam in done and not kp.rebuilt_joints:
+            backend = done[cam].get("backend", "a detector") if isinstance(done[cam], dict) else ""
+            session.keypoints[cam] = replace(
+                kp, rebuilt_joints=REBUILT_JOINTS, source=f"{kp.source} (detected: {backend})"
+            )
 
 
 def video_source(path: str | os.PathLike[str], camera: str | None = None) -> VideoSource:
