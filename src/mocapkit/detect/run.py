@@ -344,10 +344,10 @@ def ensure_keypoints(
             f"{session.path}: no keypoints/<camera>.csv for cameras {missing}; " + install_hint()
         )
     tell = say if say is not None else (lambda line: print(line, file=sys.stderr))
-    name = detector if isinstance(detector, str) else getattr(detector, "name", "default")
+    name = default_backend() if detector is None else getattr(detector, "name", detector)
     tell(
         f"{session.path}: no keypoints for {', '.join(missing)}: detecting them with "
-        f"{name or default_backend()} into keypoints/ (kept and reused next time)"
+        f"{name} into keypoints/ (kept and reused next time)"
     )
     sources = [session.video(c) for c in missing]
     res = detect_sources(sources, session.path, detector)
