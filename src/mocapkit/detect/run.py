@@ -169,16 +169,17 @@ def detect_video(
     world = np.full((n, N_BODY_25, 3), np.nan)
     has_world = False
     follower = PersonFollower(start_px=start_px)
-    roi_calls = 0
+    roi_calls = found = 0
     with atomic_folder(json_dir) as tmp, Progress(n, label or source.camera) as bar:
         for t, (pose, roi_used) in enumerate(detect_frames(_frames(source), detector, follower)):
             roi_calls += roi_used
             if pose is not None:
+                found += 1
                 kp[t] = pose.keypoints
                 if pose.world_mm is not None:
                     world[t], has_world = pose.world_mm, True
             write_openpose_frame(tmp / f"{t:06d}_keypoints.json", [kp[t]] if pose else [])
-            bar.status = f"person in {int(np.count_nonzero(kp[: t + 1, :, 2].max(axis=1)))}"
+            bar.status = f"person in {found}"
             bar.update()
     if has_world and world_path is not None:
         atomic_save_npz(world_path, time_s=source.time_s, names=np.array(BODY_25),
