@@ -26,7 +26,7 @@ from mocapkit.io.session_csv import read_keypoints_csv
 from mocapkit.viz.overlay import draw_sticks_px
 
 #: Height of the first row's tiles (px).
-HEIGHT = 420
+HEIGHT = 360
 
 
 def tile(out: Path, camera: str, frame: int, video: Path) -> np.ndarray:
