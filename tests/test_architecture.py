@@ -29,9 +29,9 @@ CORE_LAYERS: tuple[str, ...] = (
     "cli",
 )
 #: Packages beside the core: they build on the core up to `cues` and are used from
-#: `pipelines` and `cli`. `io` is the floor of them: synth, eval and viz read and write
-#: through it, and import no other side package.
-SIDE_PACKAGES: tuple[str, ...] = ("io", "synth", "eval", "viz")
+#: `pipelines` and `cli`. `io` is the floor of them: synth, eval, viz and detect read and
+#: write through it, and import no other side package.
+SIDE_PACKAGES: tuple[str, ...] = ("io", "synth", "eval", "viz", "detect")
 SIDE_MAY_IMPORT: frozenset[str] = frozenset({"geometry", "skeleton", "camera", "cues"})
 #: Core layers that may import the side packages.
 CORE_USING_SIDE: frozenset[str] = frozenset({"pipelines", "cli"})

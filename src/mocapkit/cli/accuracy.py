@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from mocapkit.cli.accuracy_detect import register_method as register_detect
 from mocapkit.cli.accuracy_stereo import register_method as register_stereo
 from mocapkit.cli.args import mocap_folder, number, parsed_by
 
@@ -66,6 +67,7 @@ def register(subparsers: Any) -> None:
 
     add_mono_accuracy_parser(methods)
     register_stereo(methods)
+    register_detect(methods)
 
 
 def run(args: argparse.Namespace) -> int:

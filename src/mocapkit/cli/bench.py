@@ -1,4 +1,4 @@
-"""``mocapkit bench kinematics|hybrid|mono|all``: speed figures (medians over repeats)."""
+"""``mocapkit bench NAME|all``: speed figures (medians over repeats)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import argparse
 import json
 
 # the line of `mocapkit --help` (shown without importing this module's pipeline)
-HELP = "time the kinematics and the hybrid, stereo and mono trackers"
+HELP = "time the kinematics, the hybrid, stereo and mono trackers and the 2-D detector"
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

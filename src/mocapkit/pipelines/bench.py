@@ -282,11 +282,19 @@ def _bench_stereo(repeats: int = 3) -> dict[str, Any]:
     return bench_stereo(repeats=repeats)
 
 
+def _bench_detect(repeats: int = 3) -> dict[str, Any]:
+    """The 2-D detector's figures (`mocapkit.pipelines.detect_bench.bench_detect`)."""
+    from mocapkit.pipelines.detect_bench import bench_detect
+
+    return bench_detect(repeats=repeats)
+
+
 BENCHMARKS: dict[str, Callable[..., dict[str, Any]]] = {
     "kinematics": bench_kinematics,
     "hybrid": bench_hybrid,
     "mono": bench_mono,
     "stereo": _bench_stereo,
+    "detect": _bench_detect,
 }
 
 

@@ -161,7 +161,9 @@ def load_keypoints(
     An OpenPose folder takes the frame times of the camera's video (one JSON per frame).
     """
     if keypoints is None:
-        session.require(keypoints=True, cameras=[camera])
+        from mocapkit.detect.run import ensure_keypoints
+
+        ensure_keypoints(session, [camera])  # detected into the session when missing
         return session.keypoints[camera]
     p = Path(keypoints)
     if p.is_dir():

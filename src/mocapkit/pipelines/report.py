@@ -61,6 +61,7 @@ LINKED_SUFFIXES = (".bvh", ".trc", ".csv", ".npz", ".c3d", ".json")
 
 _CAPTURED_BGR = (26, 140, 255)
 _TRUTH_BGR = (60, 210, 60)
+_KEYPOINTS_BGR = (255, 80, 255)
 
 
 @dataclass(frozen=True)
@@ -362,6 +363,10 @@ def _video_section(
                     _TRUTH_BGR,
                 )
             )
+        kp = session.keypoints.get(cam)
+        if kp is not None:  # the 2-D input beside the result: did the detector or the tracker fail?
+            pixels = _aligned(source.time_s, kp.time_s, kp.pixels)
+            layers.append(OverlayLayer("2-D keypoints", kp.joint_names, pixels, _KEYPOINTS_BGR, 1))
         layers.append(OverlayLayer("captured", result.joint_names, captured, _CAPTURED_BGR, 3))
         body = None
         if result.skeleton is not None and result.q is not None:
@@ -381,7 +386,9 @@ def _video_section(
     notes.insert(
         0,
         "The camera images with the captured canonical joints (orange sticks over the body "
-        "model's limbs)" + (" and the truth (green)" if truth is not None else "") + ".",
+        "model's limbs)" + (" and the truth (green)" if truth is not None else "") + "; thin "
+        "magenta sticks: the session's 2-D keypoints (the detector's, `mocapkit detect`), "
+        "where it has them.",
     )
     if used is not None and any(c not in used for c in session.video_cameras):
         notes.insert(

@@ -99,11 +99,9 @@ def _open_session(
     )
     kp_names: tuple[str, ...] = ()
     if cfg.use_keypoints:
-        missing = [c for c in names if c not in session.keypoints]
-        if missing:
-            raise SessionError(
-                f"{session.path}: --keypoints needs keypoints/<camera>.csv for {missing}"
-            )
+        from mocapkit.detect.run import ensure_keypoints
+
+        ensure_keypoints(session, names)  # detected into the session when missing
         kp_names = tuple(session.keypoints[names[0]].joint_names)
     sk = azad_skeleton(session.bone_lengths_mm, session.segment_vectors_mm)
     check_session_cameras(session, names, skeleton=sk)  # before any tracker is built

@@ -157,18 +157,39 @@ def draw_sticks(
     px = np.full((pts.shape[0], 2), np.nan)
     if np.any(ok):
         px[ok] = camera.project_camera_points(in_camera[ok])
-    ok &= np.all(np.isfinite(px), axis=1)
+    px[~ok] = np.nan
+    return draw_sticks_px(image, joint_names, px, colour, thickness)
+
+
+def draw_sticks_px(
+    image: NDArray[np.uint8],
+    joint_names: Sequence[str],
+    pixels: ArrayLike,
+    colour: Colour = (0, 165, 255),
+    thickness: int = 2,
+    left_colour: Colour | None = None,
+) -> NDArray[np.uint8]:
+    """Draw canonical image points (K, 2) (px; NaN where unseen) as dots joined by the
+    `CANONICAL_SEGMENTS` sticks, in place; the left side's segments in ``left_colour``
+    when given (so that a left/right swap shows)."""
+    px = np.asarray(pixels, dtype=float).reshape(-1, 2)
+    if px.shape[0] != len(joint_names):
+        raise ShapeError(
+            f"pixels: expected {len(joint_names)} points (one per name), found {px.shape[0]}"
+        )
+    ok = np.all(np.isfinite(px), axis=1)
     index = {n: k for k, n in enumerate(joint_names)}
     shift = 4  # sub-pixel precision of OpenCV's drawing
     scale = 1 << shift
     fixed = np.round(np.where(ok[:, None], px, 0.0) * scale).astype(np.int64)
-    for a, b in CANONICAL_SEGMENTS.values():
+    for name, (a, b) in CANONICAL_SEGMENTS.items():
         ia, ib = index.get(a), index.get(b)
         if ia is None or ib is None or not (ok[ia] and ok[ib]):
             continue
         pa = (int(fixed[ia, 0]), int(fixed[ia, 1]))
         pb = (int(fixed[ib, 0]), int(fixed[ib, 1]))
-        cv2.line(image, pa, pb, colour, thickness, cv2.LINE_AA, shift)
+        c = left_colour if left_colour is not None and name.startswith("left_") else colour
+        cv2.line(image, pa, pb, c, thickness, cv2.LINE_AA, shift)
     for k in np.flatnonzero(ok):
         centre = (int(fixed[k, 0]), int(fixed[k, 1]))
         cv2.circle(image, centre, (thickness + 1) * scale, colour, -1, cv2.LINE_AA, shift)
@@ -185,4 +206,4 @@ def draw_points(
     return image
 
 
-__all__ = ["draw_body", "draw_points", "draw_sticks", "segment_silhouettes"]
+__all__ = ["draw_body", "draw_points", "draw_sticks", "draw_sticks_px", "segment_silhouettes"]

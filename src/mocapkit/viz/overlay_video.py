@@ -21,7 +21,7 @@ from mocapkit.errors import ShapeError
 from mocapkit.io.video import VideoSource
 from mocapkit.progress import Progress
 from mocapkit.skeleton.model import Skeleton
-from mocapkit.viz.overlay import draw_body, draw_sticks
+from mocapkit.viz.overlay import draw_body, draw_sticks, draw_sticks_px
 from mocapkit.viz.web_video import WebVideo, WebVideoWriter
 
 FloatArray = NDArray[np.float64]
@@ -40,8 +40,10 @@ class OverlayLayer:
     name : str
         Legend text.
     joint_names : tuple of str, length K
-    joints_mm : ndarray, shape (N, K, 3)
-        World positions (mm) at each of the video's N frames; NaN where unknown.
+    joints_mm : ndarray, shape (N, K, 3) or (N, K, 2)
+        World positions (mm) at each of the video's N frames, projected through the
+        camera; or, with two columns, image points (px) drawn as they are (a detector's
+        2-D keypoints); NaN where unknown.
     colour : BGR
     thickness : int
         Stick width (px).
@@ -85,10 +87,13 @@ def write_overlay_video(
     """
     n = source.n_frames
     for layer in layers:
-        if layer.joints_mm.shape != (n, len(layer.joint_names), 3):
+        if layer.joints_mm.shape[:2] != (n, len(layer.joint_names)) or layer.joints_mm.shape[
+            2:
+        ] not in ((3,), (2,)):
             raise ShapeError(
                 f"overlay layer {layer.name!r}: expected joints of shape "
-                f"({n}, {len(layer.joint_names)}, 3) for {n} frames of {source.path}, found "
+                f"({n}, {len(layer.joint_names)}, 3) or image points ({n}, "
+                f"{len(layer.joint_names)}, 2) for {n} frames of {source.path}, found "
                 f"{layer.joints_mm.shape}"
             )
     if body is not None and body[1].shape != (n, body[0].n_dofs):
@@ -112,6 +117,10 @@ def write_overlay_video(
                         dtype=np.uint8,
                     )
                 for layer in layers:
+                    if layer.joints_mm.shape[2] == 2:
+                        draw_sticks_px(image, layer.joint_names, layer.joints_mm[i],
+                                       layer.colour, layer.thickness)  # fmt: skip
+                        continue
                     draw_sticks(
                         image,
                         camera,
