@@ -6,7 +6,7 @@ import argparse
 
 from mocapkit.cli.args import output_folder
 
-HELP = "find 2-D keypoints of one followed person in videos or a session"
+HELP = "2-D keypoints of one person from videos (MediaPipe Pose, RTMPose)"
 
 _EPILOG = """\
 SOURCE is a session folder (session.json; results go into it unless --out is given), a
@@ -42,7 +42,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
     p = subparsers.add_parser(
         "detect",
-        help="2-D keypoints of one person from videos (MediaPipe Pose, RTMPose)",
+        help=HELP,
         description="Detect and follow one person through videos; write OpenPose JSON per "
         "frame and keypoints/<camera>.csv.",
         epilog=_EPILOG,
