@@ -30,6 +30,7 @@ from mocapkit.errors import ConfigError, ShapeError, unknown_name
 from mocapkit.io.atomic import atomic_folder, atomic_write, remove_stale_temporaries
 from mocapkit.io.motion import Motion
 from mocapkit.io.motion_files import write_result_folder
+from mocapkit.io.opensim import write_opensim_folder
 from mocapkit.progress import Progress
 from mocapkit.skeleton.limbs import has_limb, head_dofs, limb
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
@@ -44,6 +45,8 @@ from mocapkit.tracking.base import (
 
 #: Name of the per-frame fit and status file in a result folder.
 FIT_FILE = "fit.csv"
+#: The result folder's OpenSim export (`mocapkit.io.opensim.write_opensim_folder`).
+OPENSIM_FOLDER = "opensim"
 
 
 @dataclass
@@ -335,7 +338,8 @@ def write_run_folder(
     out_dir: str | os.PathLike[str], motion: Motion, results: Sequence[FrameResult]
 ) -> Path:
     """Write a result folder whole: ``motion.npz``, ``joints.csv``, ``motion.bvh``
-    (`mocapkit.io.motion_files.write_result_folder`) and ``fit.csv`` (`write_fit_csv`).
+    (`mocapkit.io.motion_files.write_result_folder`), ``fit.csv`` (`write_fit_csv`) and
+    ``opensim/`` (TRC, model and IK setup: `mocapkit.io.opensim.write_opensim_folder`).
 
     The folder is built under a temporary name beside ``out_dir`` and swapped in when
     complete (`mocapkit.io.atomic.atomic_folder`): a kill or an error mid-write leaves
@@ -354,6 +358,7 @@ def write_run_folder(
     with atomic_folder(out) as tmp:
         write_result_folder(tmp, motion, bvh_motion=bvh)
         write_fit_csv(tmp / FIT_FILE, results)
+        write_opensim_folder(tmp / OPENSIM_FOLDER, motion)
     return out
 
 
@@ -416,6 +421,7 @@ def read_fit_csv(path: str | os.PathLike[str]) -> tuple[list[dict[str, str]], di
 
 __all__ = [
     "FIT_FILE",
+    "OPENSIM_FOLDER",
     "RESULT_MARKER_FILE",
     "Gap",
     "RunResult",
