@@ -212,6 +212,29 @@ def _part_dofs(skeleton: Skeleton, part: str) -> NDArray[np.int64]:
     return np.concatenate([lmb.dofs, lmb.translation_dofs]).astype(np.int64)
 
 
+#: Time over which a part held through a gap in the BVH is blended back to the tracked
+#: pose once it is observed again (`motion_for_bvh`), rather than snapped there.
+GAP_BLEND_S = 0.2
+
+
+def _blend_back(
+    q: NDArray[np.float64],
+    time_s: NDArray[np.float64],
+    held: NDArray[np.bool_],
+    dofs: NDArray[np.int64],
+) -> None:
+    """After each held stretch of ``held`` frames, move ``q[:, dofs]`` from the held values
+    to the tracked ones linearly over `GAP_BLEND_S` (in place)."""
+    ends = np.flatnonzero(held[:-1] & ~held[1:])  # the last held frame of each stretch
+    for e in ends:
+        start = q[e, dofs].copy()
+        for i in range(e + 1, len(q)):
+            w = (time_s[i] - time_s[e]) / GAP_BLEND_S
+            if held[i] or not w < 1.0 or not np.isfinite(q[i, dofs]).all():
+                break
+            q[i, dofs] = start + w * (q[i, dofs] - start)
+
+
 def motion_for_bvh(motion: Motion, results: Sequence[FrameResult]) -> Motion:
     """``motion`` with each released or missing part held at its last observed pose: what
     the BVH, which cannot hold NaN, is written from.
@@ -220,9 +243,11 @@ def motion_for_bvh(motion: Motion, results: Sequence[FrameResult]) -> Motion:
     pose its part (`mocapkit.skeleton.limbs.limb` DoFs of an arm or leg,
     `mocapkit.skeleton.limbs.head_dofs` of the head) keep their values of the last frame
     where it was ``seen`` or ``bridged`` (of the first such frame, before it was ever
-    seen); the rest of the pose is the tracker's. A part never observed keeps the
-    tracker's pose. ``fit.csv`` holds the status that says so. Frames without any pose
-    (NaN ``q``) are left to `mocapkit.io.bvh.write_bvh`, which holds the previous pose.
+    seen); the rest of the pose is the tracker's. When the part is observed again, its
+    DoFs go from the held values to the tracked ones linearly over `GAP_BLEND_S`, not in
+    one frame. A part never observed keeps the tracker's pose. ``fit.csv`` holds the
+    status that says so. Frames without any pose (NaN ``q``) are left to
+    `mocapkit.io.bvh.write_bvh`, which holds the previous pose.
     """
     if len(results) != motion.n_frames:
         return motion
@@ -247,6 +272,7 @@ def motion_for_bvh(motion: Motion, results: Sequence[FrameResult]) -> Motion:
         src[src < 0] = np.flatnonzero(good)[0]
         held = np.flatnonzero(flags)
         q[np.ix_(held, dofs)] = q[np.ix_(src[held], dofs)]
+        _blend_back(q, motion.time_s, flags, dofs)
     if np.array_equal(q, motion.q, equal_nan=True):
         return motion
     return Motion(
@@ -421,6 +447,7 @@ def read_fit_csv(path: str | os.PathLike[str]) -> tuple[list[dict[str, str]], di
 
 __all__ = [
     "FIT_FILE",
+    "GAP_BLEND_S",
     "OPENSIM_FOLDER",
     "RESULT_MARKER_FILE",
     "Gap",
