@@ -393,3 +393,13 @@ def test_result_bvh_matches_joints_csv_and_its_roll_steps_are_bounded(
     assert np.abs(after).max() <= MAX_ROLL_SPEED_RAD_S * dt + 1e-6
     channels = parse_bvh(tmp_path / "motion.bvh").values
     assert np.abs(np.diff(channels, axis=0)).max() < 300.0  # degrees: no whole-turn wraps
+
+
+def test_continuous_euler_passes_frames_without_a_pose_through() -> None:
+    from mocapkit.io.bvh import continuous_euler
+
+    a = np.array([[0.0, 0.0, 3.1], [np.nan, np.nan, np.nan], [0.0, 0.0, -3.1], [0.0, 0.0, 3.1]])
+    out = continuous_euler(a)
+    assert np.isnan(out[1]).all()
+    np.testing.assert_allclose(out[2], [0.0, 0.0, -3.1])  # restarts after the gap
+    np.testing.assert_allclose(out[3], [0.0, 0.0, 3.1 - 2 * np.pi])  # nearest: one turn off

@@ -58,6 +58,7 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
@@ -525,22 +526,41 @@ def continuous_euler(angles_rad: FloatArray) -> FloatArray:
     a = np.array(angles_rad, dtype=float, copy=True)
     if a.shape[0] < 2:
         return a
+    flat = np.ascontiguousarray(a.reshape(a.shape[0], -1, 3))
+    _continuous_euler_nb(flat)
+    return flat.reshape(a.shape)
+
+
+@numba.njit(cache=True)
+def _continuous_euler_nb(a: FloatArray) -> None:
+    """`continuous_euler` in place on (T, N, 3)."""
     two_pi = 2.0 * np.pi
+    best = np.empty(3)
+    cand = np.empty(3)
     for t in range(1, a.shape[0]):
-        prev = a[t - 1]
-        first = a[t]
-        second = np.stack([first[..., 0] + np.pi, np.pi - first[..., 1], first[..., 2] + np.pi], -1)
-        best = []
-        for cand in (first, second):
-            cand = cand - two_pi * np.round((cand - prev) / two_pi)
-            best.append(cand)
-        d0 = np.sum((best[0] - prev) ** 2, axis=-1)
-        d1 = np.sum((best[1] - prev) ** 2, axis=-1)
-        ok = np.isfinite(prev).all(axis=-1)
-        a[t] = np.where(
-            (ok & (d1 < d0))[..., None], best[1], np.where(ok[..., None], best[0], first)
-        )
-    return a
+        for n in range(a.shape[1]):
+            p0, p1, p2 = a[t - 1, n, 0], a[t - 1, n, 1], a[t - 1, n, 2]
+            if not (np.isfinite(p0) and np.isfinite(p1) and np.isfinite(p2)):
+                continue
+            if not np.isfinite(a[t, n, 0] + a[t, n, 1] + a[t, n, 2]):
+                continue
+            best_d = np.inf
+            for branch in range(2):
+                if branch == 0:
+                    cand[0], cand[1], cand[2] = a[t, n, 0], a[t, n, 1], a[t, n, 2]
+                else:
+                    cand[0] = a[t, n, 0] + np.pi
+                    cand[1] = np.pi - a[t, n, 1]
+                    cand[2] = a[t, n, 2] + np.pi
+                d = 0.0
+                for k in range(3):
+                    prev = (p0, p1, p2)[k]
+                    cand[k] -= two_pi * np.round((cand[k] - prev) / two_pi)
+                    d += (cand[k] - prev) ** 2
+                if d < best_d:
+                    best_d = d
+                    best[:] = cand
+            a[t, n, :] = best
 
 
 #: Fastest turn of a bone about its own axis written to a result's BVH (rad/s): about
