@@ -209,7 +209,19 @@ def _part_dofs(skeleton: Skeleton, part: str) -> NDArray[np.int64]:
     if not has_limb(skeleton, part):
         return np.zeros(0, dtype=np.int64)
     lmb = limb(skeleton, part)
-    return np.concatenate([lmb.dofs, lmb.translation_dofs]).astype(np.int64)
+    # the limb with the joints that carry it alone (a clavicle above a shoulder, a hip
+    # joint above a femur) and everything below it: what the missing markers would pose
+    parents = skeleton.parents
+    n_children = np.bincount(parents[parents >= 0], minlength=skeleton.n_joints)
+    top = int(lmb.root)
+    while parents[top] > 0 and n_children[parents[top]] == 1:
+        top = int(parents[top])
+    below = {top}
+    for j in range(top + 1, skeleton.n_joints):
+        if int(parents[j]) in below:
+            below.add(j)
+    carried = np.flatnonzero(np.isin(skeleton.dof_joint, sorted(below)))
+    return np.union1d(carried, lmb.translation_dofs).astype(np.int64)
 
 
 #: Time over which a part held through a gap in the BVH is blended back to the tracked
@@ -240,7 +252,8 @@ def motion_for_bvh(motion: Motion, results: Sequence[FrameResult]) -> Motion:
     the BVH, which cannot hold NaN, is written from.
 
     On the frames where an effector or limb is ``released`` or ``missing``, the DoFs that
-    pose its part (`mocapkit.skeleton.limbs.limb` DoFs of an arm or leg,
+    pose its part (those of an arm or leg `mocapkit.skeleton.limbs.limb`, of the joints
+    that carry it alone above it, a clavicle, and of every joint below it,
     `mocapkit.skeleton.limbs.head_dofs` of the head) keep their values of the last frame
     where it was ``seen`` or ``bridged`` (of the first such frame, before it was ever
     seen); the rest of the pose is the tracker's. When the part is observed again, its
