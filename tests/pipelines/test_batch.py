@@ -175,7 +175,7 @@ def test_run_take_writes_a_complete_folder_and_a_failed_row(study, tmp_path):
     assert row.coverage == 1.0 and np.isfinite([row.fit_px, row.mpjpe_mm, row.elbow_mm]).all()
     folder = out / "s1" / "t1"
     assert sorted(p.name for p in folder.iterdir()) == sorted(
-        ["eval.json", "fit.csv", "joints.csv", "motion.bvh", "motion.npz", TAKE_FILE]
+        ["eval.json", "fit.csv", "joints.csv", "motion.bvh", "motion.npz", "opensim", TAKE_FILE]
     )
     doc = json.loads((folder / TAKE_FILE).read_text())
     assert doc["source"] == str(take.source) and doc["row"]["mpjpe_mm"] == row.mpjpe_mm

@@ -187,6 +187,7 @@ def test_session_writes_result_folder_on_video_time_line(wave_session, wave_resu
         "joints.csv",
         "motion.bvh",
         "motion.npz",
+        "opensim",
     ]
     video_t = load_session(wave_session).video("mono").time_s
     assert video_t.shape == (16,)

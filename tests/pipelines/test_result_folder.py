@@ -20,7 +20,15 @@ from mocapkit.pipelines.run import FIT_FILE, run_tracker
 from mocapkit.skeleton import canonical_positions, load_preset
 from mocapkit.tracking.base import FrameResult, canonical_joints_mm
 
-RESULT_FILES = {"motion.npz", "joints.csv", "motion.bvh", FIT_FILE}
+RESULT_FILES = {
+    "motion.npz",
+    "joints.csv",
+    "motion.bvh",
+    FIT_FILE,
+    "opensim/markers.trc",
+    "opensim/model.osim",
+    "opensim/ik_setup.xml",
+}
 
 
 class Replay:
@@ -117,7 +125,7 @@ def test_an_existing_result_folder_is_replaced_whole(tmp_path) -> None:
     (out / "report").mkdir()
     (out / "report" / "index.html").write_text("<html>old result</html>")
     _write(out, 2)
-    assert {p.name for p in out.iterdir()} == RESULT_FILES  # the old report went with it
+    assert set(_snapshot(out)) == RESULT_FILES  # the old report went with it
     _sk, _t, q2 = _poses(2)
     np.testing.assert_array_equal(load_motion_npz(out / "motion.npz").q, q2)
 
@@ -142,7 +150,7 @@ def test_a_folder_that_is_not_a_result_is_refused_before_the_work(tmp_path) -> N
     empty = tmp_path / "empty"
     empty.mkdir()
     run_tracker(Replay(sk), zip(t, q), len(t), empty)
-    assert {p.name for p in empty.iterdir()} == RESULT_FILES
+    assert set(_snapshot(empty)) == RESULT_FILES
 
 
 def test_ctrl_c_during_track_exits_130_and_keeps_the_earlier_result(

@@ -43,6 +43,7 @@ def test_run_tracker_writes_the_result_folder_and_fit(tmp_path) -> None:
         "joints.csv",
         "motion.bvh",
         FIT_FILE,
+        "opensim",
     }
     motion = load_motion_npz(tmp_path / "res" / "motion.npz")
     np.testing.assert_allclose(motion.q, q)

@@ -14,8 +14,8 @@ from mocapkit.io.bvh import parse_bvh
 from mocapkit.io.joints_csv import read_joints_csv
 from mocapkit.io.motion_npz import load_motion_npz
 from mocapkit.io.session_csv import read_keypoints_csv, write_keypoints_csv
-from mocapkit.pipelines.run import FIT_FILE, find_gaps, read_fit_csv, run_tracker
-from mocapkit.skeleton import load_preset
+from mocapkit.pipelines.run import FIT_FILE, find_gaps, motion_for_bvh, read_fit_csv, run_tracker
+from mocapkit.skeleton import forward_kinematics, load_preset
 from mocapkit.skeleton.limbs import arm
 from mocapkit.tracking.base import BRIDGE_S, unobserved_part
 from mocapkit.tracking.hybrid import HybridConfig, HybridSample, HybridTracker
@@ -207,3 +207,67 @@ def test_mono_limb_unseen_past_the_bridge_is_released_with_nan_joints(tmp_path, 
     assert np.all(np.isfinite(joints[:, names.index("right_wrist")]))
     gap = [line for line in text.splitlines() if line.startswith("gap: left_arm released")]
     assert len(gap) == 1 and f"({released.sum()} frames)" in gap[0]
+
+
+def test_hybrid_hand_blanked_for_one_second_is_held_then_blended_back_in_the_bvh(
+    tmp_path,
+) -> None:
+    """The left hand set blanked for 1 s while the hand moves on: in the BVH the arm holds
+    its last observed pose, and when the set comes back the arm goes to the tracked pose
+    over GAP_BLEND_S (its DoFs in equal time shares), not in one frame."""
+    from mocapkit.io.bvh import read_bvh
+    from mocapkit.pipelines.run import GAP_BLEND_S
+
+    sk = load_preset("zhang21")
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False))
+    q0 = tracker.solver.secondary.omega.copy()
+    pos = tracker.solver.effector_positions(q0)[:3]
+    n, dt = 100, 0.02
+    gone = range(25, 75)  # 0.50 .. 1.48 s
+    raise_mm = np.array([0.0, -250.0, 350.0])  # the left hand lifted forward over the take
+
+    def left(i: int) -> np.ndarray:
+        return pos[1] + raise_mm * min(i / 60.0, 1.0)
+
+    samples = [
+        HybridSample(
+            dt * i,
+            {"head": pos[0], "right_hand": pos[2]} | ({} if i in gone else {"left_hand": left(i)}),
+        )
+        for i in range(n)
+    ]
+    out = tmp_path / "res"
+    run = run_tracker(tracker, samples, n, out)
+    status = [r.status["left_hand"] for r in run.results]
+    released = np.array([s == "released" for s in status])
+    assert released.sum() >= 30
+    back = read_bvh(out / "motion.bvh", unit_mm=1000.0)
+    # the wrist in the frame of the arm's parent (the clavicle): the part's own pose
+    parent = int(sk.parents[arm(sk, "left").chain[0]])
+    wrist_j = sk.joint_index("l_hand")
+
+    def in_parent(skel, q) -> np.ndarray:
+        world = forward_kinematics(skel, q)
+        rel = world[:, wrist_j, :3, 3] - world[:, parent, :3, 3]
+        return np.einsum("tji,tj->ti", world[:, parent, :3, :3], rel)
+
+    wrist = in_parent(back.skeleton, back.q)
+    tracked = in_parent(sk, np.asarray(run.motion.q))
+    gap = np.flatnonzero(released)
+    np.testing.assert_allclose(wrist[gap], np.tile(wrist[gap[0] - 1], (gap.size, 1)), atol=1e-3)
+    first_back = int(gap[-1]) + 1
+    jump = np.linalg.norm(tracked[first_back] - wrist[first_back - 1])
+    assert jump > 50.0  # the hand moved on while unseen: snapping back would jump this far
+    steps = np.linalg.norm(np.diff(wrist[first_back - 1 :], axis=0), axis=1)
+    assert steps[0] < 0.5 * jump and steps.max() < jump  # no snap
+    # the arm's DoFs go from the held values to the tracked ones in equal time shares
+    dofs = arm(sk, "left").dofs
+    bvh_q = motion_for_bvh(run.motion, run.results).q[:, dofs]
+    held, tracked_q = bvh_q[first_back - 1], np.asarray(run.motion.q)[:, dofs]
+    for k in range(3):
+        w = (k + 1) * dt / GAP_BLEND_S
+        np.testing.assert_allclose(
+            bvh_q[first_back + k], held + w * (tracked_q[first_back + k] - held), atol=1e-9
+        )
+    blended = first_back + round(GAP_BLEND_S / dt)
+    np.testing.assert_allclose(wrist[blended + 1 :], tracked[blended + 1 :], atol=1e-3)

@@ -58,6 +58,7 @@ import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numba
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
@@ -75,6 +76,7 @@ from mocapkit.io.units import (
 )
 from mocapkit.skeleton.kinematics import forward_kinematics
 from mocapkit.skeleton.model import PRISMATIC, REVOLUTE, Skeleton
+from mocapkit.skeleton.roll import limit_roll
 
 FloatArray = NDArray[np.float64]
 
@@ -514,11 +516,66 @@ def _fill_missing(q: FloatArray) -> FloatArray:
     return q[idx]
 
 
+def continuous_euler(angles_rad: FloatArray) -> FloatArray:
+    """ZYX Euler angles (T, ..., 3) made continuous over time: each frame takes, of its two
+    equivalent triples ``(z, y, x)`` and ``(z + pi, pi - y, x + pi)`` and every whole turn
+    added to each, the one nearest the previous frame's. The rotations are unchanged; the
+    channels no longer jump by 360 deg or flip between the two solutions, so a program
+    that interpolates or filters the channels (Blender's F-curves) sees no spin.
+    """
+    a = np.array(angles_rad, dtype=float, copy=True)
+    if a.shape[0] < 2:
+        return a
+    flat = np.ascontiguousarray(a.reshape(a.shape[0], -1, 3))
+    _continuous_euler_nb(flat)
+    return flat.reshape(a.shape)
+
+
+@numba.njit(cache=True)
+def _continuous_euler_nb(a: FloatArray) -> None:
+    """`continuous_euler` in place on (T, N, 3)."""
+    two_pi = 2.0 * np.pi
+    best = np.empty(3)
+    cand = np.empty(3)
+    for t in range(1, a.shape[0]):
+        for n in range(a.shape[1]):
+            p0, p1, p2 = a[t - 1, n, 0], a[t - 1, n, 1], a[t - 1, n, 2]
+            if not (np.isfinite(p0) and np.isfinite(p1) and np.isfinite(p2)):
+                continue
+            if not np.isfinite(a[t, n, 0] + a[t, n, 1] + a[t, n, 2]):
+                continue
+            best_d = np.inf
+            for branch in range(2):
+                if branch == 0:
+                    cand[0], cand[1], cand[2] = a[t, n, 0], a[t, n, 1], a[t, n, 2]
+                else:
+                    cand[0] = a[t, n, 0] + np.pi
+                    cand[1] = np.pi - a[t, n, 1]
+                    cand[2] = a[t, n, 2] + np.pi
+                d = 0.0
+                for k in range(3):
+                    prev = (p0, p1, p2)[k]
+                    cand[k] -= two_pi * np.round((cand[k] - prev) / two_pi)
+                    d += (cand[k] - prev) ** 2
+                if d < best_d:
+                    best_d = d
+                    best[:] = cand
+            a[t, n, :] = best
+
+
+#: Fastest turn of a bone about its own axis written to a result's BVH (rad/s): about
+#: 1200 deg/s, near the fastest forearm pronation reported in throwing; a roll that the
+#: tracker changes faster (a flip of an arm about its own line, which no joint shows) is
+#: caught up at this speed (`mocapkit.skeleton.roll.limit_roll`).
+MAX_ROLL_SPEED_RAD_S = float(np.deg2rad(1200.0))
+
+
 def write_bvh(
     path: str | os.PathLike[str],
     motion: Motion,
     unit_mm: float = 1000.0,
     frame_time_s: float | None = None,
+    max_roll_speed_rad_s: float | None = None,
 ) -> None:
     """Write a motion of any skeleton as BVH (Y up, atomically).
 
@@ -532,12 +589,19 @@ def write_bvh(
     frame_time_s : float, optional
         ``Frame Time``; default the median step of ``motion.time_s`` (BVH assumes a
         constant rate), or 1/30 s for a single frame.
+    max_roll_speed_rad_s : float, optional
+        Where given, each bone that turns about its own axis without moving a joint
+        (`mocapkit.skeleton.roll.roll_free_bones`) turns by at most this speed times the
+        frame time per frame (`mocapkit.skeleton.roll.limit_roll`; result folders use
+        `MAX_ROLL_SPEED_RAD_S`); joint positions are unchanged. Default: the rotations
+        as they are.
 
     Notes
     -----
     Frames without a pose (NaN rows of ``q``) cannot be expressed in BVH; they are
     written as the previous valid pose (the first valid pose for leading ones).
     Values are written with 10 decimals, enough for a sub-micrometre round trip.
+    Euler angles are continuous from frame to frame (`continuous_euler`).
     """
     if not (unit_mm > 0 and np.isfinite(unit_mm)):
         raise FormatError(
@@ -555,12 +619,16 @@ def write_bvh(
     world = forward_kinematics(skel, q)  # (T, J, 4, 4)
     rot = world[..., :3, :3]
     pos = world[..., :3, 3]
+    if max_roll_speed_rad_s is not None:
+        rot = limit_roll(skel, rot, max_roll_speed_rad_s * frame_time_s)
     f = FILE_FROM_WORLD
     n_t, n_j = q.shape[0], skel.n_joints
     parents = skel.parents
     has_prismatic = np.zeros(n_j, dtype=bool)
     has_prismatic[skel.dof_joint[skel.dof_kind == PRISMATIC]] = True
     columns: list[FloatArray] = []
+    eulers: list[FloatArray] = []
+    slots: list[int] = []
     for j in range(n_j):
         p = parents[j]
         if p < 0:
@@ -574,7 +642,13 @@ def write_bvh(
         r_file = np.einsum("ik,tkl,jl->tij", f, local_r, f)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # gimbal lock: the matrix is still exact
-            columns.append(Rotation.from_matrix(r_file).as_euler("ZYX", degrees=True))
+            eulers.append(Rotation.from_matrix(r_file).as_euler("ZYX"))
+        slots.append(len(columns))
+        columns.append(np.zeros((n_t, 0)))  # joint j's angles, made continuous below
+    if eulers:
+        smooth = np.rad2deg(continuous_euler(np.stack(eulers, axis=1)))
+        for j, slot in enumerate(slots):
+            columns[slot] = smooth[:, j]
     values = np.concatenate(columns, axis=1) if columns else np.zeros((n_t, 0))
 
     names = [_NAME_SAFE.sub("_", n) for n in skel.joint_names]
@@ -613,4 +687,13 @@ def write_bvh(
         fh.write(out.getvalue())
 
 
-__all__ = ["BvhData", "BvhJoint", "parse_bvh", "read_bvh", "skeleton_from_bvh", "write_bvh"]
+__all__ = [
+    "MAX_ROLL_SPEED_RAD_S",
+    "BvhData",
+    "BvhJoint",
+    "continuous_euler",
+    "parse_bvh",
+    "read_bvh",
+    "skeleton_from_bvh",
+    "write_bvh",
+]

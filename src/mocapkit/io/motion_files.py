@@ -16,7 +16,7 @@ from pathlib import Path
 
 from mocapkit.errors import FormatError
 from mocapkit.io.asf_amc import read_amc
-from mocapkit.io.bvh import read_bvh, write_bvh
+from mocapkit.io.bvh import MAX_ROLL_SPEED_RAD_S, read_bvh, write_bvh
 from mocapkit.io.files import require_file
 from mocapkit.io.joints_csv import write_joints_csv
 from mocapkit.io.motion import Motion
@@ -113,7 +113,11 @@ def write_result_folder(
     out.mkdir(parents=True, exist_ok=True)
     save_motion_npz(out / "motion.npz", motion)
     write_joints_csv(out / "joints.csv", motion)
-    write_bvh(out / "motion.bvh", motion if bvh_motion is None else bvh_motion)
+    write_bvh(
+        out / "motion.bvh",
+        motion if bvh_motion is None else bvh_motion,
+        max_roll_speed_rad_s=MAX_ROLL_SPEED_RAD_S,
+    )
     return out
 
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -179,8 +179,15 @@ def write_trc(
     units: str = "mm",
     *,
     rate_hz: float | None = None,
+    rename: Mapping[str, str] | None = None,
+    file_from_world: ArrayLike | None = None,
 ) -> None:
     """Write marker trajectories as a TRC file, atomically.
+
+    For OpenSim or Pose2Sim, one call writes markers under their names in OpenSim's Y-up
+    frame: ``write_trc(path, t, names, joints_mm, rename=DIRECT,
+    file_from_world=OPENSIM_FROM_WORLD)`` (`mocapkit.io.openpose.DIRECT` maps canonical
+    joints to BODY_25 names, `mocapkit.io.units.OPENSIM_FROM_WORLD`).
 
     Coordinates are printed with 1e-6 mm resolution whatever the units (6 decimals in
     mm, 9 in m), time with 8 decimals; NaN samples become empty fields.
@@ -199,8 +206,32 @@ def write_trc(
     rate_hz : float, optional
         DataRate/CameraRate written in the header; by default the inverse of the median
         time step (required when T < 2).
+    rename : mapping, optional
+        Name written for each marker; markers it does not name are left out.
+    file_from_world : (3, 3) array, optional
+        Rotation applied to every position before writing (the file's axes from ours).
     """
     where = str(path)
+    if rename is not None or file_from_world is not None:
+        names_in = list(marker_names)
+        pos_in = np.asarray(positions_mm, dtype=float)
+        if rename is not None:
+            keep = [k for k, n in enumerate(names_in) if n in rename]
+            if not keep:
+                raise ConfigError(
+                    f"{where}: rename: expected a map naming some of the markers "
+                    f"{names_in[:5]}, found none of them in {sorted(rename)[:5]}"
+                )
+            names_in = [rename[names_in[k]] for k in keep]
+            pos_in = pos_in[..., keep, :]
+        if file_from_world is not None:
+            rot = np.asarray(file_from_world, dtype=float)
+            if rot.shape != (3, 3) or not np.allclose(rot @ rot.T, np.eye(3), atol=1e-9):
+                raise ConfigError(
+                    f"{where}: file_from_world: expected a 3x3 rotation, found {rot.tolist()}"
+                )
+            pos_in = pos_in @ rot.T
+        marker_names, positions_mm = names_in, pos_in
     if units not in TRC_UNITS_MM:
         raise FormatError(
             f"{where}: units: expected one of {', '.join(TRC_UNITS_MM)}, found {units!r}"

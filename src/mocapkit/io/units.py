@@ -26,6 +26,10 @@ WORLD_FROM_FILE.setflags(write=False)
 #: Inverse of `WORLD_FROM_FILE` (it is its own transpose and inverse).
 FILE_FROM_WORLD: FloatArray = WORLD_FROM_FILE.T.copy()
 FILE_FROM_WORLD.setflags(write=False)
+#: Rotation taking the mocapkit world (Z up, facing +Y, right side +X) to OpenSim's
+#: ground frame (Y up, X forward, Z to the subject's right): world Y -> X, Z -> Y, X -> Z.
+OPENSIM_FROM_WORLD: FloatArray = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]])
+OPENSIM_FROM_WORLD.setflags(write=False)
 
 #: One CMU length unit in mm: the ASF header says ``length 0.45`` and the CMU FAQ
 #: states that one unit is (1/0.45) inch. The cgspeed BVH conversions keep the same

@@ -35,6 +35,7 @@ from mocapkit.io.atomic import (
 )
 from mocapkit.io.motion import Motion
 from mocapkit.io.motion_files import write_result_folder
+from mocapkit.io.opensim import write_opensim_folder
 from mocapkit.progress import Progress
 from mocapkit.skeleton.limbs import has_limb, head_dofs, limb
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
@@ -50,6 +51,8 @@ from mocapkit.tracking.base import (
 
 #: Name of the per-frame fit and status file in a result folder.
 FIT_FILE = "fit.csv"
+#: The result folder's OpenSim export (`mocapkit.io.opensim.write_opensim_folder`).
+OPENSIM_FOLDER = "opensim"
 
 
 @dataclass
@@ -210,7 +213,42 @@ def _part_dofs(skeleton: Skeleton, part: str) -> NDArray[np.int64]:
     if not has_limb(skeleton, part):
         return np.zeros(0, dtype=np.int64)
     lmb = limb(skeleton, part)
-    return np.concatenate([lmb.dofs, lmb.translation_dofs]).astype(np.int64)
+    # the limb with the joints that carry it alone (a clavicle above a shoulder, a hip
+    # joint above a femur) and everything below it: what the missing markers would pose
+    parents = skeleton.parents
+    n_children = np.bincount(parents[parents >= 0], minlength=skeleton.n_joints)
+    top = int(lmb.root)
+    while parents[top] > 0 and n_children[parents[top]] == 1:
+        top = int(parents[top])
+    below = {top}
+    for j in range(top + 1, skeleton.n_joints):
+        if int(parents[j]) in below:
+            below.add(j)
+    carried = np.flatnonzero(np.isin(skeleton.dof_joint, sorted(below)))
+    return np.union1d(carried, lmb.translation_dofs).astype(np.int64)
+
+
+#: Time over which a part held through a gap in the BVH is blended back to the tracked
+#: pose once it is observed again (`motion_for_bvh`), rather than snapped there.
+GAP_BLEND_S = 0.2
+
+
+def _blend_back(
+    q: NDArray[np.float64],
+    time_s: NDArray[np.float64],
+    held: NDArray[np.bool_],
+    dofs: NDArray[np.int64],
+) -> None:
+    """After each held stretch of ``held`` frames, move ``q[:, dofs]`` from the held values
+    to the tracked ones linearly over `GAP_BLEND_S` (in place)."""
+    ends = np.flatnonzero(held[:-1] & ~held[1:])  # the last held frame of each stretch
+    for e in ends:
+        start = q[e, dofs].copy()
+        for i in range(e + 1, len(q)):
+            w = (time_s[i] - time_s[e]) / GAP_BLEND_S
+            if held[i] or not w < 1.0 or not np.isfinite(q[i, dofs]).all():
+                break
+            q[i, dofs] = start + w * (q[i, dofs] - start)
 
 
 def motion_for_bvh(motion: Motion, results: Sequence[FrameResult]) -> Motion:
@@ -218,12 +256,15 @@ def motion_for_bvh(motion: Motion, results: Sequence[FrameResult]) -> Motion:
     the BVH, which cannot hold NaN, is written from.
 
     On the frames where an effector or limb is ``released`` or ``missing``, the DoFs that
-    pose its part (`mocapkit.skeleton.limbs.limb` DoFs of an arm or leg,
+    pose its part (those of an arm or leg `mocapkit.skeleton.limbs.limb`, of the joints
+    that carry it alone above it, a clavicle, and of every joint below it,
     `mocapkit.skeleton.limbs.head_dofs` of the head) keep their values of the last frame
     where it was ``seen`` or ``bridged`` (of the first such frame, before it was ever
-    seen); the rest of the pose is the tracker's. A part never observed keeps the
-    tracker's pose. ``fit.csv`` holds the status that says so. Frames without any pose
-    (NaN ``q``) are left to `mocapkit.io.bvh.write_bvh`, which holds the previous pose.
+    seen); the rest of the pose is the tracker's. When the part is observed again, its
+    DoFs go from the held values to the tracked ones linearly over `GAP_BLEND_S`, not in
+    one frame. A part never observed keeps the tracker's pose. ``fit.csv`` holds the
+    status that says so. Frames without any pose (NaN ``q``) are left to
+    `mocapkit.io.bvh.write_bvh`, which holds the previous pose.
     """
     if len(results) != motion.n_frames:
         return motion
@@ -248,6 +289,7 @@ def motion_for_bvh(motion: Motion, results: Sequence[FrameResult]) -> Motion:
         src[src < 0] = np.flatnonzero(good)[0]
         held = np.flatnonzero(flags)
         q[np.ix_(held, dofs)] = q[np.ix_(src[held], dofs)]
+        _blend_back(q, motion.time_s, flags, dofs)
     if np.array_equal(q, motion.q, equal_nan=True):
         return motion
     return Motion(
@@ -327,7 +369,8 @@ def write_run_folder(
     out_dir: str | os.PathLike[str], motion: Motion, results: Sequence[FrameResult]
 ) -> Path:
     """Write a result folder whole: ``motion.npz``, ``joints.csv``, ``motion.bvh``
-    (`mocapkit.io.motion_files.write_result_folder`) and ``fit.csv`` (`write_fit_csv`).
+    (`mocapkit.io.motion_files.write_result_folder`), ``fit.csv`` (`write_fit_csv`) and
+    ``opensim/`` (TRC, model and IK setup: `mocapkit.io.opensim.write_opensim_folder`).
 
     The folder is built under a temporary name beside ``out_dir`` and swapped in when
     complete (`mocapkit.io.atomic.atomic_folder`): a kill or an error mid-write leaves
@@ -346,6 +389,7 @@ def write_run_folder(
     with atomic_folder(out) as tmp:
         write_result_folder(tmp, motion, bvh_motion=bvh)
         write_fit_csv(tmp / FIT_FILE, results)
+        write_opensim_folder(tmp / OPENSIM_FOLDER, motion)
     return out
 
 
@@ -408,6 +452,8 @@ def read_fit_csv(path: str | os.PathLike[str]) -> tuple[list[dict[str, str]], di
 
 __all__ = [
     "FIT_FILE",
+    "GAP_BLEND_S",
+    "OPENSIM_FOLDER",
     "RESULT_MARKER_FILE",
     "Gap",
     "RunResult",
