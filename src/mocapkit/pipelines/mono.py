@@ -507,14 +507,24 @@ class MonoStream:
                     model.joint_names.index(j) for j in part[1] if j in model.joint_names
                 ]
         self.bridge_s = bridge_s
-        self._raw: list[FloatArray] = []
-        self._times: list[float] = []
+        # per limb, the time its joints were last all in the 2-D points (the frames
+        # pushed so far); per pending frame, each limb's time unseen then
+        self._last_seen: dict[str, float] = {}
+        self._unseen: dict[int, dict[str, float]] = {}
+        self._pushed = 0
         self._posed: set[str] = set()
 
     def push(self, sample: MonoSample) -> list[FrameResult]:
         """Track one frame; returns the results it makes final."""
-        self._raw.append(np.asarray(sample.points_px, dtype=float))
-        self._times.append(float(sample.time_s))
+        raw = np.asarray(sample.points_px, dtype=float)
+        t = float(sample.time_s)
+        unseen = {}
+        for limb, js in self._limbs.items():
+            if np.all(np.isfinite(raw[js])):
+                self._last_seen[limb] = t
+            unseen[limb] = t - self._last_seen.get(limb, -math.inf)
+        self._unseen[self._pushed] = unseen
+        self._pushed += 1
         return [self._result(f) for f in self.tracker.push(sample.time_s, sample.points_px)]
 
     def finish(self) -> list[FrameResult]:
@@ -523,6 +533,7 @@ class MonoStream:
 
     def _result(self, f: MonoFrame) -> MonoResult:
         t = self.tracker
+        unseen = self._unseen.pop(f.index)
         world = to_world([f], t.model, self.camera, t.config, self.px_per_mm)[0]
         joints = world[self._order]
         q = fit_stick_pose(self.skeleton, self.joint_names, joints[None])[0]
@@ -532,7 +543,7 @@ class MonoStream:
         for limb, js in self._limbs.items():
             if f.code >= 0 and np.all(np.isfinite(world[js])):
                 self._posed.add(limb)
-                unseen_s = self._unseen_s(f.index, js)
+                unseen_s = unseen[limb]
                 status[limb] = (
                     "seen"
                     if unseen_s == 0.0
@@ -551,16 +562,6 @@ class MonoStream:
             "flips": float(f.code),
         }
         return MonoResult(f.time_s, q, canonical, status, fit, "", frame=f)
-
-    def _unseen_s(self, k: int, joints: list[int]) -> float:
-        """Time (s) since frame ``k``'s limb ``joints`` were last all in the 2-D points
-        (0 when they are in frame k's; inf when never before)."""
-        i = k
-        while i >= 0 and not np.all(np.isfinite(self._raw[i][joints])):
-            if self._times[k] - self._times[i] > self.bridge_s:
-                return math.inf
-            i -= 1
-        return math.inf if i < 0 else self._times[k] - self._times[i]
 
 
 def refined_lengths(
@@ -716,10 +717,6 @@ def track_mono(
     # seventh round).
     paper_cfg = replace(
         cfg,
-        residual_weight=0.0,
-        elbow_flex_weight=0.0,
-        depth_velocity_weight=0.0,
-        joint_acceleration_weight=0.0,
         clavicle_weight=0.0,
         arm_prior_weight=0.0,
         reach_tolerance=0.0,
