@@ -188,7 +188,11 @@ class Decoder:
         n = self.n_frames
         if self.lag is not None:
             return self._fix_until(n - 1 - self.lag, self._best_path)
-        out = self._fix_until(self._merged(), self._best_path)
+        # the merge check walks back over the open frames: run it less often as they
+        # grow (every open/8 frames), so its cost per frame stays bounded
+        out = []
+        if n % max(1, (n - self._next) // 8) == 0:
+            out = self._fix_until(self._merged(), self._best_path)
         forced = self._fix_until(n - 1 - self.window, self._best_path)
         self.n_forced += len(forced)
         return out + forced
@@ -241,9 +245,9 @@ class Decoder:
         jj, mm = np.nonzero(np.isfinite(self._cost))
         k = n - 1
         while jj.shape[0] > 1 and k > self._next + 1:
-            older = self._entry(k)[jj, mm]
-            pairs = np.unique(np.stack([older, jj]), axis=1)
-            jj, mm = pairs[0], pairs[1]
+            older = self._entry(k)[jj, mm].astype(np.int64)
+            pairs = np.unique((older << 32) | jj)  # distinct (k - 2, k - 1) pair states
+            jj, mm = pairs >> 32, pairs & 0xFFFFFFFF
             k -= 1
         return k if jj.shape[0] <= 1 else -1
 
