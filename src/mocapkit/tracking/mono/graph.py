@@ -8,9 +8,9 @@ the first-order rotation, ``"rotation"``) and runs `mocapkit.tracking.mono.viter
 
 Pair-state decoding is O(N^3) per frame; where a frame has more than ``max_pair_states``
 poses, the ones with the lowest first-order forward cost are kept (a beam; exact below
-the cap). A layer is kept only until its frame is decided and the next two frames no
-longer read it, so memory does not grow with the recording (the decoder's window
-bounds the open frames offline, its lag online).
+the cap). A layer is kept only until its frame is decided, and once the next two frames
+no longer read it only with its beam's poses, so memory does not grow with the
+recording (the decoder's window bounds the open frames offline, its lag online).
 """
 
 from __future__ import annotations
@@ -127,7 +127,9 @@ class PoseGraph:
         layer = Layer(k, float(time_s), codes, positions, vectors, unary, keep, info)
         self._layers[k] = layer
         self._n += 1
-        return self._answer(self._push(layer, w_full, r_full))
+        decided = self._push(layer, w_full, r_full)
+        self._compact(k - 2)
+        return self._answer(decided)
 
     def finish(self) -> list[tuple[Layer, int]]:
         """End of the recording: every decision still pending."""
@@ -140,6 +142,24 @@ class PoseGraph:
         for f in [f for f in self._layers if f < oldest]:
             del self._layers[f]
         return out
+
+    def _compact(self, k: int) -> None:
+        """Layer ``k`` is no longer read by any weight: keep only its beam's poses (what
+        a decision can pick), without their link vectors."""
+        old = self._layers.get(k)
+        if old is None:
+            return
+        sel = old.keep
+        self._layers[k] = Layer(
+            old.index,
+            old.time_s,
+            old.codes[sel],
+            old.positions[sel],
+            np.zeros((0, 0, 3)),
+            old.unary[sel],
+            np.arange(sel.shape[0]),
+            old.info,
+        )
 
     def _dt(self, t0: float, t1: float) -> float:
         d = t1 - t0
