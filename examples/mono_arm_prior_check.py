@@ -6,7 +6,7 @@
 For each `MonoConfig` setting of the JSON list: the five clips of ``mocapkit accuracy
 mono`` with the shipped table (fitted on none of them), and each of the four held-out
 clips (01_12, 11_01, 131_01, 131_03) with a prior fitted as the shipped one
-(``examples/mono_fit_arm_prior.py``) but without that clip (leave one clip out). Sessions
+(``tools/mono_fit_arm_prior.py``) but without that clip (leave one clip out). Sessions
 are rendered into WORK_DIR on first use (as ``mocapkit accuracy mono --work``), tracked
 from the true 2-D keypoints plus 2 px noise (seed 0). Prints one JSON line per setting:
 per clip (name, Procrustes upper-body mm, flips right %) and the means of each group.
@@ -30,7 +30,7 @@ HELD_OUT = ("01_12.amc", "11_01.amc", "131_01.bvh", "131_03.bvh")
 
 
 def _fit_module():  # type: ignore[no-untyped-def]
-    path = Path(__file__).with_name("mono_fit_arm_prior.py")
+    path = Path(__file__).resolve().parents[1] / "tools" / "mono_fit_arm_prior.py"
     spec = importlib.util.spec_from_file_location("mono_fit_arm_prior", path)
     assert spec is not None and spec.loader is not None
     mod = importlib.util.module_from_spec(spec)
