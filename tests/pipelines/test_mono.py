@@ -15,19 +15,20 @@ from mocapkit.io.cameras import write_cameras
 from mocapkit.io.session import write_session_json
 from mocapkit.io.session_csv import write_keypoints_csv
 from mocapkit.io.truth import Truth
-from mocapkit.pipelines.mono import (
-    MonoResult,
-    MonoSample,
-    MonoStream,
-    output_skeleton,
-    to_world,
-    track_mono,
-)
+from mocapkit.pipelines.mono import track_mono
 from mocapkit.pipelines.mono_accuracy import write_openpose_with_bystander
 from mocapkit.pipelines.run import FIT_FILE
 from mocapkit.skeleton.model import CANONICAL_JOINTS, UPPER_BODY_JOINTS
 from mocapkit.tracking.base import DelayedTracker, FrameResult
 from mocapkit.tracking.mono.stick import stick_model
+from mocapkit.tracking.mono.stream import (
+    MonoResult,
+    MonoSample,
+    MonoStream,
+    output_skeleton,
+    to_world,
+    world_points,
+)
 from mocapkit.tracking.mono.tracker import MonoConfig, MonoTracker
 from tests.tracking.mono.test_tracker import FPS, camera, stick_motion
 
@@ -282,7 +283,7 @@ def test_a_known_initial_pose_from_a_joints_csv_gives_the_first_frames_true_flip
     """World-frame start (joints.csv, canonical names, any order) -> the camera frame of
     the tracker: the first frame takes the truth's flips on every link out of the image,
     and each of its surviving candidates, given in the world 300 mm deeper, is chosen."""
-    from mocapkit.pipelines.mono import _apply, initial_pose_from
+    from mocapkit.pipelines.mono import initial_pose_from
 
     session = _session(tmp_path / "s")
     joints, names, _ = stick_motion(N)
@@ -306,19 +307,23 @@ def test_a_known_initial_pose_from_a_joints_csv_gives_the_first_frames_true_flip
     start = initial_pose_from(names, joints[0], model)
     run = track_mono(session, None, initial_pose=start)
     assert run.frames[0].code == first
-    kept: list[MonoTracker] = []
-    finish = MonoTracker.finish
+    from mocapkit.tracking.mono.graph import PoseGraph
 
-    def keeping(self: MonoTracker) -> list:  # type: ignore[type-arg]
-        kept.append(self)
-        return finish(self)
+    firsts = []
+    add = PoseGraph.add
 
-    monkeypatch.setattr(MonoTracker, "finish", keeping)
+    def keeping(self: PoseGraph, *args, **kwargs) -> list:  # type: ignore[no-untyped-def,type-arg]
+        out = add(self, *args, **kwargs)
+        if self._n == 1:
+            firsts.append(self._layers[0])
+        return out
+
+    monkeypatch.setattr(PoseGraph, "add", keeping)
     track_mono(session, None)
-    layer = kept[-1]._layers[0]  # the last pass's first frame
+    layer = firsts[-1]  # the last pass's first frame
     assert layer.codes.shape[0] >= 2
     for i, code in enumerate(layer.codes):
-        world = _apply(camera(), layer.positions[i] + np.array([0.0, 0.0, 300.0]))
+        world = world_points(camera(), layer.positions[i] + np.array([0.0, 0.0, 300.0]))
         assert track_mono(session, None, initial_pose=world).frames[0].code == code
     with pytest.raises(SessionError, match="expected the joint 'neck'"):
         initial_pose_from(("head", "pelvis"), joints[0, :2], model)
@@ -417,3 +422,28 @@ def test_truth_in_camera_is_the_stick_joints_seen_from_the_camera(tmp_path: Path
     (folder / "truth.npz").unlink()
     with pytest.raises(SessionError, match="expected truth.npz to measure against, found none"):
         truth_in_camera(load_session(folder), cam.name, model)
+
+
+def test_on_floor_places_the_neck_above_the_standing_foot(tmp_path: Path) -> None:
+    """With ``on_floor`` and an ankle seen standing below the neck, the neck lands where
+    the truth has it (its depth from the floor, its image from the tracker); without,
+    at the depth from the link lengths. Refused without a calibrated perspective model."""
+    from mocapkit.tracking.mono.placement import ANKLE_SHARE
+
+    session = _session(tmp_path / "s")
+    joints, names, _ = stick_motion(N)
+    neck = joints[:, names.index("neck")]
+    foot = neck.copy()
+    foot[:, 2] = ANKLE_SHARE * 1700.0
+    ankles = np.stack([camera().project(foot), np.full((N, 2), np.nan)], axis=1)
+    placed = track_mono(session, None, ankles_px=ankles, on_floor=True)
+    free = track_mono(session, None)
+    got = placed.motion.joints_mm[:, placed.motion.joint_names.index("neck")]
+    own = free.motion.joints_mm[:, free.motion.joint_names.index("neck")]
+    err = np.linalg.norm(got - neck, axis=1)
+    assert np.nanmax(err) < 5.0
+    assert np.nanmean(err) < 0.5 * np.nanmean(np.linalg.norm(own - neck, axis=1))
+    with pytest.raises(ConfigError, match="on-floor: needs the perspective"):
+        track_mono(session, None, on_floor=True, config=MonoConfig(camera_model="weak"))
+    with pytest.raises(SessionError, match="on-floor needs the ankles"):
+        track_mono(session, None, on_floor=True)

@@ -65,6 +65,11 @@ def add_mono_accuracy_parser(methods: Any) -> None:
         help="give the tracker the true pose of the first frame (the paper's assumption 3); "
         "report these figures apart",
     )
+    m.add_argument(
+        "--on-floor",
+        action="store_true",
+        help="place the subject with the feet on the floor (track mono --on-floor)",
+    )
     m.add_argument("--json", action="store_true", help="print JSON instead of a table")
     m.set_defaults(func=_run)
 
@@ -92,6 +97,7 @@ def _run(args: argparse.Namespace) -> int:
         skin_bare_from=None if args.bare_from == "paper" else args.bare_from,
         costume=args.costume,
         initial_pose=args.initial_pose,
+        on_floor=args.on_floor,
         config=MonoConfig(lag=args.lag, cost=args.cost, **prior),
         say=(lambda _line: None) if args.json else print,
     )

@@ -91,6 +91,13 @@ def add_mono_parser(methods: Any) -> None:
         help="the subject's known pose in the first frame (the paper's assumption 3): a "
         "joints.csv (world frame, mm) whose first row is used; the neck is required",
     )
+    p.add_argument(
+        "--on-floor",
+        action="store_true",
+        help="the subject stands on the world's floor (z = 0) where an ankle is seen: "
+        "place each pose at the depth the feet give (calibrated camera, stature in "
+        "session.json); off: the depth from the link lengths",
+    )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=_run_mono)
 
@@ -143,6 +150,7 @@ def _run_mono(args: argparse.Namespace) -> int:
         skin=args.skin,
         initial_pose=start,
         skin_options=skin_options,
+        on_floor=args.on_floor,
     )
     summary = run.summary()
     if not args.json:  # limbs unseen past the bridge: NaN joints, status in fit.csv

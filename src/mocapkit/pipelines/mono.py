@@ -29,19 +29,21 @@ from mocapkit.io.session_csv import Keypoints, read_keypoints_csv
 from mocapkit.pipelines.camera_check import check_session_cameras, warn_placed_subject
 from mocapkit.pipelines.run import check_result_folder, run_tracker
 from mocapkit.progress import Progress
-from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
-from mocapkit.skeleton.presets import load_preset
-from mocapkit.skeleton.scaling import fit_segments
-from mocapkit.tracking.base import BRIDGE_S, FrameResult, unobserved_part
 from mocapkit.tracking.mono.lengths import (
     ANTHROPOMETRIC_RATIOS,
     estimate_link_lengths,
     pixels_per_mm,
     raise_short_links,
 )
-from mocapkit.tracking.mono.pose_fit import fit_stick_pose
+from mocapkit.tracking.mono.placement import FloorDepth
 from mocapkit.tracking.mono.smoother import smooth_keypoints
 from mocapkit.tracking.mono.stick import StickModel, stick_model
+from mocapkit.tracking.mono.stream import (
+    MonoResult,
+    MonoSample,
+    MonoStream,
+    output_skeleton,
+)
 from mocapkit.tracking.mono.tracker import MonoConfig, MonoFrame, MonoTracker
 
 FloatArray = NDArray[np.float64]
@@ -353,59 +355,6 @@ def session_lengths(session: Session, model: StickModel) -> FloatArray:
     return np.array([session.bone_lengths_mm[s] for s in model.segments])
 
 
-def output_skeleton(model: StickModel, lengths_mm: FloatArray) -> Skeleton:
-    """``upper_stick`` fitted to the tracked link lengths (mm)."""
-    sk = load_preset("upper_stick")
-    fitted = {s: float(v) for s, v in zip(model.segments, lengths_mm) if s in _UPPER_SEGMENTS}
-    return fit_segments(sk, fitted)
-
-
-_UPPER_SEGMENTS = (
-    "trunk", "head", "left_clavicle", "right_clavicle", "left_upper_arm", "right_upper_arm",
-    "left_forearm", "right_forearm",
-)  # fmt: skip
-
-
-def to_world(
-    frames: list[MonoFrame],
-    model: StickModel,
-    camera: Camera | None,
-    config: MonoConfig,
-    px_per_mm: float,
-) -> FloatArray:
-    """Tracked joints (T, K, 3) in the world frame (mm).
-
-    Calibrated models are already in the camera frame (mm). The orthographic model's px
-    are scaled to mm and, with a camera, placed at the depth where the scale holds
-    (``f / px_per_mm``) on the camera's axis; without one, in a frame with x right, y the
-    depth and z up.
-    """
-    cam_pts = np.stack([f.joints_in_camera for f in frames])
-    if config.camera_model != "orthographic" and camera is not None:
-        return _apply(camera, cam_pts)
-    mm = cam_pts / px_per_mm
-    if camera is None:
-        return np.stack([mm[..., 0], mm[..., 2], -mm[..., 1]], axis=-1)
-    k = camera.K
-    depth = k[0, 0] / px_per_mm
-    pts = np.stack(
-        [
-            (cam_pts[..., 0] - k[0, 2]) / px_per_mm,
-            (cam_pts[..., 1] - k[1, 2]) / px_per_mm,
-            depth + mm[..., 2],
-        ],
-        axis=-1,
-    )
-    return _apply(camera, pts)
-
-
-def _apply(camera: Camera, points_in_camera: FloatArray) -> FloatArray:
-    from mocapkit.geometry.transforms import transform_points
-
-    flat = points_in_camera.reshape(-1, 3)
-    return transform_points(camera.world_from_camera, flat).reshape(points_in_camera.shape)
-
-
 def _run(
     lengths: FloatArray,
     cam: Camera | None,
@@ -424,146 +373,6 @@ def _run(
     frames += tracker.finish()
     frames.sort(key=lambda f: f.index)
     return frames
-
-
-@dataclass
-class MonoSample:
-    """One frame for `MonoStream`: the stick's joints (K, 2) px, NaN where unseen."""
-
-    time_s: float
-    points_px: FloatArray
-
-
-#: Limbs whose status a `MonoResult` reports, by the stick joint at their end.
-MONO_LIMBS: dict[str, str] = {
-    "head": "head",
-    "left_arm": "left_wrist",
-    "right_arm": "right_wrist",
-    "left_leg": "left_ankle",
-    "right_leg": "right_ankle",
-}
-
-
-@dataclass
-class MonoResult(FrameResult):
-    """A `FrameResult` of the mono tracker, keeping its `MonoFrame`.
-
-    ``status`` per limb of `MONO_LIMBS` the stick has, from the joints that the limb
-    alone places (`mocapkit.tracking.base.unobserved_part`: elbow and wrist of an arm,
-    knee and ankle of a leg, the head): ``seen`` (all of them in this frame's 2-D points
-    and posed), ``bridged`` (posed, one of them read off the smoother over a gap of at
-    most ``bridge_s`` since the limb was last seen whole), ``released`` (no pose for them
-    after having one, or unseen for longer than ``bridge_s``), ``missing`` (never posed
-    yet). The runner sets the joints of a released or missing limb to NaN, as for every
-    tracker (`mocapkit.pipelines.run.unobserved_to_nan`). ``fit``: ``residual_px`` (mean
-    2-D distance of the chosen pose's projection to the input points), ``candidates``
-    and ``survivors`` (poses before and after pruning), ``all_pruned`` (1 where every
-    pose was pruned and the unpruned set kept), ``depth_mm`` (neck depth; NaN
-    orthographic) and ``flips`` (the chosen flip code, -1 without a pose).
-    """
-
-    frame: MonoFrame | None = None
-
-
-class MonoStream:
-    """`MonoTracker` as a `mocapkit.tracking.base.DelayedTracker` of world results.
-
-    Each frame the tracker makes final is placed in the world (`to_world`), its
-    ``upper_stick`` pose fitted (`mocapkit.tracking.mono.pose_fit.fit_stick_pose`) and
-    returned as a `MonoResult`. Offline (``config.lag`` None) every result comes from
-    ``finish``; online, the result of frame k comes with frame k + ``smooth_lag + lag``.
-
-    Parameters
-    ----------
-    tracker : MonoTracker
-    skeleton : Skeleton
-        `output_skeleton` of the tracker's lengths.
-    camera : Camera or None
-    px_per_mm : float
-        Image scale (orthographic model; NaN otherwise).
-    bridge_s : float
-        Longest gap (s) in a limb's 2-D points that its status calls ``bridged``
-        (`mocapkit.tracking.base.BRIDGE_S`, as the hybrid and stereo trackers).
-    """
-
-    def __init__(
-        self,
-        tracker: MonoTracker,
-        skeleton: Skeleton,
-        camera: Camera | None,
-        px_per_mm: float,
-        bridge_s: float = BRIDGE_S,
-    ) -> None:
-        self.tracker = tracker
-        self.skeleton = skeleton
-        self.camera = camera
-        self.px_per_mm = px_per_mm
-        model = tracker.model
-        self.joint_names = tuple(n for n in CANONICAL_JOINTS if n in model.joint_names)
-        self._order = [model.joint_names.index(n) for n in self.joint_names]
-        self._rows = [CANONICAL_JOINTS.index(n) for n in self.joint_names]
-        self._limbs: dict[str, list[int]] = {}
-        for limb, end in MONO_LIMBS.items():
-            part = unobserved_part(limb)
-            if end in model.joint_names and part is not None:
-                self._limbs[limb] = [
-                    model.joint_names.index(j) for j in part[1] if j in model.joint_names
-                ]
-        self.bridge_s = bridge_s
-        self._raw: list[FloatArray] = []
-        self._times: list[float] = []
-        self._posed: set[str] = set()
-
-    def push(self, sample: MonoSample) -> list[FrameResult]:
-        """Track one frame; returns the results it makes final."""
-        self._raw.append(np.asarray(sample.points_px, dtype=float))
-        self._times.append(float(sample.time_s))
-        return [self._result(f) for f in self.tracker.push(sample.time_s, sample.points_px)]
-
-    def finish(self) -> list[FrameResult]:
-        """The results still pending (all of them offline)."""
-        return [self._result(f) for f in self.tracker.finish()]
-
-    def _result(self, f: MonoFrame) -> MonoResult:
-        t = self.tracker
-        world = to_world([f], t.model, self.camera, t.config, self.px_per_mm)[0]
-        joints = world[self._order]
-        q = fit_stick_pose(self.skeleton, self.joint_names, joints[None])[0]
-        canonical = np.full((len(CANONICAL_JOINTS), 3), np.nan)
-        canonical[self._rows] = joints
-        status = {}
-        for limb, js in self._limbs.items():
-            if f.code >= 0 and np.all(np.isfinite(world[js])):
-                self._posed.add(limb)
-                unseen_s = self._unseen_s(f.index, js)
-                status[limb] = (
-                    "seen"
-                    if unseen_s == 0.0
-                    else "bridged"
-                    if unseen_s <= self.bridge_s
-                    else "released"
-                )
-            else:
-                status[limb] = "released" if limb in self._posed else "missing"
-        fit = {
-            "residual_px": f.residual_px,
-            "candidates": float(f.n_candidates),
-            "survivors": float(f.n_survivors),
-            "all_pruned": float(f.pruned_all),
-            "depth_mm": f.depth_mm,
-            "flips": float(f.code),
-        }
-        return MonoResult(f.time_s, q, canonical, status, fit, "", frame=f)
-
-    def _unseen_s(self, k: int, joints: list[int]) -> float:
-        """Time (s) since frame ``k``'s limb ``joints`` were last all in the 2-D points
-        (0 when they are in frame k's; inf when never before)."""
-        i = k
-        while i >= 0 and not np.all(np.isfinite(self._raw[i][joints])):
-            if self._times[k] - self._times[i] > self.bridge_s:
-                return math.inf
-            i -= 1
-        return math.inf if i < 0 else self._times[k] - self._times[i]
 
 
 def refined_lengths(
@@ -605,6 +414,8 @@ def track_mono(
     config: MonoConfig | None = None,
     use_session_lengths: bool = False,
     pixels: FloatArray | None = None,
+    ankles_px: FloatArray | None = None,
+    on_floor: bool = False,
     length_passes: int = 2,
     skin: bool = False,
     initial_pose: FloatArray | None = None,
@@ -627,6 +438,15 @@ def track_mono(
         Take link lengths from session.json instead of the video.
     pixels : (T, K, 2) float, optional
         Replace the keypoints' pixels of the stick's joints (e.g. with noise added).
+    on_floor : bool
+        The subject stands on the world's floor (z = 0, z up) where an ankle is seen:
+        each pose is placed at the neck depth this gives (`MonoStream`'s ``floor``,
+        `mocapkit.tracking.mono.placement`) instead of the tracker's. Needs the
+        perspective model and the session's stature. Off by default: on a step or a
+        box (two of the five report clips) it places the subject worse.
+    ankles_px : (T, 2, 2) float, optional
+        With ``on_floor``: the left and right ankles (px, NaN where unseen); default:
+        the keypoints' ankles.
     skin : bool
         Read the 2-D joints off the camera's video by skin blobs (`skin_keypoints`)
         instead of keypoints.
@@ -720,10 +540,6 @@ def track_mono(
     # seventh round).
     paper_cfg = replace(
         cfg,
-        residual_weight=0.0,
-        elbow_flex_weight=0.0,
-        depth_velocity_weight=0.0,
-        joint_acceleration_weight=0.0,
         clavicle_weight=0.0,
         arm_prior_weight=0.0,
         reach_tolerance=0.0,
@@ -735,10 +551,29 @@ def track_mono(
     lengths_mm = lengths / scale if ortho else lengths
     skeleton = output_skeleton(model, lengths_mm)
     tracker = MonoTracker(lengths, cam, dt, cfg, model, initial_pose=initial)
-    stream = MonoStream(tracker, skeleton, cam, scale)
+    feet = ankles_px
+    floor = None
+    if on_floor:
+        if cfg.camera_model != "perspective" or not session.height_mm:
+            raise ConfigError(
+                "track mono --on-floor: needs the perspective camera model (found "
+                f"{cfg.camera_model!r}) and the subject's stature in session.json "
+                f"(found {session.height_mm})"
+            )
+        if feet is None:
+            ankles = ("left_ankle", "right_ankle")
+            if not set(ankles) <= set(kp.joint_names):
+                raise SessionError(
+                    f"{kp.source}: --on-floor needs the ankles, found {list(kp.joint_names)}"
+                )
+            feet = kp.pixels[:, [kp.joint_names.index(n) for n in ankles]]
+        floor = FloorDepth(cam, session.height_mm)
+    stream = MonoStream(tracker, skeleton, cam, scale, floor=floor)
+    if feet is None:
+        feet = np.full((t.shape[0], 2, 2), np.nan)
     run = run_tracker(
         stream,
-        (MonoSample(float(ti), p) for ti, p in zip(t, px)),
+        (MonoSample(float(ti), p, a) for ti, p, a in zip(t, px, feet)),
         len(t),
         out_dir,
         label="track mono",

@@ -258,6 +258,7 @@ def mono_accuracy(
     initial_pose: bool = False,
     skin_bare_from: str | None = "costume",
     costume: str | None = None,
+    on_floor: bool = False,
 ) -> list[MonoClipAccuracy]:
     """Render (or reuse), track from noisy true keypoints (or OpenPose JSON, or the video
     by skin blobs with ``skin``), and evaluate each clip.
@@ -272,7 +273,9 @@ def mono_accuracy(
 
     With ``initial_pose`` the tracker is given the true pose of the first frame (the
     paper's assumption 3; `mocapkit.pipelines.mono.track_mono`), so those figures are
-    to be reported apart from the default ones.
+    to be reported apart from the default ones. With ``on_floor`` the poses are placed
+    with the feet on the floor (`mocapkit.pipelines.mono.track_mono`; from the keypoints:
+    the noisy ankles).
     """
     if skin and openpose:
         raise ConfigError("mono_accuracy: give either skin or openpose, not both")
@@ -308,12 +311,26 @@ def mono_accuracy(
             folder = base / "openpose_json"
             write_openpose_with_bystander(folder, names, px, seed)
             run = track_mono(
-                session, out, camera=cam, keypoints=folder, config=cfg, initial_pose=first_pose
+                session,
+                out,
+                camera=cam,
+                keypoints=folder,
+                config=cfg,
+                initial_pose=first_pose,
+                on_floor=on_floor,
             )
         else:
             idx = [names.index(n) for n in _model(cfg).joint_names]
+            feet = [names.index(n) for n in ("left_ankle", "right_ankle") if n in names]
             run = track_mono(
-                session, out, camera=cam, config=cfg, pixels=px[:, idx], initial_pose=first_pose
+                session,
+                out,
+                camera=cam,
+                config=cfg,
+                pixels=px[:, idx],
+                ankles_px=px[:, feet] if on_floor and len(feet) == 2 else None,
+                on_floor=on_floor,
+                initial_pose=first_pose,
             )
         rep = evaluate_result(out, session, joints=UPPER_BODY_JOINTS)
         flips, _ = flip_accuracy(run, truth_in_camera(s, cam, run.model))

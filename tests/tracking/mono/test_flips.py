@@ -177,29 +177,24 @@ def test_perspective_candidates_share_the_rays_and_include_the_truth() -> None:
     np.testing.assert_allclose(truth_like[:, :2] / truth_like[:, 2:], rays, atol=1e-9)
 
 
-@pytest.mark.parametrize(("reach", "plane_from"), [(0.0, np.inf), (0.08, np.inf), (0.08, 0.95)])
+@pytest.mark.parametrize("reach", [0.0, 0.08])
 @pytest.mark.parametrize("legs", [False, True])
 @pytest.mark.parametrize("perspective", [False, True])
 def test_pruning_during_the_search_equals_pruning_after_it(
-    legs: bool, perspective: bool, reach: float, plane_from: float
+    legs: bool, perspective: bool, reach: float
 ) -> None:
-    """Also with a reach tolerance, the lengths then 4 % short so that some links use it,
-    and with the band's in-plane candidates (three configurations on those links)."""
+    """Also with a reach tolerance, the lengths then 4 % short so that some links use it."""
     rng = np.random.default_rng(13)
     model = stick_model(legs=legs)
-    kept_some = pruned_some = in_plane = 0
+    kept_some = pruned_some = 0
     for _ in range(30):
         pos, lengths = random_pose(rng, model, 35.0)
         if reach > 0:
             lengths = 0.96 * lengths
         obs, root = _observed(pos, perspective)
-        # the in-plane candidate on the first six links only: 3^k poses on all 14 would
-        # need 4.8 M of them per frame
-        plane = np.where(np.arange(model.n_links) < 6, plane_from, np.inf)
-        kw = {"perspective": perspective, "reach_tolerance": reach, "in_plane_from": plane}
+        kw = {"perspective": perspective, "reach_tolerance": reach}
         full = enumerate_poses(model, lengths, obs, root, prune=False, **kw)
         during = enumerate_poses(model, lengths, obs, root, prune=True, **kw)
-        in_plane += int(np.any(full.codes >> model.n_links))
         ok = ~violates(model, lengths, full.positions)
         if not ok.any():
             assert during.pruned_all
@@ -213,7 +208,6 @@ def test_pruning_during_the_search_equals_pruning_after_it(
         kept_some += 1
         pruned_some += int((~ok).sum() > 0)
     assert kept_some >= 10 and pruned_some >= 5
-    assert (in_plane > 0) == np.isfinite(plane_from)
 
 
 def test_joint_limits_known_values() -> None:
@@ -298,51 +292,36 @@ def test_reach_tolerance_per_link_widens_only_its_links() -> None:
 
 
 @pytest.mark.parametrize("perspective", [False, True])
-def test_in_plane_candidate_of_a_link_that_looks_longer_than_itself(perspective: bool) -> None:
-    """A link whose parent lies D = 1.03 L from its child's ray, inside a band of 0.05:
-    with ``in_plane_from`` 1 it has three configurations, the two flips of the band and
-    the child on its ray at the point nearest its parent (dz = 0, code bit L + l); with
-    ``in_plane_from`` 1.05 (D below 1.05 L) or inf it has the band's two."""
-    rng = np.random.default_rng(29)
-    model = stick_model()
-    pos, lengths, i = _shortened_link(rng, model, "left_upper_arm", 1.0 / 1.03, perspective)
-    p, c = model.parent[i], model.child[i]
-    obs, root = _observed(pos, perspective)
-    kw = {"perspective": perspective, "prune": False, "reach_tolerance": 0.05}
-    band = enumerate_poses(model, lengths, obs, root, **kw)
-    only = np.full(model.n_links, np.inf)
-    only[i] = 1.0
-    three = enumerate_poses(model, lengths, obs, root, in_plane_from=only, **kw)
-    for later in (1.05, np.inf):
-        same = enumerate_poses(model, lengths, obs, root, in_plane_from=later, **kw)
-        np.testing.assert_array_equal(same.codes, band.codes)
-        np.testing.assert_array_equal(same.positions, band.positions)
-    plane_bit = 1 << (model.n_links + i)
-    new = (three.codes & plane_bit) != 0
-    assert new.sum() > 0
-    assert len(set(three.codes.tolist())) == three.codes.shape[0]
-    assert three.n_candidates == three.codes.shape[0]
-    assert (
-        count_candidates(model, lengths, obs, root, perspective, 0.05, in_plane_from=only)
-        == three.n_candidates
-    )
-    assert not np.any(three.codes[new] & (1 << i))  # in the plane, not the far flip
-    # the band's poses are all there, unchanged
-    np.testing.assert_array_equal(three.codes[~new], band.codes)
-    np.testing.assert_array_equal(three.positions[~new], band.positions)
-    parent, child = three.positions[new, p], three.positions[new, c]
-    if perspective:
-        ray = np.array([obs[c, 0], obs[c, 1], 1.0])
-        # on the child's ray, at the ray's point nearest the parent
+def test_fixed_joints_give_the_full_searchs_poses_with_that_upper_body(perspective: bool) -> None:
+    """The legs enumerated below a fixed upper-body pose are exactly the poses of the full
+    search (all 14 links, pruned) that have that upper body; the capacity is 2^6."""
+    rng = np.random.default_rng(31)
+    model = stick_model(legs=True)
+    upper = stick_model()
+    tested = 0
+    for _ in range(20):
+        pos, lengths = random_pose(rng, model, 35.0)
+        obs, root = _observed(pos, perspective)
+        kw = {"perspective": perspective}
+        full = enumerate_poses(model, lengths, obs, root, **kw)
+        if full.pruned_all:
+            continue
+        mask = (1 << upper.n_links) - 1
+        pick = full.codes[int(rng.integers(full.codes.shape[0]))] & mask
+        fixed = np.full((model.n_joints, 3), np.nan)
+        fixed[: upper.n_joints] = full.positions[np.flatnonzero((full.codes & mask) == pick)[0]][
+            : upper.n_joints
+        ]
+        legs = enumerate_poses(model, lengths, obs, root, fixed=fixed, **kw)
+        same = (full.codes & mask) == pick
+        assert not legs.pruned_all
+        assert sorted((legs.codes | pick).tolist()) == sorted(full.codes[same].tolist())
+        order = np.argsort(full.codes[same])
         np.testing.assert_allclose(
-            child[:, :2] / child[:, 2:], np.broadcast_to(obs[c], (len(child), 2))
+            legs.positions[np.argsort(legs.codes)], full.positions[same][order], atol=1e-9
         )
-        np.testing.assert_allclose((child - parent) @ ray, 0.0, atol=1e-6)
-    else:
-        np.testing.assert_allclose(child[:, :2], np.broadcast_to(obs[c], (len(child), 2)))
-        np.testing.assert_allclose(child[:, 2], parent[:, 2])
-    if not perspective:
-        n = 1 << model.n_links
-        assert band.codes.shape == (n,) and three.codes.shape == (n + n // 2,)
-    with pytest.raises(ShapeError, match=r"in_plane_from: expected a number or \(8,\)"):
-        enumerate_poses(model, lengths, obs, root, in_plane_from=np.zeros(2), **kw)
+        assert legs.n_candidates <= 1 << 6
+        tested += 1
+    assert tested >= 5
+    with pytest.raises(ShapeError, match=r"fixed: expected \(15, 3\) joints"):
+        enumerate_poses(model, lengths, obs, root, fixed=np.zeros((3, 3)))

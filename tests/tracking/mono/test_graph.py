@@ -165,10 +165,17 @@ def test_push_reduced_equals_push_with_the_triple() -> None:
             a = full.push(u, pair[k - 1], triple[k - 2])
             b = reduced.push_reduced(u, pair[k - 1], tot.min(axis=0), tot.argmin(axis=0))
         assert a == b
-    np.testing.assert_array_equal(full.flush(), reduced.flush())
+    assert full.flush() == reduced.flush()
     assert full.best_cost() == reduced.best_cost()
     with pytest.raises(ShapeError, match="push_reduced: needs order 2"):
         Decoder(1).push_reduced(np.zeros(1), np.zeros((1, 1)), np.zeros((1, 1)), np.zeros((1, 1)))
+
+
+def _path(decisions: list[tuple[int, int]], n: int) -> np.ndarray:
+    """The states of frames 0 .. n - 1 from a decoder's decisions (each frame once, in
+    order)."""
+    assert [f for f, _ in decisions] == list(range(n))
+    return np.array([s for _, s in decisions], dtype=np.int64)
 
 
 def test_online_decoder_with_a_long_lag_equals_offline() -> None:
@@ -178,17 +185,51 @@ def test_online_decoder_with_a_long_lag_equals_offline() -> None:
         off = Decoder(order)
         on = Decoder(order, lag=20)
         short = Decoder(order, lag=2)
-        decided = []
+        decided, off_d, on_d = [], [], []
         for k, u in enumerate(unary):
             tri = triple[k - 2] if (k >= 2 and order == 2) else None
             args = (u, pair[k - 1] if k else None, tri)
-            off.push(*args)
+            off_d += off.push(*args)
             assert on.push(*args) == []
             decided += short.push(*args)
         assert [f for f, _ in decided] == list(range(10))  # frame k - 2 fixed at frame k
-        np.testing.assert_array_equal(off.flush(), on.flush())
-        path = short.flush()
-        assert [int(path[f]) for f, _ in decided] == [s for _, s in decided]
+        np.testing.assert_array_equal(_path(off_d + off.flush(), 12), _path(on_d + on.flush(), 12))
+        _path(decided + short.flush(), 12)
+
+
+def _offline(order: int, unary: list, pair: list, triple: list, window: int) -> tuple:
+    dec = Decoder(order, window=window)
+    decided, open_most = [], 0
+    for k, u in enumerate(unary):
+        tri = triple[k - 2] if (k >= 2 and order == 2) else None
+        decided += dec.push(u, pair[k - 1] if k else None, tri)
+        open_most = max(open_most, k + 1 - len(decided))
+    return _path(decided + dec.flush(), len(unary)), open_most, dec
+
+
+def test_offline_decoder_fixes_merged_frames_early_and_stays_exact() -> None:
+    """Offline, frames are fixed as soon as every current state's best path agrees on
+    them, and the path is the exact one; a window caps the open frames."""
+    rng = np.random.default_rng(43)
+    for order in (1, 2):
+        for _ in range(10):
+            unary, pair, triple = _random_graph(rng, 6)
+            path, _, dec = _offline(order, unary, pair, triple, 1 << 30)
+            best = _brute(unary, pair, triple if order == 2 else None)
+            assert _cost(path, unary, pair, triple if order == 2 else None) == pytest.approx(best)
+            assert dec.n_forced == 0
+        # a long sequence whose paths merge: few frames stay open
+        n = 200
+        unary = [rng.normal(size=3) * 5 for _ in range(n)]
+        pair = [rng.normal(size=(3, 3)) for _ in range(n - 1)]
+        triple = [rng.normal(size=(3, 3, 3)) for _ in range(n - 2)]
+        exact, open_exact, _ = _offline(order, unary, pair, triple, 1 << 30)
+        assert open_exact < 40
+        # a window of 2 frames: open frames capped, the path a valid one
+        capped, open_capped, dec = _offline(order, unary, pair, triple, 2)
+        assert open_capped <= 3
+        assert dec.n_forced > 0
+        assert capped.shape == exact.shape
 
 
 def test_decoder_refuses_bad_input() -> None:
@@ -212,10 +253,12 @@ def test_online_decisions_are_those_of_the_full_backtrack(lag: int) -> None:
             tri = triple[k - 2] if (k >= 2 and order == 2) else None
             decided = on.push(u, pair[k - 1] if k else None, tri)
             full = Decoder(order)
+            full_d = []
             for i in range(k + 1):
                 t2 = triple[i - 2] if (i >= 2 and order == 2) else None
-                full.push(unary[i], pair[i - 1] if i else None, t2)
+                full_d += full.push(unary[i], pair[i - 1] if i else None, t2)
+            best = _path(full_d + full.flush(), k + 1)
             if k >= lag:
-                assert decided == [(k - lag, int(full.flush()[k - lag]))]
+                assert decided == [(k - lag, int(best[k - lag]))]
             else:
                 assert decided == []

@@ -4,58 +4,12 @@ import numpy as np
 import pytest
 
 from mocapkit.errors import ShapeError
-from mocapkit.tracking.mono.flips import enumerate_poses
 from mocapkit.tracking.mono.priors import (
     clavicle_forward_cost,
-    depth_velocity_cost,
-    elbow_flex_cost,
     girdle_angle_cost,
-    reprojection_cost,
 )
 from mocapkit.tracking.mono.stick import stick_model
 from tests.tracking.mono.conftest import random_pose
-
-
-def test_reprojection_cost_known_values_per_camera_model() -> None:
-    rng = np.random.default_rng(3)
-    model = stick_model()
-    pos, _ = random_pose(rng, model, 30.0, depth_mm=3000.0)
-    f = 800.0
-    n = pos[:, :2] / pos[:, 2:3]
-    shifted = n.copy()
-    shifted[4] += (3.0 / f, 4.0 / f)  # 5 px off
-    cost = reprojection_cost(pos[None], shifted, "perspective", f)
-    assert cost == pytest.approx([25.0])
-    assert reprojection_cost(pos[None], n, "perspective", f) == pytest.approx([0.0], abs=1e-18)
-    # weak perspective: inputs scaled by the depth, residual back in px
-    obs = pos[:, :2].copy()
-    obs[2] += (6.0, 8.0)  # mm at 3000 mm, f 800: 1.6 + 2.133 px
-    expect = (6.0**2 + 8.0**2) * (f / 3000.0) ** 2
-    assert reprojection_cost(pos[None], obs, "weak", f, 3000.0) == pytest.approx([expect])
-    # orthographic: px as they are; a NaN joint adds nothing
-    obs = pos[:, :2] + 1.0
-    obs[0] = np.nan
-    assert reprojection_cost(pos[None], obs, "orthographic") == pytest.approx(
-        [2.0 * (len(pos) - 1)]
-    )
-    with pytest.raises(ShapeError, match=r"reprojection_cost: expected positions \(N, K, 3\)"):
-        reprojection_cost(pos, obs, "perspective", f)
-
-
-def test_reprojection_cost_zero_for_the_true_pose_among_perspective_flips() -> None:
-    rng = np.random.default_rng(5)
-    model = stick_model()
-    pos, lengths = random_pose(rng, model, 35.0, depth_mm=2500.0)
-    n = pos[:, :2] / pos[:, 2:3]
-    fp = enumerate_poses(model, lengths, n, pos[0], perspective=True, prune=False)
-    cost = reprojection_cost(fp.positions, n, "perspective", 1000.0)
-    hit = np.all(np.abs(fp.positions - pos[None]).reshape(len(cost), -1) < 1e-6, axis=1)
-    assert hit.sum() == 1
-    assert cost[hit][0] < 1e-12
-    # brute force: the same cost from each pose's own projection
-    for i in range(0, len(cost), 17):
-        proj = fp.positions[i, :, :2] / fp.positions[i, :, 2:3]
-        assert cost[i] == pytest.approx(float(np.sum(((proj - n) * 1000.0) ** 2)), abs=1e-9)
 
 
 def _arm_pose(  # type: ignore[no-untyped-def]
@@ -82,40 +36,6 @@ def _arm_pose(  # type: ignore[no-untyped-def]
         v = np.asarray(d[seg], dtype=float)
         pos[model.child[i]] = pos[model.parent[i]] + 250.0 * v / np.linalg.norm(v)
     return pos
-
-
-def test_elbow_flex_cost_known_values() -> None:
-    model = stick_model()
-    s = np.sqrt(0.5)
-    cases = [
-        ((0.0, 0.0, -1.0), (0.0, 0.0, -1.0), 0.0),  # both bend towards the front
-        ((0.0, 0.0, 1.0), (0.0, 0.0, -1.0), 1.0),  # left straight backwards
-        ((0.0, 1.0, 1.0), (0.0, 0.0, 1.0), 2.0),  # 45 deg and 90 deg backwards: unit bend
-        ((1.0, 0.0, 1.0), (1.0, 0.0, 0.0), s),  # half sideways half backwards; sideways
-        ((0.0, 1.0, 0.1), (0.0, 1.0, -0.1), 0.0),  # nearly straight arms: no direction
-    ]
-    poses = np.stack([_arm_pose(model, a, b) for a, b, _ in cases])
-    np.testing.assert_allclose(elbow_flex_cost(model, poses), [c for _, _, c in cases], atol=1e-12)
-    with pytest.raises(ShapeError, match="elbow_flex_cost: expected positions"):
-        elbow_flex_cost(model, poses[0])
-
-
-def test_depth_velocity_cost_brute_force_and_root_invariance() -> None:
-    rng = np.random.default_rng(7)
-    model = stick_model()
-    a = np.stack([random_pose(rng, model, 40.0)[0] for _ in range(3)])
-    b = np.stack([random_pose(rng, model, 40.0)[0] for _ in range(4)])
-    dt = 1 / 30
-    got = depth_velocity_cost(model, a, b, dt)
-    assert got.shape == (3, 4)
-    for i in range(3):
-        for j in range(4):
-            s = 0.0
-            for k in range(model.n_joints):
-                s += ((b[j, k, 2] - b[j, 0, 2]) - (a[i, k, 2] - a[i, 0, 2])) ** 2
-            assert got[i, j] == pytest.approx(s / dt**2)
-    moved = a + np.array([10.0, -5.0, 400.0])  # the whole pose moved: no relative depth change
-    np.testing.assert_allclose(np.diag(depth_velocity_cost(model, a, moved, dt)), 0.0, atol=1e-6)
 
 
 def test_clavicle_forward_cost_known_values() -> None:

@@ -23,11 +23,11 @@ pose's cost is the sum over its two arms (`ArmPrior.cost`); `MonoConfig.arm_prio
 turns nats into the units of eq. 3.
 
 The shipped table (`mocapkit.tracking.mono.arm_prior_table`) is fitted by
-``examples/mono_fit_arm_prior.py`` on CMU clips that are not in the accuracy set of
-``mocapkit accuracy mono`` (its provenance is in that module's docstring): 12 components,
-0.03 added to each covariance's diagonal. Both were chosen on the training clips alone, by
-leave-one-clip-out log-likelihood; with a floor of 1e-3 the density was so narrow that
-the accuracy clips' true arms cost the full cap in most frames (docs/design-notes/mono.md).
+``tools/mono_fit_arm_prior.py`` on the project's tuning clips, so the report clips stay
+unseen (its provenance is in that module's docstring): 12 components, 0.03 added to each
+covariance's diagonal. Both were chosen by leave-one-clip-out log-likelihood on the
+fitting clips; with a floor of 1e-3 the density was so narrow that unseen clips' true
+arms cost the full cap in most frames.
 """
 
 from __future__ import annotations

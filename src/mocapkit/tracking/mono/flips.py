@@ -34,14 +34,10 @@ the band's far edge, beyond which M5 applies. Links outside the band are untouch
 the counts above hold for links more than t from parallel; with t > 0 a link exactly
 parallel keeps two configurations.
 
-In-plane candidate (beyond the paper; ``in_plane_from``, off by default): the band
-places a link whose projection is as long as the link about ``sqrt(t)`` rad out of the
-image plane, so a link truly in the plane whose 2-D length is uncertain (a clavicle from
-a rebuilt neck) has no candidate there. With a ratio r a link whose parent lies at
-D >= r L from its child's ray, and that still has two flips, gets a third: the child on
-its ray at the point nearest the parent (dz = 0, the placement at the band's far edge).
-Its code sets bit ``L + l`` instead of bit l, so there are up to 3^k 2^(L-k) poses with k
-such links.
+Fixed joints (``fixed``): joints given in 3-D are placed there, their links with one
+configuration, while the constraints still run. The tracker enumerates the legs this
+way, one chain at a time: the upper body first, then the legs below its chosen pose
+(`mocapkit.tracking.mono.tracker`), so a frame has at most 2^8 + 2^6 poses, not 2^14.
 
 A joint without a 2-D position (NaN) has no candidates: it and the joints below it are
 NaN in every pose, its link does not branch and constraints reading it pass.
@@ -80,13 +76,11 @@ class FramePoses(NamedTuple):
     Attributes
     ----------
     codes : (N,) int
-        Bit l set: link l takes its far configuration (child farther from the camera);
-        bit ``n_links + l`` set: its in-plane candidate (``in_plane_from``).
+        Bit l set: link l takes its far configuration (child farther from the camera).
     positions : (N, K, 3) float
         Joints in the camera frame (x right, y down, z along the optical axis; mm).
     n_candidates : int
-        Distinct poses before pruning: 2^(links with two configurations) times 3^(links
-        with three).
+        Distinct poses before pruning: 2^(links with two configurations).
     pruned_all : bool
         Every candidate violated a constraint; ``codes`` then holds the unpruned set
         (recipe M: such a frame keeps its unpruned set).
@@ -218,16 +212,14 @@ def _branches(
     link: int,
     perspective: bool,
     reach: float,
-    plane_from: float,
+    fixed: FloatArray,
     out: FloatArray,
 ) -> int:
-    """Candidate child positions of ``link`` given its placed parent; returns their count.
-
-    Where the parent lies at least ``plane_from L`` from the child's ray and both flips
-    exist, a third candidate follows them: the child on its ray where the ray passes
-    nearest the parent (the band's far-edge placement, dz = 0); ``plane_from`` inf:
-    never.
-    """
+    """Candidate child positions of ``link`` given its placed parent; returns their count
+    (one where the child is ``fixed``)."""
+    if not np.isnan(fixed[stick.child[link], 0]):
+        out[0, :] = fixed[stick.child[link]]
+        return 1
     p = pos[stick.parent[link]]
     o = obs[stick.child[link]]
     length = stick.lengths[link]
@@ -254,11 +246,6 @@ def _branches(
         out[1, 0] = o[0]
         out[1, 1] = o[1]
         out[1, 2] = p[2] + dz
-        if d2 >= (length * plane_from) ** 2:
-            out[2, 0] = o[0]
-            out[2, 1] = o[1]
-            out[2, 2] = p[2]
-            return 3
         return 2
     # perspective: |t r - p| = L on the viewing ray r = (x_n, y_n, 1)
     r = o.copy()
@@ -282,9 +269,6 @@ def _branches(
         return 1
     out[0, :] = t_near * r
     out[1, :] = t_far * r
-    if dist >= length * plane_from:
-        out[2, :] = (b / a) * r  # the ray's point nearest the parent
-        return 3
     return 2
 
 
@@ -297,14 +281,14 @@ def _enumerate(
     perspective: bool,
     prune: bool,
     reach: FloatArray,
-    plane_from: FloatArray,
+    fixed: FloatArray,
     out_codes: IntArray,
     out_pos: FloatArray,
 ) -> int:
     n_links = stick.parent.shape[0]
     pos = np.full((obs.shape[0], 3), np.nan)
     pos[stick.root] = root
-    cand = np.zeros((n_links, 3, 3))
+    cand = np.zeros((n_links, 2, 3))
     n_branch = np.zeros(n_links, dtype=np.int64)
     branch = np.full(n_links, -1, dtype=np.int64)
     code = np.zeros(n_links + 1, dtype=np.int64)  # code[l]: bits of links < l
@@ -314,7 +298,7 @@ def _enumerate(
         branch[level] += 1
         if branch[level] == 0:
             n_branch[level] = _branches(
-                stick, obs, pos, level, perspective, reach[level], plane_from[level], cand[level]
+                stick, obs, pos, level, perspective, reach[level], fixed, cand[level]
             )
         if branch[level] >= n_branch[level]:
             branch[level] = -1
@@ -331,13 +315,11 @@ def _enumerate(
                     break
         if not ok:
             continue
-        # far: bit l; in the plane (the band's third candidate): bit n_links + l
+        # far: bit l
         if b == 0:
             code[level + 1] = code[level]
-        elif b == 1:
-            code[level + 1] = code[level] | (np.int64(1) << level)
         else:
-            code[level + 1] = code[level] | (np.int64(1) << (n_links + level))
+            code[level + 1] = code[level] | (np.int64(1) << level)
         if level == n_links - 1:
             out_codes[n] = code[level + 1]
             out_pos[n] = pos
@@ -370,7 +352,7 @@ def enumerate_poses(
     perspective: bool = False,
     prune: bool = True,
     reach_tolerance: float | ArrayLike = 0.0,
-    in_plane_from: float | ArrayLike = np.inf,
+    fixed: ArrayLike | None = None,
 ) -> FramePoses:
     """All flip configurations of one frame that satisfy the constraints.
 
@@ -396,15 +378,9 @@ def enumerate_poses(
         from its child's ray (orthographic: from its projected end) has its child placed
         on that ray at the length ``L + (D - L (1 - t)) / 2``, two configurations up to
         D = L (1 + t); 0: the paper's (M5 exactly).
-    in_plane_from : float or (L,) float
-        Ratio r, one for every link or one per link: a link whose parent lies at a
-        distance D >= r L from its child's ray and that still has two flips (D below
-        ``L (1 + t)``) gets a third candidate, the child on its ray at the ray's point
-        nearest the parent (orthographic: at the parent's depth; dz = 0, the band's
-        far-edge placement; its code sets bit ``L + l``, not bit l). The band alone
-        places a link that looks as long as itself about ``sqrt(t)`` rad out of the image
-        plane, so a link truly in the plane has no pose there (docs/design-notes/mono.md).
-        inf (default): no third candidate, the paper's two flips.
+    fixed : (K, 3) float, optional
+        Joints already placed (camera frame, as the poses), NaN where free: each such
+        joint is put there and its link has one configuration (module docstring).
 
     Returns
     -------
@@ -422,25 +398,35 @@ def enumerate_poses(
     r = np.asarray(root, dtype=float)
     if r.shape != (3,) or not np.all(np.isfinite(r)):
         raise ShapeError(f"enumerate_poses: expected a finite root (3,), found {r}")
-    flat = _per_link(in_plane_from, model.n_links, "in_plane_from")
-    cap = _capacity(model.n_links, flat)
+    fix = _fixed(model, fixed)
+    cap = _capacity(model, fix)
     codes = np.zeros(cap, dtype=np.int64)
     pos = np.zeros((cap, model.n_joints, 3))
     n_all = -1
     tol = _per_link(reach_tolerance, model.n_links, "reach_tolerance")
-    n = _enumerate(stick, model.checks, obs3, r, perspective, prune, tol, flat, codes, pos)
+    n = _enumerate(stick, model.checks, obs3, r, perspective, prune, tol, fix, codes, pos)
     pruned_all = False
     if prune and n == 0:
-        n = _enumerate(stick, model.checks, obs3, r, perspective, False, tol, flat, codes, pos)
+        n = _enumerate(stick, model.checks, obs3, r, perspective, False, tol, fix, codes, pos)
         n_all, pruned_all = n, True
     if n_all < 0:
-        n_all = count_candidates(model, stick.lengths, obs3, r, perspective, tol, flat)
+        n_all = count_candidates(model, stick.lengths, obs3, r, perspective, tol, fixed)
     return FramePoses(codes[:n].copy(), pos[:n].copy(), n_all, pruned_all)
 
 
+def _fixed(model: StickModel, fixed: ArrayLike | None) -> FloatArray:
+    """The fixed joints (K, 3) as the compiled search reads them (all NaN: none)."""
+    if fixed is None:
+        return np.full((model.n_joints, 3), np.nan)
+    f = np.array(fixed, dtype=float, order="C")
+    if f.shape != (model.n_joints, 3):
+        raise ShapeError(f"fixed: expected ({model.n_joints}, 3) joints, found {f.shape}")
+    f[~np.isfinite(f).all(axis=1)] = np.nan
+    return f
+
+
 def _per_link(value: float | ArrayLike, n_links: int, name: str) -> FloatArray:
-    """A number per link (L,) from one number or one per link (the reach band, the
-    in-plane candidate's ratio)."""
+    """A number per link (L,) from one number or one per link (the reach band)."""
     if isinstance(value, (int, float)):
         return np.full(n_links, float(value))
     tol = np.asarray(value, dtype=float)
@@ -453,10 +439,10 @@ def _per_link(value: float | ArrayLike, n_links: int, name: str) -> FloatArray:
     return np.array(np.broadcast_to(tol, (n_links,)), dtype=float, order="C")
 
 
-def _capacity(n_links: int, plane_from: FloatArray) -> int:
-    """Most poses of one frame: 2 per link, 3 per link with an in-plane candidate."""
-    n3 = int(np.isfinite(plane_from).sum())
-    return (1 << (n_links - n3)) * 3**n3
+def _capacity(model: StickModel, fixed: FloatArray) -> int:
+    """Most poses of one frame: 2 per link whose child is not fixed."""
+    free = np.isnan(fixed[model.child, 0])
+    return 1 << int(free.sum())
 
 
 def count_candidates(
@@ -466,7 +452,7 @@ def count_candidates(
     root: ArrayLike,
     perspective: bool = False,
     reach_tolerance: float | ArrayLike = 0.0,
-    in_plane_from: float | ArrayLike = np.inf,
+    fixed: ArrayLike | None = None,
 ) -> int:
     """Number of distinct poses before pruning (one full unpruned search; arguments as
     `enumerate_poses`)."""
@@ -475,8 +461,8 @@ def count_candidates(
     obs3 = np.zeros((model.n_joints, 3))
     obs3[:, :2] = obs[:, :2]
     obs3[np.isnan(obs[:, :2]).any(axis=1)] = np.nan
-    flat = _per_link(in_plane_from, model.n_links, "in_plane_from")
-    cap = _capacity(model.n_links, flat)
+    fix = _fixed(model, fixed)
+    cap = _capacity(model, fix)
     return int(
         _enumerate(
             stick,
@@ -486,7 +472,7 @@ def count_candidates(
             perspective,
             False,
             _per_link(reach_tolerance, model.n_links, "reach_tolerance"),
-            flat,
+            fix,
             np.zeros(cap, dtype=np.int64),
             np.zeros((cap, model.n_joints, 3)),
         )

@@ -9,19 +9,28 @@ Per frame (streaming, `MonoTracker.push`):
    the search (§4.2; `mocapkit.tracking.mono.flips`); a link whose child's ray lies
    within ``reach_tolerance`` of its length keeps both flips (errata M5 with a length
    band, beyond the paper: video lengths are a few per cent short);
-4. the survivors become a layer of the pose graph; edges are weighted by the corrected
-   angular acceleration of eq. 3 over pair states (errata M1-M3, ``cost="acceleration"``),
-   by joint accelerations (eq. 4-5 with errata M4, ``"joint_acceleration"``), or by the
-   first-order rotation (``"rotation"``, plain states).
+4. the survivors become a layer of the pose graph (`mocapkit.tracking.mono.graph`);
+   edges are weighted by the corrected angular acceleration of eq. 3 over pair states
+   (errata M1-M3, ``cost="acceleration"``), by joint accelerations (eq. 4-5 with errata
+   M4, ``"joint_acceleration"``), or by the first-order rotation (``"rotation"``).
    Beyond the paper, each pose carries soft costs (`mocapkit.tracking.mono.priors`):
    by default the clavicle prior (``clavicle_weight``) and the data-driven arm prior
    (``arm_prior_weight``, `mocapkit.tracking.mono.arm_prior`), and where the neck is
    rebuilt (a detector's, ``rebuilt_joints``) the rigid girdle's clavicle angle
-   (``girdle_weight``) with a wider reach band on the clavicles; the image residual, elbow
-   flex, depth velocity and joint-acceleration terms are off (docs/design-notes/mono.md);
-5. Viterbi picks the path (§4.3): offline (``lag=None``) exactly at the end, online with
-   a fixed lag (`mocapkit.tracking.mono.viterbi.Decoder`). The online latency is
+   (``girdle_weight``) with a wider reach band on the clavicles;
+5. Viterbi picks the path (§4.3; `mocapkit.tracking.mono.viterbi.Decoder`): offline
+   (``lag=None``) exactly, each frame fixed as soon as every path agrees on it (or
+   ``window`` frames later); online with a fixed lag. The online latency is
    ``smooth_lag + lag`` frames.
+
+With legs (``legs``) the graph is decoded one chain at a time: the upper body (trunk,
+clavicles, head, arms: at most 2^8 poses a frame) first, then the legs (at most 2^6)
+enumerated below each decided upper-body pose, in a second graph. Enumerating all 14
+links together gives up to 2^14 poses a frame and 2^28 edges between two frames (the
+cause of gigabytes per clip and MemoryError); the two-chain search keeps both bounded,
+at the cost that the legs do not vote on the trunk's flip, and online a latency of
+``smooth_lag + 2 lag`` frames for the legs. Memory stays flat with the recording's
+length: only open frames are kept.
 
 Camera models (the paper assumes orthography, the camera 10 m away, §4):
 
@@ -73,22 +82,10 @@ from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import ConfigError, ShapeError, unknown_name
 from mocapkit.tracking.mono.arm_prior import ArmPrior, default_arm_prior
 from mocapkit.tracking.mono.flips import enumerate_poses
-from mocapkit.tracking.mono.motion_cost import (
-    acceleration_cost,
-    acceleration_min,
-    joint_acceleration_cost,
-    pair_omegas_and_rotation,
-)
-from mocapkit.tracking.mono.priors import (
-    clavicle_forward_cost,
-    depth_velocity_cost,
-    elbow_flex_cost,
-    girdle_angle_cost,
-    reprojection_cost,
-)
+from mocapkit.tracking.mono.graph import Layer, PoseGraph
+from mocapkit.tracking.mono.priors import clavicle_forward_cost, girdle_angle_cost
 from mocapkit.tracking.mono.smoother import KeypointSmoother
-from mocapkit.tracking.mono.stick import LimitConfig, StickModel, stick_model
-from mocapkit.tracking.mono.viterbi import Decoder
+from mocapkit.tracking.mono.stick import UPPER_LINKS, LimitConfig, StickModel, stick_model
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -123,19 +120,11 @@ class MonoConfig:
         Image noise allowed for in the depth bound (px).
     max_pair_states : int
         Beam cap of pair-state decoding.
+    window : int
+        Offline: most frames a frame waits for every path to agree on it before it is
+        fixed from the best current path (`mocapkit.tracking.mono.viterbi.Decoder`);
+        bounds the memory. Default 300 (10 s at 30 fps).
     limits : LimitConfig
-    residual_weight : float
-        Unary cost per px^2 of a pose's image residual
-        (`mocapkit.tracking.mono.priors.reprojection_cost`); 0: the paper's.
-    elbow_flex_weight : float
-        Unary cost per unit of `mocapkit.tracking.mono.priors.elbow_flex_cost`; 0: off.
-    depth_velocity_weight : float
-        Pair cost per mm^2/s^2 of `mocapkit.tracking.mono.priors.depth_velocity_cost`;
-        0: off.
-    joint_acceleration_weight : float
-        With ``cost="acceleration"``: the joint accelerations of eq. 4-5 (errata M4,
-        mm/s^2 summed over joints) added to eq. 3 with this weight (rad/s^2
-        per mm/s^2); 0: eq. 3 alone (exact fused step).
     clavicle_weight : float
         Unary cost per unit of `mocapkit.tracking.mono.priors.clavicle_forward_cost`
         (eq. 3 costs ~450 rad/s^2 per frame on 13_26); 0: the paper's. Default 300,
@@ -173,17 +162,6 @@ class MonoConfig:
         0.06 did not, docs/design-notes/mono.md).
     rebuilt_reach_links : tuple of str
         Links the wider band applies to: the clavicles (also the trunk and head: worse).
-    rebuilt_in_plane_from : float
-        Where the wider band applies, a third candidate besides the two flips where the
-        link looks at least this share of its length long: the child on its ray at the
-        parent's depth (`mocapkit.tracking.mono.flips.enumerate_poses`,
-        ``in_plane_from``). The band alone places a clavicle whose 2-D length equals its
-        link about ``sqrt(rebuilt_reach_tolerance)`` rad (18 deg) out of the image plane,
-        so one truly in the plane (zombie's) had no pose there. Default inf (off): 0.95
-        with the band 0.1 gave zombie 35.5 -> 27.6 mm and the held-out clips 39.6 ->
-        37.4 mm, but online (``lag`` 10) it mirrored zombie's left arm (75 mm) and with
-        another noise seed it cost lambada 9 mm; 1.0 cost 01_09 5 mm (docs/design-notes/mono.md,
-        eighth round).
     girdle_weight : float
         Unary cost per unit of `mocapkit.tracking.mono.priors.girdle_angle_cost` where
         the clavicles' common parent (the neck) is in ``rebuilt_joints`` and
@@ -210,11 +188,8 @@ class MonoConfig:
     depth_window: int = 31
     depth_margin_px: float = 1.5
     max_pair_states: int = 96
+    window: int = 300
     limits: LimitConfig = field(default_factory=LimitConfig)
-    residual_weight: float = 0.0
-    elbow_flex_weight: float = 0.0
-    depth_velocity_weight: float = 0.0
-    joint_acceleration_weight: float = 0.0
     clavicle_weight: float = 300.0
     arm_prior_weight: float = 30.0
     short_link_weight: float = 0.5
@@ -222,7 +197,6 @@ class MonoConfig:
     rebuilt_joints: tuple[str, ...] = ()
     rebuilt_reach_tolerance: float = 0.1
     rebuilt_reach_links: tuple[str, ...] = ("left_clavicle", "right_clavicle")
-    rebuilt_in_plane_from: float = float("inf")
     girdle_weight: float = 100.0
     girdle_cosine: float = float("nan")
     arm_prior: ArmPrior | None = field(default=None, compare=False, repr=False)
@@ -250,28 +224,23 @@ class MonoConfig:
                 "MonoConfig.rebuilt_reach_tolerance: expected [0, 1), found "
                 f"{self.rebuilt_reach_tolerance}"
             )
-        if not self.rebuilt_in_plane_from >= 0.0:
-            raise ConfigError(
-                "MonoConfig.rebuilt_in_plane_from: expected >= 0 (inf: off), found "
-                f"{self.rebuilt_in_plane_from}"
-            )
-        for name in (
-            "residual_weight",
-            "elbow_flex_weight",
-            "depth_velocity_weight",
-            "joint_acceleration_weight",
-            "clavicle_weight",
-            "arm_prior_weight",
-            "girdle_weight",
-        ):  # a negative weight rewards what the cost penalises; NaN poisons every path
+        for name in ("clavicle_weight", "arm_prior_weight", "short_link_weight", "girdle_weight"):
+            # a negative weight rewards what the cost penalises; NaN poisons every path
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
                 raise ConfigError(
                     f"MonoConfig.{name}: expected a finite weight >= 0 (0: off), found {value}"
                 )
-        if self.depth_window < 1 or self.max_pair_states < 1 or self.smooth_lag < 0:
+        if (
+            self.depth_window < 1
+            or self.max_pair_states < 1
+            or self.window < 1
+            or self.smooth_lag < 0
+        ):
             raise ConfigError(
-                "MonoConfig: depth_window and max_pair_states must be >= 1, smooth_lag >= 0"
+                "MonoConfig: depth_window, max_pair_states and window must be >= 1, "
+                f"smooth_lag >= 0; found {self.depth_window}, {self.max_pair_states}, "
+                f"{self.window}, {self.smooth_lag}"
             )
 
 
@@ -311,22 +280,23 @@ class MonoFrame:
 
 
 @dataclass
-class _Layer:
-    index: int
-    time_s: float
+class _FrameInfo:
+    """What a frame carries through the graphs besides its poses."""
+
     raw_px: FloatArray
-    codes: IntArray
-    positions: FloatArray  # (N, K, 3) camera frame, mm (px for orthographic)
-    vectors: FloatArray  # (N, L, 3)
-    n_candidates: int
-    pruned_all: bool
+    obs: FloatArray
+    root: FloatArray
     depth: float
-    keep: IntArray  # indices of ``codes`` in the decoder's layer (beam)
-    unary: FloatArray  # (N,) soft costs of each pose (priors)
+    n_candidates: int
+    n_survivors: int
+    pruned_all: bool
 
 
 class MonoTracker:
     """Streaming monocular tracker over a stick figure (see the module docstring).
+
+    A `mocapkit.tracking.base.DelayedTracker`-like core: `push` takes one frame's 2-D
+    joints and returns the frames it makes final; `finish` the rest.
 
     Parameters
     ----------
@@ -359,11 +329,18 @@ class MonoTracker:
         self.config = cfg = config or MonoConfig()
         self.model = model or stick_model(cfg.legs, cfg.limits)
         self.lengths = np.asarray(lengths, dtype=float)
+        self.model.arrays(self.lengths)  # validates
+        # the upper body's chain: the model itself, or its first links where it has legs
+        n_upper = len(UPPER_LINKS)
+        self._legs = self.model.n_links > n_upper
+        self.upper = stick_model(False, self.model.limits) if self._legs else self.model
+        if self.upper.joint_names != self.model.joint_names[: self.upper.n_joints]:
+            raise ConfigError(
+                "MonoTracker: expected a stick whose first links are the upper body's "
+                f"{self.upper.segments}, found {self.model.segments}"
+            )
+        self._n_up = self.upper.n_joints
         self._reach = self._link_reach()
-        # the band's in-plane candidate where the band was widened for a rebuilt end
-        self._plane_from = np.where(
-            self._reach > cfg.reach_tolerance, cfg.rebuilt_in_plane_from, np.inf
-        )
         # the girdle cost where the neck is rebuilt (its clavicles mirror images in 2-D)
         self._girdle = (
             cfg.girdle_weight > 0
@@ -371,7 +348,6 @@ class MonoTracker:
             and self.model.joint_names[self.model.parent[self.model.link_index("left_clavicle")]]
             in cfg.rebuilt_joints
         )
-        self.model.arrays(self.lengths)  # validates
         if cfg.camera_model != "orthographic" and camera is None:
             raise ConfigError(
                 f"MonoTracker: camera model {cfg.camera_model!r} needs a calibrated camera"
@@ -381,20 +357,21 @@ class MonoTracker:
         self._smoother = KeypointSmoother(
             self.model.n_joints, dt_s, cfg.smooth_lag, cfg.noise_px, cfg.accel_px_s2, cfg.max_gap
         )
-        order = 1 if cfg.cost == "rotation" else 2
-        self._decoder = Decoder(order, cfg.lag)
-        self._beam = Decoder(1)  # first-order forward costs for the beam
-        self._times: list[float] = []
-        self._raw: list[FloatArray] = []
-        self._layers: list[_Layer] = []
-        self._depths: deque[float] = deque(maxlen=cfg.depth_window)
-        self._done: set[int] = set()
+
+        def graph(model: StickModel) -> PoseGraph:
+            return PoseGraph(model, cfg.cost, dt_s, cfg.lag, cfg.window, cfg.max_pair_states)
+
+        self._graph = graph(self.upper)
+        self._leg_graph = graph(self.model) if self._legs else None
+        self._pending: deque[tuple[float, FloatArray]] = deque()  # (time, raw) to smooth
+        self._pushed = 0
         self._processed = 0
-        self._last_w = np.zeros((0, 0, 0, 3))
+        self._depths: deque[float] = deque(maxlen=cfg.depth_window)
         self._arm_prior: ArmPrior | None = None
         if cfg.arm_prior_weight > 0:
             self._arm_prior = cfg.arm_prior or default_arm_prior()
         self._initial: FloatArray | None = None
+        self._initial_legs: FloatArray | None = None
         if initial_pose is not None:
             q = np.asarray(initial_pose, dtype=float)
             if q.shape != (self.model.n_joints, 3):
@@ -409,14 +386,16 @@ class MonoTracker:
                     "MonoTracker: expected an initial pose with the neck and at least one "
                     f"other joint finite (it needs the neck), found finite joints {found}"
                 )
-            self._initial = q - q[0]
+            self._initial = q[: self._n_up] - q[0]
+            if self._legs:
+                self._initial_legs = q - q[0]
 
     # ------------------------------------------------------------ streaming
 
     def push(self, time_s: float, points_px: ArrayLike) -> list[MonoFrame]:
         """Add one frame of the stick's joints (K, 2) px (NaN where unseen).
 
-        Returns the frames this makes final (online), in order; offline, none.
+        Returns the frames this makes final, in order.
         """
         p = np.asarray(points_px, dtype=float)
         if p.shape != (self.model.n_joints, 2):
@@ -424,29 +403,23 @@ class MonoTracker:
                 f"MonoTracker.push: expected ({self.model.n_joints}, 2) points of "
                 f"{self.model.joint_names}, found {p.shape}"
             )
-        self._times.append(float(time_s))
-        self._raw.append(p)
+        self._pending.append((float(time_s), p))
+        self._pushed += 1
         self._smoother.push(p)
         out: list[MonoFrame] = []
-        ready = len(self._raw) - 1 - self.config.smooth_lag
+        ready = self._pushed - 1 - self.config.smooth_lag
         while self._processed <= ready:
-            out += self._process(self._processed)
-            self._processed += 1
+            out += self._process()
         return out
 
     def finish(self) -> list[MonoFrame]:
         """Process the frames still waiting and return every frame not yet returned."""
         out: list[MonoFrame] = []
-        while self._processed < len(self._raw):
-            out += self._process(self._processed)
-            self._processed += 1
-        if self._layers:
-            path = self._decoder.flush()
-            for k, s in enumerate(path):
-                if k not in self._done:
-                    out.append(self._frame(k, int(s)))
-                    self._done.add(k)
-        out.sort(key=lambda f: f.index)
+        while self._processed < self._pushed:
+            out += self._process()
+        out += self._legs_of(self._graph.finish())
+        if self._leg_graph is not None:
+            out += [self._frame(layer, s) for layer, s in self._leg_graph.finish()]
         return out
 
     # ------------------------------------------------------------ one frame
@@ -509,175 +482,101 @@ class MonoTracker:
                 tol[li] = max(tol[li], cfg.rebuilt_reach_tolerance)
         return tol
 
-    def _process(self, k: int) -> list[MonoFrame]:
+    def _enumerate(
+        self, model: StickModel, obs: FloatArray, root: FloatArray, fixed: FloatArray | None
+    ) -> tuple[IntArray, FloatArray, int, bool]:
+        """Candidate poses of ``model`` (one empty pose without a root: it keeps the graph
+        connected)."""
+        if not np.isfinite(root).all():
+            return np.zeros(1, dtype=np.int64), np.full((1, model.n_joints, 3), np.nan), 0, False
+        persp = self.config.camera_model == "perspective" and self.camera is not None
+        fp = enumerate_poses(
+            model,
+            self.lengths[: model.n_links],
+            obs[: model.n_joints],
+            root,
+            perspective=persp,
+            reach_tolerance=self._reach[: model.n_links],
+            fixed=fixed,
+        )
+        return fp.codes, fp.positions, fp.n_candidates, fp.pruned_all
+
+    def _process(self) -> list[MonoFrame]:
+        k = self._processed
+        self._processed += 1
+        time_s, raw = self._pending.popleft()
         pts = self._smoother.smoothed(k)
         obs, root, depth = self._observation(pts)
-        persp = self.config.camera_model == "perspective" and self.camera is not None
-        if np.isfinite(root).all():
-            fp = enumerate_poses(
-                self.model,
-                self.lengths,
-                obs,
-                root,
-                perspective=persp,
-                reach_tolerance=self._reach,
-                in_plane_from=self._plane_from,
-            )
-            codes, positions, n_cand, pruned_all = fp
-        else:  # no root this frame: one empty pose keeps the graph connected
-            codes = np.zeros(1, dtype=np.int64)
-            positions = np.full((1, self.model.n_joints, 3), np.nan)
-            n_cand, pruned_all = 0, False
-        vectors = self.model.link_vectors(positions)
-        prev = self._layers[-1] if self._layers else None
-        w_full = r_full = None
-        if prev is not None:
-            w_full, r_full = pair_omegas_and_rotation(
-                prev.vectors, vectors, self._dt(prev.index, k)
-            )
-        unary = self._unary(positions, obs, depth)
-        keep = self._beam_select(unary, r_full)
+        codes, positions, n_cand, pruned_all = self._enumerate(self.upper, obs, root, None)
+        unary = self._unary(positions)
+        only = None
         if self._initial is not None and np.isfinite(positions).any():
-            keep = np.array([self._nearest_to_initial(positions)], dtype=np.int64)
+            only = _nearest(positions, self._initial)
             self._initial = None  # only the first posed frame
-        layer = _Layer(
-            k,
-            self._times[k],
-            self._raw[k],
-            codes,
-            positions,
-            vectors,
-            n_cand,
-            pruned_all,
-            depth,
-            keep,
-            unary,
-        )
-        self._layers.append(layer)
-        decided = self._push_decoder(layer, w_full, r_full)
-        out = []
-        for frame, state in decided:
-            out.append(self._frame(frame, state))
-            self._done.add(frame)
+        info = _FrameInfo(raw, obs, root, depth, n_cand, codes.shape[0], pruned_all)
+        decided = self._graph.add(time_s, codes, positions, unary, info, only)
+        return self._legs_of(decided)
+
+    def _legs_of(self, decided: list[tuple[Layer, int]]) -> list[MonoFrame]:
+        """The frames whose upper body is decided: final without legs; with legs, their
+        legs enumerated below it and added to the legs' graph."""
+        if self._leg_graph is None:
+            return [self._frame(layer, s) for layer, s in decided]
+        out: list[MonoFrame] = []
+        for layer, s in decided:
+            info: _FrameInfo = layer.info
+            fixed = np.full((self.model.n_joints, 3), np.nan)
+            fixed[: self._n_up] = layer.positions[s]
+            posed = np.isfinite(fixed[0]).all()
+            codes, positions, n_cand, pruned = self._enumerate(
+                self.model, info.obs, info.root, fixed if posed else None
+            )
+            codes = codes | layer.codes[s]
+            only = None
+            if self._initial_legs is not None and np.isfinite(positions).any():
+                only = _nearest(positions, self._initial_legs)
+                self._initial_legs = None
+            whole = _FrameInfo(
+                info.raw_px,
+                info.obs,
+                info.root,
+                info.depth,
+                info.n_candidates * max(n_cand, 1),
+                info.n_survivors * codes.shape[0],
+                info.pruned_all or pruned,
+            )
+            unary = np.zeros(codes.shape[0])  # the soft costs read the upper body only
+            done = self._leg_graph.add(layer.time_s, codes, positions, unary, whole, only)
+            out += [self._frame(g, c) for g, c in done]
         return out
 
-    def _nearest_to_initial(self, positions: FloatArray) -> int:
-        """Index of the candidate (N, K, 3) nearest to the initial pose, relative to the neck
-        (mean distance over the joints finite in both)."""
-        assert self._initial is not None
-        rel = positions - positions[:, :1]
-        d = np.linalg.norm(rel - self._initial, axis=-1)  # (N, K)
-        ok = np.isfinite(d)
-        n = ok.sum(axis=1)
-        mean = np.where(n > 0, np.where(ok, d, 0.0).sum(axis=1) / np.maximum(n, 1), np.inf)
-        return int(np.argmin(mean))
-
-    def _dt(self, a: int, b: int) -> float:
-        d = self._times[b] - self._times[a]
-        return d if d > 0 else self.dt_s
-
-    def _unary(self, positions: FloatArray, obs: FloatArray, depth: float) -> FloatArray:
-        """Soft costs of each pose (zeros with the paper's settings)."""
+    def _unary(self, positions: FloatArray) -> FloatArray:
+        """Soft costs of each upper-body pose (zeros with the paper's settings)."""
         cfg = self.config
         u = np.zeros(positions.shape[0])
-        if cfg.residual_weight > 0:
-            f = 1.0 if self.camera is None else float(self.camera.K[0, 0])
-            model = cfg.camera_model if self.camera is not None else "orthographic"
-            u += cfg.residual_weight * reprojection_cost(positions, obs, model, f, depth)
-        if cfg.elbow_flex_weight > 0:
-            u += cfg.elbow_flex_weight * elbow_flex_cost(self.model, positions)
         if cfg.clavicle_weight > 0:
-            u += cfg.clavicle_weight * clavicle_forward_cost(self.model, positions)
+            u += cfg.clavicle_weight * clavicle_forward_cost(self.upper, positions)
         if self._girdle:
-            u += cfg.girdle_weight * girdle_angle_cost(self.model, positions, cfg.girdle_cosine)
+            u += cfg.girdle_weight * girdle_angle_cost(self.upper, positions, cfg.girdle_cosine)
         if self._arm_prior is not None:
-            u += cfg.arm_prior_weight * self._arm_prior.cost(self.model, positions)
+            u += cfg.arm_prior_weight * self._arm_prior.cost(self.upper, positions)
         return u
 
-    def _beam_select(self, unary: FloatArray, rotation: FloatArray | None) -> IntArray:
-        """States of this layer the pair-state decoder keeps (all of them under the cap).
-
-        The beam runs a first-order (rotation) forward pass over the full layers and keeps
-        the ``max_pair_states`` states of lowest forward cost.
-        """
-        n = unary.shape[0]
-        if self._decoder.order == 1:
-            return np.arange(n)
-        if rotation is None:
-            self._beam.push(unary)
-        else:
-            self._beam.push(unary, rotation)
-        if n <= self.config.max_pair_states:
-            return np.arange(n)
-        cost = self._beam.forward_costs()
-        return np.sort(np.argsort(cost, kind="stable")[: self.config.max_pair_states])
-
-    def _push_decoder(
-        self, layer: _Layer, w_full: FloatArray | None, r_full: FloatArray | None
-    ) -> list[tuple[int, int]]:
-        cfg = self.config
-        sel = layer.keep
-        u = layer.unary[sel]
-        if w_full is None or r_full is None:
-            return self._decoder.push(u)
-        prev = self._layers[-2]
-        pick = np.ix_(prev.keep, sel)
-        pair = np.zeros((prev.keep.shape[0], sel.shape[0]))
-        if cfg.depth_velocity_weight > 0:
-            pair += cfg.depth_velocity_weight * depth_velocity_cost(
-                self.model,
-                prev.positions[prev.keep],
-                layer.positions[sel],
-                self._dt(prev.index, layer.index),
-            )
-        if cfg.cost == "rotation":
-            return self._decoder.push(u, r_full[pick] + pair)
-        w_b = w_full[pick]
-        if len(self._layers) == 2:
-            self._last_w = w_b
-            return self._decoder.push(u, pair)
-        older = self._layers[-3]
-        dt_mid = 0.5 * self._dt(older.index, layer.index)
-        if cfg.cost == "acceleration" and cfg.joint_acceleration_weight > 0:
-            tot = self._decoder.pair_costs()[:, :, None] + acceleration_cost(
-                self._last_w, w_b, dt_mid
-            )
-            tot += cfg.joint_acceleration_weight * joint_acceleration_cost(
-                older.positions[older.keep], prev.positions[prev.keep], layer.positions[sel], dt_mid
-            )
-            back = np.argmin(tot, axis=0)
-            best = np.take_along_axis(tot, back[None], axis=0)[0]
-            self._last_w = w_b
-            return self._decoder.push_reduced(u, pair, best, back)
-        if cfg.cost == "acceleration":
-            best, back = acceleration_min(self._decoder.pair_costs(), self._last_w, w_b, dt_mid)
-            self._last_w = w_b
-            return self._decoder.push_reduced(u, pair, best, back)
-        else:
-            triple = joint_acceleration_cost(
-                older.positions[older.keep],
-                prev.positions[prev.keep],
-                layer.positions[sel],
-                dt_mid,
-            )
-        self._last_w = w_b
-        return self._decoder.push(u, pair, triple)
-
-    def _frame(self, k: int, state: int) -> MonoFrame:
-        layer = self._layers[k]
-        s = int(layer.keep[state])
-        pos = layer.positions[s].copy()
+    def _frame(self, layer: Layer, s: int) -> MonoFrame:
+        info: _FrameInfo = layer.info
+        pos = np.full((self.model.n_joints, 3), np.nan)
+        pos[: layer.positions.shape[1]] = layer.positions[s]
         code = int(layer.codes[s]) if np.isfinite(pos).any() else -1
         return MonoFrame(
             index=layer.index,
             time_s=layer.time_s,
             joints_in_camera=pos,
             code=code,
-            n_candidates=layer.n_candidates,
-            n_survivors=int(layer.codes.shape[0]) if code >= 0 else 0,
-            pruned_all=layer.pruned_all,
-            residual_px=self._residual(pos, layer.raw_px),
-            depth_mm=layer.depth,
+            n_candidates=info.n_candidates,
+            n_survivors=info.n_survivors if code >= 0 else 0,
+            pruned_all=info.pruned_all,
+            residual_px=self._residual(pos, info.raw_px),
+            depth_mm=info.depth,
         )
 
     def _residual(self, pos: FloatArray, raw: FloatArray) -> float:
@@ -687,3 +586,14 @@ class MonoTracker:
             proj = self.camera.project_camera_points(pos)
         d = np.linalg.norm(proj - raw, axis=1)
         return float(np.nanmean(d)) if np.isfinite(d).any() else float("nan")
+
+
+def _nearest(positions: FloatArray, initial: FloatArray) -> int:
+    """Index of the candidate (N, K, 3) nearest to the neck-relative ``initial`` pose
+    (mean distance over the joints finite in both)."""
+    rel = positions - positions[:, :1]
+    d = np.linalg.norm(rel - initial, axis=-1)  # (N, K)
+    ok = np.isfinite(d)
+    n = ok.sum(axis=1)
+    mean = np.where(n > 0, np.where(ok, d, 0.0).sum(axis=1) / np.maximum(n, 1), np.inf)
+    return int(np.argmin(mean))

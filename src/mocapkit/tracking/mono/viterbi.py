@@ -6,15 +6,18 @@ the first layer to the last. Eq. 3 couples three frames (errata M3), so the exac
 runs Viterbi over pair states (phi_k, phi_{k+1}), O(T N^3); a first-order weight runs on
 plain states, O(T N^2).
 
-`Decoder` runs either form frame by frame. Offline (``lag=None``) it backtracks once at
-the end (exact). Online with ``lag=D`` it fixes frame k - D when frame k arrives, by
-backtracking from the best state at k: a latency of D frames, and a path that may differ
-from the offline one where later frames would have changed an earlier choice.
+`Decoder` runs either form frame by frame in bounded memory. Offline (``lag=None``) it
+fixes a frame once the best paths into all current states agree on it (exact; a frame
+still open after a window of frames is fixed from the best current path). Online with
+``lag=D`` it fixes frame k - D when frame k arrives, by backtracking from the best state
+at k: a latency of D frames, and a path that may differ from the offline one where later
+frames would have changed an earlier choice.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections import deque
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -28,8 +31,17 @@ IntArray = NDArray[np.int64]
 class Decoder:
     """Frame-by-frame Viterbi over plain (``order=1``) or pair states (``order=2``).
 
-    Call `push` once per frame, then `flush`. Costs are non-negative or any real
-    numbers; a state that no path reaches has cost ``inf``.
+    Call `push` once per frame, then `flush`; each returns the (frame, state) decisions
+    it makes final, in frame order, and over a whole sequence every frame is decided
+    once. Costs are non-negative or any real numbers; a state that no path reaches has
+    cost ``inf``.
+
+    Memory is bounded: only the back-pointers of frames not yet decided are kept.
+    Online (``lag=D``) frame k - D is fixed when frame k arrives. Offline (``lag=None``)
+    a frame is fixed as soon as the best paths into every reachable current state pass
+    through one state there (they then share all earlier frames too: survivor merging),
+    which is the exact offline answer; a frame still open ``window`` frames later is
+    fixed from the best current path, as online with that lag.
 
     Parameters
     ----------
@@ -37,24 +49,40 @@ class Decoder:
         1: weights on pairs of consecutive frames. 2: also on triples (pair states).
     lag : int or None
         Frames of delay before a frame's state is fixed (online); None: offline.
+    window : int
+        Offline: most frames a frame stays open (memory bound); see above.
     """
 
-    def __init__(self, order: int = 1, lag: int | None = None) -> None:
+    def __init__(self, order: int = 1, lag: int | None = None, window: int = 1 << 30) -> None:
         if order not in (1, 2):
             raise ConfigError(f"Decoder order: expected 1 or 2, found {order}")
         if lag is not None and lag < 0:
             raise ConfigError(f"Decoder lag: expected >= 0 frames or None, found {lag}")
+        if window < 1:
+            raise ConfigError(f"Decoder window: expected >= 1 frame, found {window}")
         self.order = order
         self.lag = lag
+        self.window = window
         self._cost: FloatArray | None = None  # (N_k,) or (N_{k-1}, N_k)
-        self._back: list[IntArray] = []  # per frame k >= 1 (order 1) / k >= 2 (order 2)
-        self._sizes: list[int] = []
-        self._decided: dict[int, int] = {}
+        # back-pointers of frames first_back, first_back + 1, ... (order 1: state of k - 1
+        # per state of k; order 2: state of k - 2 per pair state (k - 1, k))
+        self._back: deque[NDArray[np.integer]] = deque()
+        self._first_back = order
+        self._sizes: deque[int] = deque(maxlen=2)
+        self._n = 0
+        self._next = 0  # oldest frame not decided yet
+        #: Offline: frames fixed by the ``window`` rule rather than by merging.
+        self.n_forced = 0
 
     @property
     def n_frames(self) -> int:
         """Frames pushed so far."""
-        return len(self._sizes)
+        return self._n
+
+    @property
+    def first_open(self) -> int:
+        """The oldest frame not decided yet."""
+        return self._next
 
     def push(
         self,
@@ -62,7 +90,7 @@ class Decoder:
         pairwise: ArrayLike | None = None,
         triple: ArrayLike | None = None,
     ) -> list[tuple[int, int]]:
-        """Add frame k; returns the (frame, state) decisions this makes final (online).
+        """Add frame k; returns the (frame, state) decisions this makes final.
 
         Parameters
         ----------
@@ -94,7 +122,7 @@ class Decoder:
                 tot = self._cost[:, None] + p
                 back = np.argmin(tot, axis=0)
                 self._cost = tot[back, np.arange(u.shape[0])] + u
-                self._back.append(back.astype(np.int64))
+                self._store(back)
             elif k == 1:
                 self._cost = self._cost[:, None] + p + u[None, :]
             else:
@@ -110,8 +138,9 @@ class Decoder:
                 back = np.argmin(tot, axis=0)  # (j, m)
                 jj, mm = np.meshgrid(np.arange(t.shape[1]), np.arange(t.shape[2]), indexing="ij")
                 self._cost = tot[back, jj, mm] + p + u[None, :]
-                self._back.append(back.astype(np.int64))
+                self._store(back)
         self._sizes.append(int(u.shape[0]))
+        self._n += 1
         return self._decide()
 
     def pair_costs(self) -> FloatArray:
@@ -142,62 +171,85 @@ class Decoder:
                 f"{want}; found {u.shape}, {p.shape}, {bst.shape}, {bk.shape}"
             )
         self._cost = bst + p + u[None, :]
-        self._back.append(bk)
+        self._store(bk)
         self._sizes.append(int(u.shape[0]))
+        self._n += 1
         return self._decide()
 
+    def _store(self, back: NDArray[np.integer]) -> None:
+        """Keep a frame's back-pointers in the smallest integer type that holds them."""
+        top = int(back.max()) if back.size else 0
+        self._back.append(back.astype(np.min_scalar_type(top)))
+
+    def _entry(self, k: int) -> NDArray[np.integer]:
+        return self._back[k - self._first_back]
+
     def _decide(self) -> list[tuple[int, int]]:
-        if self.lag is None:
-            return []
-        target = self.n_frames - 1 - self.lag
-        if target < 0 or target in self._decided:
-            return []
-        path = self._backtrack(self.lag + 1)
-        state = int(path[target - (self.n_frames - path.shape[0])])
-        self._decided[target] = state
-        return [(target, state)]
-
-    def _backtrack(self, depth: int | None = None) -> IntArray:
-        """Best path ending in the best current state: all frames, or the last ``depth``.
-
-        Online, only the ``lag + 1`` newest frames are walked for each decision, so a
-        decision costs O(lag), not O(frames so far).
-        """
         n = self.n_frames
-        first = 0 if depth is None else max(n - depth, 0)
-        full = self._backtrack_all() if first == 0 else None
-        if full is not None:
-            return full
-        path = np.zeros(n - first, dtype=np.int64)
+        if self.lag is not None:
+            return self._fix_until(n - 1 - self.lag, self._best_path)
+        # the merge check walks back over the open frames: run it less often as they
+        # grow (every open/8 frames), so its cost per frame stays bounded
+        out = []
+        if n % max(1, (n - self._next) // 8) == 0:
+            out = self._fix_until(self._merged(), self._best_path)
+        forced = self._fix_until(n - 1 - self.window, self._best_path)
+        self.n_forced += len(forced)
+        return out + forced
+
+    def _fix_until(self, last: int, path_from: Callable[[int], IntArray]) -> list[tuple[int, int]]:
+        """Decide the open frames up to ``last`` along ``path_from(first open frame)``."""
+        if last < self._next:
+            return []
+        path = path_from(self._next)
+        out = [(f, int(path[f - self._next])) for f in range(self._next, last + 1)]
+        self._next = last + 1
+        # back-pointers of frames <= next (order 1) / next + 1 (order 2) only lead to
+        # decided frames
+        while self._back and self._first_back <= self._next + self.order - 1:
+            self._back.popleft()
+            self._first_back += 1
+        return out
+
+    def _best_path(self, first: int) -> IntArray:
+        """States of frames first .. n - 1 on the best path into the newest frame."""
         assert self._cost is not None
-        if self.order == 1:
+        n = self.n_frames
+        path = np.zeros(n - first, dtype=np.int64)
+        if self._cost.ndim == 1:
             path[-1] = int(np.argmin(self._cost))
             for k in range(n - 1, first, -1):
-                path[k - 1 - first] = self._back[k - 1][path[k - first]]
+                path[k - 1 - first] = self._entry(k)[path[k - first]]
             return path
         j, m = np.unravel_index(int(np.argmin(self._cost)), self._cost.shape)
         path[-1] = int(m)
         if n - first >= 2:
             path[-2] = int(j)
         for k in range(n - 1, first + 1, -1):
-            path[k - 2 - first] = self._back[k - 2][path[k - 1 - first], path[k - first]]
+            # entry k: the best state of frame k - 2 given (k - 1, k)
+            path[k - 2 - first] = self._entry(k)[path[k - 1 - first], path[k - first]]
         return path
 
-    def _backtrack_all(self) -> IntArray:
-        n = self.n_frames
-        path = np.zeros(n, dtype=np.int64)
+    def _merged(self) -> int:
+        """Newest frame through which the best paths into every reachable current state
+        pass in one state (with the frame before, for pair states); -1 if none open."""
         assert self._cost is not None
-        if self.order == 1 or n == 1:
-            path[-1] = int(np.argmin(self._cost))
-            for k in range(n - 1, 0, -1):
-                path[k - 1] = self._back[k - 1][path[k]]
-            return path
-        j, m = np.unravel_index(int(np.argmin(self._cost)), self._cost.shape)
-        path[-1], path[-2] = int(m), int(j)
-        for k in range(n - 1, 1, -1):
-            # back[k - 2][j, m] is the best state of frame k - 2 given (k - 1, k)
-            path[k - 2] = self._back[k - 2][path[k - 1], path[k]]
-        return path
+        n = self.n_frames
+        if self._cost.ndim == 1:
+            s = np.flatnonzero(np.isfinite(self._cost))
+            k = n - 1
+            while s.shape[0] > 1 and k > self._next:
+                s = np.unique(self._entry(k)[s])
+                k -= 1
+            return k if s.shape[0] <= 1 else -1
+        jj, mm = np.nonzero(np.isfinite(self._cost))
+        k = n - 1
+        while jj.shape[0] > 1 and k > self._next + 1:
+            older = self._entry(k)[jj, mm].astype(np.int64)
+            pairs = np.unique((older << 32) | jj)  # distinct (k - 2, k - 1) pair states
+            jj, mm = pairs >> 32, pairs & 0xFFFFFFFF
+            k -= 1
+        return k if jj.shape[0] <= 1 else -1
 
     def forward_costs(self) -> FloatArray:
         """Best cost of a path ending in each state of the newest frame (N_k,)."""
@@ -211,14 +263,11 @@ class Decoder:
         assert self._cost is not None
         return float(np.min(self._cost))
 
-    def flush(self) -> IntArray:
-        """The states of all frames: fixed decisions (online) and the best path for the rest."""
+    def flush(self) -> list[tuple[int, int]]:
+        """End of the sequence: the open frames' decisions, along the best path."""
         if self.n_frames == 0:
-            return np.zeros(0, dtype=np.int64)
-        path = self._backtrack()
-        for k, s in self._decided.items():
-            path[k] = s
-        return path
+            return []
+        return self._fix_until(self.n_frames - 1, self._best_path)
 
 
 def viterbi(unary: Sequence[ArrayLike], pairwise: Sequence[ArrayLike]) -> tuple[IntArray, float]:
@@ -239,9 +288,11 @@ def viterbi(unary: Sequence[ArrayLike], pairwise: Sequence[ArrayLike]) -> tuple[
             f"viterbi: expected {len(unary) - 1} pairwise arrays, found {len(pairwise)}"
         )
     dec = Decoder(1)
+    decided = []
     for k, u in enumerate(unary):
-        dec.push(u, pairwise[k - 1] if k else None)
-    return dec.flush(), dec.best_cost()
+        decided += dec.push(u, pairwise[k - 1] if k else None)
+    decided += dec.flush()
+    return np.array([s for _, s in decided], dtype=np.int64), dec.best_cost()
 
 
 def pair_viterbi(
@@ -262,6 +313,8 @@ def pair_viterbi(
             f"{len(pairwise)} and {len(triple)}"
         )
     dec = Decoder(2)
+    decided = []
     for k, u in enumerate(unary):
-        dec.push(u, pairwise[k - 1] if k else None, triple[k - 2] if k >= 2 else None)
-    return dec.flush(), dec.best_cost()
+        decided += dec.push(u, pairwise[k - 1] if k else None, triple[k - 2] if k >= 2 else None)
+    decided += dec.flush()
+    return np.array([s for _, s in decided], dtype=np.int64), dec.best_cost()

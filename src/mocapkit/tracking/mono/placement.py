@@ -1,0 +1,111 @@
+"""The subject's depth from the feet on the floor, with a calibrated camera.
+
+The tracker's own depth (`mocapkit.tracking.mono.tracker`) comes from the link lengths
+alone: an upper bound per frame, of which a low percentile is taken, so it errs by one
+or two hundred mm either way and the pose lands off the person in the other cameras.
+A calibrated camera also knows its height and tilt above the floor (the world's z = 0,
+z up). Where an ankle is seen and stands on the floor, its viewing ray meets the plane
+``z = ankle_height`` at the foot; the neck lies on its own ray above the foot
+(upright trunk): the ray's point nearest the foot in the floor's plan gives the neck's
+depth. Of the two ankles the nearer intersection is taken (a raised foot's ray meets the
+plane beyond the foot). A frame counts only where the neck so placed stands a plausible
+height above the foot (``neck_share`` of the stature, a band); the depth of a frame is
+the median over a window of such frames around it. Where none is found, the tracker's
+own depth stays.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mocapkit.camera.pinhole import Camera
+
+FloatArray = NDArray[np.float64]
+
+#: Height of the ankle joint above the floor when the foot is down, as a share of the
+#: stature (the lowest ankle of the tuning clips' truth: 0.052-0.072).
+ANKLE_SHARE = 0.055
+#: Band of the neck's height above the standing ankle, as shares of the stature:
+#: upright about 0.78; lower when bent or squatting; above it the foot is off the floor.
+NECK_SHARE = (0.45, 0.85)
+
+
+def floor_neck_depth(
+    camera: Camera, stature_mm: float, neck_px: ArrayLike, ankles_px: ArrayLike
+) -> float:
+    """Depth (camera z, mm) of the neck above the foot standing on the floor; NaN where
+    no ankle is seen, none meets the floor in front of the camera, or the neck so placed
+    is not a plausible height above it (module docstring).
+
+    Parameters
+    ----------
+    camera : Camera
+        Calibrated, in a world frame whose floor is z = 0 (z up).
+    stature_mm : float
+    neck_px : (2,) float
+    ankles_px : (A, 2) float
+        NaN where not seen.
+    """
+    neck = np.asarray(neck_px, dtype=float).reshape(1, 2)
+    ankles = np.asarray(ankles_px, dtype=float).reshape(-1, 2)
+    seen = np.isfinite(ankles).all(axis=1)
+    if not np.isfinite(neck).all() or not seen.any():
+        return float("nan")
+    world_from_camera = np.linalg.inv(camera.camera_from_world)
+    rot, centre = world_from_camera[:3, :3], world_from_camera[:3, 3]
+    rays = np.c_[camera.undistort_pixels(ankles[seen]), np.ones(int(seen.sum()))] @ rot.T
+    height = ANKLE_SHARE * stature_mm
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (height - centre[2]) / rays[:, 2]
+    t = np.where(np.isfinite(t) & (t > 0), t, np.inf)
+    if not np.isfinite(t).any():
+        return float("nan")
+    i = int(np.argmin(t))  # the nearer foot: a raised one meets the plane beyond itself
+    foot = centre + t[i] * rays[i]
+    d = np.r_[camera.undistort_pixels(neck)[0], 1.0] @ rot.T
+    plan = float(d[:2] @ d[:2])
+    if plan <= 1e-12:
+        return float("nan")
+    s = float((foot - centre)[:2] @ d[:2]) / plan
+    neck_w = centre + s * d
+    rise = (neck_w[2] - foot[2]) / stature_mm
+    if s <= 0 or not NECK_SHARE[0] <= rise <= NECK_SHARE[1]:
+        return float("nan")
+    return float(s)  # the ray's z in the camera frame is 1: s is the depth
+
+
+class FloorDepth:
+    """`floor_neck_depth` per frame, and its median over a window of frames around one.
+
+    Parameters
+    ----------
+    camera : Camera
+    stature_mm : float
+    half_window : int
+        Frames on each side of a frame whose depths its median takes.
+    """
+
+    def __init__(self, camera: Camera, stature_mm: float, half_window: int = 15) -> None:
+        self.camera = camera
+        self.stature_mm = float(stature_mm)
+        self.half_window = half_window
+        self._depth: dict[int, float] = {}
+        self._n = 0
+
+    def push(self, neck_px: ArrayLike, ankles_px: ArrayLike) -> None:
+        """The next frame's neck and ankles (px, NaN where unseen)."""
+        self._depth[self._n] = floor_neck_depth(self.camera, self.stature_mm, neck_px, ankles_px)
+        self._n += 1
+
+    def depth(self, frame: int) -> float:
+        """Median depth of the window around ``frame`` among the frames pushed (NaN if it
+        has none); frames older than the window are forgotten (call in frame order)."""
+        for k in [k for k in self._depth if k < frame - self.half_window]:
+            del self._depth[k]
+        w = [
+            v
+            for k, v in self._depth.items()
+            if abs(k - frame) <= self.half_window and np.isfinite(v)
+        ]
+        return float(np.median(w)) if w else float("nan")

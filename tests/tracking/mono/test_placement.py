@@ -1,0 +1,52 @@
+"""The neck's depth from the feet on the floor (`mocapkit.tracking.mono.placement`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
+from mocapkit.tracking.mono.placement import ANKLE_SHARE, FloorDepth, floor_neck_depth
+
+STATURE = 1700.0
+
+
+def _camera() -> Camera:
+    k = intrinsics_from_fov((640, 480), 60.0)
+    # 1.6 m up, tilted down towards a point 3 m away at 1 m
+    return Camera("c", (640, 480), k, np.zeros(5), look_at((0, -3000, 1600), (0, 0, 1000)))
+
+
+def test_a_standing_subject_gets_its_necks_depth_and_a_raised_foot_is_ignored() -> None:
+    cam = _camera()
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        x, y = rng.uniform(-600, 600), rng.uniform(-800, 1500)
+        foot = np.array([x, y, ANKLE_SHARE * STATURE])
+        neck = foot + np.array([0.0, 0.0, 0.78 * STATURE])
+        # the other foot lifted 300 mm and 200 mm forward: its ray meets the floor beyond
+        other = foot + np.array([150.0, -200.0, 300.0])
+        px = cam.project(np.stack([neck, foot, other]))
+        z = floor_neck_depth(cam, STATURE, px[0], px[1:])
+        assert abs(z - cam.to_camera(neck[None])[0, 2]) < 1e-6
+    # no ankle seen; a neck far too high above the foot (the foot on a box): no depth
+    assert np.isnan(floor_neck_depth(cam, STATURE, px[0], np.full((2, 2), np.nan)))
+    foot = np.array([0.0, 500.0, ANKLE_SHARE * STATURE])
+    high = cam.project(np.stack([foot + np.array([0.0, 0.0, 1.3 * STATURE]), foot]))
+    assert np.isnan(floor_neck_depth(cam, STATURE, high[0], high[1:]))
+
+
+def test_floor_depth_is_the_median_of_the_window_around_a_frame() -> None:
+    cam = _camera()
+    floor = FloorDepth(cam, STATURE, half_window=2)
+    depths = []
+    for y in (0.0, 100.0, 200.0, 300.0, 400.0, 500.0):
+        foot = np.array([0.0, y, ANKLE_SHARE * STATURE])
+        neck = foot + np.array([0.0, 0.0, 0.78 * STATURE])
+        px = cam.project(np.stack([neck, foot]))
+        floor.push(px[0], px[1:])
+        depths.append(cam.to_camera(neck[None])[0, 2])
+    floor.push(np.full(2, np.nan), np.full((2, 2), np.nan))  # an unseen frame adds nothing
+    assert floor.depth(0) == pytest.approx(np.median(depths[:3]))
+    assert floor.depth(3) == pytest.approx(np.median(depths[1:6]))
+    assert floor.depth(6) == pytest.approx(np.median(depths[4:6]))
