@@ -536,8 +536,7 @@ def track_mono(
     # reach tolerance too (in every pass it changed the refined lengths: 45.2 -> 46.4 mm), and
     # the clavicles' wider band for a rebuilt neck with it; the girdle cost of a rebuilt
     # neck stays (a rigid bone triangle, not a prior on the pose: without it in the length
-    # passes, at girdle weight 300, 01_09 from OpenPose JSON 41.5 -> 42.6 mm, 91.2 -> 86.6 %,
-    # seventh round).
+    # passes a detector's input lost flips; docs/design-notes/mono.md).
     paper_cfg = replace(
         cfg,
         clavicle_weight=0.0,

@@ -166,9 +166,8 @@ class MonoConfig:
         Unary cost per unit of `mocapkit.tracking.mono.priors.girdle_angle_cost` where
         the clavicles' common parent (the neck) is in ``rebuilt_joints`` and
         ``girdle_cosine`` is finite; 0: off. Default 100: offline 300 gained 0.3-0.5 mm
-        and about a point of flips on the five accuracy clips (two noise seeds), but
-        online (``lag`` 10) it mirrored zombie's left arm (59.8 mm against 48.8 at 100
-        and 50.0 without the change); 1000 mirrors it offline too (seventh round).
+        and about a point of flips on the tuning clips, but online (``lag`` 10) it
+        mirrored an arm; 1000 mirrors it offline too (docs/design-notes/mono.md).
     girdle_cosine : float
         Cosine of the angle between the two clavicles of the subject's rigid girdle;
         NaN (default): no girdle cost.
