@@ -18,7 +18,7 @@ import csv
 import io
 import math
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -144,10 +144,27 @@ def run_tracker(
         results.sort(key=lambda r: r.time_s)
     if not results:
         raise ShapeError(f"{label}: no samples to track")
+    motion = results_motion(results, sk, source, joint_names)
+    out = None
+    if out_dir is not None:
+        with timer.stage("write"):
+            out = write_run_folder(out_dir, motion, results)
+    return RunResult(motion, results, out)
+
+
+def results_motion(
+    results: Sequence[FrameResult],
+    skeleton: Skeleton,
+    source: str = "",
+    joint_names: Sequence[str] | None = None,
+) -> Motion:
+    """The motion of a run's results (time order), with `unobserved_to_nan` applied:
+    joints by forward kinematics of ``q``, or taken from the results' ``joints_mm`` for
+    ``joint_names`` (as `run_tracker`'s parameter)."""
     t = np.array([r.time_s for r in results])
     q = np.stack([r.q for r in results])
     if joint_names is None:
-        motion = Motion.from_q(sk, t, q, source=source)
+        motion = Motion.from_q(skeleton, t, q, source=source)
     else:
         names = tuple(joint_names)
         unknown = [n for n in names if n not in CANONICAL_JOINTS]
@@ -155,13 +172,18 @@ def run_tracker(
             raise unknown_name("canonical joint", unknown[0], CANONICAL_JOINTS, "joint_names")
         rows = [CANONICAL_JOINTS.index(n) for n in names]
         joints = np.stack([r.joints_mm[rows] for r in results])
-        motion = Motion(sk, t, q, names, joints, source)
-    motion = unobserved_to_nan(motion, results)
-    out = None
-    if out_dir is not None:
-        with timer.stage("write"):
-            out = write_run_folder(out_dir, motion, results)
-    return RunResult(motion, results, out)
+        motion = Motion(skeleton, t, q, names, joints, source)
+    return unobserved_to_nan(motion, results)
+
+
+def unobserved_joints(status: Mapping[str, str]) -> list[str]:
+    """The canonical joints made up in a frame with these statuses: those that a released
+    or missing effector or limb alone places (`mocapkit.tracking.base.unobserved_part`)."""
+    out: list[str] = []
+    for name, st in status.items():
+        part = unobserved_part(name) if st in UNOBSERVED else None
+        out += part[1] if part is not None else ()
+    return out
 
 
 def unobserved_to_nan(motion: Motion, results: Sequence[FrameResult]) -> Motion:
@@ -187,11 +209,9 @@ def unobserved_to_nan(motion: Motion, results: Sequence[FrameResult]) -> Motion:
             for k, row in enumerate(rows):
                 if row >= 0 and np.isnan(rj[row]).any():
                     joints[i, k] = np.nan
-        for name, st in r.status.items():
-            part = unobserved_part(name) if st in UNOBSERVED else None
-            for joint in part[1] if part is not None else ():
-                if joint in col:
-                    joints[i, col[joint]] = np.nan
+        for joint in unobserved_joints(r.status):
+            if joint in col:
+                joints[i, col[joint]] = np.nan
     if np.array_equal(joints, motion.joints_mm, equal_nan=True):
         return motion
     return Motion(
@@ -423,7 +443,9 @@ __all__ = [
     "find_gaps",
     "motion_for_bvh",
     "read_fit_csv",
+    "results_motion",
     "run_tracker",
+    "unobserved_joints",
     "unobserved_to_nan",
     "write_fit_csv",
     "write_run_folder",
