@@ -538,17 +538,30 @@ class LiveFeed:
             ):
                 self.stats.frames_dropped += 1
                 continue
-            yield self._sample(index, t, stamp, value)
+            sample = self._sample(index, t, stamp, value)
+            if sample is None:  # a camera without any frame yet
+                self.stats.frames_dropped += 1
+                continue
+            yield sample
             index += 1
             self.stats.frames_tracked += 1
 
+    def _missing(self, role: str, inp: _Input, t: float) -> bool:
+        """Whether partner ``inp`` still lacks its sample for step time ``t``: the markers
+        one that is due (`_Input.due`), another input one at or after ``t``."""
+        if role == "markers":
+            return inp.due(t)
+        return not inp.lost and inp.newest_t < t - 1e-9
+
     def _wait_partners(self, t: float) -> None:
         deadline = time.monotonic() + self.config.match_wait_s
-        waiting = [i for r, i in self.inputs.items() if r != self.driver and i.due(t)]
+        waiting = [
+            (r, i) for r, i in self.inputs.items() if r != self.driver and self._missing(r, i, t)
+        ]
         while waiting and time.monotonic() < deadline:
-            for inp in waiting:
+            for _, inp in waiting:
                 self._poll(inp)
-            waiting = [i for i in waiting if i.due(t)]
+            waiting = [(r, i) for r, i in waiting if self._missing(r, i, t)]
             if waiting:
                 time.sleep(0.0005)
 
@@ -560,7 +573,7 @@ class LiveFeed:
         stream.advance_to(max(j, stream.index))
         return LazyFrame(stream, stream.index, float(self.video_time[cam][stream.index]))
 
-    def _sample(self, index: int, t: float, stamp: float, value: Any) -> SessionSample:
+    def _sample(self, index: int, t: float, stamp: float, value: Any) -> SessionSample | None:
         role, _, cam = self.driver.partition(":")
         if role == "frames":
             frame = self._frame(cam, self.inputs[self.driver], t, value, index)
@@ -579,6 +592,9 @@ class LiveFeed:
                 continue
             k = inp.nearest(t)
             if k < 0:
+                if kind == "frames":
+                    self.pending.pop()
+                    return None
                 continue
             if kind == "frames":
                 frames[other] = self._frame(other, inp, inp.t[0], inp.values[0], index)
