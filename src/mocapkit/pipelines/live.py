@@ -237,18 +237,21 @@ class InputRecorder:
         w.write(image)
         times.append(t)
 
-    def sample(self, s: SessionSample, frames: bool, rate_hz: float) -> None:
-        """Record what a matched sample holds that was not recorded yet."""
-        if s.markers_mm is not None and (not self.markers or s.marker_time_s > self.markers[-1][0]):
-            self.marker_names = s.marker_names
-            self.markers.append((s.marker_time_s, np.array(s.markers_mm, copy=True)))
-        for cam, px in s.keypoints_px.items():
-            rows = self.keypoints.setdefault(cam, [])
-            if not rows or s.time_s > rows[-1][0]:
-                rows.append((s.time_s, np.array(px, copy=True)))
-        if frames:
-            for cam, f in s.frames.items():
-                self.frame(cam, f.time_s, f.load(), rate_hz)
+    def marker_sample(self, t: float, positions_mm: FloatArray) -> None:
+        """Append one received marker sample (mm)."""
+        if not self.markers or t > self.markers[-1][0]:
+            self.markers.append((t, np.array(positions_mm, dtype=float, copy=True)))
+
+    def keypoints_sample(self, cam: str, t: float, pixels: FloatArray) -> None:
+        """Append one received keypoints sample of ``cam`` (px)."""
+        rows = self.keypoints.setdefault(cam, [])
+        if not rows or t > rows[-1][0]:
+            rows.append((t, np.array(pixels, dtype=float, copy=True)))
+
+    def frames(self, s: SessionSample, rate_hz: float) -> None:
+        """Append the frames of a tracked sample."""
+        for cam, f in s.frames.items():
+            self.frame(cam, f.time_s, f.load(), rate_hz)
 
     def finish(self, keypoint_names: dict[str, tuple[str, ...]], rates: dict[str, float]) -> None:
         """Write the files (the folder is swapped in by the caller)."""
@@ -406,6 +409,17 @@ def _driver(method: str, inputs: LiveInputs) -> str:
     return f"frames:{next(iter(inputs.video))}" if inputs.video else "markers"
 
 
+def _tap(feed: LiveFeed, recorder: InputRecorder) -> None:
+    """Every marker and keypoints sample received goes to the recorder."""
+    for role, inp in feed.inputs.items():
+        kind, _, cam = role.partition(":")
+        if kind == "markers":
+            recorder.marker_names = feed.marker_names
+            inp.tap = recorder.marker_sample
+        elif kind == "keypoints":
+            inp.tap = lambda t, px, cam=cam: recorder.keypoints_sample(cam, t, px)
+
+
 def _run(
     method: str,
     setup: Session,
@@ -447,11 +461,12 @@ def _run(
         if recorder is not None:
             remove_stale_temporaries(recorder.folder.parent, recorder.folder.name)
             recorder.tmp = stack.enter_context(atomic_folder(recorder.folder))
+            _tap(feed, recorder)
         stack.enter_context(_sigint_stops(feed))
         video = any(r.startswith("frames:") for r in feed.inputs)
         for s in feed.samples():
-            if recorder is not None:
-                recorder.sample(s, video, drv_rate)
+            if recorder is not None and video:
+                recorder.frames(s, drv_rate)
             sample = live.to_sample(s)
             if delayed is not None:
                 publish(delayed.push(sample))

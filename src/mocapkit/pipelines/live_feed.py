@@ -85,7 +85,8 @@ class LiveConfig:
         A frame already this old (LSL clock) when its turn comes is dropped (counted) so
         that the output keeps up; inf: track every frame.
     connect_timeout_s : float
-        How long to wait for each named LSL stream to appear.
+        How long to wait for each named LSL stream to appear, and then for its first
+        sample.
     mono_lag : int
         The mono tracker's online Viterbi lag (frames; latency lag + smoother lag).
     """
@@ -157,6 +158,8 @@ class _Input:
         self.newest_t = -math.inf
         #: Why the input ended (empty while it runs).
         self.lost = ""
+        #: Called with (time, values) of every sample received (a recorder).
+        self.tap: Callable[[float, Any], None] | None = None
 
     def poll(self) -> None:
         """Take what has arrived (never blocks); raise `StreamLost` when the source ended."""
@@ -172,6 +175,8 @@ class _Input:
         self.newest_t = max(self.newest_t, t)
         self.n_received += 1
         self.last_rx = time.monotonic()
+        if self.tap is not None:
+            self.tap(t, value)
 
     def close(self) -> None:
         """Release the source."""
@@ -498,11 +503,10 @@ class LiveFeed:
             inp.lost = f"lost {exc}"
             return
         silent = time.monotonic() - inp.last_rx
-        if silent > self.config.lost_after_s:
-            inp.lost = (
-                f"lost {inp.label}: no sample for {silent:.1f} s "
-                f"(lost after {self.config.lost_after_s:g} s)"
-            )
+        # before its first sample an input has connect_timeout_s to start sending
+        limit = self.config.lost_after_s if inp.n_received else self.config.connect_timeout_s
+        if silent > limit:
+            inp.lost = f"lost {inp.label}: no sample for {silent:.1f} s (lost after {limit:g} s)"
 
     def samples(self) -> Iterator[SessionSample]:
         """The matched samples, until a stop or a lost input (`stop_reason` says which).

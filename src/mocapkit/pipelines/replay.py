@@ -54,11 +54,13 @@ def stream_names(session: Session, prefix: str = STREAM_PREFIX) -> dict[str, str
 
 @dataclass
 class ReplayStats:
-    """What a replay sent: samples per stream name, and the session span (s)."""
+    """What a replay sent: samples per stream name, the session span (s), its clock and
+    whether it was stopped early."""
 
     samples: dict[str, int]
     start_s: float
     end_s: float
+    clock: ReplayClock
     stopped: bool = False
 
 
@@ -185,7 +187,7 @@ def replay_session(
         counts[names[role]] += 1
         end = t
     outlets.clear()  # closing the outlets ends the streams
-    return ReplayStats(counts, t0, end, stopped)
+    return ReplayStats(counts, t0, end, clock, stopped)
 
 
 def _rows(
