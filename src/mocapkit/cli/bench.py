@@ -1,4 +1,4 @@
-"""``mocapkit bench kinematics|hybrid|mono|all``: speed figures (medians over repeats)."""
+"""``mocapkit bench NAME``: speed figures (medians over repeats)."""
 
 from __future__ import annotations
 

@@ -291,12 +291,22 @@ def _bench_stereo(repeats: int = 3) -> dict[str, Any]:
     return bench_stereo(repeats=repeats)
 
 
+def _bench_live(repeats: int = 1) -> dict[str, Any]:
+    """Latency of each tracker live (`mocapkit.pipelines.live_bench.bench_live`)."""
+    from mocapkit.pipelines.live_bench import bench_live
+
+    return bench_live(repeats=repeats)
+
+
 BENCHMARKS: dict[str, Callable[..., dict[str, Any]]] = {
     "kinematics": bench_kinematics,
     "hybrid": bench_hybrid,
     "mono": bench_mono,
     "stereo": _bench_stereo,
+    "live": _bench_live,
 }
+#: Benchmarks that ``all`` leaves out: ``live`` needs ``mocapkit[live]`` and runs in real time.
+NOT_IN_ALL: tuple[str, ...] = ("live",)
 
 
 def run_benchmarks(
@@ -317,7 +327,7 @@ def run_benchmarks(
         raise unknown_name("benchmark", name, [*BENCHMARKS, "all"], "mocapkit bench")
     if repeats < 1:
         raise ConfigError(f"--repeats: expected at least 1, found {repeats}")
-    names = list(BENCHMARKS) if name == "all" else [name]
+    names = [n for n in BENCHMARKS if n not in NOT_IN_ALL] if name == "all" else [name]
     return {
         n: BENCHMARKS[n](repeats=repeats, work_dir=work_dir)
         if n == "hybrid"
@@ -362,7 +372,8 @@ def format_table(results: dict[str, dict[str, Any]]) -> str:
             if isinstance(value, dict):
                 lines.append(f"  {key}")
                 for k, v in value.items():
-                    lines.append(f"    {k:<{width - 2}}  {v:,.3f}")
+                    shown = f"{v:,.3f}" if isinstance(v, float) else str(v)
+                    lines.append(f"    {k:<{width - 2}}  {shown}")
                 continue
             shown = f"{value:,.3f}" if isinstance(value, float) else str(value)
             lines.append(f"  {key:<{width}}  {shown}")
