@@ -32,7 +32,7 @@ from mocapkit.io.lsl import JOINTS_TYPE, local_clock, make_outlet, point_labels
 from mocapkit.io.marker_csv import write_markers_csv
 from mocapkit.io.session import Session, SessionSample, load_session, write_session_json
 from mocapkit.io.session_csv import write_keypoints_csv, write_timestamps_csv
-from mocapkit.pipelines.live_feed import LiveConfig, LiveFeed, LiveInputs, LiveStats
+from mocapkit.pipelines.live_feed import LiveConfig, LiveFeed, LiveInputs, LiveStats, rss_mb
 from mocapkit.pipelines.run import (
     check_result_folder,
     find_gaps,
@@ -452,6 +452,8 @@ def _run(
             if stamp is not None:
                 latency.append(1e3 * (local_clock() - stamp))
             sent += 1
+            if sent == 1:
+                feed.stats.rss_first_mb = rss_mb()
             if keep is not None:
                 keep.append(r)
             if on_result is not None:
@@ -481,6 +483,7 @@ def _run(
             recorder.finish(names, rates)
     feed.stats.latency_ms = list(latency)
     feed.stats.results = sent
+    feed.stats.rss_last_mb = rss_mb()
     report = LiveReport(
         method,
         feed.stop_reason or "stopped",

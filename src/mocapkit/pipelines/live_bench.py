@@ -34,15 +34,6 @@ VIDEO_RATE_HZ = 30.0
 STEREO_CAMERAS = ("stereo_left", "stereo_right")
 
 
-def rss_mb() -> float:
-    """This process's resident memory (MB; NaN where /proc is absent)."""
-    try:
-        pages = int(Path("/proc/self/statm").read_text().split()[1])
-    except (OSError, ValueError, IndexError):
-        return float("nan")
-    return pages * os.sysconf("SC_PAGE_SIZE") / 1e6
-
-
 def live_bench_session(work_dir: Path, seconds: float | None = None) -> Path:
     """The benchmark's session, rendered once into ``work_dir``."""
     from mocapkit.synth.session_writer import SynthOptions, synthesize_session
@@ -125,12 +116,6 @@ def bench_live_one(
         text=True,
         preexec_fn=None if not replay_cpus else (lambda: os.sched_setaffinity(0, replay_cpus)),
     )
-    rss: list[float] = []
-
-    def on_result(_: Any) -> None:
-        if not rss:
-            rss.append(rss_mb())
-
     try:
         t0 = time.perf_counter()
         report = track_live(
@@ -139,7 +124,6 @@ def bench_live_one(
             inputs,
             stream_name=f"{prefix}joints",
             config=LiveConfig(lost_after_s=1.0, connect_timeout_s=60.0),
-            on_result=on_result,
         )
         wall = time.perf_counter() - t0
     finally:
@@ -154,8 +138,8 @@ def bench_live_one(
         "frames_tracked": float(report.stats.frames_tracked),
         "frames_dropped": float(report.stats.frames_dropped),
         "results_sent": float(report.n_results),
-        "rss_first_mb": rss[0] if rss else float("nan"),
-        "rss_last_mb": rss_mb(),
+        "rss_first_mb": report.stats.rss_first_mb,
+        "rss_last_mb": report.stats.rss_last_mb,
         "wall_s": wall,
         "stopped": report.stop_reason,
     }
@@ -205,4 +189,4 @@ def bench_live(
     return out
 
 
-__all__ = ["LIVE_BENCH_CLIP", "bench_live", "bench_live_one", "live_bench_session", "rss_mb"]
+__all__ = ["LIVE_BENCH_CLIP", "bench_live", "bench_live_one", "live_bench_session"]

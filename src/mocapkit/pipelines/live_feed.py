@@ -37,6 +37,7 @@ ended it.
 from __future__ import annotations
 
 import math
+import os
 import threading
 import time
 from collections import deque
@@ -358,6 +359,18 @@ class LiveStats:
     frames_dropped: int = 0
     latency_ms: list[float] = field(default_factory=list)
     results: int = 0
+    #: The process's resident memory (MB) at the first result and at the end.
+    rss_first_mb: float = math.nan
+    rss_last_mb: float = math.nan
+
+
+def rss_mb() -> float:
+    """This process's resident memory (MB; NaN where /proc is absent)."""
+    try:
+        pages = int(Path("/proc/self/statm").read_text().split()[1])
+    except (OSError, ValueError, IndexError):
+        return math.nan
+    return pages * os.sysconf("SC_PAGE_SIZE") / 1e6
 
 
 class LiveFeed:
