@@ -287,3 +287,15 @@ def test_live_refuses_stream_without_the_marker_sets(session, tmp_path):
             )
     finally:
         del outlet
+
+
+def test_cli_live_and_replay_refuse_bad_use(session, capsys):
+    from mocapkit.cli.main import main
+
+    assert main(["live", "hybrid", str(session)]) == 2
+    assert "live hybrid: expected a marker stream (--markers NAME)" in capsys.readouterr().err
+    assert main(["live", "stereo", str(session), "--video", "mono=0"]) == 2
+    assert "expected two or more cameras (--video), found ['mono']" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["replay", str(session), "--lsl", "--speed", "0"])
+    assert "--speed" in capsys.readouterr().err
