@@ -111,6 +111,7 @@ def run(args: argparse.Namespace) -> int:
         "results_sent": report.n_results,
         "received": report.stats.received,
         "latency": report.latency_summary(),
+        "step_cpu": report.step_cpu_summary(),
         "rss_mb": {"first_result": report.stats.rss_first_mb, "end": report.stats.rss_last_mb},
         "out": str(report.out_dir) if report.out_dir else None,
         "record": str(report.record_dir) if report.record_dir else None,

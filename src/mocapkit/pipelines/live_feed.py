@@ -358,6 +358,7 @@ class LiveStats:
     frames_tracked: int = 0
     frames_dropped: int = 0
     latency_ms: list[float] = field(default_factory=list)
+    step_cpu_ms: list[float] = field(default_factory=list)
     results: int = 0
     #: The process's resident memory (MB) at the first result and at the end.
     rss_first_mb: float = math.nan
