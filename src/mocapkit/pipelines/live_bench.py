@@ -8,7 +8,8 @@ compiled and warmed up first on the same session offline. Per tracker: the laten
 each input sample's LSL time stamp to its output sample being sent (median, 99th
 percentile, max; ms), the CPU time of each step (the tracker's update and the output, on
 the tracking thread: what the latency is on an idle core, less waiting), frames tracked
-and dropped, and the process's memory (RSS) at the first and last result. Timings are figures to read, never asserted by tests.
+and dropped, and the process's memory (RSS) at the first and last result. Timings are
+figures to read, never asserted by tests.
 """
 
 from __future__ import annotations
