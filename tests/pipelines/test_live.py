@@ -296,6 +296,17 @@ def test_cli_live_and_replay_refuse_bad_use(session, capsys):
     assert "live hybrid: expected a marker stream (--markers NAME)" in capsys.readouterr().err
     assert main(["live", "stereo", str(session), "--video", "mono=0"]) == 2
     assert "expected two or more cameras (--video), found ['mono']" in capsys.readouterr().err
+    try:
+        import cv2
+
+        cv2.namedWindow("probe")
+        gui = True
+    except cv2.error:
+        gui = False
+    if not gui:  # headless OpenCV: --view is refused before connecting to anything
+        args = ["live", "hybrid", str(session), "--markers", "m", "--video", "mono=lsl:f"]
+        assert main([*args, "--view"]) == 2
+        assert "--view needs OpenCV with a GUI" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["replay", str(session), "--lsl", "--speed", "0"])
     assert "--speed" in capsys.readouterr().err

@@ -75,6 +75,12 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         default=_DEFAULTS.lost_after_s,
         help=f"stop when an input is silent this long (default {_DEFAULTS.lost_after_s:g} s)",
     )
+    p.add_argument(
+        "--view",
+        action="store_true",
+        help="show the joints over the first camera's image in a window (needs OpenCV "
+        "with a GUI; off by default, for headless use)",
+    )
     p.add_argument("--json", action="store_true", help="print the run's report as JSON")
     p.set_defaults(func=run)
 
@@ -102,7 +108,16 @@ def run(args: argparse.Namespace) -> int:
         inputs = replace(inputs, markers=None)
     config = LiveConfig(lost_after_s=args.lost_after_s, mono_lag=args.lag)
     print(f"live {args.method}: publishing {args.stream}; Ctrl-C stops", file=sys.stderr)
-    report = track_live(args.method, args.setup, inputs, args.out, args.record, args.stream, config)
+    report = track_live(
+        args.method,
+        args.setup,
+        inputs,
+        args.out,
+        args.record,
+        args.stream,
+        config,
+        view=args.view,
+    )
     summary = {
         "method": report.method,
         "stopped": report.stop_reason,

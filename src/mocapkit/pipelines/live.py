@@ -283,6 +283,42 @@ class InputRecorder:
         write_session_json(self.tmp / "session.json", info)
 
 
+# ====================================================================== the view
+
+
+class LiveView:
+    """The joints drawn over the driving camera's image in an OpenCV window (streaming
+    trackers driven by a camera; the mono tracker's delayed results are not shown)."""
+
+    WINDOW = "mocapkit live"
+
+    def __init__(self, setup: Session, driver: str) -> None:
+        kind, _, cam = driver.partition(":")
+        if kind != "frames":
+            raise ConfigError(f"--view: expected a camera driving the time line, found {driver!r}")
+        try:
+            cv2.namedWindow(self.WINDOW, cv2.WINDOW_NORMAL)
+        except cv2.error:
+            raise ConfigError(
+                "--view needs OpenCV with a GUI (opencv-python, not opencv-python-headless); "
+                "leave --view off in headless use"
+            ) from None
+        self.cam = cam
+        self.camera = setup.camera(cam)
+
+    def show(self, s: SessionSample, result: FrameResult) -> None:
+        """Draw ``result`` over the sample's frame and show it."""
+        from mocapkit.viz.overlay import draw_sticks
+
+        frame = s.frames.get(self.cam)
+        if frame is None:
+            return
+        joints = np.asarray(published_joints(result)).reshape(-1, 3)
+        image = draw_sticks(frame.load().copy(), self.camera, CANONICAL_JOINTS, joints)
+        cv2.imshow(self.WINDOW, image)
+        cv2.waitKey(1)
+
+
 # ====================================================================== the run
 
 
@@ -359,6 +395,7 @@ def track_live(
     stop: threading.Event | None = None,
     on_result: Callable[[FrameResult], None] | None = None,
     keep_latency: int = 200_000,
+    view: bool = False,
 ) -> LiveReport:
     """Track live inputs with ``method`` until Ctrl-C, ``stop`` or a lost input.
 
@@ -383,6 +420,9 @@ def track_live(
         Called with each result after it is sent.
     keep_latency : int
         Latencies kept for the report (the newest).
+    view : bool
+        Show the joints over the first camera's image in a window (`LiveView`; needs
+        OpenCV with a GUI); off for headless use.
     """
     if method not in LIVE_METHODS:
         from mocapkit.errors import unknown_name
@@ -403,11 +443,12 @@ def track_live(
         if method == "stereo"
         else _mono(setup, inputs, cfg)
     )
+    shown = LiveView(setup, _driver(method, inputs)) if view else None  # before connecting
     feed = LiveFeed(setup, inputs, _driver(method, inputs), cfg, stop)
     try:
         live = build(feed)
         return _run(method, setup, feed, live, out_dir, record_dir, stream_name, on_result,
-                    keep_latency)  # fmt: skip
+                    keep_latency, shown)  # fmt: skip
     finally:
         feed.close()
 
@@ -441,6 +482,7 @@ def _run(
     stream_name: str,
     on_result: Callable[[FrameResult], None] | None,
     keep_latency: int,
+    view: LiveView | None = None,
 ) -> LiveReport:
     drv_rate = feed.inputs[live.driver].rate_hz
     outlet = joints_outlet(stream_name, method, drv_rate)
@@ -486,7 +528,10 @@ def _run(
             if delayed is not None:
                 publish(delayed.push(sample))
             elif streaming is not None:
-                publish([streaming.update(sample)])
+                result = streaming.update(sample)
+                publish([result])
+                if view is not None:
+                    view.show(s, result)
             step_cpu.append(1e3 * (time.thread_time() - c0))
         if delayed is not None:
             publish(sorted(delayed.finish(), key=lambda r: r.time_s))
