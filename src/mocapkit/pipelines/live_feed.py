@@ -461,6 +461,12 @@ class LiveFeed:
                 self._add_lsl(f"frames:{cam}", layout, inlet)
                 self._open_replayed_video(cam, layout)
             else:
+                if self.clock.replay is not None:
+                    raise ConfigError(
+                        f"--video {cam}={source}: a camera runs on the LSL clock, the other "
+                        "inputs on a replay's session clock; give a replay's frames "
+                        "(lsl:STREAM) or live streams"
+                    )
                 self.inputs[f"frames:{cam}"] = _CameraInput(f"camera {cam} ({source})", source)
 
     def _add_lsl(self, role: str, layout: StreamLayout, inlet: Any) -> None:
