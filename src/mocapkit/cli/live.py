@@ -100,6 +100,7 @@ def run(args: argparse.Namespace) -> int:
         keypoints = dict(args.keypoints) or dict(r.keypoints)
         if args.method == "hybrid":
             video = dict(list(video.items())[:1])
+            keypoints = dict(args.keypoints)
         if args.method == "mono":
             keypoints = dict(list(keypoints.items())[:1])
             video = {}
