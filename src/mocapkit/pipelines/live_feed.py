@@ -1,8 +1,8 @@
-"""Live tracking: LSL streams and cameras in, the canonical joints out as an LSL stream.
+"""The input side of live tracking: LSL streams and cameras matched into session samples.
 
-`track_live` runs one of the trackers (hybrid, stereo, mono) on live inputs, frame by
-frame, through the same ``update``/``push`` a recorded session goes through. A *setup*
-session folder gives what does not stream: ``cameras.json`` (calibration) and
+`mocapkit.pipelines.live.track_live` runs one of the trackers (hybrid, stereo, mono) on
+live inputs, frame by frame, through the same ``update``/``push`` a recorded session goes
+through. A *setup* session folder gives what does not stream: ``cameras.json`` (calibration) and
 ``session.json`` (subject, marker sets and their offsets). The inputs:
 
 - markers: an LSL stream of ``<marker>_x/_y/_z`` channels (`mocapkit.io.lsl`), e.g. the
