@@ -76,9 +76,11 @@ def session(tmp_path_factory):
     return folder
 
 
-def _live(method, folder, inputs_of, speed, tmp_path, **kwargs):
+def _live(method, folder, inputs_of, speed, tmp_path, match_wait_s=1.0, **kwargs):
     """Track a replay of ``folder`` live; returns the report, the result folder and the
-    joints stream as a consumer received it (samples, stamps, its metadata)."""
+    joints stream as a consumer received it (samples, stamps, its metadata). A step waits
+    up to ``match_wait_s`` for a due partner sample: long, so that a loaded machine's
+    late delivery cannot change the pairing (the wait ends when the sample comes)."""
     from mocapkit.io.lsl import find_stream, inlet_layout, open_inlet
 
     prefix = f"t{uuid.uuid4().hex[:8]}_"
@@ -116,7 +118,12 @@ def _live(method, folder, inputs_of, speed, tmp_path, **kwargs):
             inputs,
             out,
             stream_name=joints_name,
-            config=LiveConfig(lost_after_s=LOST_S, connect_timeout_s=30.0, max_behind_s=np.inf),
+            config=LiveConfig(
+                match_wait_s=match_wait_s,
+                lost_after_s=LOST_S,
+                connect_timeout_s=30.0,
+                max_behind_s=np.inf,
+            ),
             **kwargs,
         )
     finally:
@@ -228,7 +235,8 @@ def test_stalled_marker_stream_bridged_released_and_back(session, tmp_path):
     gap = (m.time_s >= 0.1) & (m.time_s < 0.1 + 1.0 * 0.5)  # 0.5 s of session at speed 0.5
     write_markers_csv(folder / "markers.csv", m.time_s[~gap], m.names, m.positions_mm[~gap])
     offline = track_hybrid_session(folder, tmp_path / "offline")
-    report, out, _, _ = _live("hybrid", folder, _first_camera, 0.5, tmp_path)
+    # a frame waits 0.2 s at most for a due marker sample: during the stall none comes
+    report, out, _, _ = _live("hybrid", folder, _first_camera, 0.5, tmp_path, 0.2)
     assert report.stats.frames_dropped == 0
     live = _same_joints(out, offline, atol=0.0)
     rows, _ = read_fit_csv(out / "fit.csv")

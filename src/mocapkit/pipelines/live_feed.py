@@ -79,7 +79,8 @@ class LiveConfig:
     Attributes
     ----------
     match_wait_s : float
-        Longest wait of a frame for a partner sample that is due but not yet received.
+        Longest wait of a frame for a partner sample that is due but not yet received
+        (the wait ends as soon as it, or a later one, arrives).
     lost_after_s : float
         An input silent this long (wall clock) is lost: the run stops.
     max_behind_s : float
@@ -140,6 +141,11 @@ def replay_inputs(setup: Session, prefix: str) -> LiveInputs:
 # ====================================================================== input buffers
 
 
+#: A partner sample is awaited once its stream's newest sample is this fraction of a
+#: nominal period older than the step (time-stamp jitter of a quarter period allowed).
+DUE_FRACTION = 0.75
+
+
 class StreamLost(Exception):
     """An input ended; the message says which and why."""
 
@@ -183,10 +189,12 @@ class _Input:
         """Release the source."""
 
     def due(self, t: float) -> bool:
-        """Whether a sample at or before ``t`` is expected but not yet received."""
+        """Whether a sample at or before ``t`` may exist that has not been received: the
+        newest one is more than `DUE_FRACTION` of a nominal period before ``t`` (a
+        stream comes in order, so a sample after ``t`` ends the wait)."""
         if self.lost or self.rate_hz <= 0 or not math.isfinite(self.newest_t):
             return False
-        return self.newest_t + 1.0 / self.rate_hz <= t + 1e-9
+        return self.newest_t + DUE_FRACTION / self.rate_hz <= t + 1e-9
 
     def newest_at_or_before(self, t: float) -> int:
         """Index of the newest sample at or before ``t`` (-1 when none); older ones are
