@@ -191,8 +191,13 @@ class _Input:
     def due(self, t: float) -> bool:
         """Whether a sample at or before ``t`` may exist that has not been received: the
         newest one is more than `DUE_FRACTION` of a nominal period before ``t`` (a
-        stream comes in order, so a sample after ``t`` ends the wait)."""
-        if self.lost or self.rate_hz <= 0 or not math.isfinite(self.newest_t):
+        stream comes in order, so a sample after ``t`` ends the wait), or none has come
+        yet."""
+        if self.lost:
+            return False
+        if not math.isfinite(self.newest_t):
+            return True
+        if self.rate_hz <= 0:
             return False
         return self.newest_t + DUE_FRACTION / self.rate_hz <= t + 1e-9
 
