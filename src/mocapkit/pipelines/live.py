@@ -494,7 +494,7 @@ def _run(
     delayed = live.tracker if isinstance(live.tracker, DelayedTracker) else None
     streaming = live.tracker if isinstance(live.tracker, Tracker) else None
 
-    def publish(results: list[FrameResult]) -> None:
+    def publish(results: list[FrameResult], timed: bool = True) -> None:
         nonlocal sent
         for r in results:
             stamp = None
@@ -503,7 +503,7 @@ def _run(
             if feed.pending and abs(feed.pending[0][0] - r.time_s) <= 1e-9:
                 stamp = feed.pending.popleft()[1]
             outlet.push_sample(published_joints(r), stamp if stamp is not None else 0.0)
-            if stamp is not None:
+            if stamp is not None and timed:
                 latency.append(1e3 * (local_clock() - stamp))
             sent += 1
             if sent == 1:
@@ -534,7 +534,8 @@ def _run(
                     view.show(s, result)
             step_cpu.append(1e3 * (time.thread_time() - c0))
         if delayed is not None:
-            publish(sorted(delayed.finish(), key=lambda r: r.time_s))
+            # answered when the input ended, not in the stream: sent, but not timed
+            publish(sorted(delayed.finish(), key=lambda r: r.time_s), timed=False)
         if recorder is not None:
             names = {r.split(":", 1)[1]: feed.layouts[r].points for r in feed.layouts
                      if r.startswith("keypoints:")}  # fmt: skip
