@@ -39,3 +39,16 @@ def test_null_timer_records_nothing() -> None:
     NULL_TIMER.count("ik_solves", 3)
     assert not NULL_TIMER.enabled
     assert NULL_TIMER.totals_s() == {} and NULL_TIMER.counts() == {}
+
+
+def test_recorded_stage_keeps_each_call():
+    ticks = iter([0.0, 0.5, 1.0, 3.0, 3.0, 3.25])
+    timer = StageTimer(clock=lambda: next(ticks), record=("track",))
+    for _ in range(2):
+        with timer.stage("track"):
+            pass
+    with timer.stage("other"):
+        pass
+    assert timer.durations_s("track") == [0.5, 2.0]
+    assert timer.durations_s("other") == []  # not recorded
+    assert timer.totals_s()["track"] == 2.5

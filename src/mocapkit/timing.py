@@ -17,9 +17,11 @@ from types import TracebackType
 class _Stage:
     """Context manager of one stage; re-used, so entering it allocates nothing."""
 
-    __slots__ = ("_clock", "_start", "calls", "count", "name", "total_s")
+    __slots__ = ("_clock", "_start", "calls", "count", "durations_s", "name", "total_s")
 
-    def __init__(self, name: str, clock: Callable[[], float] = time.perf_counter) -> None:
+    def __init__(
+        self, name: str, clock: Callable[[], float] = time.perf_counter, record: bool = False
+    ) -> None:
         self.name = name
         self._clock = clock
         self.total_s = 0.0
@@ -27,6 +29,8 @@ class _Stage:
         #: Items the stage counted (e.g. IK iterations), see `StageTimer.count`.
         self.count = 0
         self._start = 0.0
+        #: Seconds of each call, when the timer records this stage (`StageTimer` ``record``).
+        self.durations_s: list[float] | None = [] if record else None
 
     def __enter__(self) -> _Stage:
         self._start = self._clock()
@@ -38,8 +42,11 @@ class _Stage:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
-        self.total_s += self._clock() - self._start
+        elapsed = self._clock() - self._start
+        self.total_s += elapsed
         self.calls += 1
+        if self.durations_s is not None:
+            self.durations_s.append(elapsed)
 
 
 class _NullStage:
@@ -71,20 +78,30 @@ class StageTimer:
     clock : callable
         ``time.perf_counter`` (wall time, default) or ``time.process_time`` (CPU time
         of the process: on a shared machine, the time the work itself took).
+    record : tuple of str
+        Stages whose every call's time is kept (`durations_s`: per-frame times).
     """
 
     enabled = True
 
-    def __init__(self, clock: Callable[[], float] = time.perf_counter) -> None:
+    def __init__(
+        self, clock: Callable[[], float] = time.perf_counter, record: tuple[str, ...] = ()
+    ) -> None:
         self.clock = clock
+        self.record = tuple(record)
         self._stages: dict[str, _Stage] = {}
 
     def stage(self, name: str) -> _Stage | _NullStage:
         """The context manager timing stage ``name``."""
         s = self._stages.get(name)
         if s is None:
-            s = self._stages[name] = _Stage(name, self.clock)
+            s = self._stages[name] = _Stage(name, self.clock, name in self.record)
         return s
+
+    def durations_s(self, name: str) -> list[float]:
+        """Seconds of each call of a recorded stage (empty if not recorded or not run)."""
+        s = self._stages.get(name)
+        return list(s.durations_s) if s is not None and s.durations_s is not None else []
 
     def count(self, name: str, n: int) -> None:
         """Add ``n`` items (iterations, solves) to stage ``name``'s count."""

@@ -193,7 +193,9 @@ def bench_hybrid(
     -------
     dict
         ``fps`` (frames of all sessions per CPU second, median), ``fps_min``,
-        ``fps_wall`` (per wall-clock second), ``ms_per_frame`` (CPU);
+        ``fps_wall`` (per wall-clock second), ``ms_per_frame`` (CPU); ``frame_ms``: the
+        tracker's ``update`` per frame (CPU ms; median, 99th percentile and max over every
+        frame of every repeat: what a live feed waits for);
         ``stages_ms``: CPU milliseconds per frame of each stage
         (`HYBRID_STAGES`: ``load`` the session, ``input`` the marker samples and the
         video frames' grab, ``ik`` the solves and foot re-planting, ``edges`` the frame's
@@ -229,11 +231,12 @@ def bench_hybrid(
     wall_fps: list[float] = []
     per_stage: dict[str, list[float]] = {}
     solves, iters, frames = [], [], 0
+    per_frame_s: list[float] = []
     try:
         with tempfile.TemporaryDirectory(prefix="mocapkit-bench-") as tmp:
             track_hybrid_session_run(sessions[0], Path(tmp) / "warm")  # compile, warm up
             for r in range(repeats):
-                timer = StageTimer(clock=time.process_time)
+                timer = StageTimer(clock=time.process_time, record=("track",))
                 frames = 0
                 t0, c0 = time.perf_counter(), time.process_time()
                 for s in sessions:
@@ -245,6 +248,7 @@ def bench_hybrid(
                 totals = timer.totals_s()
                 for name in (*HYBRID_STAGES, "track"):
                     per_stage.setdefault(name, []).append(1e3 * totals.get(name, 0.0) / frames)
+                per_frame_s += timer.durations_s("track")
                 counts = timer.counts()
                 solves.append(counts.get("ik_solves", 0) / frames)
                 iters.append(counts.get("ik_iterations", 0) / max(counts.get("ik_solves", 0), 1))
@@ -261,6 +265,11 @@ def bench_hybrid(
         "fps_min": float(np.min(fps_list)),
         "fps_wall": float(np.median(wall_fps)),
         "ms_per_frame": 1e3 / fps,
+        "frame_ms": {
+            "median": 1e3 * float(np.median(per_frame_s)),
+            "p99": 1e3 * float(np.percentile(per_frame_s, 99)),
+            "max": 1e3 * float(np.max(per_frame_s)),
+        },
         "stages_ms": stages,
         "ik_solves_per_frame": float(np.median(solves)),
         "ik_iterations_per_solve": float(np.median(iters)),
@@ -289,13 +298,23 @@ def _bench_detect(repeats: int = 3) -> dict[str, Any]:
     return bench_detect(repeats=repeats)
 
 
+def _bench_live(repeats: int = 1) -> dict[str, Any]:
+    """Latency of each tracker live (`mocapkit.pipelines.live_bench.bench_live`)."""
+    from mocapkit.pipelines.live_bench import bench_live
+
+    return bench_live(repeats=repeats)
+
+
 BENCHMARKS: dict[str, Callable[..., dict[str, Any]]] = {
     "kinematics": bench_kinematics,
     "hybrid": bench_hybrid,
     "mono": bench_mono,
     "stereo": _bench_stereo,
     "detect": _bench_detect,
+    "live": _bench_live,
 }
+#: Benchmarks that ``all`` leaves out: ``live`` needs ``mocapkit[live]`` and runs in real time.
+NOT_IN_ALL: tuple[str, ...] = ("live",)
 
 
 def run_benchmarks(
@@ -316,7 +335,7 @@ def run_benchmarks(
         raise unknown_name("benchmark", name, [*BENCHMARKS, "all"], "mocapkit bench")
     if repeats < 1:
         raise ConfigError(f"--repeats: expected at least 1, found {repeats}")
-    names = list(BENCHMARKS) if name == "all" else [name]
+    names = [n for n in BENCHMARKS if n not in NOT_IN_ALL] if name == "all" else [name]
     return {
         n: BENCHMARKS[n](repeats=repeats, work_dir=work_dir)
         if n == "hybrid"
@@ -361,7 +380,8 @@ def format_table(results: dict[str, dict[str, Any]]) -> str:
             if isinstance(value, dict):
                 lines.append(f"  {key}")
                 for k, v in value.items():
-                    lines.append(f"    {k:<{width - 2}}  {v:,.3f}")
+                    shown = f"{v:,.3f}" if isinstance(v, float) else str(v)
+                    lines.append(f"    {k:<{width - 2}}  {shown}")
                 continue
             shown = f"{value:,.3f}" if isinstance(value, float) else str(value)
             lines.append(f"  {key:<{width}}  {shown}")

@@ -74,7 +74,7 @@ from mocapkit.tracking.static_calibration import (
 )
 
 if TYPE_CHECKING:
-    from mocapkit.io.session import Session
+    from mocapkit.io.session import Session, SessionSample
 
 FloatArray = NDArray[np.float64]
 
@@ -275,6 +275,63 @@ def require_observed_sets(
         )
 
 
+def hybrid_setup(
+    session: Session,
+    paper: bool = False,
+    use_video: bool = True,
+    config: HybridConfig | None = None,
+    oriented_sets: Sequence[str] | None = None,
+    clavicle: bool | None = None,
+    twist: bool | None = None,
+    refine_config: RefineConfig | None = None,
+) -> tuple[HybridConfig, Skeleton]:
+    """The tracker's configuration and model from a session's ``session.json`` (marker
+    offsets, members, subject): what `track_hybrid_session_run` and the live tracker
+    (`mocapkit.pipelines.live`) build the `HybridTracker` from. Arguments as
+    `track_hybrid_session`."""
+    if oriented_sets is None:
+        oriented_sets = () if paper else ORIENTED_SETS
+    cfg = session_config(
+        session,
+        config or HybridConfig(paper=paper, use_video=use_video, refine_config=refine_config),
+        oriented_sets,
+    )
+    sk = hybrid_skeleton(
+        session.height_mm,
+        session.bone_lengths_mm,
+        segment_vectors_mm=session.segment_vectors_mm,
+        clavicle=not cfg.paper if clavicle is None else clavicle,
+        twist=(not cfg.paper and "head" in cfg.member_offsets_mm) if twist is None else twist,
+    )
+    return cfg, sk
+
+
+def member_markers(config: HybridConfig) -> frozenset[str]:
+    """The member markers whose positions a `HybridSample` carries (the oriented sets')."""
+    return frozenset(m for members in config.member_offsets_mm.values() for m in members)
+
+
+def hybrid_sample(
+    s: SessionSample, camera: str, members: frozenset[str], use_video: bool
+) -> HybridSample:
+    """A session sample (a video frame and the newest marker sample before it) as the
+    hybrid tracker's sample: the marker sets' centres, the ``members`` markers and the
+    frame of ``camera``, decoded only if the tracker refines an arm on it."""
+    markers = {k: v for k, v in s.marker_sets_mm.items() if k in MARKER_SETS}
+    chosen = (
+        {}
+        if s.markers_mm is None
+        else {m: p for m, p in zip(s.marker_names, s.markers_mm) if m in members}
+    )
+    return HybridSample(
+        s.time_s,
+        markers,
+        None if np.isnan(s.marker_time_s) else s.marker_time_s,
+        s.frames[camera].load if use_video else None,
+        chosen,
+    )
+
+
 def track_hybrid_session(
     session_dir: str | os.PathLike[str],
     out_dir: str | os.PathLike[str] | None,
@@ -378,8 +435,6 @@ def track_hybrid_session_run(
     require_observed_sets(
         {n: positions[:, i] for i, n in enumerate(MARKER_SETS)}, session.path, SessionError
     )
-    if oriented_sets is None:
-        oriented_sets = () if paper else ORIENTED_SETS
     refine_config = None
     if max_elbow_speed_mm_per_s is not None:
         if paper:
@@ -397,19 +452,10 @@ def track_hybrid_session_run(
             if max_elbow_speed_mm_per_s == 0
             else RefineConfig(elbow_speed_mm_per_s=float(max_elbow_speed_mm_per_s))
         )
-    cfg = session_config(
-        session,
-        config or HybridConfig(paper=paper, use_video=use_video, refine_config=refine_config),
-        oriented_sets,
+    cfg, sk = hybrid_setup(
+        session, paper, use_video, config, oriented_sets, clavicle, twist, refine_config
     )
-    wanted = {m for members in cfg.member_offsets_mm.values() for m in members}
-    sk = hybrid_skeleton(
-        session.height_mm,
-        session.bone_lengths_mm,
-        segment_vectors_mm=session.segment_vectors_mm,
-        clavicle=not cfg.paper if clavicle is None else clavicle,
-        twist=(not cfg.paper and "head" in cfg.member_offsets_mm) if twist is None else twist,
-    )
+    wanted = member_markers(cfg)
     check_posture(posture)
     if posture != "standing":
         head_z = positions[:, MARKER_SETS.index("head"), 2]
@@ -442,21 +488,7 @@ def track_hybrid_session_run(
 
     def stream() -> Iterator[HybridSample]:
         for s in session.samples(cams[0]):
-            markers = {k: v for k, v in s.marker_sets_mm.items() if k in MARKER_SETS}
-            members = (
-                {}
-                if s.markers_mm is None
-                else {m: p for m, p in zip(s.marker_names, s.markers_mm) if m in wanted}
-            )
-            # decoded by the tracker only for a frame whose arms it refines
-            image = s.frames[cams[0]].load if cfg.use_video else None
-            yield HybridSample(
-                s.time_s,
-                markers,
-                None if np.isnan(s.marker_time_s) else s.marker_time_s,
-                image,
-                members,
-            )
+            yield hybrid_sample(s, cams[0], wanted, cfg.use_video)
 
     mode = "paper" if cfg.paper else "default"
     seated = (

@@ -375,6 +375,30 @@ def _run(
     return frames
 
 
+def online_mono_stream(
+    session: Session, camera: str, config: MonoConfig, dt_s: float
+) -> MonoStream:
+    """The online mono tracker on a session's camera with its measured link lengths
+    (``session.json`` ``subject.bone_lengths_mm``): what ``track mono --session-lengths
+    --lag L`` runs, for samples that come one at a time (`mocapkit.pipelines.live`).
+
+    Raises
+    ------
+    ConfigError
+        ``config.lag`` is None (offline) or the model is orthographic (its scale is read
+        off the whole video).
+    """
+    if config.lag is None:
+        raise ConfigError("online mono: expected MonoConfig.lag (frames), found None (offline)")
+    if config.camera_model == "orthographic":
+        raise ConfigError("online mono: the orthographic model needs the whole video's scale")
+    model = stick_model(config.legs, config.limits)
+    lengths = session_lengths(session, model)
+    cam = session.camera(camera)
+    tracker = MonoTracker(lengths, cam, dt_s, config, model)
+    return MonoStream(tracker, output_skeleton(model, lengths), cam, float("nan"))
+
+
 def refined_lengths(
     frames: list[MonoFrame],
     model: StickModel,

@@ -153,10 +153,27 @@ def run_tracker(
         results.sort(key=lambda r: r.time_s)
     if not results:
         raise ShapeError(f"{label}: no samples to track")
+    motion = results_motion(results, sk, source, joint_names)
+    out = None
+    if out_dir is not None:
+        with timer.stage("write"):
+            out = write_run_folder(out_dir, motion, results)
+    return RunResult(motion, results, out)
+
+
+def results_motion(
+    results: Sequence[FrameResult],
+    skeleton: Skeleton,
+    source: str = "",
+    joint_names: Sequence[str] | None = None,
+) -> Motion:
+    """The motion of a run's results (time order), with `unobserved_to_nan` applied:
+    joints by forward kinematics of ``q``, or taken from the results' ``joints_mm`` for
+    ``joint_names`` (as `run_tracker`'s parameter)."""
     t = np.array([r.time_s for r in results])
     q = np.stack([r.q for r in results])
     if joint_names is None:
-        motion = Motion.from_q(sk, t, q, source=source)
+        motion = Motion.from_q(skeleton, t, q, source=source)
     else:
         names = tuple(joint_names)
         unknown = [n for n in names if n not in CANONICAL_JOINTS]
@@ -164,13 +181,8 @@ def run_tracker(
             raise unknown_name("canonical joint", unknown[0], CANONICAL_JOINTS, "joint_names")
         rows = [CANONICAL_JOINTS.index(n) for n in names]
         joints = np.stack([r.joints_mm[rows] for r in results])
-        motion = Motion(sk, t, q, names, joints, source)
-    motion = unobserved_to_nan(motion, results)
-    out = None
-    if out_dir is not None:
-        with timer.stage("write"):
-            out = write_run_folder(out_dir, motion, results)
-    return RunResult(motion, results, out)
+        motion = Motion(skeleton, t, q, names, joints, source)
+    return unobserved_to_nan(motion, results)
 
 
 def unobserved_to_nan(motion: Motion, results: Sequence[FrameResult]) -> Motion:
@@ -461,7 +473,9 @@ __all__ = [
     "find_gaps",
     "motion_for_bvh",
     "read_fit_csv",
+    "results_motion",
     "run_tracker",
+    "unobserved_joints",
     "unobserved_to_nan",
     "write_fit_csv",
     "write_run_folder",

@@ -41,7 +41,7 @@ from mocapkit.tracking.stereo.tracker import (
 )
 
 if TYPE_CHECKING:
-    from mocapkit.io.session import Session
+    from mocapkit.io.session import Session, SessionSample
 
 FloatArray = NDArray[np.float64]
 
@@ -103,10 +103,22 @@ def _open_session(
 
         ensure_keypoints(session, names)  # detected into the session when missing
         kp_names = tuple(session.keypoints[names[0]].joint_names)
+    return session, names, stereo_tracker(session, names, cfg, kp_names)
+
+
+def stereo_tracker(
+    session: Session, names: Sequence[str], cfg: StereoConfig, keypoint_names: Sequence[str]
+) -> StereoTracker:
+    """A `StereoTracker` on the named cameras of a session, fitted to its subject."""
     sk = azad_skeleton(session.bone_lengths_mm, session.segment_vectors_mm)
     check_session_cameras(session, names, skeleton=sk)  # before any tracker is built
     cams = [session.camera(c) for c in names]
-    return session, names, StereoTracker(sk, cams, cfg, keypoint_names=kp_names)
+    return StereoTracker(sk, cams, cfg, keypoint_names=tuple(keypoint_names))
+
+
+def stereo_sample(s: SessionSample, names: Sequence[str]) -> StereoSample:
+    """A session sample as the stereo tracker's: the named cameras' images, keypoints."""
+    return StereoSample(s.time_s, {c: s.image(c) for c in names}, dict(s.keypoints_px))
 
 
 def _samples(session: Session, names: Sequence[str], n: int) -> Iterator[StereoSample]:
@@ -114,7 +126,7 @@ def _samples(session: Session, names: Sequence[str], n: int) -> Iterator[StereoS
     for k, s in enumerate(session.samples(list(names))):
         if k >= n:
             break
-        yield StereoSample(s.time_s, {c: s.image(c) for c in names}, dict(s.keypoints_px))
+        yield stereo_sample(s, names)
 
 
 def track_stereo_session(
