@@ -9,7 +9,8 @@ wheel) and ``opencv-python``::
     /tmp/mp/bin/python examples/mediapipe_openpose_json.py SESSION OUT
 
 For every camera folder ``SESSION/video/<camera>/`` (images in name order, as
-`examples/pose2sim_stereo.py` writes them) it writes ``OUT/<camera>/<frame>_keypoints.json``
+`examples/pose2sim_stereo.py` writes them) or video file ``SESSION/video/<camera>.mp4``
+(as ``mocapkit synth`` writes them) it writes ``OUT/<camera>/<frame>_keypoints.json``
 in OpenPose's ``--write_json`` layout (BODY_25, confidences = MediaPipe's visibility;
 OpenPose's "Neck" and "MidHip" are the shoulder and hip midpoints, as OpenPose's own),
 which `mocapkit.io.openpose.read_openpose_folder` reads. One person per frame
@@ -68,15 +69,36 @@ def body25(landmarks: np.ndarray) -> list[float]:
     return [round(float(v), 3) for v in out.reshape(-1)]
 
 
+def _frames(source: Path):
+    """Frames (BGR) of an image folder (name order) or of a video file."""
+    if source.is_dir():
+        for f in sorted(source.iterdir()):
+            yield cv2.imread(str(f))
+        return
+    cap = cv2.VideoCapture(str(source))
+    try:
+        while True:
+            ok, img = cap.read()
+            if not ok:
+                return
+            yield img
+    finally:
+        cap.release()
+
+
 def main(session: Path, out: Path) -> int:
-    for cam_dir in sorted(p for p in (session / "video").iterdir() if p.is_dir()):
-        dest = out / cam_dir.name
+    video = session / "video"
+    sources = sorted(
+        p for p in video.iterdir() if p.is_dir() or p.suffix.lower() in (".mp4", ".avi", ".mkv")
+    )
+    for source in sources:
+        name = source.name if source.is_dir() else source.stem
+        dest = out / name
         dest.mkdir(parents=True, exist_ok=True)
         pose = mp.solutions.pose.Pose(static_image_mode=False, model_complexity=1)
-        found = 0
-        files = sorted(cam_dir.iterdir())
-        for k, f in enumerate(files):
-            img = cv2.imread(str(f))
+        found = n = 0
+        for k, img in enumerate(_frames(source)):
+            n += 1
             h, w = img.shape[:2]
             res = pose.process(cv2.cvtColor(img, cv2.COLOR_BGR2RGB))
             people = []
@@ -92,7 +114,7 @@ def main(session: Path, out: Path) -> int:
             (dest / f"{k:06d}_keypoints.json").write_text(
                 json.dumps({"version": 1.3, "people": people})
             )
-        print(f"{cam_dir.name}: a person on {found} of {len(files)} frames")
+        print(f"{name}: a person on {found} of {n} frames")
     return 0
 
 
