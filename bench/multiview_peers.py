@@ -353,6 +353,9 @@ def main() -> int:
     ap.add_argument("--pose2sim-python", default=None)
     ap.add_argument("--faults", action="store_true")
     ap.add_argument("--json", default=None)
+    ap.add_argument(
+        "--prepare", action="store_true", help="only render and detect (the slow part), no scores"
+    )
     args = ap.parse_args()
     data = find_shared_data()
     if data is None:
@@ -373,6 +376,9 @@ def main() -> int:
                 inputs["mediapipe"] = mediapipe_session(truth, base / "mp", args.mediapipe_python)
                 if args.faults:
                     inputs["mp+faults"] = fault_session(inputs["mediapipe"], base / "mp_faults")
+            if args.prepare:
+                print(f"{rig} {clip}: ready", flush=True)
+                continue
             for label, session in inputs.items():
                 t0 = time.time()
                 mk, lens, fps = run_mocapkit(session)

@@ -176,7 +176,8 @@ def track_multiview_session(
         cams, joint_names, pixels, reject_px=run_cfg.reject_px, good_px=run_cfg.good_px
     )
     sk = multiview_skeleton(lengths, height_mm=session.height_mm, vectors_mm=vectors)
-    tracker = MultiviewTracker(sk, cams, joint_names, run_cfg.fit)
+    rebuilt = sorted({j for k in kps for j in k.rebuilt_joints})
+    tracker = MultiviewTracker(sk, cams, joint_names, run_cfg.fit, rebuilt=rebuilt)
     time_s = kps[0].time_s[:n]
     samples = (
         _Sample(float(time_s[i]), {c: pixels[v, i] for v, c in enumerate(names)}) for i in range(n)

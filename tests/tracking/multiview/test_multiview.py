@@ -253,3 +253,22 @@ def test_config_and_inputs_are_checked() -> None:
     tracker = MultiviewTracker(sk, _rig(), NAMES)
     with pytest.raises(ShapeError, match="ring1"):
         tracker.update(Sample(0.0, {"ring1": np.zeros((3, 2))}))
+
+
+def test_a_limb_stuck_in_a_wrong_pose_is_started_again(rng: np.random.Generator) -> None:
+    from mocapkit.skeleton.limbs import limb
+
+    sk = multiview_skeleton()
+    cams = _rig()
+    q = _pose(sk, rng, 0.2)
+    tracker = MultiviewTracker(sk, cams, NAMES)
+    tracker.update(Sample(0.0, _pixels(sk, cams, q)))
+    dofs = limb(sk, "right_arm").dofs
+    assert tracker._q is not None
+    tracker._q[dofs] = sk.lower[dofs]  # the previous frame left the arm at its limits
+    r = tracker.update(Sample(1 / 30, _pixels(sk, cams, q)))
+    err = np.linalg.norm(r.joints_mm - canonical_positions(sk, q), axis=1)
+    arm_rows = [NAMES.index("right_elbow"), NAMES.index("right_wrist")]
+    assert err[arm_rows].max() < 5.0
+    # the temporal prior still pulls the trunk a little towards the wrong previous pose
+    assert np.nanmax(err) < 15.0

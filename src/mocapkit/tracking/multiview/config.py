@@ -47,10 +47,16 @@ class MultiviewConfig:
     warn_px : float
         A joint further than this from its detections in most views that see it counts
         as far on that frame (``far_joints``; warned about over time spans).
-    neck_pelvis_weight : float
-        Weight of the neck and pelvis detections (1 for the others): a detector's neck
-        and pelvis are midpoints of the shoulders and hips, which the model places
-        otherwise.
+    restart_mm : float
+        A limb whose middle or end joint stays further than this from its kept
+        detections (median over the views) after the fit is started again from
+        `restart_seeds` random poses within its joint limits (a local minimum, often
+        at a limit, that the warm start cannot leave); the best fit is kept.
+    restart_seeds : int
+    rebuilt_weight : float
+        Weight of the detections a reader placed from others rather than detected (a
+        detector's neck and pelvis, midpoints of the shoulders and hips,
+        `mocapkit.io.session_csv.Keypoints.rebuilt_joints`); 1 for the others.
     """
 
     delta_mm: float = 25.0
@@ -63,7 +69,9 @@ class MultiviewConfig:
     first_iter: int = 80
     gap_limit_s: float = 0.25  # mocapkit.tracking.base.BRIDGE_S (a test holds them equal)
     warn_px: float = 40.0
-    neck_pelvis_weight: float = 0.0
+    restart_mm: float = 60.0
+    restart_seeds: int = 24
+    rebuilt_weight: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("delta_mm", "reject_mm", "prior_mm_per_rad", "prior_root", "warn_px"):

@@ -42,6 +42,7 @@ from numpy.typing import NDArray
 from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.skeleton.kinematics import canonical_positions, kinematic_arrays
+from mocapkit.skeleton.limbs import has_limb, limb
 from mocapkit.skeleton.model import Skeleton
 from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments, scale_skeleton
@@ -112,6 +113,9 @@ class MultiviewTracker:
     joint_names : sequence of str
         Canonical names of the detections' K joints.
     config : MultiviewConfig, optional
+    rebuilt : sequence of str
+        Joints the keypoints' reader placed from others (weighted by
+        `MultiviewConfig.rebuilt_weight`).
     """
 
     def __init__(
@@ -120,6 +124,7 @@ class MultiviewTracker:
         cameras: Sequence[Camera],
         joint_names: Sequence[str],
         config: MultiviewConfig | None = None,
+        rebuilt: Sequence[str] = (),
     ) -> None:
         if len(cameras) < 2:
             raise ConfigError(f"the multi-view fit needs two or more cameras, found {len(cameras)}")
@@ -145,9 +150,7 @@ class MultiviewTracker:
         self._views = view_arrays([c.camera_from_world for c in self.cameras])
         self._perm = swap_permutation(self.names)
         self._pairs = np.flatnonzero(self._perm != np.arange(len(self.names)))
-        self._base_w = np.array(
-            [cfg.neck_pelvis_weight if n in ("neck", "pelvis") else 1.0 for n in self.names]
-        )
+        self._base_w = np.array([cfg.rebuilt_weight if n in rebuilt else 1.0 for n in self.names])
         d = skeleton.n_dofs
         free = np.array([n in FREE_DOFS for n in skeleton.dof_names])
         lower = np.where(np.isfinite(skeleton.lower) & ~free, skeleton.lower, -1e9)
@@ -159,6 +162,13 @@ class MultiviewTracker:
         self._prior_first = np.where(root_t, 1e-4, 1e-2).astype(float)
         self._root_t = np.flatnonzero(root_t)
         self._yaw = skeleton.dof_index("root_yaw")
+        idx = {n: i for i, n in enumerate(self.names)}
+        self._limbs: list[tuple[NDArray[np.int64], list[int]]] = []
+        for part, end, mid in PARTS:
+            if mid is None or end not in idx or mid not in idx or not has_limb(skeleton, part):
+                continue
+            self._limbs.append((limb(skeleton, part).dofs, [idx[mid], idx[end]]))
+        self._rng = np.random.default_rng(0)
         self._q: FloatArray | None = None
         self._last_seen: dict[str, float] = {}
         self._ever_seen: set[str] = set()
@@ -309,6 +319,76 @@ class MultiviewTracker:
             weight = np.where(far, 0.0, weight)
         return weight
 
+    def _restart_limbs(
+        self,
+        q: FloatArray,
+        obs: FloatArray,
+        weight: FloatArray,
+        scale: FloatArray,
+        q_ref: FloatArray,
+        prior: FloatArray,
+    ) -> None:
+        """Start each limb left far from its detections again from random poses within
+        its limits (`MultiviewConfig.restart_mm`); keeps the lowest cost, in place on
+        ``q``. The prior of a limb started again no longer holds it to the previous
+        frame's pose, which was wrong (``q_ref`` takes the new pose, in place)."""
+        cfg = self.config
+        tg = self._targets(obs, weight, scale, q_ref, prior)
+        base = self._cost(q, tg)
+        norm = self._norm.copy()
+        for dofs, rows in self._limbs:
+            res = np.where(weight[:, rows] > 0, norm[:, rows], np.nan)
+            med = column_median(res)
+            if not (np.nanmax(med, initial=0.0) > cfg.restart_mm):
+                continue
+            lo, hi = self._lower[dofs], self._upper[dofs]
+            seeds = self._rng.uniform(lo, hi, (cfg.restart_seeds, dofs.size))
+            costs = []
+            trial = q.copy()
+            for seed in seeds:
+                trial[dofs] = seed
+                costs.append(self._cost(trial, tg))
+            for k in np.argsort(costs)[:2]:
+                trial = q.copy()
+                trial[dofs] = seeds[k]
+                c, _ = fit_pose_nb(
+                    trial,
+                    self._kin,
+                    self._tj,
+                    self._tp,
+                    self._views,
+                    tg,
+                    self._lower,
+                    self._upper,
+                    cfg.delta_mm,
+                    cfg.max_iter,
+                    self._norm,
+                )
+                if c < base:
+                    base = c
+                    q[:] = trial
+                    q_ref[dofs] = trial[dofs]
+
+    def _cost(self, q: FloatArray, tg: FitTargets) -> float:
+        from mocapkit.tracking.multiview.fit import evaluate_nb
+
+        d = q.shape[0]
+        return float(
+            evaluate_nb(
+                q,
+                self._kin,
+                self._tj,
+                self._tp,
+                self._views,
+                tg,
+                self.config.delta_mm,
+                False,
+                np.empty((d, d)),
+                np.empty(d),
+                self._norm,
+            )
+        )
+
     # ------------------------------------------------------------------ update
 
     def update(self, sample: Any) -> FrameResult:
@@ -331,6 +411,8 @@ class MultiviewTracker:
         prior = self._prior_first if first else self._prior
         iters = cfg.first_iter if first else cfg.max_iter
         weight = self._fit(q, obs, scale, q_ref, prior, iters)
+        self._restart_limbs(q, obs, weight, scale, q_ref, prior)
+        weight = self._fit(q, obs, scale, q_ref, prior, iters)
         again = self._swap_test(q, obs, scale)
         if again.any():
             swapped ^= again
@@ -352,6 +434,8 @@ class MultiviewTracker:
             for c in self.cameras:
                 fit[f"{n}_{c.name}_px"] = math.nan
             fit[f"{n}_views"] = 0.0
+        for c in self.cameras:
+            fit[f"{c.name}_swapped"] = 0.0
         fit.update(
             {"mean_px": math.nan, "max_px": math.nan, "swapped_views": 0.0, "far_joints": 0.0}
         )
@@ -398,6 +482,8 @@ class MultiviewTracker:
             mean_px, max_px = float(np.nanmean(kept_err)), float(np.nanmax(kept_err))
         else:
             mean_px = max_px = math.nan
+        for i, c in enumerate(self.cameras):
+            fit[f"{c.name}_swapped"] = float(self.swapped[i])
         fit.update(
             {
                 "mean_px": mean_px,
