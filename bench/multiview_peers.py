@@ -273,8 +273,13 @@ print(f"P2S_TIMES {t1 - t0} {t2 - t1}")
 """
 
 
-def run_pose2sim(session: Path, project: Path, p2s_python: str) -> tuple[dict[str, float], float]:
-    """Pose2Sim's triangulation and filtering on the session's keypoints."""
+def run_pose2sim_project(
+    session: Path, json_root: Path | None, project: Path, p2s_python: str
+) -> tuple[Path, float]:
+    """Pose2Sim's triangulation and filtering of a session's detections: the detector's
+    own JSON files from ``json_root/<camera>/`` when given (with its confidences), else
+    the session's keypoints as BODY_25 (confidence 0.9). Returns the filtered TRC and the
+    triangulation's frames per CPU second."""
     import re
 
     s = load_session(session)
@@ -284,9 +289,8 @@ def run_pose2sim(session: Path, project: Path, p2s_python: str) -> tuple[dict[st
     write_calib_toml(session, project / "calibration" / "Calib.toml")
     for cam in names:
         d = project / "pose" / f"{cam}_json"
-        original = session.parent / (session.name + "_json") / cam
-        if original.is_dir():  # the detector's own files, with its confidences
-            shutil.copytree(original, d)
+        if json_root is not None and (json_root / cam).is_dir():
+            shutil.copytree(json_root / cam, d)
             continue
         kp = s.keypoints[cam]
         d.mkdir(parents=True)
@@ -316,11 +320,23 @@ def run_pose2sim(session: Path, project: Path, p2s_python: str) -> tuple[dict[st
     if res.returncode != 0:
         raise RuntimeError(f"Pose2Sim failed on {session}:\n{res.stderr[-3000:]}")
     tri_s = float(res.stdout.split("P2S_TIMES")[1].split()[0])
-    trc = sorted((project / "pose-3d").glob("*filt*.trc"))
-    t, joints = read_pose2sim_trc(trc[0])
+    trc = sorted((project / "pose-3d").glob("*filt*.trc"))[0]
+    n = len(s.keypoints[names[0]].time_s)
+    return trc, n / max(tri_s, 1e-9)
+
+
+def run_pose2sim(session: Path, project: Path, p2s_python: str) -> tuple[dict[str, float], float]:
+    """Pose2Sim's triangulation and filtering on the session's keypoints, scored."""
+    s = load_session(session)
+    names = sorted(s.keypoints)
+    json_root = session.parent / (session.name + "_json")
+    trc, fps = run_pose2sim_project(
+        session, json_root if json_root.is_dir() else None, project, p2s_python
+    )
+    t, joints = read_pose2sim_trc(trc)
     times = s.keypoints[names[0]].time_s
     rows = np.clip(t, 0, len(times) - 1)
-    return score(session, times[rows], tuple(BODY25), joints), len(times) / max(tri_s, 1e-9)
+    return score(session, times[rows], tuple(BODY25), joints), fps
 
 
 def read_pose2sim_trc(path: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -399,6 +415,11 @@ def main() -> int:
                     row["pose2sim"] = p2s["mpjpe_mm"]
                     row["pose2sim_tri_fps"] = p2s_fps
                 rows.append(row)
+                if "pose2sim_tri_fps" in row:
+                    print(
+                        f"  3-D step frames per CPU s: mocapkit {fps:.0f}, Pose2Sim's "
+                        f"triangulation {row['pose2sim_tri_fps']:.0f}"
+                    )
                 worst_len = max((abs(v) for v in lens.values()), default=float("nan"))
                 print(
                     f"{rig:6} {clip:16} {label:10} mocapkit {row['mocapkit']:6.1f}  dlt "

@@ -173,7 +173,7 @@ def track_multiview_session(
     pixels = np.stack([k.pixels[:n] for k in kps])  # (V, T, K, 2)
     t0 = time.process_time()
     lengths, vectors = subject_lengths_mm(
-        cams, joint_names, pixels, reject_px=run_cfg.reject_px, good_px=run_cfg.good_px
+        cams, joint_names, pixels, reject_mm=run_cfg.reject_mm, good_mm=run_cfg.good_mm
     )
     sk = multiview_skeleton(lengths, height_mm=session.height_mm, vectors_mm=vectors)
     rebuilt = sorted({j for k in kps for j in k.rebuilt_joints})

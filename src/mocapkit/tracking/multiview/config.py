@@ -103,17 +103,18 @@ class MultiviewRunConfig:
         when still.
     one_euro_beta : float
         One-euro speed coefficient (per rad/s of a joint angle).
-    reject_px, good_px : float
-        Segment lengths: views further than ``reject_px`` from a point's triangulation
-        are dropped; a point counts when its kept views are within ``good_px``.
+    reject_mm, good_mm : float
+        Segment lengths: views further than ``reject_mm`` (across the ray at the point)
+        from a point's triangulation are dropped; a point counts when its kept views are
+        within ``good_mm``.
     """
 
     fit: MultiviewConfig = field(default_factory=MultiviewConfig)
     smoothing: str = "butterworth"
     cutoff_hz: float = 6.0
     one_euro_beta: float = 0.5
-    reject_px: float = 30.0
-    good_px: float = 15.0
+    reject_mm: float = 200.0
+    good_mm: float = 100.0
 
     def __post_init__(self) -> None:
         if self.smoothing not in SMOOTHING:

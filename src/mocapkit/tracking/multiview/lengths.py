@@ -37,16 +37,30 @@ def column_median(a: FloatArray) -> FloatArray:
     return out
 
 
+def reprojection_errors_mm(
+    cameras: Sequence[Camera], points_mm: FloatArray, pixels: FloatArray
+) -> FloatArray:
+    """Reprojection errors (V, ...) of points (..., 3) against pixels (V, ..., 2) in mm
+    across each view's ray at the point (pixels times depth over focal length), so that
+    one threshold serves every image size and distance; NaN where a pixel is missing."""
+    err = reprojection_errors_px(cameras, points_mm, pixels)
+    for v, cam in enumerate(cameras):
+        depth = np.asarray(cam.to_camera(points_mm))[..., 2]
+        err[v] = err[v] * np.abs(depth) / float(cam.K[0, 0])
+    return err
+
+
 def robust_triangulation(
-    cameras: Sequence[Camera], pixels: FloatArray, reject_px: float, min_views: int = 2
+    cameras: Sequence[Camera], pixels: FloatArray, reject_mm: float, min_views: int = 2
 ) -> tuple[FloatArray, FloatArray, NDArray[np.int64]]:
     """Triangulate (V, ..., 2) pixels, dropping views that reproject far from the rest.
 
     The points are triangulated over every view (`triangulate_views`); a view whose
-    pixel lies more than ``reject_px`` from the reprojection *and* more than twice the
-    median over the views is dropped, and the point is triangulated again from the
-    views left. Returns the points (..., 3), the reprojection error per view
-    (V, ...; NaN where the view has no pixel) and the count of views kept (...).
+    pixel lies more than ``reject_mm`` from the reprojection (`reprojection_errors_mm`)
+    *and* more than twice the median over the views is dropped, and the point is
+    triangulated again from the views left. Returns the points (..., 3), the
+    reprojection error (mm) per view (V, ...; NaN where the view has no pixel) and the
+    count of views kept (...).
     """
     px = np.asarray(pixels, dtype=float)
     if px.ndim < 2 or px.shape[0] != len(cameras) or px.shape[-1] != 2:
@@ -54,14 +68,14 @@ def robust_triangulation(
             f"robust_triangulation: expected pixels ({len(cameras)}, ..., 2), found {px.shape}"
         )
     pts = triangulate_views(cameras, px, min_views=min_views)
-    err = reprojection_errors_px(cameras, pts, px)
+    err = reprojection_errors_mm(cameras, pts, px)
     flat = err.reshape(err.shape[0], -1)
     med = column_median(flat).reshape(err.shape[1:])
     with np.errstate(invalid="ignore"):
-        bad = (err > reject_px) & (err > 2.0 * med)
+        bad = (err > reject_mm) & (err > 2.0 * med)
     kept_px = np.where(bad[..., None], np.nan, px)
     pts = triangulate_views(cameras, kept_px, min_views=min_views)
-    err = reprojection_errors_px(cameras, pts, px)
+    err = reprojection_errors_mm(cameras, pts, px)
     kept = np.sum(np.all(np.isfinite(kept_px), axis=-1), axis=0).astype(np.int64)
     return pts, err, kept
 
@@ -76,12 +90,13 @@ def segment_lengths_from_points(
     """Median length of each canonical segment (`CANONICAL_SEGMENTS`) over the frames
     where both of its joints are ``good``; points (T, K, 3), good (T, K).
 
-    Left and right segments share their mean when they differ by less than
-    ``side_tolerance`` of it. Segments with fewer than ``min_frames`` good frames are
-    left out.
+    Left and right segments share the median of both sides' lengths unless their
+    medians differ by more than ``side_tolerance`` of their mean and by more than three
+    standard errors (robust, from each side's median absolute deviation). Segments with
+    fewer than ``min_frames`` good frames are left out.
     """
     names = list(joint_names)
-    out: dict[str, float] = {}
+    samples: dict[str, FloatArray] = {}
     for seg, (a, b) in CANONICAL_SEGMENTS.items():
         if a not in names or b not in names:
             continue
@@ -89,17 +104,26 @@ def segment_lengths_from_points(
         ok = good[:, ia] & good[:, ib]
         if int(ok.sum()) < min_frames:
             continue
-        d = np.linalg.norm(points_mm[ok, ib] - points_mm[ok, ia], axis=1)
-        out[seg] = float(np.median(d))
+        samples[seg] = np.linalg.norm(points_mm[ok, ib] - points_mm[ok, ia], axis=1)
+    out = {seg: float(np.median(d)) for seg, d in samples.items()}
     for seg in list(out):
         if not seg.startswith("left_"):
             continue
         other = "right_" + seg[len("left_") :]
-        if other in out:
-            left, right = out[seg], out[other]
-            mean = 0.5 * (left + right)
-            if abs(left - right) <= side_tolerance * mean:
-                out[seg] = out[other] = mean
+        if other not in out:
+            continue
+        left, right = out[seg], out[other]
+        # the sides differ when their medians differ by more than the tolerance and by
+        # more than three standard errors (from the median absolute deviations)
+        se = [
+            1.4826 * np.median(np.abs(d - np.median(d))) / np.sqrt(d.size)
+            for d in (samples[seg], samples[other])
+        ]
+        differ = abs(left - right) > max(
+            side_tolerance * 0.5 * (left + right), 3.0 * float(np.hypot(se[0], se[1]))
+        )
+        if not differ:
+            out[seg] = out[other] = float(np.median(np.concatenate([samples[seg], samples[other]])))
     return out
 
 
@@ -163,8 +187,8 @@ def subject_lengths_mm(
     cameras: Sequence[Camera],
     joint_names: Sequence[str],
     pixels: FloatArray,
-    reject_px: float,
-    good_px: float,
+    reject_mm: float,
+    good_mm: float,
     min_views: int = 3,
 ) -> tuple[dict[str, float], dict[str, FloatArray]]:
     """Segment lengths (mm) of the subject from a take's detections (V, T, K, 2), and
@@ -172,14 +196,14 @@ def subject_lengths_mm(
 
     A joint counts on a frame when, after `robust_triangulation`, at least
     ``min(min_views, V)`` views kept it and its largest kept reprojection error is
-    below ``good_px``.
+    below ``good_mm``.
     """
-    pts, err, kept = robust_triangulation(cameras, pixels, reject_px)
+    pts, err, kept = robust_triangulation(cameras, pixels, reject_mm)
     need = min(min_views, len(cameras))
     with np.errstate(invalid="ignore"):
-        kept_err = np.where(err <= reject_px, err, np.nan)
+        kept_err = np.where(err <= reject_mm, err, np.nan)
         worst = np.nanmax(np.where(np.isfinite(kept_err), kept_err, -np.inf), axis=0)
-    good = (kept >= need) & np.isfinite(pts).all(axis=-1) & (worst < good_px)
+    good = (kept >= need) & np.isfinite(pts).all(axis=-1) & (worst < good_mm)
     return segment_lengths_from_points(joint_names, pts, good), trunk_vectors_from_points(
         joint_names, pts, good
     )
@@ -189,6 +213,7 @@ __all__ = [
     "MIN_FRAMES",
     "SIDE_TOLERANCE",
     "column_median",
+    "reprojection_errors_mm",
     "robust_triangulation",
     "segment_lengths_from_points",
     "subject_lengths_mm",

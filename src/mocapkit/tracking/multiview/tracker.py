@@ -205,7 +205,7 @@ class MultiviewTracker:
     def _initial_pose(self, px: FloatArray) -> FloatArray | None:
         """A start pose from the frame's robust triangulation: the root on the hips'
         midpoint, turned to the hips' and shoulders' left-right line; limbs at rest."""
-        pts, _err, _kept = robust_triangulation(self.cameras, px, reject_px=1e9)
+        pts, _err, _kept = robust_triangulation(self.cameras, px, reject_mm=1e9)
         idx = {n: i for i, n in enumerate(self.names)}
         need = ("left_hip", "right_hip", "left_shoulder", "right_shoulder")
         if not all(np.isfinite(pts[idx[n]]).all() for n in need):
