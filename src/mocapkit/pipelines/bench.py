@@ -282,11 +282,19 @@ def _bench_stereo(repeats: int = 3) -> dict[str, Any]:
     return bench_stereo(repeats=repeats)
 
 
+def _bench_multiview(repeats: int = 3) -> dict[str, Any]:
+    """The multi-view fit's figures (`mocapkit.pipelines.multiview.bench_multiview`)."""
+    from mocapkit.pipelines.multiview import bench_multiview
+
+    return bench_multiview(repeats=repeats)
+
+
 BENCHMARKS: dict[str, Callable[..., dict[str, Any]]] = {
     "kinematics": bench_kinematics,
     "hybrid": bench_hybrid,
     "mono": bench_mono,
     "stereo": _bench_stereo,
+    "multiview": _bench_multiview,
 }
 
 
