@@ -235,7 +235,8 @@ def write_calib_toml(session: Path, path: Path) -> None:
 
     s = load_session(session)
     lines = []
-    for cam in s.cameras:
+    # in the sorted order of the pose folders, which Pose2Sim pairs with them by position
+    for cam in sorted(s.cameras, key=lambda c: c.name):
         k = cam.K
         rvec = cv2.Rodrigues(np.asarray(cam.camera_from_world)[:3, :3])[0].ravel()
         t = np.asarray(cam.camera_from_world)[:3, 3] / 1000.0

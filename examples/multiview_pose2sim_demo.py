@@ -141,7 +141,7 @@ def main() -> int:
                 kp = session.keypoints[c]
                 for p in kp.pixels[f]:
                     if np.isfinite(p).all():
-                        cv2.circle(img, (round(p[0]), round(p[1])), 6, (0, 255, 0), -1)
+                        cv2.circle(img, (round(p[0]), round(p[1])), 12, (0, 255, 0), 3)
                 if p2s_joints is not None:
                     draw_sticks(
                         img, cam, tuple(BODY25), p2s_joints[f], colour=(255, 0, 255), thickness=4

@@ -272,3 +272,14 @@ def test_a_limb_stuck_in_a_wrong_pose_is_started_again(rng: np.random.Generator)
     assert err[arm_rows].max() < 5.0
     # the temporal prior still pulls the trunk a little towards the wrong previous pose
     assert np.nanmax(err) < 15.0
+
+
+def test_column_median_matches_numpy(rng: np.random.Generator) -> None:
+    from mocapkit.tracking.multiview.lengths import column_median
+
+    a = rng.normal(size=(7, 40))
+    a[rng.random(a.shape) < 0.3] = np.nan
+    a[:, 0] = np.nan
+    got = column_median(a)
+    assert np.isnan(got[0])
+    np.testing.assert_allclose(got[1:], np.nanmedian(a[:, 1:], axis=0))

@@ -327,15 +327,17 @@ class MultiviewTracker:
         scale: FloatArray,
         q_ref: FloatArray,
         prior: FloatArray,
-    ) -> None:
+    ) -> bool:
         """Start each limb left far from its detections again from random poses within
         its limits (`MultiviewConfig.restart_mm`); keeps the lowest cost, in place on
         ``q``. The prior of a limb started again no longer holds it to the previous
-        frame's pose, which was wrong (``q_ref`` takes the new pose, in place)."""
+        frame's pose, which was wrong (``q_ref`` takes the new pose, in place). Returns
+        whether a limb was started again."""
         cfg = self.config
         tg = self._targets(obs, weight, scale, q_ref, prior)
         base = self._cost(q, tg)
         norm = self._norm.copy()
+        moved = False
         for dofs, rows in self._limbs:
             res = np.where(weight[:, rows] > 0, norm[:, rows], np.nan)
             med = column_median(res)
@@ -368,6 +370,8 @@ class MultiviewTracker:
                     base = c
                     q[:] = trial
                     q_ref[dofs] = trial[dofs]
+                    moved = True
+        return moved
 
     def _cost(self, q: FloatArray, tg: FitTargets) -> float:
         from mocapkit.tracking.multiview.fit import evaluate_nb
@@ -411,8 +415,8 @@ class MultiviewTracker:
         prior = self._prior_first if first else self._prior
         iters = cfg.first_iter if first else cfg.max_iter
         weight = self._fit(q, obs, scale, q_ref, prior, iters)
-        self._restart_limbs(q, obs, weight, scale, q_ref, prior)
-        weight = self._fit(q, obs, scale, q_ref, prior, iters)
+        if self._restart_limbs(q, obs, weight, scale, q_ref, prior):
+            weight = self._fit(q, obs, scale, q_ref, prior, iters)
         again = self._swap_test(q, obs, scale)
         if again.any():
             swapped ^= again
