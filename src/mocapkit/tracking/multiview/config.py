@@ -48,7 +48,7 @@ class MultiviewConfig:
         A joint further than this from its detections in most views that see it counts
         as far on that frame (``far_joints``; warned about over time spans).
     restart_mm : float
-        A limb whose middle or end joint stays further than this from its kept
+        A limb any of whose joints stays further than this from its kept
         detections (median over the views) after the fit is started again from
         `restart_seeds` random poses within its joint limits (a local minimum, often
         at a limit, that the warm start cannot leave); the best fit is kept.
@@ -63,7 +63,7 @@ class MultiviewConfig:
     reject_mm: float = 150.0
     swap_ratio: float = 0.6
     swap_margin_mm: float = 40.0
-    prior_mm_per_rad: float = 20.0
+    prior_mm_per_rad: float = 60.0
     prior_root: float = 0.02
     max_iter: int = 12
     first_iter: int = 80

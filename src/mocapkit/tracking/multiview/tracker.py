@@ -167,7 +167,10 @@ class MultiviewTracker:
         for part, end, mid in PARTS:
             if mid is None or end not in idx or mid not in idx or not has_limb(skeleton, part):
                 continue
-            self._limbs.append((limb(skeleton, part).dofs, [idx[mid], idx[end]]))
+            side, kind = part.split("_")
+            top = f"{side}_{'shoulder' if kind == 'arm' else 'hip'}"
+            rows = [idx[n] for n in (top, mid, end) if n in idx]
+            self._limbs.append((limb(skeleton, part).dofs, rows))
         self._rng = np.random.default_rng(0)
         self._q: FloatArray | None = None
         self._last_seen: dict[str, float] = {}
@@ -345,11 +348,16 @@ class MultiviewTracker:
                 continue
             lo, hi = self._lower[dofs], self._upper[dofs]
             seeds = self._rng.uniform(lo, hi, (cfg.restart_seeds, dofs.size))
+            # the candidates are judged without the limb's prior (its reference pose is
+            # the one that went wrong), the current pose with it
+            free = prior.copy()
+            free[dofs] = 1e-3
+            tg_free = self._targets(obs, weight, scale, q_ref, free)
             costs = []
             trial = q.copy()
             for seed in seeds:
                 trial[dofs] = seed
-                costs.append(self._cost(trial, tg))
+                costs.append(self._cost(trial, tg_free))
             for k in np.argsort(costs)[:2]:
                 trial = q.copy()
                 trial[dofs] = seeds[k]
@@ -359,7 +367,7 @@ class MultiviewTracker:
                     self._tj,
                     self._tp,
                     self._views,
-                    tg,
+                    tg_free,
                     self._lower,
                     self._upper,
                     cfg.delta_mm,
