@@ -58,7 +58,7 @@ from mocapkit.io.session import load_session
 from mocapkit.io.session_csv import write_keypoints_csv
 from mocapkit.pipelines.demo import find_shared_data
 from mocapkit.pipelines.multiview import track_multiview_session
-from mocapkit.skeleton.model import CANONICAL_SEGMENTS
+from mocapkit.skeleton.model import CANONICAL_JOINTS, CANONICAL_SEGMENTS
 from mocapkit.tracking.multiview.config import MultiviewRunConfig
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -79,20 +79,7 @@ REPORT = {
     "131_03.bvh": 0.0,
 }
 SECONDS = 4.0
-JOINTS = (
-    "left_shoulder",
-    "right_shoulder",
-    "left_elbow",
-    "right_elbow",
-    "left_wrist",
-    "right_wrist",
-    "left_hip",
-    "right_hip",
-    "left_knee",
-    "right_knee",
-    "left_ankle",
-    "right_ankle",
-)
+JOINTS = tuple(j for j in CANONICAL_JOINTS if j not in ("head", "neck", "pelvis"))
 LIMBS = tuple(s for s in CANONICAL_SEGMENTS if s.endswith(("arm", "forearm", "thigh", "shank")))
 #: BODY_25 names of the scored joints (Pose2Sim's TRC markers).
 BODY25 = {

@@ -19,23 +19,11 @@ from mocapkit.pipelines.multiview import (
     track_multiview_session,
     track_stereo_auto,
 )
+from mocapkit.skeleton.model import CANONICAL_JOINTS
 from mocapkit.tracking.base import FrameResult
 from mocapkit.tracking.multiview.config import MultiviewRunConfig
 
-ARMS_LEGS = (
-    "left_shoulder",
-    "right_shoulder",
-    "left_elbow",
-    "right_elbow",
-    "left_wrist",
-    "right_wrist",
-    "left_hip",
-    "right_hip",
-    "left_knee",
-    "right_knee",
-    "left_ankle",
-    "right_ankle",
-)
+ARMS_LEGS = tuple(j for j in CANONICAL_JOINTS if j not in ("head", "neck", "pelvis"))
 
 
 @pytest.fixture(scope="module")

@@ -250,28 +250,10 @@ class MultiviewTracker:
         w = np.ones((len(self.cameras), len(self.names)))
         for col, obs in enumerate((norm, norm[:, self._perm])):
             tg = self._targets(obs, w, scale, q, self._prior)
-            self._evaluate(q, tg)
+            self._cost(q, tg)
             r = self._norm[:, self._pairs]
             out[:, col] = np.nansum(np.minimum(r, cfg.reject_mm), axis=1)
         return out
-
-    def _evaluate(self, q: FloatArray, tg: FitTargets) -> None:
-        from mocapkit.tracking.multiview.fit import evaluate_nb
-
-        d = q.shape[0]
-        evaluate_nb(
-            q,
-            self._kin,
-            self._tj,
-            self._tp,
-            self._views,
-            tg,
-            self.config.delta_mm,
-            False,
-            np.empty((d, d)),
-            np.empty(d),
-            self._norm,
-        )
 
     def _swap_test(self, q: FloatArray, norm: FloatArray, scale: FloatArray) -> NDArray[np.bool_]:
         """Views whose exchanged labels fit pose ``q`` clearly better."""
