@@ -100,3 +100,12 @@ def test_far_spans_need_most_views_and_a_stretch() -> None:
     res += [frame(9 / 30, near)] + [frame(k / 30, far) for k in range(10, 13)]
     spans = far_spans(res, ["left_wrist"])
     assert spans == [("left_wrist", 0.1, 8 / 30, 6)]
+
+
+def test_track_stereo_refuses_options_of_another_method(ring_session, tmp_path, capsys) -> None:
+    out = str(tmp_path / "r")
+    args = ["track", "stereo", str(ring_session), "--out", out]
+    assert main([*args, "--method", "skin", "--keypoints"]) == 2
+    assert "--keypoints is --method filter" in capsys.readouterr().err
+    assert main([*args, "--particles", "50"]) == 2
+    assert "--particles belongs to --method filter or skin" in capsys.readouterr().err

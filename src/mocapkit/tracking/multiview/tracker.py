@@ -151,7 +151,6 @@ class MultiviewTracker:
         self._perm = swap_permutation(self.names)
         self._pairs = np.flatnonzero(self._perm != np.arange(len(self.names)))
         self._base_w = np.array([cfg.rebuilt_weight if n in rebuilt else 1.0 for n in self.names])
-        d = skeleton.n_dofs
         free = np.array([n in FREE_DOFS for n in skeleton.dof_names])
         lower = np.where(np.isfinite(skeleton.lower) & ~free, skeleton.lower, -1e9)
         upper = np.where(np.isfinite(skeleton.upper) & ~free, skeleton.upper, 1e9)
@@ -177,7 +176,6 @@ class MultiviewTracker:
         self._ever_seen: set[str] = set()
         self._norm = np.empty((len(self.cameras), len(self.names)))
         self.swapped = np.zeros(len(self.cameras), dtype=bool)
-        _ = d
 
     # ------------------------------------------------------------------ pieces
 
