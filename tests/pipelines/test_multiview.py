@@ -109,3 +109,33 @@ def test_track_stereo_refuses_options_of_another_method(ring_session, tmp_path, 
     assert "--keypoints is --method filter" in capsys.readouterr().err
     assert main([*args, "--particles", "50"]) == 2
     assert "--particles belongs to --method filter or skin" in capsys.readouterr().err
+
+
+def test_batch_fits_a_session_with_keypoints_and_marks_a_poor_take(ring_session, tmp_path) -> None:
+    from mocapkit.pipelines.batch import Take, TakeJob, run_take
+
+    study = tmp_path / "study"
+    shutil.copytree(ring_session, study / "take")
+    (study / "take" / "markers.csv").unlink(missing_ok=True)
+    opts = {"method": "auto", "joints": "upper"}
+    row = run_take(
+        TakeJob(Take("take", "session", (study / "take").resolve()), tmp_path / "o", opts)
+    )
+    assert (row.method, row.status) == ("stereo", "done") and row.mpjpe_mm < 20.0
+    # one view's right wrist far off for a third of a second in most views: poor
+    kp_dir = study / "take" / "keypoints"
+    for cam in ("ring1", "ring2", "ring3"):
+        path = kp_dir / f"{cam}.csv"
+        lines = path.read_text().splitlines()
+        head = lines[0].split(",")
+        col = head.index("right_wrist_x_px")
+        for i in range(5, 16):
+            cells = lines[i].split(",")
+            cells[col] = f"{float(cells[col]) + 90.0 * (1 if cam != 'ring2' else -1):.3f}"
+            lines[i] = ",".join(cells)
+        path.write_text("\n".join(lines) + "\n")
+    row = run_take(
+        TakeJob(Take("take", "session", (study / "take").resolve()), tmp_path / "o2", opts)
+    )
+    spans = far_spans_in_folder(tmp_path / "o2" / "take")
+    assert row.status == "poor" and [s[0] for s in spans] == ["right_wrist"]
