@@ -49,7 +49,7 @@ from mocapkit.viz.overlay import draw_sticks
 ARMS = ("left_shoulder", "right_shoulder", "left_elbow", "right_elbow", "left_wrist", "right_wrist")
 
 
-def reprojection_px(session, names, joint_names, joints_mm) -> np.ndarray:
+def reprojection_px(session, joint_names, joints_mm) -> np.ndarray:
     """Distance (T, V, 6) px of the arm joints from each view's detections."""
     cams = sorted(session.keypoints)
     out = np.full((joints_mm.shape[0], len(cams), len(ARMS)), np.nan)
@@ -101,7 +101,7 @@ def main() -> int:
     session = load_session(session_dir)
     run = track_multiview_session(session_dir, args.out / "result")
     m = run.motion
-    ours = reprojection_px(session, None, m.joint_names, m.joints_mm)
+    ours = reprojection_px(session, m.joint_names, m.joints_mm)
     cams = sorted(session.keypoints)
     swapped = np.array([[r.fit[f"{c}_swapped"] for c in cams] for r in run.results], dtype=bool)
     clean = ~swapped.any(axis=1)
@@ -121,7 +121,7 @@ def main() -> int:
         full = np.full((m.n_frames, len(BODY25), 3), np.nan)
         full[frames[frames < m.n_frames]] = p2s_joints[frames < m.n_frames]
         p2s_joints = full
-        rows.append(("Pose2Sim", reprojection_px(session, None, tuple(BODY25), full)))
+        rows.append(("Pose2Sim", reprojection_px(session, tuple(BODY25), full)))
     print(
         f"{'arm joints vs detections, px':<30}{'all frames':>12}{'no swap':>10}"
         f"{'elbows':>9}{'wrists':>9}"
