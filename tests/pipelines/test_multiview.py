@@ -107,7 +107,7 @@ def test_track_stereo_refuses_options_of_another_method(ring_session, tmp_path, 
     args = ["track", "stereo", str(ring_session), "--out", out]
     assert main([*args, "--method", "skin", "--keypoints"]) == 2
     assert "--keypoints is --method filter" in capsys.readouterr().err
-    assert main([*args, "--particles", "50"]) == 2
+    assert main([*args, "--method", "fit", "--particles", "50"]) == 2
     assert "--particles belongs to --method filter or skin" in capsys.readouterr().err
 
 

@@ -104,6 +104,14 @@ def _run(args: argparse.Namespace) -> int:
         if args.method not in ("auto", "filter"):
             raise ConfigError(f"--keypoints is --method filter; found --method {args.method}")
         args.method = "filter"
+    paper_options = (
+        args.particles is not None
+        or args.torso != "shoulders"
+        or args.torso_anchor != "neck"
+        or args.fixed_shoulders
+    )
+    if args.method == "auto" and paper_options:
+        args.method = "skin"  # the paper's tracker's options: the paper's tracker
     method = resolve_stereo_method(args.session, args.method, args.cameras)
     if method == "fit":
         return _run_fit(args)
