@@ -210,7 +210,12 @@ def test_batch_on_an_in_process_cluster(study, tmp_path, client):
     lines: list[str] = []
     result = batch(study, out, "auto", client=client, say=lines.append)
     assert [r.take for r in result.rows] == sorted(TAKES)
-    assert result.n_failed == 1 and result.counts == {"done": 3, "skipped": 0, "failed": 1}
+    assert result.n_failed == 1 and result.counts == {
+        "done": 3,
+        "poor": 0,
+        "skipped": 0,
+        "failed": 1,
+    }
     # an address where bokeh is installed, else a line saying there is none
     assert len(lines) == 1 and lines[0].startswith("dask dashboard: ")
     table = {r["take"]: r for r in _read_csv(out / "study.csv")}
@@ -228,13 +233,13 @@ def test_batch_on_an_in_process_cluster(study, tmp_path, client):
     # again: complete takes are skipped (not even sent), the failed one is tried again
     stamp = {n: (out / n / TAKE_FILE).stat().st_mtime_ns for n in TAKES[:3]}
     again = batch(study, out, "auto", client=client)
-    assert again.counts == {"done": 0, "skipped": 3, "failed": 1}
+    assert again.counts == {"done": 0, "poor": 0, "skipped": 3, "failed": 1}
     assert {n: (out / n / TAKE_FILE).stat().st_mtime_ns for n in TAKES[:3]} == stamp
     assert [r.mpjpe_mm for r in again.rows[:3]] == [r.mpjpe_mm for r in result.rows[:3]]
     # the explicit method is another option set: redone; --force redoes the rest
     shutil.rmtree(study / "s3")
     forced = batch(study, out, "hybrid", client=client)
-    assert forced.counts == {"done": 3, "skipped": 0, "failed": 0}
+    assert forced.counts == {"done": 3, "poor": 0, "skipped": 0, "failed": 0}
     assert batch(study, out, "hybrid", client=client, force=True).counts["done"] == 3
 
 

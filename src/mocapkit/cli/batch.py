@@ -110,7 +110,13 @@ def run(args: argparse.Namespace) -> int:
     print(result.table())
     c = result.counts
     print(
-        f"{len(result.rows)} takes: {c['done']} done, {c['skipped']} skipped, "
+        f"{len(result.rows)} takes: {c['done']} done, "
+        + (
+            f"{c['poor']} poor (a joint far from its detections: its fit.csv), "
+            if c["poor"]
+            else ""
+        )
+        + f"{c['skipped']} skipped, "
         f"{c['failed']} failed; wall {result.wall_s:.1f} s -> {result.study_csv}"
     )
     return min(result.n_failed, 100)

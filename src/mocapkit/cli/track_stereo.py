@@ -11,6 +11,7 @@ import json
 from typing import Any
 
 from mocapkit.cli.args import output_folder
+from mocapkit.tracking.multiview.config import SMOOTHING, STEREO_METHODS, MultiviewRunConfig
 
 
 def register_method(methods: Any) -> None:
@@ -18,10 +19,13 @@ def register_method(methods: Any) -> None:
     p = methods.add_parser(
         "stereo",
         help="two or more cameras, no markers (Azad, Asfour, Dillmann 2008)",
-        description="Track the upper body of a session folder with two or more calibrated "
-        "cameras: skin-blob (or keypoint) head and hands in 3-D, one particle filter per "
-        "arm on the edge and distance cues. Writes motion.npz, joints.csv, motion.bvh and fit.csv "
-        "to --out; with a truth.npz in the session, prints the arm joints' errors too.",
+        description="Track a session folder with two or more calibrated cameras. With 2-D "
+        "keypoints for every camera (default --method auto): the full body fitted to every "
+        "view's detections (robust, left/right swaps per view, the subject's segment lengths "
+        "from the take). Without keypoints, or with --method skin|filter: the paper's upper "
+        "body, skin-blob (or keypoint) head and hands in 3-D and one particle filter per arm on "
+        "the edge and distance cues. Writes motion.npz, joints.csv, motion.bvh and fit.csv "
+        "to --out; with a truth.npz in the session, prints the joints' errors too.",
     )
     p.add_argument("session", help="session folder")
     p.add_argument("--out", required=True, type=output_folder, help="result folder")
@@ -32,9 +36,32 @@ def register_method(methods: Any) -> None:
         help="cameras to use (default: every camera with a video); the cues average over them",
     )
     p.add_argument(
+        "--method",
+        choices=STEREO_METHODS,
+        default="auto",
+        help="fit: the full-body model fitted to the keypoints; filter: the paper's arm "
+        "particle filters with head and hands from the keypoints; skin: the paper's skin "
+        "blobs; auto (default): fit when every camera has keypoints, else skin",
+    )
+    p.add_argument(
+        "--smooth",
+        choices=SMOOTHING,
+        default=MultiviewRunConfig().smoothing,
+        help="with the fit: smoothing of the poses: none; one-euro (online, a few frames of "
+        "lag on fast motion); butterworth (offline, zero lag, 4th order, as Pose2Sim) "
+        f"(default {MultiviewRunConfig().smoothing})",
+    )
+    p.add_argument(
+        "--cutoff-hz",
+        type=float,
+        default=MultiviewRunConfig().cutoff_hz,
+        help=f"with --smooth: cut-off (default {MultiviewRunConfig().cutoff_hz:g} Hz)",
+    )
+    p.add_argument(
         "--keypoints",
         action="store_true",
-        help="head and hands from keypoints/<camera>.csv instead of skin blobs",
+        help="same as --method filter: head and hands from keypoints/<camera>.csv instead of "
+        "skin blobs, arms by the particle filters",
     )
     p.add_argument(
         "--particles", type=int, default=None, help="particles per arm and run (default 150)"
@@ -68,10 +95,32 @@ def _run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from mocapkit.errors import ConfigError
+    from mocapkit.pipelines.multiview import resolve_stereo_method
     from mocapkit.pipelines.run import find_gaps
     from mocapkit.pipelines.stereo import evaluate_stereo, track_stereo_session
     from mocapkit.tracking.stereo.tracker import StereoConfig
 
+    if args.keypoints:
+        if args.method not in ("auto", "filter"):
+            raise ConfigError(f"--keypoints is --method filter; found --method {args.method}")
+        args.method = "filter"
+    paper_options = (
+        args.particles is not None
+        or args.torso != "shoulders"
+        or args.torso_anchor != "neck"
+        or args.fixed_shoulders
+    )
+    if args.method == "auto" and paper_options:
+        args.method = "skin"  # the paper's tracker's options: the paper's tracker
+    method = resolve_stereo_method(args.session, args.method, args.cameras)
+    if method == "fit":
+        return _run_fit(args)
+    if method == "skin" and args.method == "auto":
+        print(
+            "no keypoints/<camera>.csv for every camera: tracking by skin colour (the paper's "
+            "cues; they fail on most real video). Give 2-D keypoints for the full-body fit.",
+        )
+    args.keypoints = method == "filter"
     if args.torso == "keypoints" and not args.keypoints:
         raise ConfigError("--torso keypoints needs --keypoints")
     if args.particles is not None and args.particles < 2:
@@ -107,4 +156,48 @@ def _run(args: argparse.Namespace) -> int:
                 print(f"  {k:<16}{v:8.1f} mm")
             print(f"  {'arm mean':<16}{ev['arm_mean_mm']:8.1f} mm")
             print(f"  {'torso yaw':<16}{ev['torso_yaw_error_deg']:8.1f} deg")
+    return 0
+
+
+def _run_fit(args: argparse.Namespace) -> int:
+    """``--method fit``: the full-body model fitted to the keypoints."""
+    from dataclasses import replace
+    from pathlib import Path
+
+    from mocapkit.errors import ConfigError
+    from mocapkit.pipelines.accuracy import evaluate_result
+    from mocapkit.pipelines.multiview import track_multiview_session
+    from mocapkit.pipelines.run import find_gaps
+
+    for flag, value, default in (
+        ("--particles", args.particles, None),
+        ("--torso", args.torso, "shoulders"),
+        ("--torso-anchor", args.torso_anchor, "neck"),
+        ("--fixed-shoulders", args.fixed_shoulders, False),
+    ):
+        if value != default:
+            raise ConfigError(f"{flag} belongs to --method filter or skin, not to the fit")
+    cfg = replace(MultiviewRunConfig(), smoothing=args.smooth, cutoff_hz=args.cutoff_hz)
+    run = track_multiview_session(args.session, args.out, cameras=args.cameras, config=cfg)
+    for gap in find_gaps(run.results):
+        print(f"gap: {gap}")
+    for joint, t0, t1, n in run.far:
+        print(
+            f"warning: {joint} is more than {cfg.fit.warn_px:g} px from its detections in most "
+            f"views over {t0:.3f}-{t1:.3f} s ({n} frames); see fit.csv"
+        )
+    fps = run.motion.n_frames / max(run.seconds, 1e-9)
+    print(
+        f"fitted {run.motion.n_frames} frames in {run.seconds:.2f} s CPU ({fps:.1f} frames/s), "
+        f"smoothing {cfg.smoothing}"
+    )
+    print(f"wrote {args.out}")
+    if (Path(args.session) / "truth.npz").is_file():
+        rep = evaluate_result(args.out, args.session)
+        if args.json:
+            print(rep.to_json())
+        else:
+            for k, v in rep.per_joint_mm.items():
+                print(f"  {k:<16}{v:8.1f} mm")
+            print(f"  {'MPJPE':<16}{rep.mpjpe_mm:8.1f} mm")
     return 0

@@ -54,7 +54,9 @@ STUDY_FILE = "study.csv"
 #: also its result folder relative to the results), ``session`` or ``markers``, the method
 #: that ran, frames tracked, share of them with a pose, mean distance (px) of the result's
 #: joints from the session's 2-D keypoints in its first camera that has both, upper-body
-#: errors against truth (mm), seconds the take took on its worker, ``done`` / ``skipped``
+#: errors against truth (mm), seconds the take took on its worker, ``done`` / ``poor``
+#: (tracked, but a joint stays far from its detections in most views over a stretch:
+#: `mocapkit.pipelines.multiview.far_spans`) / ``skipped``
 #: (complete from an earlier run; figures from then) / ``failed`` / ``pending``, and the
 #: error of a failed take.
 STUDY_COLUMNS = (
@@ -372,7 +374,10 @@ def _track_into(job: TakeJob, method: str, folder: Path) -> dict[str, float]:
         "coverage": float(np.all(np.isfinite(joints), axis=(1, 2)).mean()) if joints.size else 0.0,
     }
     if take.kind == "session":
+        from mocapkit.pipelines.multiview import far_spans_in_folder
+
         figures["fit_px"] = keypoint_fit_px(take.source, folder)
+        figures["far_spans"] = float(len(far_spans_in_folder(folder)))
         if (take.source / "truth.npz").is_file():
             report = evaluate_result(folder, take.source, joints=joint_subset(opts["joints"]))
             with atomic_write(folder / "eval.json") as fh:
@@ -413,7 +418,7 @@ def run_take(job: TakeJob) -> TakeRow:
                     pa_mpjpe_mm=figures.get("pa_mpjpe_mm", nan),
                     elbow_mm=figures.get("elbow_mm", nan),
                     seconds=time.perf_counter() - start,
-                    status="done",
+                    status="poor" if figures.get("far_spans", 0.0) > 0 else "done",
                 )
                 doc = {
                     "format": TAKE_FORMAT,
@@ -735,7 +740,9 @@ def batch(
                     )
                     raise
     result_rows = ordered()
-    counts = {s: sum(r.status == s for r in result_rows) for s in ("done", "skipped", "failed")}
+    counts = {
+        s: sum(r.status == s for r in result_rows) for s in ("done", "poor", "skipped", "failed")
+    }
     return StudyResult(result_rows, study_csv, time.perf_counter() - start, dashboard, counts)
 
 

@@ -305,6 +305,13 @@ def _bench_live(repeats: int = 1) -> dict[str, Any]:
     return bench_live(repeats=repeats)
 
 
+def _bench_multiview(repeats: int = 3) -> dict[str, Any]:
+    """The multi-view fit's figures (`mocapkit.pipelines.multiview.bench_multiview`)."""
+    from mocapkit.pipelines.multiview import bench_multiview
+
+    return bench_multiview(repeats=repeats)
+
+
 BENCHMARKS: dict[str, Callable[..., dict[str, Any]]] = {
     "kinematics": bench_kinematics,
     "hybrid": bench_hybrid,
@@ -312,6 +319,7 @@ BENCHMARKS: dict[str, Callable[..., dict[str, Any]]] = {
     "stereo": _bench_stereo,
     "detect": _bench_detect,
     "live": _bench_live,
+    "multiview": _bench_multiview,
 }
 #: Benchmarks that ``all`` leaves out: ``live`` needs ``mocapkit[live]`` and runs in real time.
 NOT_IN_ALL: tuple[str, ...] = ("live",)

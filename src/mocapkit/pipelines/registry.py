@@ -11,7 +11,8 @@ registers with one line in `TRACKERS` (or `register_tracker` at run time, e.g. f
 notebook).
 
 ``auto`` chooses by what a session holds (`choose_method`): markers and video -> hybrid
-(Zhang 2011); two or more cameras with video and no markers -> stereo (Azad 2008); one
+(Zhang 2011); two or more cameras with video and no markers -> stereo (the model-based
+multi-view fit when every camera has 2-D keypoints, else Azad 2008's skin colour); one
 camera -> mono (Mamania 2004). When the preferred method is not available, the next one
 that can use the session is taken (a stereo pair can be tracked by mono from its first
 camera); when none is, the error names the missing method and the ones available.
@@ -32,7 +33,7 @@ SessionTracker = Callable[[str | os.PathLike[str], str | os.PathLike[str]], Any]
 #: Method name -> ``"module:function"`` (or a function registered at run time).
 TRACKERS: dict[str, str | SessionTracker] = {
     "hybrid": "mocapkit.pipelines.hybrid:track_hybrid_session",
-    "stereo": "mocapkit.pipelines.stereo:track_stereo_session",
+    "stereo": "mocapkit.pipelines.multiview:track_stereo_auto",
     "mono": "mocapkit.pipelines.mono:track_mono",
 }
 

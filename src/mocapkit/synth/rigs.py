@@ -16,7 +16,7 @@ from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
 from mocapkit.errors import ShapeError, unknown_name
 
 #: Rig names accepted by `make_rig`.
-RIG_NAMES: tuple[str, ...] = ("mono", "stereo", "all", "multi")
+RIG_NAMES: tuple[str, ...] = ("mono", "stereo", "all", "multi", "ring")
 
 #: Horizontal field of view (degrees): a 1.8 m subject fills about 3/4 of a 4:3 image at 3 m.
 HORIZONTAL_FOV_DEG = 62.0
@@ -31,6 +31,13 @@ STEREO_AZIMUTH_DEG = 15.0
 #: The ``multi`` rig's fourth camera, ``side``: this far (degrees) around the subject on the
 #: other side of the mono camera, at the mono camera's distance and height.
 SIDE_AZIMUTH_DEG = -45.0
+#: The ``ring`` rig: cameras ``ring1`` ... around the subject as a lab rings a capture
+#: volume: this many, evenly spaced, the first this far (degrees) around from the front,
+#: at this distance (mm) and lens height (mm), each aimed at the subject's hips.
+RING_CAMERAS = 4
+RING_FIRST_AZIMUTH_DEG = 45.0
+RING_DISTANCE_MM = 4000.0
+RING_HEIGHT_MM = 1700.0
 #: Nominal lens distortion ``k1, k2, p1, p2, k3`` (mild barrel), jittered per camera.
 NOMINAL_DIST = np.array([-0.10, 0.03, 0.0, 0.0, 0.0])
 
@@ -55,12 +62,15 @@ def make_rig(
 
     Parameters
     ----------
-    rig : {"mono", "stereo", "all", "multi"}
+    rig : {"mono", "stereo", "all", "multi", "ring"}
         ``mono``: one camera named ``mono`` about 3 m in front of the subject at chest
         height. ``stereo``: ``stereo_left`` and ``stereo_right``, 90 mm apart with parallel
         optical axes, about 2.7 m away at head height. ``all``: both. ``multi``: both and
         a fourth camera ``side`` like ``mono`` but 45 degrees around the subject the other
-        way (for trackers over more than three views).
+        way (for trackers over more than three views). ``ring``: `RING_CAMERAS` cameras
+        ``ring1``, ``ring2``, ... evenly around the subject (`RING_DISTANCE_MM` away,
+        `RING_HEIGHT_MM` high, the first `RING_FIRST_AZIMUTH_DEG` from the front), each
+        aimed at the hips.
     subject_mm : array_like, shape (3,)
         Subject position (pelvis) in the world, mm; only x and y are used.
     forward : array_like, shape (3,)
@@ -116,4 +126,12 @@ def make_rig(
         eye = base + MONO_DISTANCE_MM * dirn + np.array([0.0, 0.0, chest_height_mm])
         target = base + np.array([0.0, 0.0, chest_height_mm - 150.0])
         cams.append(Camera("side", image_size, k, dist(), look_at(eye, target)))
+    if rig == "ring":
+        target = base + np.array([0.0, 0.0, chest_height_mm - 400.0])
+        for i in range(RING_CAMERAS):
+            a = np.radians(RING_FIRST_AZIMUTH_DEG + 360.0 * i / RING_CAMERAS)
+            c, s = np.cos(a), np.sin(a)
+            dirn = np.array([c * fwd[0] - s * fwd[1], s * fwd[0] + c * fwd[1], 0.0])
+            eye = base + RING_DISTANCE_MM * dirn + np.array([0.0, 0.0, RING_HEIGHT_MM])
+            cams.append(Camera(f"ring{i + 1}", image_size, k, dist(), look_at(eye, target)))
     return cams

@@ -1,0 +1,255 @@
+"""The compiled model fit: a jointed skeleton posed so that its points reproject onto every
+view's 2-D detections (robust weighted least squares, Levenberg-Marquardt).
+
+Residuals live in the normalised image plane of each camera (detections undistorted once,
+`mocapkit.camera.pinhole.Camera.undistort_pixels`), scaled by the subject's depth in that
+view, so that a residual reads as millimetres across the ray at the subject and every
+threshold is independent of the image size. The loss per (view, joint) is Huber's on the
+2-D residual's length, times the detection's weight; a prior pulls each DoF towards a
+reference pose (the previous frame). Joint limits are kept by projecting every step onto
+the box. The Jacobian is analytic: the skeleton's point Jacobian
+(`mocapkit.skeleton.kinematics.points_jacobian_pose_nb`) through the camera rotation and
+the perspective division.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba
+import numpy as np
+from numpy.typing import NDArray
+
+from mocapkit.skeleton.kinematics import (
+    KinematicArrays,
+    fk_points_jacobian_pose_nb,
+    fk_pose_nb,
+)
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+
+class ViewArrays(NamedTuple):
+    """The views of one fit in kernel layout.
+
+    Attributes
+    ----------
+    rotation : ndarray, shape (V, 3, 3)
+        Rotations of ``camera_from_world``.
+    translation_mm : ndarray, shape (V, 3)
+    """
+
+    rotation: FloatArray
+    translation_mm: FloatArray
+
+
+class FitTargets(NamedTuple):
+    """What one frame's fit is asked to match.
+
+    Attributes
+    ----------
+    observed : ndarray, shape (V, K, 2)
+        Undistorted normalised image coordinates of each detection (NaN: none).
+    weight : ndarray, shape (V, K)
+        Weight of each detection (0: not used).
+    scale_mm : ndarray, shape (V,)
+        Depth of the subject in each view (mm): residuals are normalised coordinates
+        times this, millimetres across the ray at the subject.
+    q_ref : ndarray, shape (D,)
+        Reference pose of the prior.
+    prior : ndarray, shape (D,)
+        Square root of each DoF's prior weight (mm per rad, or per mm); positive.
+    """
+
+    observed: FloatArray
+    weight: FloatArray
+    scale_mm: FloatArray
+    q_ref: FloatArray
+    prior: FloatArray
+
+
+@numba.njit(cache=True)
+def evaluate_nb(
+    q: FloatArray,
+    kin: KinematicArrays,
+    target_joint: IntArray,
+    target_point: FloatArray,
+    views: ViewArrays,
+    tg: FitTargets,
+    delta_mm: float,
+    want_normal: bool,
+    hess: FloatArray,
+    grad: FloatArray,
+    norms: FloatArray,
+) -> float:
+    """Robust cost of pose ``q``; with ``want_normal`` also the Gauss-Newton normal
+    equations ``hess`` (D, D) and ``grad`` (D,) of the iteratively reweighted problem.
+
+    ``norms`` (V, K) receives each residual's length (mm; NaN without a detection or
+    behind the camera), whatever its weight.
+    """
+    n_dofs = q.shape[0]
+    n_views = views.rotation.shape[0]
+    n_pts = target_joint.shape[0]
+    n_joints = kin.parents.shape[0]
+    world = np.empty((n_joints, 4, 4))
+    axis_world = np.empty((n_dofs, 3))
+    pivot_world = np.empty((n_dofs, 3))
+    pts = np.empty((n_pts, 3))
+    jac = np.empty((3 * n_pts, n_dofs))
+    if want_normal:
+        fk_points_jacobian_pose_nb(
+            q, kin, target_joint, target_point, world, axis_world, pivot_world, pts, jac
+        )
+        hess[:, :] = 0.0
+        grad[:] = 0.0
+    else:
+        fk_pose_nb(q, kin, world, axis_world, pivot_world)
+        for k in range(n_pts):
+            jk = target_joint[k]
+            for a in range(3):
+                pts[k, a] = (
+                    world[jk, a, 0] * target_point[k, 0]
+                    + world[jk, a, 1] * target_point[k, 1]
+                    + world[jk, a, 2] * target_point[k, 2]
+                    + world[jk, a, 3]
+                )
+    row_x = np.empty(n_dofs)
+    row_y = np.empty(n_dofs)
+    cost = 0.0
+    for v in range(n_views):
+        r = views.rotation[v]
+        t = views.translation_mm[v]
+        s = tg.scale_mm[v]
+        for k in range(n_pts):
+            norms[v, k] = np.nan
+            ox, oy = tg.observed[v, k, 0], tg.observed[v, k, 1]
+            if not (np.isfinite(ox) and np.isfinite(oy)):
+                continue
+            x, y, z = pts[k, 0], pts[k, 1], pts[k, 2]
+            xc = r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + t[0]
+            yc = r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + t[1]
+            zc = r[2, 0] * x + r[2, 1] * y + r[2, 2] * z + t[2]
+            if zc < 1.0:
+                continue
+            rx = s * (xc / zc - ox)
+            ry = s * (yc / zc - oy)
+            n = np.sqrt(rx * rx + ry * ry)
+            norms[v, k] = n
+            wk = tg.weight[v, k]
+            if wk <= 0.0:
+                continue
+            if n <= delta_mm:
+                cost += wk * 0.5 * n * n
+                irls = wk
+            else:
+                cost += wk * delta_mm * (n - 0.5 * delta_mm)
+                irls = wk * delta_mm / n
+            if not want_normal:
+                continue
+            a0 = s / zc
+            ax = -s * xc / (zc * zc)
+            ay = -s * yc / (zc * zc)
+            for d in range(n_dofs):
+                j0, j1, j2 = jac[3 * k, d], jac[3 * k + 1, d], jac[3 * k + 2, d]
+                c0 = r[0, 0] * j0 + r[0, 1] * j1 + r[0, 2] * j2
+                c1 = r[1, 0] * j0 + r[1, 1] * j1 + r[1, 2] * j2
+                c2 = r[2, 0] * j0 + r[2, 1] * j1 + r[2, 2] * j2
+                row_x[d] = a0 * c0 + ax * c2
+                row_y[d] = a0 * c1 + ay * c2
+            for a in range(n_dofs):
+                xa, ya = row_x[a], row_y[a]
+                if xa == 0.0 and ya == 0.0:
+                    continue
+                grad[a] += irls * (xa * rx + ya * ry)
+                for b in range(a, n_dofs):
+                    hess[a, b] += irls * (xa * row_x[b] + ya * row_y[b])
+    for d in range(n_dofs):
+        e = tg.prior[d] * (q[d] - tg.q_ref[d])
+        cost += 0.5 * e * e
+        if want_normal:
+            hess[d, d] += tg.prior[d] * tg.prior[d]
+            grad[d] += tg.prior[d] * e
+    if want_normal:
+        for a in range(n_dofs):
+            for b in range(a):
+                hess[a, b] = hess[b, a]
+    return cost
+
+
+@numba.njit(cache=True)
+def fit_pose_nb(
+    q: FloatArray,
+    kin: KinematicArrays,
+    target_joint: IntArray,
+    target_point: FloatArray,
+    views: ViewArrays,
+    tg: FitTargets,
+    lower: FloatArray,
+    upper: FloatArray,
+    delta_mm: float,
+    max_iter: int,
+    norms: FloatArray,
+) -> tuple[float, int]:
+    """Levenberg-Marquardt (Marquardt's diagonal scaling) on the robust cost, in place
+    on ``q``, each step projected onto the joint limits ``[lower, upper]``.
+
+    Stops when a step lowers the cost by less than 1e-6 of it, when the damping grows
+    past 1e8, or after ``max_iter`` accepted or rejected steps. Returns the final cost
+    and the number of steps; ``norms`` (V, K) holds the residual lengths at the result.
+    """
+    n = q.shape[0]
+    hess = np.empty((n, n))
+    grad = np.empty(n)
+    for d in range(n):
+        q[d] = min(max(q[d], lower[d]), upper[d])
+    cost = evaluate_nb(
+        q, kin, target_joint, target_point, views, tg, delta_mm, True, hess, grad, norms
+    )
+    lam = 1e-3
+    trial = np.empty(n)
+    a = np.empty((n, n))
+    steps = 0
+    for _ in range(max_iter):
+        steps += 1
+        for i in range(n):
+            for j in range(n):
+                a[i, j] = hess[i, j]
+            a[i, i] += lam * hess[i, i] + 1e-9
+        dq = np.linalg.solve(a, -grad)
+        for d in range(n):
+            trial[d] = min(max(q[d] + dq[d], lower[d]), upper[d])
+        c_new = evaluate_nb(
+            trial, kin, target_joint, target_point, views, tg, delta_mm, False, hess, grad, norms
+        )
+        if c_new < cost:
+            gain = cost - c_new
+            q[:] = trial
+            cost = evaluate_nb(
+                q, kin, target_joint, target_point, views, tg, delta_mm, True, hess, grad, norms
+            )
+            lam = max(lam / 3.0, 1e-9)
+            if gain < 1e-6 * cost:
+                break
+        else:
+            lam *= 4.0
+            if lam > 1e8:
+                break
+    evaluate_nb(q, kin, target_joint, target_point, views, tg, delta_mm, False, hess, grad, norms)
+    return cost, steps
+
+
+def view_arrays(camera_from_world: list[FloatArray]) -> ViewArrays:
+    """`ViewArrays` of cameras given by their ``camera_from_world`` (4, 4) matrices."""
+    m = np.stack([np.asarray(c, dtype=float) for c in camera_from_world])
+    return ViewArrays(np.ascontiguousarray(m[:, :3, :3]), np.ascontiguousarray(m[:, :3, 3]))
+
+
+__all__ = [
+    "FitTargets",
+    "ViewArrays",
+    "evaluate_nb",
+    "fit_pose_nb",
+    "view_arrays",
+]
