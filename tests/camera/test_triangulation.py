@@ -101,3 +101,23 @@ def test_closest_point_to_lines() -> None:
     np.testing.assert_allclose(x, target, atol=1e-9)
     with pytest.raises(ShapeError, match="parallel"):
         closest_point_to_lines(origins[:2], [[0, 0, 1.0], [0, 0, 2.0]])
+
+
+def test_widest_view_angle_of_known_rigs() -> None:
+    """Axes 90 deg apart give pi/2; a pair turned 3 deg to each other 3 deg; one camera 0."""
+    from mocapkit.camera.triangulation import widest_view_angle_rad
+
+    k = np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]])
+
+    def cam(name: str, eye: tuple[float, float, float], target=(0.0, 0.0, 1000.0)) -> Camera:
+        return Camera(name, (640, 480), k, np.zeros(5), look_at(eye, target))
+
+    ring = [cam("a", (4000.0, 0.0, 1000.0)), cam("b", (0.0, 4000.0, 1000.0))]
+    assert widest_view_angle_rad(ring) == pytest.approx(np.pi / 2, abs=1e-9)
+    half = np.radians(1.5)
+    pair = [
+        cam("l", (0.0, -4000.0, 1000.0), (4000.0 * np.tan(half), 0.0, 1000.0)),
+        cam("r", (0.0, -4000.0, 1000.0), (-4000.0 * np.tan(half), 0.0, 1000.0)),
+    ]
+    assert widest_view_angle_rad(pair) == pytest.approx(2 * half, abs=1e-9)
+    assert widest_view_angle_rad(ring[:1]) == 0.0

@@ -35,7 +35,7 @@ def test_mono_arm_prior_weight_must_be_a_finite_weight(value, tmp_path, capsys):
 
 @pytest.mark.parametrize(
     "name",
-    ["residual_weight", "elbow_flex_weight", "clavicle_weight", "girdle_weight"],
+    ["clavicle_weight", "arm_prior_weight", "girdle_weight"],
 )
 def test_every_mono_weight_is_checked(name):
     with pytest.raises(ConfigError, match=rf"MonoConfig.{name}: expected a finite weight"):

@@ -139,3 +139,15 @@ def test_batch_fits_a_session_with_keypoints_and_marks_a_poor_take(ring_session,
     )
     spans = far_spans_in_folder(tmp_path / "o2" / "take")
     assert row.status == "poor" and [s[0] for s in spans] == ["right_wrist"]
+
+
+def test_auto_keeps_the_papers_tracker_on_a_narrow_pair(tmp_path) -> None:
+    """On a narrow stereo pair (axes a few degrees apart) ``auto`` takes the paper's
+    tracker on the keypoints, not the fit, which places the body poorly there."""
+    from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+
+    folder = tmp_path / "pair"
+    options = SynthOptions(rig="stereo", seconds=0.3, image_size=(160, 120), seed=1)
+    synthesize_session("builtin:wave", folder, options)
+    assert resolve_stereo_method(folder) == "filter"
+    assert resolve_stereo_method(folder, "fit") == "fit"

@@ -169,3 +169,17 @@ def closest_point_to_lines(origins: ArrayLike, directions: ArrayLike) -> FloatAr
     if np.linalg.cond(a) > 1e12:
         raise ShapeError("closest_point_to_lines: lines are parallel; no unique nearest point")
     return np.linalg.solve(a, b)
+
+
+def widest_view_angle_rad(cameras: Sequence[Camera]) -> float:
+    """The largest angle between two cameras' optical axes (rad; 0 for one camera).
+
+    A measure of how well the views fix depth: a narrow stereo pair (axes nearly
+    parallel) triangulates along the line of sight poorly, a ring of cameras around the
+    subject (axes 90 deg apart and more) well.
+    """
+    axes = np.array([c.world_from_camera[:3, 2] for c in cameras], dtype=float)
+    if len(axes) < 2:
+        return 0.0
+    cos = np.clip(axes @ axes.T, -1.0, 1.0)
+    return float(np.arccos(cos.min()))

@@ -115,6 +115,11 @@ def _run(args: argparse.Namespace) -> int:
     method = resolve_stereo_method(args.session, args.method, args.cameras)
     if method == "fit":
         return _run_fit(args)
+    if method == "filter" and args.method == "auto":
+        print(
+            "the views are a narrow pair (optical axes less than 20 deg apart): the paper's "
+            "tracker on the keypoints (--method fit forces the full-body fit)"
+        )
     if method == "skin" and args.method == "auto":
         print(
             "no keypoints/<camera>.csv for every camera: tracking by skin colour (the paper's "

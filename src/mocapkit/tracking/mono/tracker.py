@@ -223,7 +223,7 @@ class MonoConfig:
                 "MonoConfig.rebuilt_reach_tolerance: expected [0, 1), found "
                 f"{self.rebuilt_reach_tolerance}"
             )
-        for name in ("clavicle_weight", "arm_prior_weight", "short_link_weight", "girdle_weight"):
+        for name in ("clavicle_weight", "arm_prior_weight", "girdle_weight"):
             # a negative weight rewards what the cost penalises; NaN poisons every path
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
