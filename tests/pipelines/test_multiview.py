@@ -77,7 +77,8 @@ def test_lengths_and_smoothing_choices(ring_session) -> None:
     assert 0.0 < np.nanmax(d) < 100.0
 
 
-def test_without_keypoints_auto_is_skin(ring_session, tmp_path) -> None:
+def test_without_keypoints_or_detector_auto_is_skin(ring_session, tmp_path, monkeypatch) -> None:
+    monkeypatch.setattr("mocapkit.detect.backend.default_backend", lambda: None)
     bare = tmp_path / "bare"
     shutil.copytree(ring_session, bare)
     shutil.rmtree(bare / "keypoints")
@@ -151,3 +152,30 @@ def test_auto_keeps_the_papers_tracker_on_a_narrow_pair(tmp_path) -> None:
     synthesize_session("builtin:wave", folder, options)
     assert resolve_stereo_method(folder) == "filter"
     assert resolve_stereo_method(folder, "fit") == "fit"
+
+
+def test_auto_detects_missing_keypoints_when_a_detector_is_installed(
+    ring_session, tmp_path, monkeypatch
+) -> None:
+    """Without keypoints but with a 2-D detector, ``auto`` detects them into the session
+    (here a stand-in detector that restores the rendered keypoints) and fits."""
+    from mocapkit.io.session_csv import read_keypoints_csv
+
+    bare = tmp_path / "bare"
+    shutil.copytree(ring_session, bare)
+    shutil.rmtree(bare / "keypoints")
+    asked: list[tuple[str, ...]] = []
+
+    def detect(session, cameras, detector=None, say=None):
+        asked.append(tuple(cameras))
+        shutil.copytree(ring_session / "keypoints", bare / "keypoints")
+        for cam in cameras:
+            session.keypoints[cam] = read_keypoints_csv(bare / "keypoints" / f"{cam}.csv")
+        return tuple(cameras)
+
+    monkeypatch.setattr("mocapkit.detect.backend.default_backend", lambda: "mediapipe")
+    monkeypatch.setattr("mocapkit.detect.run.ensure_keypoints", detect)
+    assert resolve_stereo_method(bare) == "fit"
+    assert len(asked) == 1 and len(asked[0]) == 4
+    assert resolve_stereo_method(bare) == "fit"  # kept in the session: not detected again
+    assert len(asked) == 1

@@ -302,9 +302,13 @@ def resolve_stereo_method(
 ) -> str:
     """``fit``, ``filter`` or ``skin`` for a session: ``auto`` takes the fit when every
     camera used has keypoints and the views span at least `FIT_MIN_VIEW_ANGLE_RAD`, the
-    paper's tracker on the keypoints (``filter``) for a narrower rig, skin colour without
-    keypoints."""
+    paper's tracker on the keypoints (``filter``) for a narrower rig. Keypoints missing
+    for a camera with video are detected first where a 2-D detector is installed
+    (`mocapkit.detect.run.ensure_keypoints`, said on stderr); skin colour where there is
+    none."""
     from mocapkit.camera.triangulation import widest_view_angle_rad
+    from mocapkit.detect.backend import default_backend
+    from mocapkit.detect.run import ensure_keypoints
     from mocapkit.io.session import load_session
     from mocapkit.pipelines.stereo import parse_cameras
 
@@ -318,7 +322,11 @@ def resolve_stereo_method(
         if cameras
         else [c.name for c in session.cameras]
     )
-    if not names or not all(c in session.keypoints for c in names):
+    missing = [c for c in names if c not in session.keypoints]
+    if missing and default_backend() is not None and set(missing) <= set(session.video_cameras):
+        ensure_keypoints(session, names)  # detected into the session, reused next time
+        missing = []
+    if not names or missing:
         return "skin"
     angle = widest_view_angle_rad([session.camera(c) for c in names])
     return "fit" if angle >= FIT_MIN_VIEW_ANGLE_RAD else "filter"
