@@ -130,8 +130,10 @@ def track_multiview_session(
     import time
 
     from mocapkit.io.session import load_session
+    from mocapkit.pipelines.camera_check import check_session_cameras
     from mocapkit.pipelines.run import check_result_folder
     from mocapkit.tracking.multiview.lengths import subject_lengths_mm
+    from mocapkit.tracking.stereo.tracker import azad_skeleton
 
     run_cfg = config or MultiviewRunConfig()
     if out_dir is not None:
@@ -169,6 +171,11 @@ def track_multiview_session(
     n = min(k.pixels.shape[0] for k in kps)
     if max_frames is not None:
         n = min(n, int(max_frames))
+    # the cameras against what the data allow, before any fitting: the subject's
+    # population proportions at its stature stand in for the lengths not measured yet
+    check_session_cameras(
+        session, names, skeleton=azad_skeleton(session.bone_lengths_mm, session.segment_vectors_mm)
+    )
     cams = [session.camera(c) for c in names]
     pixels = np.stack([k.pixels[:n] for k in kps])  # (V, T, K, 2)
     t0 = time.process_time()
