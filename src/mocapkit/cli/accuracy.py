@@ -7,7 +7,7 @@ from typing import Any
 
 from mocapkit.cli.accuracy_detect import register_method as register_detect
 from mocapkit.cli.accuracy_stereo import register_method as register_stereo
-from mocapkit.cli.args import mocap_folder, number, parsed_by
+from mocapkit.cli.args import imported, mocap_folder, number, parsed_by
 
 # the line of `mocapkit --help` (shown without importing this module's pipeline)
 HELP = "render sessions from real motion clips, track them and report the accuracy"
@@ -15,8 +15,7 @@ HELP = "render sessions from real motion clips, track them and report the accura
 
 def register(subparsers: Any) -> None:
     """Add ``accuracy hybrid``."""
-    from mocapkit.pipelines.accuracy import JITTER_MM
-    from mocapkit.pipelines.hybrid import parse_oriented_sets
+    from mocapkit.pipelines.harness import JITTER_MM
 
     p = subparsers.add_parser(
         "accuracy",
@@ -58,7 +57,7 @@ def register(subparsers: Any) -> None:
     orientation.add_argument(
         "--oriented-sets",
         metavar="SETS",
-        type=parsed_by(parse_oriented_sets, "marker sets"),
+        type=parsed_by(imported("mocapkit.pipelines.hybrid:parse_oriented_sets"), "marker sets"),
         help="marker sets whose orientation the tracker sees, comma-separated (head, "
         "left_hand, right_hand) or 'none' (default: all)",
     )

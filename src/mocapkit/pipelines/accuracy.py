@@ -30,6 +30,7 @@ from mocapkit.errors import ConfigError, SessionError
 from mocapkit.eval.metrics import evaluate_result
 from mocapkit.io.marker_csv import write_markers_csv
 from mocapkit.io.session import MARKER_FILES, load_session
+from mocapkit.pipelines.harness import JITTER_MM
 from mocapkit.pipelines.hybrid import track_hybrid_session
 from mocapkit.skeleton.model import UPPER_BODY_JOINTS
 from mocapkit.synth.session_writer import SynthOptions, synthesize_session
@@ -48,11 +49,6 @@ HYBRID_CLIPS: dict[str, tuple[float, float]] = {
     "charleston1.amc": (0.0, 4.0),
     "zombie.amc": (0.0, 6.0),
 }
-
-#: Half-width (mm) of the uniform marker jitter of `hybrid_accuracy_repeats`: far below
-#: the rendered marker noise (about 1 mm) and the 1 mm the comparisons resolve, far above
-#: double round-off at 1-2 m (2e-13 mm).
-JITTER_MM = 1e-6
 
 
 @dataclass(frozen=True)
