@@ -8,6 +8,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from mocapkit.cli.args import shows_default
+
 
 def add_mono_accuracy_parser(methods: Any) -> None:
     """Add ``accuracy mono`` to the ``accuracy`` methods."""
@@ -53,11 +55,14 @@ def add_mono_accuracy_parser(methods: Any) -> None:
         "--cost", choices=("acceleration", "joint_acceleration", "rotation"),
         default="acceleration",
     )  # fmt: skip
-    m.add_argument(
-        "--arm-prior-weight",
-        type=float,
-        default=None,
-        help="weight of the data-driven arm prior per nat (default 30; 0: off)",
+    shows_default(
+        m.add_argument(
+            "--arm-prior-weight",
+            type=float,
+            default=None,
+            help="weight of the data-driven arm prior per nat (default %(stated_default)s; 0: off)",
+        ),
+        "mocapkit.tracking.mono.tracker:MonoConfig.arm_prior_weight",
     )
     m.add_argument(
         "--initial-pose",

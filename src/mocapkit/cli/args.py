@@ -161,7 +161,50 @@ class LazyChoices(Sequence[str]):
         return value in self._all()
 
 
-__all__ = ["LazyChoices", "checked_by", "imported", "number", "parsed_by"]
+class StatedDefault:
+    """A default stated once in the library, read when ``--help`` shows it.
+
+    ``path`` is ``"module:Name"`` or ``"module:ConfigClass.field"`` (a dataclass field's
+    default). Set on an argument with `shows_default`; its help names it as
+    ``%(stated_default)s``, which argparse fills only when it prints the help, so a usage
+    error does not import the library.
+    """
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+
+    def value(self) -> Any:
+        """The default itself."""
+        module, _, attrs = self.path.partition(":")
+        obj: Any = importlib.import_module(module)
+        for attr in attrs.split("."):
+            fields = getattr(obj, "__dataclass_fields__", None)
+            if isinstance(obj, type) and fields is not None and attr in fields:
+                obj = fields[attr].default
+            else:
+                obj = getattr(obj, attr)
+        return obj
+
+    def __str__(self) -> str:
+        v = self.value()
+        return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def shows_default(action: argparse.Action, path: str) -> argparse.Action:
+    """Give ``action``'s help the library's default at ``path`` as ``%(stated_default)s``."""
+    action.stated_default = StatedDefault(path)  # type: ignore[attr-defined]
+    return action
+
+
+__all__ = [
+    "LazyChoices",
+    "StatedDefault",
+    "checked_by",
+    "imported",
+    "number",
+    "parsed_by",
+    "shows_default",
+]
 
 
 def output_folder(text: str) -> str:

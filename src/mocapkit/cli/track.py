@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from mocapkit.cli.args import number, output_folder
+from mocapkit.cli.args import number, output_folder, shows_default
 from mocapkit.cli.track_stereo import register_method as register_stereo
 
 # the line of `mocapkit --help` (shown without importing this module's pipeline)
@@ -44,14 +44,17 @@ def register(subparsers: Any) -> None:
         help="marker sets whose orientation the IK uses, comma-separated (head, left_hand, "
         "right_hand) or 'none' (default: all that session.json declares members for)",
     )
-    hyb.add_argument(
-        "--max-elbow-speed",
-        type=float,
-        default=None,
-        metavar="MM_PER_S",
-        help="elbow speed the video refinement takes as free when it keeps elbows from "
-        "jumping between frames (default 3000; raise it for fast sports, 0 turns the "
-        "penalty off)",
+    shows_default(
+        hyb.add_argument(
+            "--max-elbow-speed",
+            type=float,
+            default=None,
+            metavar="MM_PER_S",
+            help="elbow speed the video refinement takes as free when it keeps elbows from "
+            "jumping between frames (default %(stated_default)s; raise it for fast sports, "
+            "0 turns the penalty off)",
+        ),
+        "mocapkit.tracking.arm_refinement:RefineConfig.elbow_speed_mm_per_s",
     )
     hyb.add_argument("--markers", help="raw marker file (.c3d, .trc, .csv) instead of a session")
     hyb.add_argument(
@@ -138,21 +141,27 @@ def register(subparsers: Any) -> None:
         "stature (default; Drillis & Contini via Winter) or the preset's (zhang21, Table 1) "
         "scaled by the stature alone",
     )
-    hyb.add_argument(
-        "--warn-mm",
-        type=float,
-        default=None,
-        metavar="MM",
-        help="fit report: a marker set further than this from the model is off on that "
-        "frame (default 30)",
+    shows_default(
+        hyb.add_argument(
+            "--warn-mm",
+            type=float,
+            default=None,
+            metavar="MM",
+            help="fit report: a marker set further than this from the model is off on that "
+            "frame (default %(stated_default)s)",
+        ),
+        "mocapkit.pipelines.fit_report:WARN_MM",
     )
-    hyb.add_argument(
-        "--warn-fraction",
-        type=float,
-        default=None,
-        metavar="SHARE",
-        help="fit report: warn when a set is off on more than this share of its frames "
-        "(default 0.05)",
+    shows_default(
+        hyb.add_argument(
+            "--warn-fraction",
+            type=float,
+            default=None,
+            metavar="SHARE",
+            help="fit report: warn when a set is off on more than this share of its frames "
+            "(default %(stated_default)s)",
+        ),
+        "mocapkit.pipelines.fit_report:WARN_FRACTION",
     )
     hyb.set_defaults(func=_run_hybrid)
     from mocapkit.cli.track_mono import add_mono_parser
