@@ -40,7 +40,7 @@ from mocapkit.synth.session_writer import SynthOptions, synthesize_session
 #: planted, §3 of the paper); each start is, among the 6 s windows on a 0.5 s grid where
 #: the subject stands upright on the floor (head above the lower ankle by more than 74 %
 #: of the stature 95 % of the time and by less than 105 %), the one with the least foot
-#: travel (mm) plus twice the trunk turn (deg); charleston1 is only 4.2 s long. None of
+#: travel (mm) plus twice the trunk turn (deg); a clip shorter than 6 s is taken whole. None of
 #: these clips holds still: the feet still travel 0.5-1.5 m in the chosen windows.
 HYBRID_CLIPS: dict[str, tuple[float, float]] = {
     "13_26.bvh": (11.5, 6.0),

@@ -166,7 +166,7 @@ def keep_cameras_away(
 
     The rig is placed in front of the subject's start (`mocapkit.synth.rigs.make_rig`);
     a subject who walks or hops towards it would otherwise come up to, and through, the
-    lens (CMU 131_03 in its first 8 s: the pelvis ends 0.1 m behind the camera plane),
+    lens (one CMU clip in its first 8 s: the pelvis ends 0.1 m behind the camera plane),
     which no recording would show. Every camera moves by the same distance along its own
     axis, so a stereo pair keeps its baseline and parallel axes.
 
