@@ -196,10 +196,33 @@ def shows_default(action: argparse.Action, path: str) -> argparse.Action:
     return action
 
 
+def add_clip_options(parser: argparse.ArgumentParser) -> None:
+    """``--clips`` and ``--clip-set`` of an accuracy harness (`pipelines.harness.CLIP_SETS`)."""
+    from mocapkit.pipelines.harness import CLIP_SETS
+
+    clips = parser.add_mutually_exclusive_group()
+    clips.add_argument("--clips", nargs="*", help="clip file names (default: the tuning set)")
+    clips.add_argument(
+        "--clip-set",
+        choices=tuple(CLIP_SETS),
+        help="the project's tuning clips (the default) or its report clips, which nothing "
+        "was tuned on",
+    )
+
+
+def chosen_clips(args: argparse.Namespace) -> list[str] | None:
+    """The clips of ``--clips`` or ``--clip-set`` (None: the harness's default)."""
+    from mocapkit.pipelines.harness import CLIP_SETS
+
+    return list(CLIP_SETS[args.clip_set]) if args.clip_set else args.clips
+
+
 __all__ = [
     "LazyChoices",
     "StatedDefault",
+    "add_clip_options",
     "checked_by",
+    "chosen_clips",
     "imported",
     "number",
     "parsed_by",
