@@ -10,7 +10,7 @@ import pytest
 from mocapkit.cli.args import checked_by, number, parsed_by
 from mocapkit.cli.main import build_parser, main
 from mocapkit.errors import ConfigError
-from mocapkit.synth.realism import REALISM_RANGES
+from mocapkit.synth.options import REALISM_RANGES
 
 
 def _usage_error(argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:

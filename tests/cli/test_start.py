@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import json
 import subprocess
 import sys
@@ -30,10 +31,21 @@ def test_importing_the_command_loads_no_heavy_library() -> None:
     assert _loaded_after("import mocapkit") == []
 
 
-@pytest.mark.parametrize(
-    "argv", [["--help"], ["track", "hybrid", "--bogus"], ["trak"], ["view", "--help"]]
-)
-def test_help_and_usage_errors_load_no_heavy_library(argv: list[str]) -> None:
+def _subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    sub = next((a for a in parser._actions if isinstance(a, argparse._SubParsersAction)), None)
+    return {} if sub is None else dict(sub.choices)
+
+
+def _usage_errors() -> list[list[str]]:
+    """An unknown option given to every command and to every method of a command."""
+    argvs = []
+    for name, command in _subcommands(build_parser()).items():
+        argvs.append([name, "--bogus"])
+        argvs += [[name, method, "--bogus"] for method in _subcommands(command)]
+    return argvs
+
+
+def _main_loads(argv: list[str]) -> list[str]:
     code = (
         "import contextlib, io\nfrom mocapkit.cli.main import main\n"
         "out, err = io.StringIO(), io.StringIO()\n"
@@ -41,7 +53,20 @@ def test_help_and_usage_errors_load_no_heavy_library(argv: list[str]) -> None:
         f"    try: main({argv!r})\n"
         "    except SystemExit: pass"
     )
-    assert _loaded_after(code) == []
+    return _loaded_after(code)
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["trak"], ["view", "--help"]])
+def test_help_loads_no_heavy_library(argv: list[str]) -> None:
+    assert _main_loads(argv) == []
+
+
+def test_every_usage_error_loads_no_heavy_library() -> None:
+    """Each command's and each method's usage error: checked in one fresh process each."""
+    argvs = _usage_errors()
+    assert ["track", "hybrid", "--bogus"] in argvs and ["synth", "--bogus"] in argvs
+    loaded = {" ".join(argv): _main_loads(argv) for argv in argvs}
+    assert {k: v for k, v in loaded.items() if v} == {}
 
 
 def test_help_only_entries_name_every_command() -> None:

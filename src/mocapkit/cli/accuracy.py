@@ -7,7 +7,14 @@ from typing import Any
 
 from mocapkit.cli.accuracy_detect import register_method as register_detect
 from mocapkit.cli.accuracy_stereo import register_method as register_stereo
-from mocapkit.cli.args import mocap_folder, number, parsed_by
+from mocapkit.cli.args import (
+    add_clip_options,
+    chosen_clips,
+    imported,
+    mocap_folder,
+    number,
+    parsed_by,
+)
 
 # the line of `mocapkit --help` (shown without importing this module's pipeline)
 HELP = "render sessions from real motion clips, track them and report the accuracy"
@@ -15,8 +22,7 @@ HELP = "render sessions from real motion clips, track them and report the accura
 
 def register(subparsers: Any) -> None:
     """Add ``accuracy hybrid``."""
-    from mocapkit.pipelines.accuracy import JITTER_MM
-    from mocapkit.pipelines.hybrid import parse_oriented_sets
+    from mocapkit.pipelines.harness import JITTER_MM
 
     p = subparsers.add_parser(
         "accuracy",
@@ -29,7 +35,7 @@ def register(subparsers: Any) -> None:
         help="elbow and upper-body errors of the hybrid tracker, IK only and with video",
     )
     h.add_argument("--mocap", help="folder of motion clips (default: ../shared/data/mocap)")
-    h.add_argument("--clips", nargs="*", help="clip file names (default: the standard set)")
+    add_clip_options(h)
     h.add_argument("--work", default="accuracy-output", help="folder for sessions and results")
     h.add_argument("--seed", type=int, default=0)
     h.add_argument("--json", action="store_true", help="print JSON instead of a table")
@@ -58,7 +64,7 @@ def register(subparsers: Any) -> None:
     orientation.add_argument(
         "--oriented-sets",
         metavar="SETS",
-        type=parsed_by(parse_oriented_sets, "marker sets"),
+        type=parsed_by(imported("mocapkit.pipelines.hybrid:parse_oriented_sets"), "marker sets"),
         help="marker sets whose orientation the tracker sees, comma-separated (head, "
         "left_hand, right_hand) or 'none' (default: all)",
     )
@@ -88,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     runs = hybrid_accuracy_repeats(
         mocap,
         args.work,
-        args.clips,
+        chosen_clips(args),
         args.seed,
         say=say,
         oriented_sets=() if args.positions_only else args.oriented_sets,

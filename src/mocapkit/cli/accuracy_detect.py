@@ -7,17 +7,22 @@ import argparse
 import json
 from typing import Any
 
+from mocapkit.cli.args import LazyChoices
+
 
 def register_method(methods: Any) -> None:
     """Add ``detect`` to the ``accuracy`` methods."""
-    from mocapkit.detect.backend import backend_names
-
     p = methods.add_parser(
         "detect",
         help="2-D detector error per joint, left/right swaps and misses on rendered sessions",
     )
     p.add_argument("sessions", nargs="+", metavar="SESSION", help="synthetic session folders")
-    p.add_argument("--detector", choices=backend_names(), help="backend (default: mediapipe)")
+    p.add_argument(
+        "--detector",
+        metavar="NAME",
+        choices=LazyChoices("mocapkit.detect.backend:backend_names"),
+        help="backend: %(choices)s (default: mediapipe)",
+    )
     p.add_argument("--model", help="model file of the rtmpose backend (.onnx)")
     p.add_argument("--work", default="accuracy-output/detect", help="folder for the detections")
     p.add_argument("--overwrite", action="store_true", help="detect again where done before")

@@ -8,6 +8,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
+from mocapkit.cli.args import add_clip_options, chosen_clips, shows_default
+
 
 def add_mono_accuracy_parser(methods: Any) -> None:
     """Add ``accuracy mono`` to the ``accuracy`` methods."""
@@ -20,7 +22,7 @@ def add_mono_accuracy_parser(methods: Any) -> None:
         "link-frames with the right flip and the poses pruned per frame.",
     )
     m.add_argument("--mocap", help="folder of motion clips (default: ../shared/data/mocap)")
-    m.add_argument("--clips", nargs="*", help="clip file names (default: the standard set)")
+    add_clip_options(m)
     m.add_argument("--work", default="accuracy-output/mono", help="sessions and results")
     m.add_argument("--seed", type=int, default=0)
     m.add_argument("--noise-px", type=float, default=2.0, help="2-D noise sigma (px)")
@@ -53,11 +55,14 @@ def add_mono_accuracy_parser(methods: Any) -> None:
         "--cost", choices=("acceleration", "joint_acceleration", "rotation"),
         default="acceleration",
     )  # fmt: skip
-    m.add_argument(
-        "--arm-prior-weight",
-        type=float,
-        default=None,
-        help="weight of the data-driven arm prior per nat (default 30; 0: off)",
+    shows_default(
+        m.add_argument(
+            "--arm-prior-weight",
+            type=float,
+            default=None,
+            help="weight of the data-driven arm prior per nat (default %(stated_default)s; 0: off)",
+        ),
+        "mocapkit.tracking.mono.tracker:MonoConfig.arm_prior_weight",
     )
     m.add_argument(
         "--initial-pose",
@@ -89,7 +94,7 @@ def _run(args: argparse.Namespace) -> int:
     rows = mono_accuracy(
         mocap,
         args.work,
-        args.clips,
+        chosen_clips(args),
         seed=args.seed,
         noise_px=args.noise_px,
         openpose=args.openpose,

@@ -9,10 +9,11 @@ callers that do not go through the command line.
 from __future__ import annotations
 
 import argparse
+import importlib
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar, overload
 
 from mocapkit.errors import MocapError, SessionError
 
@@ -48,11 +49,19 @@ def parsed_by(parse: Callable[[str], T], name: str) -> Callable[[str], T]:
     return convert
 
 
-def checked_by(check: Callable[[str], object], name: str) -> Callable[[str], str]:
-    """A ``type=`` that keeps the text as given once a library parser accepts it."""
+def checked_by(
+    check: Callable[[str], object], name: str, *, default: str | None = None
+) -> Callable[[str], str]:
+    """A ``type=`` that keeps the text as given once a library parser accepts it.
+
+    ``default``, the argument's default, passes unchecked: argparse runs ``type=`` on a
+    text default at every parse, a usage error included, and the check may import the
+    library behind it.
+    """
 
     def convert(text: str) -> str:
-        parsed_by(check, name)(text)
+        if default is None or text != default:
+            parsed_by(check, name)(text)
         return text
 
     convert.__name__ = name
@@ -105,7 +114,120 @@ def number(
     return convert
 
 
-__all__ = ["checked_by", "number", "parsed_by"]
+def imported(path: str) -> Callable[..., Any]:
+    """A library function imported at its first call (``"mocapkit.eval.metrics:joint_subset"``).
+
+    A subcommand's ``register`` builds its ``type=`` from it so that a usage error or
+    ``--help`` does not import the library (and numpy, OpenCV, Numba) behind it.
+    """
+    module, _, attr = path.partition(":")
+
+    def call(*args: Any, **kwargs: Any) -> Any:
+        return getattr(importlib.import_module(module), attr)(*args, **kwargs)
+
+    return call
+
+
+class LazyChoices(Sequence[str]):
+    """``choices=`` read from the library when first asked for (``"module:function"``).
+
+    Give the argument a ``metavar`` so that the usage line does not list the choices (the
+    help can, with ``%(choices)s``, shown only by ``--help``).
+    """
+
+    def __init__(self, path: str) -> None:
+        self._names_of = imported(path)
+        self._names: tuple[str, ...] | None = None
+
+    def _all(self) -> tuple[str, ...]:
+        if self._names is None:
+            self._names = tuple(self._names_of())
+        return self._names
+
+    @overload
+    def __getitem__(self, index: int) -> str: ...
+    @overload
+    def __getitem__(self, index: slice) -> Sequence[str]: ...
+    def __getitem__(self, index: int | slice) -> str | Sequence[str]:
+        return self._all()[index]
+
+    def __len__(self) -> int:
+        return len(self._all())
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._all())
+
+    def __contains__(self, value: object) -> bool:
+        return value in self._all()
+
+
+class StatedDefault:
+    """A default stated once in the library, read when ``--help`` shows it.
+
+    ``path`` is ``"module:Name"`` or ``"module:ConfigClass.field"`` (a dataclass field's
+    default). Set on an argument with `shows_default`; its help names it as
+    ``%(stated_default)s``, which argparse fills only when it prints the help, so a usage
+    error does not import the library.
+    """
+
+    def __init__(self, path: str) -> None:
+        self.path = path
+
+    def value(self) -> Any:
+        """The default itself."""
+        module, _, attrs = self.path.partition(":")
+        obj: Any = importlib.import_module(module)
+        for attr in attrs.split("."):
+            fields = getattr(obj, "__dataclass_fields__", None)
+            if isinstance(obj, type) and fields is not None and attr in fields:
+                obj = fields[attr].default
+            else:
+                obj = getattr(obj, attr)
+        return obj
+
+    def __str__(self) -> str:
+        v = self.value()
+        return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def shows_default(action: argparse.Action, path: str) -> argparse.Action:
+    """Give ``action``'s help the library's default at ``path`` as ``%(stated_default)s``."""
+    action.stated_default = StatedDefault(path)  # type: ignore[attr-defined]
+    return action
+
+
+def add_clip_options(parser: argparse.ArgumentParser) -> None:
+    """``--clips`` and ``--clip-set`` of an accuracy harness (`pipelines.harness.CLIP_SETS`)."""
+    from mocapkit.pipelines.harness import CLIP_SETS
+
+    clips = parser.add_mutually_exclusive_group()
+    clips.add_argument("--clips", nargs="*", help="clip file names (default: the tuning set)")
+    clips.add_argument(
+        "--clip-set",
+        choices=tuple(CLIP_SETS),
+        help="the project's tuning clips (the default) or its report clips, which nothing "
+        "was tuned on",
+    )
+
+
+def chosen_clips(args: argparse.Namespace) -> list[str] | None:
+    """The clips of ``--clips`` or ``--clip-set`` (None: the harness's default)."""
+    from mocapkit.pipelines.harness import CLIP_SETS
+
+    return list(CLIP_SETS[args.clip_set]) if args.clip_set else args.clips
+
+
+__all__ = [
+    "LazyChoices",
+    "StatedDefault",
+    "add_clip_options",
+    "checked_by",
+    "chosen_clips",
+    "imported",
+    "number",
+    "parsed_by",
+    "shows_default",
+]
 
 
 def output_folder(text: str) -> str:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from mocapkit.cli.args import checked_by, number, output_folder
+from mocapkit.cli.args import checked_by, imported, number, output_folder
 from mocapkit.pipelines.registry import AUTO, TRACKERS
 
 # the line of `mocapkit --help` (shown without importing this module's pipeline)
@@ -25,9 +25,6 @@ row has its error and the others go on. Exit code: the number of failed takes (a
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``batch`` subcommand."""
-    from mocapkit.eval.metrics import joint_subset
-    from mocapkit.io.marker_sets import parse_marker_set
-
     p = subparsers.add_parser(
         "batch",
         help=HELP,
@@ -57,7 +54,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         "--marker-set",
         action="append",
         default=[],
-        type=checked_by(parse_marker_set, "marker set"),
+        type=checked_by(imported("mocapkit.io.marker_sets:parse_marker_set"), "marker set"),
         metavar="NAME=M1+M2[/T1]",
         help="marker set of the --markers-glob files (head, left_hand, right_hand); markers "
         "after '/' turn the set without placing it; repeat",
@@ -65,7 +62,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument(
         "--joints",
         default="upper",
-        type=checked_by(joint_subset, "joints"),
+        type=checked_by(imported("mocapkit.eval.metrics:joint_subset"), "joints", default="upper"),
         help="joints evaluated against truth: 'upper' (default), 'all' or a list",
     )
     p.add_argument("--force", action="store_true", help="redo takes that are complete")

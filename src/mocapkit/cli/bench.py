@@ -5,21 +5,26 @@ from __future__ import annotations
 import argparse
 import json
 
+from mocapkit.cli.args import LazyChoices
+
 # the line of `mocapkit --help` (shown without importing this module's pipeline)
 HELP = "time the kinematics, the hybrid, stereo and mono trackers and the 2-D detector"
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``bench`` subcommand."""
-    from mocapkit.pipelines.bench import BENCHMARKS
-
     p = subparsers.add_parser(
         "bench",
         help=HELP,
         description="Run a speed benchmark (after a warm-up; medians over repeats) and print "
         "a table, or JSON with --json.",
     )
-    p.add_argument("name", choices=[*BENCHMARKS, "all"], help="benchmark to run")
+    p.add_argument(
+        "name",
+        metavar="NAME",
+        choices=LazyChoices("mocapkit.pipelines.bench:benchmark_choices"),
+        help="benchmark to run: %(choices)s",
+    )
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument("--repeats", type=int, default=3, help="timed repeats (default 3)")
     p.add_argument(

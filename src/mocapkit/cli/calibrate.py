@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from mocapkit.cli.args import checked_by, number, output_file
+from mocapkit.cli.args import checked_by, imported, number, output_file
 
 # the line of `mocapkit --help` (shown without importing this module's pipeline)
 HELP = "calibrate one camera or a stereo pair from chessboard images"
@@ -24,8 +24,9 @@ image's first-corner pixel to check which corner OpenCV took as origin.
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``calibrate`` subcommand."""
-    from mocapkit.camera.calibration import parse_board
-    from mocapkit.pipelines.calibrate import DEFAULT_MAX_RMS_PX, DEFAULT_MIN_BOARDS
+    from mocapkit.pipelines.calibrate_config import DEFAULT_MAX_RMS_PX, DEFAULT_MIN_BOARDS
+
+    parse_board = imported("mocapkit.camera.calibration:parse_board")
 
     p = subparsers.add_parser(
         "calibrate",

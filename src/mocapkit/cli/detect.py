@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from mocapkit.cli.args import output_folder
+from mocapkit.cli.args import LazyChoices, output_folder
 
 HELP = "2-D keypoints of one person from videos (MediaPipe Pose, RTMPose)"
 
@@ -38,8 +38,6 @@ def _person(text: str) -> tuple[float, float] | None:
 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    from mocapkit.detect.backend import backend_names
-
     p = subparsers.add_parser(
         "detect",
         help=HELP,
@@ -54,8 +52,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument("--out", type=output_folder, help="output folder (default: the session)")
     p.add_argument(
         "--detector",
-        choices=backend_names(),
-        help="backend (default: mediapipe where installed)",
+        metavar="NAME",
+        choices=LazyChoices("mocapkit.detect.backend:backend_names"),
+        help="backend: %(choices)s (default: mediapipe where installed)",
     )
     p.add_argument(
         "--person",

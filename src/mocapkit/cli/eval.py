@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from mocapkit.cli.args import parsed_by
+from mocapkit.cli.args import imported, parsed_by
 
 # the line of `mocapkit --help` (shown without importing this module's pipeline)
 HELP = "compare a tracking result with a session's ground truth"
@@ -12,8 +12,6 @@ HELP = "compare a tracking result with a session's ground truth"
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``eval`` subcommand."""
-    from mocapkit.eval.metrics import joint_subset
-
     p = subparsers.add_parser(
         "eval",
         help=HELP,
@@ -27,9 +25,9 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.add_argument(
         "--joints",
-        type=parsed_by(joint_subset, "joints"),
-        default="all",
-        help="joints to compare: 'all', 'upper' (head, neck, pelvis, shoulders, elbows, "
+        type=parsed_by(imported("mocapkit.eval.metrics:joint_subset"), "joints"),
+        default=None,
+        help="joints to compare: 'all' (default), 'upper' (head, neck, pelvis, shoulders, elbows, "
         "wrists) or a comma-separated list of canonical names",
     )
     p.set_defaults(func=run)

@@ -20,8 +20,7 @@ def _pair(text: str) -> tuple[str, str]:
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``live`` subcommand."""
-    from mocapkit.pipelines.live_feed import LiveConfig
-    from mocapkit.pipelines.replay import STREAM_PREFIX
+    from mocapkit.pipelines.live_config import STREAM_PREFIX, LiveConfig
 
     _DEFAULTS = LiveConfig()
     p = subparsers.add_parser(

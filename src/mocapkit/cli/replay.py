@@ -12,7 +12,7 @@ HELP = "publish a session's markers, keypoints and video frames as LSL streams"
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``replay`` subcommand."""
-    from mocapkit.pipelines.replay import STREAM_PREFIX
+    from mocapkit.pipelines.live_config import STREAM_PREFIX
 
     p = subparsers.add_parser(
         "replay",

@@ -24,8 +24,7 @@ different frame counts and different frame rates are refused before anything is 
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``session`` subcommand."""
-    from mocapkit.io.calib_toml import UNITS_MM
-    from mocapkit.io.video import PAD_MULTIPLE_PX
+    from mocapkit.io.session_options import PAD_MULTIPLE_PX, UNITS_MM
 
     p = subparsers.add_parser(
         "session",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-from mocapkit.cli.args import checked_by, number, output_folder
+from mocapkit.cli.args import checked_by, imported, number, output_folder
 
 # the line of `mocapkit --help` (shown without importing this module's pipeline)
 HELP = "render a synthetic session from a motion file or a built-in motion"
@@ -22,7 +22,7 @@ excerpt and the floor is z = 0; cameras face the subject's initial facing direct
 
 def _size(text: str) -> tuple[int, int]:
     """``--size``: ``WIDTHxHEIGHT`` in pixels, each side within `IMAGE_SIDE_RANGE_PX`."""
-    from mocapkit.synth.session_writer import IMAGE_SIDE_RANGE_PX
+    from mocapkit.synth.options import IMAGE_SIDE_RANGE_PX
 
     try:
         w, h = (int(v) for v in text.lower().split("x"))
@@ -52,7 +52,7 @@ def _blackout(text: str) -> tuple[float, float]:
 
 def _realism(name: str) -> Callable[[str], float]:
     """The ``type=`` of a realism option: a number in its `REALISM_RANGES` range."""
-    from mocapkit.synth.realism import REALISM_RANGES
+    from mocapkit.synth.options import REALISM_RANGES
 
     lo, hi = REALISM_RANGES[name]
     return number(at_least=lo, at_most=hi)
@@ -60,10 +60,15 @@ def _realism(name: str) -> Callable[[str], float]:
 
 def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     """Add the ``synth`` subcommand."""
-    from mocapkit.synth.realism import BACKGROUNDS, RealismOptions
-    from mocapkit.synth.render import COSTUMES, SLEEVES, parse_colour
-    from mocapkit.synth.rigs import RIG_NAMES
-    from mocapkit.synth.session_writer import FPS_RANGE, MARKER_RATE_RANGE_HZ
+    from mocapkit.synth.options import (
+        BACKGROUNDS,
+        COSTUMES,
+        FPS_RANGE,
+        MARKER_RATE_RANGE_HZ,
+        RIG_NAMES,
+        SLEEVES,
+        RealismOptions,
+    )
 
     p = subparsers.add_parser(
         "synth",
@@ -155,7 +160,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     )
     p.add_argument(
         "--shirt-colour",
-        type=checked_by(parse_colour, "colour"),
+        type=checked_by(imported("mocapkit.synth.render:parse_colour"), "colour"),
         default=None,
         help="shirt colour name or #RRGGBB (default: seeded)",
     )
@@ -173,7 +178,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
 
 def run(args: argparse.Namespace) -> int:
     """Render the session and print a summary."""
-    from mocapkit.synth.realism import RealismOptions
+    from mocapkit.synth.options import RealismOptions
     from mocapkit.synth.session_writer import SynthOptions, synthesize_session
 
     realism = RealismOptions(

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from mocapkit.cli.args import number, output_folder
+from mocapkit.cli.args import number, output_folder, shows_default
 from mocapkit.cli.track_stereo import register_method as register_stereo
 
 # the line of `mocapkit --help` (shown without importing this module's pipeline)
@@ -44,14 +44,17 @@ def register(subparsers: Any) -> None:
         help="marker sets whose orientation the IK uses, comma-separated (head, left_hand, "
         "right_hand) or 'none' (default: all that session.json declares members for)",
     )
-    hyb.add_argument(
-        "--max-elbow-speed",
-        type=float,
-        default=None,
-        metavar="MM_PER_S",
-        help="elbow speed the video refinement takes as free when it keeps elbows from "
-        "jumping between frames (default 3000; raise it for fast sports, 0 turns the "
-        "penalty off)",
+    shows_default(
+        hyb.add_argument(
+            "--max-elbow-speed",
+            type=float,
+            default=None,
+            metavar="MM_PER_S",
+            help="elbow speed the video refinement takes as free when it keeps elbows from "
+            "jumping between frames (default %(stated_default)s; raise it for fast sports, "
+            "0 turns the penalty off)",
+        ),
+        "mocapkit.tracking.arm_refinement:RefineConfig.elbow_speed_mm_per_s",
     )
     hyb.add_argument("--markers", help="raw marker file (.c3d, .trc, .csv) instead of a session")
     hyb.add_argument(
@@ -138,21 +141,27 @@ def register(subparsers: Any) -> None:
         "stature (default; Drillis & Contini via Winter) or the preset's (zhang21, Table 1) "
         "scaled by the stature alone",
     )
-    hyb.add_argument(
-        "--warn-mm",
-        type=float,
-        default=None,
-        metavar="MM",
-        help="fit report: a marker set further than this from the model is off on that "
-        "frame (default 30)",
+    shows_default(
+        hyb.add_argument(
+            "--warn-mm",
+            type=float,
+            default=None,
+            metavar="MM",
+            help="fit report: a marker set further than this from the model is off on that "
+            "frame (default %(stated_default)s)",
+        ),
+        "mocapkit.pipelines.fit_report:WARN_MM",
     )
-    hyb.add_argument(
-        "--warn-fraction",
-        type=float,
-        default=None,
-        metavar="SHARE",
-        help="fit report: warn when a set is off on more than this share of its frames "
-        "(default 0.05)",
+    shows_default(
+        hyb.add_argument(
+            "--warn-fraction",
+            type=float,
+            default=None,
+            metavar="SHARE",
+            help="fit report: warn when a set is off on more than this share of its frames "
+            "(default %(stated_default)s)",
+        ),
+        "mocapkit.pipelines.fit_report:WARN_FRACTION",
     )
     hyb.set_defaults(func=_run_hybrid)
     from mocapkit.cli.track_mono import add_mono_parser
@@ -164,45 +173,39 @@ def register(subparsers: Any) -> None:
 def _run_hybrid(args: argparse.Namespace) -> int:
     import sys
 
-    from mocapkit.errors import SessionError
     from mocapkit.io.lab_frame import parse_up
     from mocapkit.io.marker_files import read_markers
     from mocapkit.pipelines.fit_report import WARN_FRACTION, WARN_MM, summarize_fit
-    from mocapkit.pipelines.hybrid import (
-        parse_oriented_sets,
-        track_hybrid_marker_file,
-        track_hybrid_session_run,
-    )
+    from mocapkit.pipelines.hybrid import track_hybrid_marker_file, track_hybrid_session_run
+    from mocapkit.pipelines.hybrid_options import HybridRunOptions
     from mocapkit.pipelines.run import find_gaps
 
     warn_mm = WARN_MM if args.warn_mm is None else args.warn_mm
     warn_fraction = WARN_FRACTION if args.warn_fraction is None else args.warn_fraction
 
+    options = HybridRunOptions(
+        session=args.session,
+        markers=args.markers,
+        no_video=args.no_video,
+        paper=args.paper,
+        positions_only=args.positions_only,
+        oriented_sets=args.oriented_sets,
+        max_elbow_speed_mm_per_s=args.max_elbow_speed,
+        marker_set=tuple(args.marker_set),
+        height_mm=args.height_mm,
+        free_feet=args.free_feet,
+        up=args.up,
+        floor_mm=args.floor_mm,
+        world_frame=args.world_frame,
+        static=args.static,
+        no_static_calibration=args.no_static_calibration,
+        calibration=args.calibration,
+    )
     if args.markers:
-        if args.session:
-            raise SessionError(
-                "track hybrid: give either a SESSION folder or --markers FILE, not both"
-            )
-        unused = [
-            o
-            for o, on in (
-                ("--no-video", args.no_video),
-                ("--paper", args.paper),
-                ("--positions-only", args.positions_only),
-                ("--oriented-sets", args.oriented_sets is not None),
-                ("--max-elbow-speed", args.max_elbow_speed is not None),
-            )
-            if on
-        ]
-        if unused:
-            raise SessionError(
-                f"track hybrid: {', '.join(unused)} apply to a SESSION; --markers runs IK only"
-            )
         # checked before the long run (summarize_fit and the pipeline check them again)
         summarize_fit([], warn_mm, warn_fraction)
         if args.up is not None:
             parse_up(args.up)
-        calibration = _calibration(args.calibration, args.no_static_calibration)
         run = track_hybrid_marker_file(
             read_markers(args.markers),
             args.marker_set,
@@ -213,7 +216,7 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             floor_mm=args.floor_mm,
             world_output=args.world_frame,
             posture=args.posture,
-            calibration=calibration,
+            calibration=options.member_calibration,
             static=None if args.static is None else read_markers(args.static),
             proportions=args.proportions,
         )
@@ -231,49 +234,13 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             )
         motion, results = run.motion, run.results
     else:
-        if not args.session:
-            raise SessionError(
-                "track hybrid: expected a SESSION folder or --markers FILE, found neither"
-            )
-        unused = [
-            o
-            for o, on in (
-                ("--marker-set", bool(args.marker_set)),
-                ("--height-mm", args.height_mm is not None),
-                ("--free-feet", args.free_feet),
-                ("--up", args.up is not None),
-                ("--floor-mm", args.floor_mm is not None),
-                ("--world-frame", args.world_frame),
-                ("--static", args.static is not None),
-                ("--no-static-calibration", args.no_static_calibration),
-                ("--calibration", args.calibration is not None),
-            )
-            if on
-        ]
-        if unused:
-            raise SessionError(
-                f"track hybrid: {', '.join(unused)} apply to --markers; a SESSION takes its "
-                "marker sets and subject from session.json"
-            )
-        if args.max_elbow_speed is not None and (args.paper or args.no_video):
-            raise SessionError(
-                "track hybrid: --max-elbow-speed tunes the video refinement's elbow-jump "
-                "penalty, which --paper and --no-video do not run"
-            )
-        if args.positions_only and args.oriented_sets is not None:
-            raise SessionError(
-                "track hybrid: give either --positions-only or --oriented-sets, not both"
-            )
-        oriented = (
-            parse_oriented_sets(args.oriented_sets) if args.oriented_sets is not None else None
-        )
         summarize_fit([], warn_mm, warn_fraction)
         session_run = track_hybrid_session_run(
             args.session,
             args.out,
             use_video=not args.no_video,
             paper=args.paper,
-            oriented_sets=() if args.positions_only else oriented,
+            oriented_sets=options.oriented,
             max_elbow_speed_mm_per_s=args.max_elbow_speed,
             posture=args.posture,
             on_posture=lambda choice: print(_posture_line(choice)),
@@ -289,18 +256,6 @@ def _run_hybrid(args: argparse.Namespace) -> int:
     for line in report.warnings():
         print(line, file=sys.stderr)
     return 0
-
-
-def _calibration(chosen: str | None, no_static: bool) -> str:
-    """The member calibration of ``--calibration`` and ``--no-static-calibration``."""
-    from mocapkit.errors import SessionError
-
-    if no_static and chosen not in (None, "none"):
-        raise SessionError(
-            f"track hybrid: --no-static-calibration means --calibration none; found "
-            f"--calibration {chosen} with it"
-        )
-    return "none" if no_static else (chosen or "auto")
 
 
 def _posture_line(choice: Any) -> str:

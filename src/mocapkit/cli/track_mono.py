@@ -10,7 +10,7 @@ import argparse
 import json
 from typing import Any
 
-from mocapkit.cli.args import output_folder
+from mocapkit.cli.args import output_folder, shows_default
 
 
 def add_mono_parser(methods: Any) -> None:
@@ -79,11 +79,14 @@ def add_mono_parser(methods: Any) -> None:
         action="store_true",
         help="take link lengths from session.json instead of the video",
     )
-    p.add_argument(
-        "--arm-prior-weight",
-        type=float,
-        default=None,
-        help="weight of the data-driven arm prior per nat (default 30; 0: off)",
+    shows_default(
+        p.add_argument(
+            "--arm-prior-weight",
+            type=float,
+            default=None,
+            help="weight of the data-driven arm prior per nat (default %(stated_default)s; 0: off)",
+        ),
+        "mocapkit.tracking.mono.tracker:MonoConfig.arm_prior_weight",
     )
     p.add_argument(
         "--initial-pose",

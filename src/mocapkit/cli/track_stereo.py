@@ -10,7 +10,7 @@ import argparse
 import json
 from typing import Any
 
-from mocapkit.cli.args import output_folder
+from mocapkit.cli.args import output_folder, shows_default
 from mocapkit.tracking.multiview.config import SMOOTHING, STEREO_METHODS, MultiviewRunConfig
 
 
@@ -63,8 +63,14 @@ def register_method(methods: Any) -> None:
         help="same as --method filter: head and hands from keypoints/<camera>.csv instead of "
         "skin blobs, arms by the particle filters",
     )
-    p.add_argument(
-        "--particles", type=int, default=None, help="particles per arm and run (default 150)"
+    shows_default(
+        p.add_argument(
+            "--particles",
+            type=int,
+            default=None,
+            help="particles per arm and run (default %(stated_default)s)",
+        ),
+        "mocapkit.tracking.stereo.arm_filter:ArmFilterConfig.n_particles",
     )
     p.add_argument(
         "--torso",

@@ -16,7 +16,7 @@ root: prismatic DoFs for ``TX TY TZ`` and revolute DoFs for its rotations
 and the AMC root translation is taken as absolute (``q = value - position``; the
 CMU files have ``position 0 0 0``).
 This convention was checked against the cgspeed BVH conversion of the same trial
-(CMU 01_01; see tests/io/test_asf_amc.py).
+(a CMU trial; see tests/io/test_asf_amc.py).
 
 The file frame (Y up) is turned into the mocapkit world (Z up, facing +Y) by
 `WORLD_FROM_FILE`. Units: ``:units length L`` means one file unit is ``1/L``
@@ -31,8 +31,8 @@ AMC files carry no frame rate: CMU's standard rate, 120 Hz, is the default
 seconds. Every bone with DoFs must appear in every frame.
 
 ASF lookup (when ``asf_path`` is not given): ``<stem>.asf`` beside the AMC, then the
-subject prefix before ``_`` (``01_09.amc`` -> ``01.asf``), then the stem without its
-trailing take number (``charleston1.amc`` -> ``charleston.asf``), then the only ``.asf`` in
+subject prefix before ``_`` (``02_05.amc`` -> ``02.asf``), then the stem without its
+trailing take number (``dance1.amc`` -> ``dance.asf``), then the only ``.asf`` in
 the folder; otherwise `FormatError` listing what was tried.
 """
 
@@ -405,7 +405,7 @@ def find_asf(amc_path: str | os.PathLike[str]) -> Path:
     candidates = [folder / f"{amc.stem}.asf"]
     if "_" in amc.stem:
         candidates.append(folder / f"{amc.stem.split('_', 1)[0]}.asf")
-    # a numbered take of a named subject: charleston1.amc -> charleston.asf
+    # a numbered take of a named subject: dance1.amc -> dance.asf
     stripped = amc.stem.rstrip("0123456789")
     if stripped and stripped != amc.stem:
         candidates.append(folder / f"{stripped}.asf")

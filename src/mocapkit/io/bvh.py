@@ -29,8 +29,8 @@ rotation is zero and every rotation value is a whole number of degrees (never
 the case for captured data). ``True`` always drops frame 0, ``False`` never does.
 Times start at 0 s at the first returned frame.
 
-Known property of the cgspeed MotionBuilder-friendly skeleton (checked on CMU
-01_01 against the original ASF/AMC): it omits the ASF ``thorax`` segment (Neck,
+Known property of the cgspeed MotionBuilder-friendly skeleton (checked on a CMU
+trial against the original ASF/AMC): it omits the ASF ``thorax`` segment (Neck,
 LeftShoulder and RightShoulder sit at Spine1's origin with OFFSET 0) and the
 ``lwrist``/``rwrist`` lengths, so its neck, head, shoulders, elbows and wrists
 lie one thorax length (116.55 mm for subject 01) lower than the AMC's, while

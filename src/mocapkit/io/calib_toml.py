@@ -44,12 +44,11 @@ from mocapkit.geometry.transforms import make_transform
 from mocapkit.io.atomic import atomic_write
 from mocapkit.io.camera_checks import camera_from_entry, check_unique_names, number_array
 from mocapkit.io.files import read_text
+from mocapkit.io.session_options import UNITS_MM
 
 FloatArray = NDArray[np.float64]
 PathLike = str | os.PathLike[str]
 
-#: mm per unit of the translation, by the unit's name.
-UNITS_MM: dict[str, float] = {"m": 1000.0, "mm": 1.0}
 #: A largest camera translation below this is in metres (no lab camera stands 50 m away).
 METRE_LIMIT = 50.0
 #: A largest camera translation at or above this is in mm (no lab camera stands 300 m away,

@@ -25,13 +25,13 @@ Mapping onto canonical joints (`CANONICAL_JOINTS`):
   neck = M_h + f_n (M_s - M_h), pelvis = M_h + f_p (M_s - M_h); missing unless both
   shoulders and both hips are seen. The fractions are a property of the subject more than
   of the pose (f_n within 0.005 of its median over a clip, f_p within 0.02, 10th-90th
-  percentiles; 01_12, hanging from a bar, 0.85-0.91 and 0.11-0.21), but differ between
+  percentiles; a subject hanging from a bar 0.85-0.91 and 0.11-0.21), but differ between
   subjects and skeleton sources (f_n 0.80-0.93, f_p 0.18-0.27), so a fixed pair puts the
   neck up to 0.12 of the trunk off. What varies far less is the shoulder girdle: the neck sits
   ``NECK_BELOW_SHOULDERS`` = 0.205 shoulder widths W below M_s and the pelvis
   ``PELVIS_ABOVE_HIPS`` = 0.277 shoulder widths above M_h, along the trunk (per clip
-  0.178-0.237 and 0.249-0.304 over the ten CMU clips, lambada's neck 0.100 aside; the
-  same subject's 01_01 as BVH and as AMC gives f_n 0.811 and 0.854 but 0.205 and 0.204
+  0.178-0.237 and 0.249-0.304 over the ten CMU clips, one dancer's neck 0.100 aside; the
+  same take as BVH and as AMC gives f_n 0.811 and 0.854 but 0.205 and 0.204
   W; docs/design-notes/mono.md). So `read_openpose_folder`
   places them per take (`trunk_fractions`): f_n = 1 - 0.205 W / H, f_p = 0.277 W / H,
   with W and H (the length M_h-M_s) the 90th percentiles of their projected lengths
@@ -51,7 +51,7 @@ last seen; otherwise the frame has no one (NaN) and the last seen points are kep
 next frame. The size is the bounding-box diagonal of every joint at its last seen place,
 so a partial view (one arm at the image's edge) does not shrink it (with the size of the
 points seen in the frame alone, a person down to an elbow and a wrist got a jump limit of
-a forearm, and one down to a wrist none: 11_01 lost 9 such frames).
+a forearm, and one down to a wrist none: one clip lost 9 such frames).
 Everyone else is ignored.
 """
 
@@ -109,7 +109,7 @@ NECK_FRACTION = 0.81
 PELVIS_FRACTION = 0.25
 #: The neck's distance below the shoulder midpoint and the pelvis's above the hip midpoint,
 #: along the trunk, in shoulder widths (3-D; medians over the ten CMU clips of
-#: ``shared/data/mocap`` as the library reads them, 01_01 as both BVH and AMC: the
+#: ``shared/data/mocap`` as the library reads them, one take as both BVH and AMC: the
 #: truth's canonical joints, per frame, then the median per clip; left one subject
 #: out, the medians move by at most 0.0015 and 0.004).
 NECK_BELOW_SHOULDERS = 0.205
@@ -120,7 +120,7 @@ REBUILT_JOINTS: tuple[str, ...] = ("neck", "pelvis")
 #: the placement assumes: the neck ``NECK_BELOW_SHOULDERS`` = d shoulder widths below the
 #: shoulder midpoint, so each clavicle is (+-1/2, d) W and the cosine (d^2 - 1/4) /
 #: (d^2 + 1/4) = -0.712 (135 deg; on the CMU clips constant within a clip to three
-#: decimals, e.g. 01_09 -0.710; lambada, whose neck sits 0.100 W down, -0.922).
+#: decimals, e.g. -0.710; the dancer whose neck sits 0.100 W down, -0.922).
 GIRDLE_COSINE = (NECK_BELOW_SHOULDERS**2 - 0.25) / (NECK_BELOW_SHOULDERS**2 + 0.25)
 
 #: Canonical joints the mapping provides, in canonical order.

@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 
 from mocapkit.errors import SessionError
 from mocapkit.io.frame_files import in_frame_order
+from mocapkit.io.session_options import PAD_MULTIPLE_PX
 
 FloatArray = NDArray[np.float64]
 #: File extensions of the images in an image-folder video (lower case).
@@ -153,11 +154,6 @@ def frame_size(path: Path, camera: str) -> tuple[int, int]:
     if w <= 0 or h <= 0:
         raise SessionError(f"{path}: video of camera {camera!r} has no frame size")
     return w, h
-
-
-#: Video encoders pad frames to whole 16 x 16 macroblocks; a calibration made on the
-#: padded frames is larger than the video that a player shows.
-PAD_MULTIPLE_PX = 16
 
 
 def padding_px(

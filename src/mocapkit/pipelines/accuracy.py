@@ -30,6 +30,7 @@ from mocapkit.errors import ConfigError, SessionError
 from mocapkit.eval.metrics import evaluate_result
 from mocapkit.io.marker_csv import write_markers_csv
 from mocapkit.io.session import MARKER_FILES, load_session
+from mocapkit.pipelines.harness import JITTER_MM
 from mocapkit.pipelines.hybrid import track_hybrid_session
 from mocapkit.skeleton.model import UPPER_BODY_JOINTS
 from mocapkit.synth.session_writer import SynthOptions, synthesize_session
@@ -39,7 +40,7 @@ from mocapkit.synth.session_writer import SynthOptions, synthesize_session
 #: planted, §3 of the paper); each start is, among the 6 s windows on a 0.5 s grid where
 #: the subject stands upright on the floor (head above the lower ankle by more than 74 %
 #: of the stature 95 % of the time and by less than 105 %), the one with the least foot
-#: travel (mm) plus twice the trunk turn (deg); charleston1 is only 4.2 s long. None of
+#: travel (mm) plus twice the trunk turn (deg); a clip shorter than 6 s is taken whole. None of
 #: these clips holds still: the feet still travel 0.5-1.5 m in the chosen windows.
 HYBRID_CLIPS: dict[str, tuple[float, float]] = {
     "13_26.bvh": (11.5, 6.0),
@@ -48,11 +49,6 @@ HYBRID_CLIPS: dict[str, tuple[float, float]] = {
     "charleston1.amc": (0.0, 4.0),
     "zombie.amc": (0.0, 6.0),
 }
-
-#: Half-width (mm) of the uniform marker jitter of `hybrid_accuracy_repeats`: far below
-#: the rendered marker noise (about 1 mm) and the 1 mm the comparisons resolve, far above
-#: double round-off at 1-2 m (2e-13 mm).
-JITTER_MM = 1e-6
 
 
 @dataclass(frozen=True)

@@ -321,6 +321,13 @@ BENCHMARKS: dict[str, Callable[..., dict[str, Any]]] = {
     "live": _bench_live,
     "multiview": _bench_multiview,
 }
+
+
+def benchmark_choices() -> tuple[str, ...]:
+    """The names ``mocapkit bench`` accepts: every benchmark and ``all``."""
+    return (*BENCHMARKS, "all")
+
+
 #: Benchmarks that ``all`` leaves out: ``live`` needs ``mocapkit[live]`` and runs in real time.
 NOT_IN_ALL: tuple[str, ...] = ("live",)
 

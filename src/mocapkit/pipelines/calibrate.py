@@ -39,13 +39,9 @@ from mocapkit.camera.calibration import (
 )
 from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import CalibrationError, FormatError
+from mocapkit.pipelines.calibrate_config import DEFAULT_MAX_RMS_PX, DEFAULT_MIN_BOARDS
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff")
-DEFAULT_MIN_BOARDS = 5
-#: Largest accepted RMS reprojection error (px), per camera and for the stereo fit. Good
-#: chessboard calibrations give well under 1 px (OpenCV's own stereo set: 0.45 px); a pair
-#: whose right images are shifted by one gives about 50 px.
-DEFAULT_MAX_RMS_PX = 2.0
 #: Smallest plausible board square (mm). Smaller values are nearly always metres typed
 #: where millimetres are expected (0.025 for 25 mm).
 MIN_SQUARE_MM = 2.0

@@ -490,7 +490,7 @@ def track_mono(
         the stick's joints (``stick_model(config.legs).joint_names``, e.g. picked by
         `initial_pose_from`) in the world frame, mm, NaN where unknown. The last pass
         starts from the candidate nearest to it (`MonoTracker`); the length passes, like
-        the priors, leave it out (given to them too, it changed 01_09's refined lengths
+        the priors, leave it out (given to them too, it changed one clip's refined lengths
         online and cost 16 mm there, docs/design-notes/mono.md). None: the start is free.
     """
     if out_dir is not None:
@@ -554,7 +554,7 @@ def track_mono(
     n_refine = length_passes - 1 if refine else 0
     # every pass but the last runs here; the last one streams through the runner below.
     # The length passes run the paper's graph (no soft priors, no initial pose, which
-    # changed 01_09's online lengths, 36 -> 52 mm): the refined lengths follow
+    # changed one clip's online lengths, 36 -> 52 mm): the refined lengths follow
     # the first pass's poses, and with the clavicle prior there they changed enough to
     # turn one clip from OpenPose JSON from 62 to 113 mm (docs/design-notes/mono.md). The
     # reach tolerance too (in every pass it changed the refined lengths: 45.2 -> 46.4 mm), and

@@ -176,7 +176,7 @@ def write_openpose_with_bystander(
     rng = np.random.default_rng(seed)
     det = openpose_from_canonical(pixels, joint_names, "BODY_25")
     with warnings.catch_warnings():
-        # A frame where the subject is out of view (11_01) has no keypoints: its centre is
+        # A frame where the subject is out of view has no keypoints: its centre is
         # NaN and so is its bystander, which is what a detector would write there.
         warnings.filterwarnings("ignore", "Mean of empty slice", RuntimeWarning)
         centre = np.nanmean(pixels, axis=1, keepdims=True)

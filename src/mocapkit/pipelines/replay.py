@@ -34,9 +34,7 @@ from mocapkit.io.lsl import (
     point_labels,
 )
 from mocapkit.io.session import Session, load_session
-
-#: Default prefix of the replayed streams' names.
-STREAM_PREFIX = "mocapkit_"
+from mocapkit.pipelines.live_config import STREAM_PREFIX
 
 
 def stream_names(session: Session, prefix: str = STREAM_PREFIX) -> dict[str, str]:

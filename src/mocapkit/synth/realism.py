@@ -9,78 +9,15 @@ Gaussian noise, runs of drop-outs (NaN) and jittered time stamps.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import cv2
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.camera.projection import project
-from mocapkit.errors import ConfigError
+from mocapkit.synth.options import RealismOptions
 from mocapkit.synth.render import CameraRenderer
 
 FloatArray = NDArray[np.float64]
-BACKGROUNDS = ("textured", "plain")
-
-
-#: Accepted range (inclusive) of each numeric `RealismOptions` field.
-REALISM_RANGES: dict[str, tuple[float, float]] = {
-    "noise": (0.0, 100.0),
-    "blur": (0.0, 1.0),
-    "marker_noise_mm": (0.0, 200.0),
-    "dropout": (0.0, 1.0),
-    "dropout_s": (0.0, 60.0),
-    "video_jitter_s": (0.0, 0.1),
-    "marker_jitter_s": (0.0, 0.1),
-}
-
-
-@dataclass(frozen=True)
-class RealismOptions:
-    """Realism knobs of `synthesize_session` (defaults give a plausible indoor recording).
-
-    Attributes
-    ----------
-    noise : float
-        Sensor noise standard deviation in grey levels (0-255).
-    blur : float
-        Shutter time as a fraction of the frame interval; the body is rendered at two
-        instants within it and averaged (0 disables motion blur).
-    background : {"textured", "plain"}
-    marker_noise_mm : float
-        Standard deviation of marker position noise per axis (mm).
-    dropout : float
-        Probability per marker and frame that a drop-out run starts.
-    dropout_s : float
-        Mean length of a drop-out run (s).
-    video_jitter_s : float
-        Standard deviation of video frame time stamps around the nominal grid (s).
-    marker_jitter_s : float
-        Standard deviation of marker time stamps (s).
-    """
-
-    noise: float = 2.5
-    blur: float = 0.5
-    background: str = "textured"
-    marker_noise_mm: float = 1.0
-    dropout: float = 0.002
-    dropout_s: float = 0.1
-    video_jitter_s: float = 0.002
-    marker_jitter_s: float = 0.0002
-
-    def __post_init__(self) -> None:
-        for name, (lo, hi) in REALISM_RANGES.items():
-            v = getattr(self, name)
-            if not (np.isfinite(v) and lo <= v <= hi):
-                raise ConfigError(
-                    f"--{name.replace('_', '-')}: expected a value in [{lo}, {hi}], found {v}"
-                )
-        if self.background not in BACKGROUNDS:
-            raise ConfigError(
-                f"--background: expected one of {', '.join(BACKGROUNDS)}, found {self.background!r}"
-            )
-
-
 # ====================================================================== time stamps
 
 

@@ -29,6 +29,7 @@ from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.geometry.rotations import matrix_from_axis_angle
 from mocapkit.skeleton.kinematics import forward_kinematics
 from mocapkit.skeleton.model import Skeleton
+from mocapkit.synth.options import COSTUMES, SLEEVES
 
 FloatArray = NDArray[np.float64]
 
@@ -124,15 +125,6 @@ _NAMED_COLOURS_BGR = {
 _SKIN_TONES_BGR = ((150, 180, 225), (120, 160, 210), (95, 135, 185), (70, 100, 150), (55, 75, 110))
 _TROUSERS_BGR = ((80, 55, 35), (60, 60, 60), (110, 110, 120), (40, 35, 30), (90, 110, 140))
 _HAIR_BGR = ((30, 40, 60), (20, 25, 30), (50, 90, 140), (40, 60, 90))
-SLEEVES = ("short", "long", "none", "elbow")
-#: Clothing of the rendered subject. ``everyday``: a shirt (sleeves per ``sleeve``) and
-#: trousers of independent colours. ``paper``: the costume of Mamania et al. (2004, §3):
-#: "covers her entire body except the face, forearms, and the feet", with "the golden
-#: belt [...] around the waist region" that their skin model "categorised as skin region":
-#: one dress colour over trunk, upper arms (sleeves to the elbow) and legs, bare
-#: forearms and hands, and a skin-like gold belt (`BELT_BGR`). The neck stays bare and
-#: the feet shod (the paper's feet are bare; below the upper body its tracker ignores).
-COSTUMES = ("everyday", "paper")
 #: The paper's belt colour: a dull, dark (antique) gold, RGB (155, 100, 45). Brighter,
 #: more saturated golds leave the default skin model's hue band (`mocapkit.cues.skin`)
 #: at some light; this one is accepted from 0.5 to 1.12 times its colour (shading 0.72-1

@@ -14,9 +14,7 @@ from numpy.typing import ArrayLike
 
 from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
 from mocapkit.errors import ShapeError, unknown_name
-
-#: Rig names accepted by `make_rig`.
-RIG_NAMES: tuple[str, ...] = ("mono", "stereo", "all", "multi", "ring")
+from mocapkit.synth.options import RIG_NAMES
 
 #: Horizontal field of view (degrees): a 1.8 m subject fills about 3/4 of a 4:3 image at 3 m.
 HORIZONTAL_FOV_DEG = 62.0

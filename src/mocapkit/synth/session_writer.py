@@ -45,6 +45,7 @@ from mocapkit.skeleton.scaling import (
     segment_vectors_mm,
     standing_height_mm,
 )
+from mocapkit.synth.options import FPS_RANGE, IMAGE_SIDE_RANGE_PX, MARKER_RATE_RANGE_HZ
 from mocapkit.synth.realism import (
     RealismOptions,
     corrupt_markers,
@@ -73,10 +74,6 @@ FLOOR_CLEARANCE_MM = 30.0
 TRACKER_SETS = ("head", "left_hand", "right_hand")
 REFERENCE_MARKERS = ("left_elbow_ref", "right_elbow_ref")
 VIDEO_FORMATS = ("mp4", "png")
-#: Accepted video rates (frames per second), marker rates (Hz) and image sides (px).
-FPS_RANGE: tuple[float, float] = (1.0, 1000.0)
-MARKER_RATE_RANGE_HZ: tuple[float, float] = (1.0, 2000.0)
-IMAGE_SIDE_RANGE_PX: tuple[int, int] = (32, 8192)
 
 
 @dataclass(frozen=True)
@@ -169,7 +166,7 @@ def keep_cameras_away(
 
     The rig is placed in front of the subject's start (`mocapkit.synth.rigs.make_rig`);
     a subject who walks or hops towards it would otherwise come up to, and through, the
-    lens (CMU 131_03 in its first 8 s: the pelvis ends 0.1 m behind the camera plane),
+    lens (one CMU clip in its first 8 s: the pelvis ends 0.1 m behind the camera plane),
     which no recording would show. Every camera moves by the same distance along its own
     axis, so a stereo pair keeps its baseline and parallel axes.
 

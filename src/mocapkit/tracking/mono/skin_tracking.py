@@ -12,7 +12,7 @@ right if its top lies above the other two's centroids (else, or with fewer than 
 the one reaching highest: the top of the head is the subject's highest skin unless a
 hand is raised). Neither a raised forearm whose centroid
 lies above the head's (or above that of a head merged with the other arm, as in the
-lambada clip's first frame) nor a hand raised above the head is taken for it, as the
+first frame of one dance clip) nor a hand raised above the head is taken for it, as the
 topmost centroid or the highest top alone would; the waist is a blob below the head
 whose major axis lies within 30 deg of the horizontal; the other two are the forearms, the
 subject's left one on the image's right. Later frames: each label takes the blob nearest
@@ -29,7 +29,7 @@ blob below the head however many blobs there are (without ``belt`` it needs all 
 that a flat forearm in clothing without a belt is not taken for it), and a waist label
 lost in a later frame is given again to such an unlabelled blob among the four largest.
 A forearm hanging at the hip merges with the belt into one flat blob in the first frames
-of charleston1 and zombie (and lambada's head merged with a forearm leaves three blobs),
+of two clips (and a head merged with a forearm in a third leaves three blobs),
 so the four-blob rule missed the waist in three of the five clips.
 ``reacquire``: a hand label lost (or never found) is given to an unlabelled blob of the
 four largest on its side of the head (the subject's left on the image's right), so a

@@ -35,16 +35,16 @@ recorded in `LimitConfig`:
 The shoulder-extension (60 -> 40 deg) and elbow-backward (30 -> 10 deg) limits were
 tightened on the five clips of `mocapkit accuracy mono` (mean Procrustes error 67.4 ->
 53.4 mm, flips right 81.1 -> 87.3 %) and checked on four CMU clips not used to choose
-them (01_12, 11_01, 131_01, 131_03: 62.6 -> 57.8 mm, 65.9 -> 70.0 %; 131_03 got worse,
+them (62.6 -> 57.8 mm, 65.9 -> 70.0 %; one of them got worse,
 45.7 -> 50.5 mm). They prune true poses more often: 0-5.4 % of the frames of those nine
-clips break them (0-1.3 % with the old values); charleston1 breaks the 30 deg elbow
+clips break them (0-1.3 % with the old values); a dance clip breaks the 30 deg elbow
 angle in 24.8 % of its frames either way.
 
 A tolerance on the limits was measured and not adopted (docs/design-notes/mono.md,
 the true flips' pruning): with the estimated lengths and noisy 2-D, the
 tracker pruned every candidate with the truth's flips in 0-9 % of the frames of eight of
 those nine clips (the elbow-plane limit, the clavicle-trunk angle, shoulder extension)
-and in 26 % of charleston1's (its elbow closes to 25-30 deg). Loosening the elbow to 20
+and in 26 % of the dance clip's (its elbow closes to 25-30 deg). Loosening the elbow to 20
 or 15 deg left the five accuracy clips unchanged; opening the clavicle-trunk range to
 45-135 deg or the clavicle pair to 110 deg helped one clip set and cost the other. The
 AAOS values therefore stay as they are: the wrong flips come less from pruning than

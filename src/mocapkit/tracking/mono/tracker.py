@@ -127,7 +127,7 @@ class MonoConfig:
     limits : LimitConfig
     clavicle_weight : float
         Unary cost per unit of `mocapkit.tracking.mono.priors.clavicle_forward_cost`
-        (eq. 3 costs ~450 rad/s^2 per frame on 13_26); 0: the paper's. Default 300,
+        (eq. 3 costs ~450 rad/s^2 per frame on a tuning clip); 0: the paper's. Default 300,
         chosen on the five accuracy clips and checked on four held-out clips
         (docs/design-notes/mono.md).
     arm_prior_weight : float

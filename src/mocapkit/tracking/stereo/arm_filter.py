@@ -334,7 +334,7 @@ class ArmFilterConfig:
         observed offsets wander and spreads the particles over three loose DoF.
     shoulder_pull : float
         Share by which every perturbation pulls the shoulder offsets back towards 0 (not
-        in the paper, which only bounds them; 0 = paper). Measured on the 13_26 and 01_09
+        in the paper, which only bounds them; 0 = paper). Measured on two tuning
         excerpts with keypoints and a keypoint torso: arm mean 37.3/48.5 mm without,
         28.8/30.2 mm with 0.1.
     step_px : float

@@ -29,7 +29,7 @@ lies in the hand, beyond the wrist, so the arm's measured point is the wrist plu
 ``hand_offset_mm`` along the forearm (default 15 mm with skin blobs, 0 with
 keypoints); the face blob's 3-D centroid lies ``face_offset_mm`` from the head point
 in the torso frame (default 35 mm below it). Both defaults were measured on a
-synthetic session (CMU 13_26, long sleeves: the hand blob's centroid lay 13 mm from
+synthetic session (a CMU tuning clip, long sleeves: the hand blob's centroid lay 13 mm from
 the wrist, where a hand-held object covers part of the hand; the face blob's 35 mm
 below the head joint). The adaptive shoulder offsets absorb what these leave.
 """
@@ -108,7 +108,7 @@ class StereoConfig:
         Keep only the figure's gradients (shirt-colour segmentation).
     yaw_gain : float
         Share of the shoulders' yaw taken per frame (0: the yaw stays facing the cameras;
-        0.6 measured best of 0.2/0.6/1.0 on CMU 13_26 and 01_01).
+        0.6 measured best of 0.2/0.6/1.0 on two CMU clips).
     torso : {"shoulders", "keypoints"}
         Where the torso comes from: an upright torso whose yaw follows the adaptive
         shoulders, hanging from the head (default, the paper's inputs only); or, with
