@@ -28,21 +28,14 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from mocapkit.errors import ConfigError, SessionError, ShapeError
+from mocapkit.errors import ConfigError, SessionError
 from mocapkit.eval.metrics import evaluate_joints, evaluate_result
-from mocapkit.io.openpose import (
-    BODY_25,
-    DIRECT,
-    MAPPED_JOINTS,
-    NECK_BELOW_SHOULDERS,
-    PELVIS_ABOVE_HIPS,
-    openpose_from_canonical,
-    write_openpose_frame,
-)
+from mocapkit.io.openpose import openpose_from_canonical, write_openpose_frame
 from mocapkit.io.session import Session, load_session
 from mocapkit.io.truth import Truth
 from mocapkit.pipelines.mono import (
     MonoRun,
+    canonical_from_body25_world,
     costume_skin_options,
     initial_pose_from,
     track_mono,
@@ -107,49 +100,6 @@ class MonoClipAccuracy:
 ARM_JOINTS: tuple[str, ...] = (
     "left_shoulder", "left_elbow", "left_wrist", "right_shoulder", "right_elbow", "right_wrist",
 )  # fmt: skip
-
-
-def canonical_from_body25_world(world_mm: FloatArray) -> tuple[tuple[str, ...], FloatArray]:
-    """A detector's own 3-D points (BODY_25 order, (T, 25, 3) mm) on canonical joints.
-
-    The same mapping as the 2-D keypoints' (`mocapkit.io.openpose`): the limbs' joints
-    directly, the head between the ears (the face's mean without both), the neck
-    ``NECK_BELOW_SHOULDERS`` and the pelvis ``PELVIS_ABOVE_HIPS`` shoulder widths from the
-    shoulder and hip midpoints along the trunk (the girdle rule, in 3-D).
-
-    Returns
-    -------
-    names : tuple of str
-        `mocapkit.io.openpose.MAPPED_JOINTS`.
-    joints : (T, len(names), 3) float
-        NaN where the detector gave nothing.
-    """
-    w = np.asarray(world_mm, dtype=float)
-    if w.ndim != 3 or w.shape[1:] != (len(BODY_25), 3):
-        raise ShapeError(f"detector 3-D: expected (T, {len(BODY_25)}, 3), found {w.shape}")
-    out = np.full((w.shape[0], len(MAPPED_JOINTS), 3), np.nan)
-    col = {n: i for i, n in enumerate(MAPPED_JOINTS)}
-
-    def kp(name: str) -> FloatArray:
-        return w[:, BODY_25.index(name)]
-
-    for joint, det in DIRECT.items():
-        out[:, col[joint]] = kp(det)
-    ears = np.stack([kp("LEar"), kp("REar")], axis=1)
-    face = np.stack([kp("LEar"), kp("REar"), kp("LEye"), kp("REye")], axis=1)
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", "Mean of empty slice", RuntimeWarning)
-        both = np.asarray(np.isfinite(ears).all(axis=(1, 2)), dtype=bool)
-        out[:, col["head"]] = np.where(both[:, None], ears.mean(axis=1), np.nanmean(face, axis=1))
-    m_s = 0.5 * (kp("LShoulder") + kp("RShoulder"))
-    m_h = 0.5 * (kp("LHip") + kp("RHip"))
-    width = np.linalg.norm(kp("LShoulder") - kp("RShoulder"), axis=-1, keepdims=True)
-    up = m_s - m_h
-    with np.errstate(invalid="ignore", divide="ignore"):
-        up = up / np.linalg.norm(up, axis=-1, keepdims=True)
-    out[:, col["neck"]] = m_s - NECK_BELOW_SHOULDERS * width * up
-    out[:, col["pelvis"]] = m_h + PELVIS_ABOVE_HIPS * width * up
-    return MAPPED_JOINTS, out
 
 
 def detector3d_accuracy(world_npz: Path, truth: Truth | None) -> tuple[float, float]:
@@ -422,6 +372,7 @@ def mono_accuracy(
                 config=cfg,
                 initial_pose=first_pose,
                 on_floor=on_floor,
+                keypoints3d=world_npz,
             )
         else:
             idx = [names.index(n) for n in _model(cfg).joint_names]
