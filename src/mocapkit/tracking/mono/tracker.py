@@ -178,8 +178,10 @@ class MonoConfig:
     depth_order_weight : float
         Unary cost per unit of `mocapkit.tracking.mono.priors.depth_order_cost` where
         the frame comes with a detector's depth order of its links (``link_sines`` of
-        `MonoTracker.push`, from MediaPipe's world landmarks); 0: off. Chosen on the
-        tuning clips (docs/design-notes/mono.md).
+        `MonoTracker.push`, from MediaPipe's world landmarks); 0: off. Default 1000
+        (eq. 3 costs ~450 per frame): of 10-3000 the best on the five tuning clips from
+        MediaPipe on the rendered video (62.8 -> 59.4 mm PA); report clips 55.8 -> 54.5
+        (docs/design-notes/mono.md).
     arm_prior : ArmPrior or None
         The mixture the arm prior uses; None: the shipped table
         (`mocapkit.tracking.mono.arm_prior.default_arm_prior`).
@@ -207,7 +209,7 @@ class MonoConfig:
     rebuilt_reach_links: tuple[str, ...] = ("left_clavicle", "right_clavicle")
     girdle_weight: float = 100.0
     girdle_cosine: float = float("nan")
-    depth_order_weight: float = 0.0
+    depth_order_weight: float = 1000.0
     arm_prior: ArmPrior | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
