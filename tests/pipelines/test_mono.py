@@ -447,3 +447,57 @@ def test_on_floor_places_the_neck_above_the_standing_foot(tmp_path: Path) -> Non
         track_mono(session, None, on_floor=True, config=MonoConfig(camera_model="weak"))
     with pytest.raises(SessionError, match="on-floor needs the ankles"):
         track_mono(session, None, on_floor=True)
+
+
+def test_detector_3d_on_canonical_joints_is_measured_like_the_tracker(tmp_path: Path) -> None:
+    """A detector's 3-D that is the truth turned, scaled and moved scores 0 mm after the
+    per-frame alignment; the neck and pelvis follow the girdle rule in 3-D."""
+    from mocapkit.io.openpose import BODY_25, NECK_BELOW_SHOULDERS, PELVIS_ABOVE_HIPS
+    from mocapkit.pipelines.mono_accuracy import (
+        canonical_from_body25_world,
+        detector3d_accuracy,
+    )
+
+    rng = np.random.default_rng(3)
+    T = 4
+    ls, rs = np.array([200.0, 0, 1400]), np.array([-200.0, 0, 1400])
+    lh, rh = np.array([100.0, 0, 900]), np.array([-100.0, 0, 900])
+    up = np.array([0.0, 0, 1])
+    width = 400.0
+    neck = 0.5 * (ls + rs) - NECK_BELOW_SHOULDERS * width * up
+    pelvis = 0.5 * (lh + rh) + PELVIS_ABOVE_HIPS * width * up
+    head = np.array([0.0, 20, 1600])
+    truth_pts = {"head": head, "neck": neck, "pelvis": pelvis, "left_shoulder": ls,
+                 "right_shoulder": rs, "left_hip": lh, "right_hip": rh}  # fmt: skip
+    joints = np.zeros((T, len(CANONICAL_JOINTS), 3))
+    for k, n in enumerate(CANONICAL_JOINTS):
+        joints[:, k] = truth_pts.get(n, rng.normal(scale=300.0, size=(T, 3)) + up * 1000.0)
+    truth = Truth(np.arange(T) / 30.0, CANONICAL_JOINTS, joints, (), np.zeros((T, 0, 3)))
+    # the detector's points: the truth's joints turned about z by 30 deg, halved, moved
+    c, s = np.cos(np.pi / 6), np.sin(np.pi / 6)
+    rot = np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+    body = {"LShoulder": "left_shoulder", "RShoulder": "right_shoulder", "LHip": "left_hip",
+            "RHip": "right_hip", "LElbow": "left_elbow", "LWrist": "left_wrist",
+            "RElbow": "right_elbow", "RWrist": "right_wrist", "LKnee": "left_knee",
+            "RKnee": "right_knee", "LAnkle": "left_ankle", "RAnkle": "right_ankle"}  # fmt: skip
+    world = np.full((T, len(BODY_25), 3), np.nan)
+    for det, can in body.items():
+        world[:, BODY_25.index(det)] = joints[:, CANONICAL_JOINTS.index(can)]
+    ear = np.array([30.0, 0, 0])
+    world[:, BODY_25.index("LEar")] = head + ear
+    world[:, BODY_25.index("REar")] = head - ear
+    world = 0.5 * world @ rot.T + [5.0, -7.0, 11.0]
+    names, mapped = canonical_from_body25_world(world)
+    back = (mapped - [5.0, -7.0, 11.0]) @ rot / 0.5
+    for n in ("neck", "pelvis", "head"):
+        np.testing.assert_allclose(back[:, names.index(n)], np.tile(truth_pts[n], (T, 1)),
+                                   atol=1e-9)  # fmt: skip
+    path = tmp_path / "cam.npz"
+    np.savez(path, time_s=truth.time_s, names=np.array(BODY_25), world_mm=world)
+    upper, arms = detector3d_accuracy(path, truth)
+    assert upper == pytest.approx(0.0, abs=1e-6)
+    assert arms == pytest.approx(0.0, abs=1e-6)
+    world[:, BODY_25.index("LWrist")] += [0.0, 0.0, 100.0]
+    np.savez(path, time_s=truth.time_s, names=np.array(BODY_25), world_mm=world)
+    assert detector3d_accuracy(path, truth)[1] > 1.0
+    assert np.isnan(detector3d_accuracy(tmp_path / "none.npz", truth)[0])

@@ -33,6 +33,12 @@ def add_mono_accuracy_parser(methods: Any) -> None:
         action="store_true",
         help="track from the rendered video by skin blobs",
     )
+    src.add_argument(
+        "--detector",
+        choices=("mediapipe", "rtmpose"),
+        help="track from this 2-D detector run on the rendered video (kept in WORK and "
+        "reused); its own 3-D, where it gives one, is measured beside the tracker",
+    )
     m.add_argument(
         "--costume",
         choices=("paper", "everyday"),
@@ -103,6 +109,7 @@ def _run(args: argparse.Namespace) -> int:
         costume=args.costume,
         initial_pose=args.initial_pose,
         on_floor=args.on_floor,
+        detector=args.detector,
         config=MonoConfig(lag=args.lag, cost=args.cost, **prior),
         say=(lambda _line: None) if args.json else print,
     )
@@ -114,6 +121,14 @@ def _run(args: argparse.Namespace) -> int:
             f"flips right {100 * np.mean([r.flips_right for r in rows]):.1f} %, pruned "
             f"{100 * np.mean([r.pruned_share_mean for r in rows]):.1f} % of the poses per frame"
         )
+        if args.detector:
+            print(
+                f"mean: arm {np.mean([r.arm_pa_mpjpe_mm for r in rows]):.1f} mm; the "
+                f"detector's own 3-D: upper body "
+                f"{np.mean([r.detector3d_pa_mpjpe_mm for r in rows]):.1f}, arm "
+                f"{np.mean([r.detector3d_arm_pa_mm for r in rows]):.1f} mm; world MPJPE "
+                f"{np.mean([r.mpjpe_mm for r in rows]):.1f} mm"
+            )
         if args.skin:
             for r in rows:
                 per = ", ".join(f"{n} {v:.1f}" for n, v in r.input_px_by_joint.items())

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import os
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -24,6 +25,13 @@ from numpy.typing import NDArray
 from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import ConfigError, SessionError, ShapeError
 from mocapkit.io.motion import Motion
+from mocapkit.io.openpose import (
+    BODY_25,
+    DIRECT,
+    MAPPED_JOINTS,
+    NECK_BELOW_SHOULDERS,
+    PELVIS_ABOVE_HIPS,
+)
 from mocapkit.io.session import Session, load_session
 from mocapkit.io.session_csv import Keypoints, read_keypoints_csv
 from mocapkit.pipelines.camera_check import check_session_cameras, warn_placed_subject
@@ -182,6 +190,93 @@ def load_keypoints(
             )
         return session.checked_keypoints(camera, read_openpose_folder(p, times), str(p))
     return session.checked_keypoints(camera, read_keypoints_csv(p), str(p))
+
+
+def canonical_from_body25_world(world_mm: FloatArray) -> tuple[tuple[str, ...], FloatArray]:
+    """A detector's own 3-D points (BODY_25 order, (T, 25, 3) mm) on canonical joints.
+
+    The same mapping as the 2-D keypoints' (`mocapkit.io.openpose`): the limbs' joints
+    directly, the head between the ears (the face's mean without both), the neck
+    ``NECK_BELOW_SHOULDERS`` and the pelvis ``PELVIS_ABOVE_HIPS`` shoulder widths from the
+    shoulder and hip midpoints along the trunk (the girdle rule, in 3-D).
+
+    Returns
+    -------
+    names : tuple of str
+        `mocapkit.io.openpose.MAPPED_JOINTS`.
+    joints : (T, len(names), 3) float
+        NaN where the detector gave nothing.
+    """
+    w = np.asarray(world_mm, dtype=float)
+    if w.ndim != 3 or w.shape[1:] != (len(BODY_25), 3):
+        raise ShapeError(f"detector 3-D: expected (T, {len(BODY_25)}, 3), found {w.shape}")
+    out = np.full((w.shape[0], len(MAPPED_JOINTS), 3), np.nan)
+    col = {n: i for i, n in enumerate(MAPPED_JOINTS)}
+
+    def kp(name: str) -> FloatArray:
+        return w[:, BODY_25.index(name)]
+
+    for joint, det in DIRECT.items():
+        out[:, col[joint]] = kp(det)
+    ears = np.stack([kp("LEar"), kp("REar")], axis=1)
+    face = np.stack([kp("LEar"), kp("REar"), kp("LEye"), kp("REye")], axis=1)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "Mean of empty slice", RuntimeWarning)
+        both = np.asarray(np.isfinite(ears).all(axis=(1, 2)), dtype=bool)
+        out[:, col["head"]] = np.where(both[:, None], ears.mean(axis=1), np.nanmean(face, axis=1))
+    m_s = 0.5 * (kp("LShoulder") + kp("RShoulder"))
+    m_h = 0.5 * (kp("LHip") + kp("RHip"))
+    width = np.linalg.norm(kp("LShoulder") - kp("RShoulder"), axis=-1, keepdims=True)
+    up = m_s - m_h
+    with np.errstate(invalid="ignore", divide="ignore"):
+        up = up / np.linalg.norm(up, axis=-1, keepdims=True)
+    out[:, col["neck"]] = m_s - NECK_BELOW_SHOULDERS * width * up
+    out[:, col["pelvis"]] = m_h + PELVIS_ABOVE_HIPS * width * up
+    return MAPPED_JOINTS, out
+
+
+def detector_link_sines(
+    world_npz: str | os.PathLike[str], time_s: FloatArray, model: StickModel
+) -> FloatArray:
+    """A detector's depth order per frame and link: ``dz / L`` (T, L) of its own 3-D
+    (``keypoints3d/<camera>.npz`` of `mocapkit.detect.run`: MediaPipe's world landmarks,
+    whose z points away from the camera like the camera frame's), on the frames of
+    ``time_s`` (the nearest within half a frame); NaN where it has none.
+
+    Raises
+    ------
+    SessionError
+        The file cannot be read or lacks ``time_s`` / ``world_mm``.
+    """
+    path = Path(world_npz)
+    try:
+        with np.load(path) as z:
+            det_t = np.asarray(z["time_s"], dtype=float)
+            world = np.asarray(z["world_mm"], dtype=float)
+    except (OSError, KeyError, ValueError) as exc:
+        raise SessionError(
+            f"{path}: expected a detector's 3-D (time_s, world_mm), could not read it: {exc}"
+        ) from exc
+    names, joints = canonical_from_body25_world(world)
+    missing = [n for n in model.joint_names if n not in names]
+    if missing:
+        raise SessionError(f"{path}: the detector's 3-D gives no {missing}")
+    q = joints[:, [names.index(n) for n in model.joint_names]]
+    v = q[:, model.child] - q[:, model.parent]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        sines = v[..., 2] / np.linalg.norm(v, axis=-1)
+    t = np.asarray(time_s, dtype=float)
+    out = np.full((t.shape[0], model.n_links), np.nan)
+    if det_t.shape[0] == 0:
+        return out
+    dt = float(np.median(np.diff(t))) if t.shape[0] > 1 else 1.0 / 30.0
+    n = det_t.shape[0]
+    j = np.clip(np.searchsorted(det_t, t), 1, n - 1) if n > 1 else np.zeros(t.shape[0], int)
+    lo = np.maximum(j - 1, 0)
+    j = np.where(np.abs(det_t[lo] - t) <= np.abs(det_t[j] - t), lo, j)
+    near = np.abs(det_t[j] - t) <= 0.5 * dt
+    out[near] = sines[j[near]]
+    return out
 
 
 def detector_config(config: MonoConfig) -> MonoConfig:
@@ -444,6 +539,7 @@ def track_mono(
     skin: bool = False,
     initial_pose: FloatArray | None = None,
     skin_options: SkinOptions | None = None,
+    keypoints3d: str | os.PathLike[str] | None = None,
 ) -> MonoRun:
     """Track a session with the monocular tracker and write the result folder.
 
@@ -477,6 +573,11 @@ def track_mono(
     skin_options : SkinOptions, optional
         With ``skin``: how the blobs are read (`skin_keypoints`; default `SkinOptions()`,
         the paper's rules; `SKIN_SETTINGS` per costume).
+    keypoints3d : path-like, optional
+        A detector's own 3-D (``keypoints3d/<camera>.npz``, `detector_link_sines`) whose
+        depth order softly costs each link's flip (``config.depth_order_weight``; the last
+        pass only). Default: the session's ``keypoints3d/<camera>.npz`` where the
+        session's own keypoints are tracked and it exists.
     length_passes : int
         With video lengths and the perspective model: track this many times, each pass
         measuring the lengths again from the previous pass's poses (`refined_lengths`,
@@ -594,9 +695,15 @@ def track_mono(
     stream = MonoStream(tracker, skeleton, cam, scale, floor=floor)
     if feet is None:
         feet = np.full((t.shape[0], 2, 2), np.nan)
+    own3d = session.path / "keypoints3d" / f"{cam_name}.npz"
+    if keypoints3d is None and keypoints is None and not skin and own3d.is_file():
+        keypoints3d = own3d
+    sines: Sequence[FloatArray | None] = [None] * t.shape[0]
+    if keypoints3d is not None and cfg.depth_order_weight > 0:
+        sines = list(detector_link_sines(keypoints3d, t, model))
     run = run_tracker(
         stream,
-        (MonoSample(float(ti), p, a) for ti, p, a in zip(t, px, feet)),
+        (MonoSample(float(ti), p, a, s) for ti, p, a, s in zip(t, px, feet, sines)),
         len(t),
         out_dir,
         label="track mono",

@@ -29,11 +29,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.errors import ConfigError, SessionError
-from mocapkit.eval.metrics import evaluate_result
+from mocapkit.eval.metrics import evaluate_joints, evaluate_result
 from mocapkit.io.openpose import openpose_from_canonical, write_openpose_frame
 from mocapkit.io.session import Session, load_session
+from mocapkit.io.truth import Truth
 from mocapkit.pipelines.mono import (
     MonoRun,
+    canonical_from_body25_world,
     costume_skin_options,
     initial_pose_from,
     track_mono,
@@ -89,6 +91,46 @@ class MonoClipAccuracy:
     input_seen: float = float("nan")
     input_px_by_joint: dict[str, float] = field(default_factory=dict)
     costume: str = ""
+    arm_pa_mpjpe_mm: float = float("nan")
+    detector3d_pa_mpjpe_mm: float = float("nan")
+    detector3d_arm_pa_mm: float = float("nan")
+
+
+#: The arm joints of the arm figures (PA-aligned on these six alone).
+ARM_JOINTS: tuple[str, ...] = (
+    "left_shoulder", "left_elbow", "left_wrist", "right_shoulder", "right_elbow", "right_wrist",
+)  # fmt: skip
+
+
+def detector3d_accuracy(world_npz: Path, truth: Truth | None) -> tuple[float, float]:
+    """PA-MPJPE (mm) of a detector's own 3-D (``keypoints3d/<camera>.npz``) against the
+    truth, per frame aligned as the tracker's (`mocapkit.eval.metrics.evaluate_joints`):
+    over the upper body and over the arms alone. NaN, NaN without the file."""
+    if not world_npz.is_file() or truth is None:
+        return float("nan"), float("nan")
+    with np.load(world_npz) as z:
+        time_s, world = np.asarray(z["time_s"], dtype=float), np.asarray(z["world_mm"])
+    names, joints = canonical_from_body25_world(world)
+    tr = truth
+    upper, arms = (
+        evaluate_joints(
+            time_s, names, joints, tr.time_s, tr.joint_names, tr.joints_mm, joints=sel
+        ).pa_mpjpe_mm
+        for sel in (UPPER_BODY_JOINTS, ARM_JOINTS)
+    )
+    return upper, arms
+
+
+def detector_keypoints(base: Path, session: Path, detector: str, overwrite: bool) -> Path:
+    """Run ``detector`` on the session's rendered video into ``base/detect_<detector>``
+    (kept: a rerun reuses it unless ``overwrite``); returns that folder
+    (`mocapkit.detect.run` layout: ``keypoints/openpose/<camera>/``,
+    ``keypoints3d/<camera>.npz``)."""
+    from mocapkit.detect.run import detect_session
+
+    out = base / f"detect_{detector}"
+    detect_session(session, detector, overwrite=overwrite, out_dir=out)
+    return out
 
 
 def truth_in_camera(session: Session, camera: str, model: StickModel) -> FloatArray:
@@ -259,6 +301,7 @@ def mono_accuracy(
     skin_bare_from: str | None = "costume",
     costume: str | None = None,
     on_floor: bool = False,
+    detector: str | None = None,
 ) -> list[MonoClipAccuracy]:
     """Render (or reuse), track from noisy true keypoints (or OpenPose JSON, or the video
     by skin blobs with ``skin``), and evaluate each clip.
@@ -276,16 +319,21 @@ def mono_accuracy(
     to be reported apart from the default ones. With ``on_floor`` the poses are placed
     with the feet on the floor (`mocapkit.pipelines.mono.track_mono`; from the keypoints:
     the noisy ankles).
+
+    With ``detector`` (a `mocapkit.detect` backend, e.g. ``"mediapipe"``) the rendered
+    video is given to that detector (its detections kept in ``WORK/<clip>/detect_<name>``
+    and reused), the session is tracked from its OpenPose JSON, and the detector's own
+    3-D (where it gives one) is measured beside the tracker, aligned the same way.
     """
-    if skin and openpose:
-        raise ConfigError("mono_accuracy: give either skin or openpose, not both")
+    if sum((skin, openpose, detector is not None)) > 1:
+        raise ConfigError("mono_accuracy: give one of skin, openpose and detector")
     if costume is not None and not skin:
         raise ConfigError("mono_accuracy: a costume is chosen for skin tracking only")
     dress = (costume or SKIN_COSTUME) if skin else "everyday"
     own_arms = {} if skin_bare_from == "costume" else {"bare_from": skin_bare_from}
     skin_options = costume_skin_options(dress, **own_arms)
     cfg = config or MonoConfig()
-    source = "skin" if skin else "openpose" if openpose else "keypoints"
+    source = "skin" if skin else "openpose" if openpose else detector or "keypoints"
     rows = []
     for clip in clips or tuple(MONO_CLIPS):
         base = Path(work_dir) / Path(clip).stem
@@ -294,6 +342,7 @@ def mono_accuracy(
         tag = f"skin_{dress}" if skin else source
         out = base / (tag + ("_initial" if initial_pose else ""))
         first_pose = None
+        world_npz = None
         if initial_pose:
             assert s.truth is not None
             first_pose = initial_pose_from(s.truth.joint_names, s.truth.joints_mm[0], _model(cfg))
@@ -307,9 +356,14 @@ def mono_accuracy(
                 initial_pose=first_pose,
                 skin_options=skin_options,
             )
-        elif openpose:
-            folder = base / "openpose_json"
-            write_openpose_with_bystander(folder, names, px, seed)
+        elif openpose or detector is not None:
+            if detector is not None:
+                found = detector_keypoints(base, session, detector, overwrite=not reuse)
+                folder = found / "keypoints" / "openpose" / cam
+                world_npz = found / "keypoints3d" / f"{cam}.npz"
+            else:
+                folder = base / "openpose_json"
+                write_openpose_with_bystander(folder, names, px, seed)
             run = track_mono(
                 session,
                 out,
@@ -318,6 +372,7 @@ def mono_accuracy(
                 config=cfg,
                 initial_pose=first_pose,
                 on_floor=on_floor,
+                keypoints3d=world_npz,
             )
         else:
             idx = [names.index(n) for n in _model(cfg).joint_names]
@@ -333,6 +388,10 @@ def mono_accuracy(
                 initial_pose=first_pose,
             )
         rep = evaluate_result(out, session, joints=UPPER_BODY_JOINTS)
+        arm = evaluate_result(out, session, joints=ARM_JOINTS).pa_mpjpe_mm
+        det3d = (
+            detector3d_accuracy(world_npz, s.truth) if world_npz is not None else (np.nan, np.nan)
+        )
         flips, _ = flip_accuracy(run, truth_in_camera(s, cam, run.model))
         true_px = s.keypoints[cam].pixels[:, [names.index(n) for n in run.model.joint_names]]
         med, seen, by_joint = input_error(run, true_px)
@@ -353,6 +412,9 @@ def mono_accuracy(
             seen,
             by_joint,
             dress if skin else "",
+            arm,
+            float(det3d[0]),
+            float(det3d[1]),
         )
         say(format_rows([row]).splitlines()[-1])
         rows.append(row)
@@ -370,6 +432,7 @@ def format_rows(rows: Sequence[MonoClipAccuracy]) -> str:
     lines = [
         f"{'clip':<18}{'input':<15}{'PA mm':>8}{'MPJPE':>8}{'flips':>7}{'surv':>7}"
         f"{'cand':>7}{'pruned':>8}{'allpr':>6}{'res px':>8}{'cover':>7}{'in px':>7}{'seen':>7}"
+        f"{'arm PA':>8}{'det3D':>7}{'d3 arm':>8}"
     ]
     for r in rows:
         what = f"{r.source} {r.costume}" if r.costume else r.source
@@ -378,6 +441,7 @@ def format_rows(rows: Sequence[MonoClipAccuracy]) -> str:
             f"{100 * r.flips_right:6.1f}%{r.survivors_mean:7.1f}{r.candidates_mean:7.1f}"
             f"{100 * r.pruned_share_mean:7.1f}%{r.all_pruned_frames:6d}{r.residual_px_mean:8.2f}"
             f"{r.coverage:7.3f}{r.input_px_median:7.2f}{100 * r.input_seen:6.1f}%"
+            f"{r.arm_pa_mpjpe_mm:8.1f}{r.detector3d_pa_mpjpe_mm:7.1f}{r.detector3d_arm_pa_mm:8.1f}"
         )
     return "\n".join(lines)
 

@@ -6,6 +6,7 @@ import pytest
 from mocapkit.errors import ShapeError
 from mocapkit.tracking.mono.priors import (
     clavicle_forward_cost,
+    depth_order_cost,
     girdle_angle_cost,
 )
 from mocapkit.tracking.mono.stick import stick_model
@@ -104,3 +105,22 @@ def test_girdle_angle_cost_known_values_and_flip_pairs() -> None:
     assert girdle_angle_cost(model, nan, c0) == pytest.approx([0.0])
     with pytest.raises(ShapeError, match="girdle_angle_cost: expected positions"):
         girdle_angle_cost(model, poses[0], c0)
+
+
+def test_depth_order_cost_is_the_out_of_plane_sine_of_each_disagreeing_link() -> None:
+    model = stick_model(False)
+    fwd = _arm_pose(model, (0.0, 0.0, -1.0), (0.0, 0.0, 1.0))  # left forearm towards us
+    lf, rf = model.link_index("left_forearm"), model.link_index("right_forearm")
+    sines = np.full(model.n_links, np.nan)
+    sines[lf], sines[rf] = -0.8, 0.3  # the detector agrees on both forearms
+    mirrored = fwd.copy()  # the left forearm flipped away from the camera
+    le, lw = model.joint_names.index("left_elbow"), model.joint_names.index("left_wrist")
+    mirrored[lw, 2] = 2 * mirrored[le, 2] - mirrored[lw, 2]
+    cost = depth_order_cost(model, np.stack([fwd, mirrored]), sines)
+    np.testing.assert_allclose(cost, [0.0, 0.8])
+    sines[rf] = -0.3  # now it disagrees on the right forearm in both poses
+    np.testing.assert_allclose(depth_order_cost(model, np.stack([fwd, mirrored]), sines),
+                               [0.3, 1.1])  # fmt: skip
+    assert depth_order_cost(model, np.full((1, model.n_joints, 3), np.nan), sines)[0] == 0.0
+    with pytest.raises(ShapeError, match="depth_order_cost"):
+        depth_order_cost(model, fwd, sines)

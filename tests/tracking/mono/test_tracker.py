@@ -239,3 +239,32 @@ def test_rebuilt_neck_widens_the_clavicles_band_and_turns_the_girdle_cost_on() -
         MonoConfig(girdle_weight=-1.0)
     with pytest.raises(ConfigError, match=r"window must be >= 1"):
         MonoConfig(window=0)
+
+
+def test_a_detectors_depth_order_steers_the_flips_softly() -> None:
+    """Given the truth's depth order the flips stay right; given its mirror image and a
+    large weight, the tracker follows the hint where the limits allow; weight 0 ignores it."""
+    joints, names, _ = stick_motion(40)
+    model = stick_model()
+    cam = camera()
+    idx = [names.index(n) for n in model.joint_names]
+    px = cam.project(joints[:, idx])
+    truth = cam.to_camera(joints[:, idx])
+    lengths = np.linalg.norm(model.link_vectors(truth[0]), axis=-1)
+    v = model.link_vectors(truth)
+    sines = v[..., 2] / np.linalg.norm(v, axis=-1)
+    counted = np.abs(sines) > 0.2
+
+    def agree(hint: np.ndarray, weight: float) -> float:
+        tracker = MonoTracker(lengths, cam, 1 / FPS, MonoConfig(depth_order_weight=weight), model)
+        out = []
+        for k in range(px.shape[0]):
+            out += tracker.push(k / FPS, px[k], hint[k])
+        est = np.stack([f.joints_in_camera for f in out + tracker.finish()])
+        dz = est[:, model.child, 2] - est[:, model.parent, 2]
+        return float((np.sign(dz) == np.sign(hint))[counted].mean())
+
+    assert agree(sines, 1e4) >= 0.95
+    mirrored_free, mirrored_forced = agree(-sines, 0.0), agree(-sines, 1e4)
+    assert mirrored_free <= 0.1
+    assert mirrored_forced >= mirrored_free + 0.3

@@ -13,6 +13,9 @@ plain cost; a weight of 0 leaves the tracker as the paper's.
   the departure of the cosine of the angle between the clavicles from the girdle's. Used
   where the neck is rebuilt from a detector's shoulders and hips (its clavicles mirror
   images in 2-D, their flips undecided by their own lengths; docs/design-notes/mono.md).
+- `depth_order_cost` (unary, 0-L): a detector's own 3-D (MediaPipe's world landmarks)
+  says which end of each link is nearer the camera; each link whose flip disagrees costs
+  how far the detector has it out of the image plane (|dz| / L), never a hard choice.
 """
 
 from __future__ import annotations
@@ -113,3 +116,36 @@ def girdle_angle_cost(model: StickModel, positions: ArrayLike, cosine: float) ->
             * np.einsum("nc,nc->n", vec[:, 1], vec[:, 1])
         )
     return np.asarray(np.nan_to_num(np.abs(c - cosine), nan=0.0), dtype=float)
+
+
+def depth_order_cost(model: StickModel, positions: ArrayLike, sines: ArrayLike) -> FloatArray:
+    """Disagreement of each pose's link flips with a detector's depth order.
+
+    Parameters
+    ----------
+    model : StickModel
+    positions : (N, K, 3) float
+        Candidate poses in the camera frame (z away from the camera).
+    sines : (L_s,) float
+        Per link of ``model`` (its first L_s links), the detector's ``dz / L`` (child minus
+        parent depth over the link's length, in [-1, 1]); NaN where it has none.
+
+    Returns
+    -------
+    (N,) float
+        Sum over the links whose depth order differs from the detector's of ``|dz / L|``;
+        0 for a pose with NaN positions.
+    """
+    pos = np.asarray(positions, dtype=float)
+    sn = np.asarray(sines, dtype=float)
+    if pos.ndim != 3 or pos.shape[1:] != (model.n_joints, 3) or sn.ndim != 1:
+        raise ShapeError(
+            f"depth_order_cost: expected positions (N, {model.n_joints}, 3) and sines (L,), "
+            f"found {pos.shape} and {sn.shape}"
+        )
+    n = min(sn.shape[0], model.n_links)
+    dz = pos[:, model.child[:n], 2] - pos[:, model.parent[:n], 2]  # (N, n)
+    s = sn[:n]
+    with np.errstate(invalid="ignore"):
+        wrong = (np.sign(dz) * np.sign(s)) < 0
+    return np.where(wrong & np.isfinite(s), np.abs(np.nan_to_num(s)), 0.0).sum(axis=1)

@@ -84,11 +84,13 @@ def world_points(camera: Camera, points_in_camera: FloatArray) -> FloatArray:
 @dataclass
 class MonoSample:
     """One frame for `MonoStream`: the stick's joints (K, 2) px, NaN where unseen, and
-    the ankles (2, 2) px where the stream places the subject on the floor."""
+    the ankles (2, 2) px where the stream places the subject on the floor, and a
+    detector's depth order per link (``link_sines``, `MonoTracker.push`) where it has one."""
 
     time_s: float
     points_px: FloatArray
     ankles_px: FloatArray | None = None
+    link_sines: FloatArray | None = None
 
 
 #: Limbs whose status a `MonoResult` reports, by the stick joint at their end.
@@ -194,7 +196,10 @@ class MonoStream:
         if self.floor is not None:
             ankles = sample.ankles_px if sample.ankles_px is not None else np.full((2, 2), np.nan)
             self.floor.push(raw[0], ankles)
-        return [self._result(f) for f in self.tracker.push(sample.time_s, sample.points_px)]
+        return [
+            self._result(f)
+            for f in self.tracker.push(sample.time_s, sample.points_px, sample.link_sines)
+        ]
 
     def finish(self) -> list[FrameResult]:
         """The results still pending (all of them offline)."""
