@@ -381,35 +381,3 @@ def test_guided_balance_gives_the_same_pose_with_fewer_restores(setup):
         np.testing.assert_array_equal(b.q, a.q)
     assert slope is not None and slope < 0
     assert n_guided < 0.7 * n_plain
-
-
-class _CountingIterations(SDLSSolver):
-    iterations = 0
-
-    def solve(self, *args, **kwargs):
-        res = super().solve(*args, **kwargs)
-        type(self).iterations += res.iterations
-        return res
-
-
-def test_a_restore_seeded_at_a_nearby_lean_keeps_the_lean_and_converges_faster(setup):
-    """`apply_lean`'s ``seed``: the spine takes ``q``'s flexion plus the lean whatever the
-    seed, and a restore that starts from the restore of a nearby lean puts the effectors
-    back as well in fewer iterations."""
-    from mocapkit.tracking.balance import _spine_split
-
-    sk, _solver, _model = setup
-    solver = _CountingIterations(sk)
-    *_, (q, t) = squat(solver, np.linspace(-50.0, -200.0, 4))
-    spine = list(spine_dof_indices(sk))
-    split = _spine_split(sk, tuple(spine))
-    near = apply_lean(solver, q, 0.10 * split, t)[0]
-    _CountingIterations.iterations = 0
-    cold, cold_resid = apply_lean(solver, q, 0.12 * split, t)
-    n_cold = _CountingIterations.iterations
-    _CountingIterations.iterations = 0
-    warm, warm_resid = apply_lean(solver, q, 0.12 * split, t, seed=near)
-    n_warm = _CountingIterations.iterations
-    np.testing.assert_array_equal(warm[spine], cold[spine])
-    assert np.nanmax(warm_resid) <= max(np.nanmax(cold_resid), 2.0 * solver.config.tol_mm)
-    assert n_warm < n_cold

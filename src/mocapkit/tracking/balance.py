@@ -271,7 +271,6 @@ def apply_lean(
     taus: ArrayLike,
     targets_mm: ArrayLike,
     active: ArrayLike | None = None,
-    seed: ArrayLike | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Add ``taus`` to the spine flexion, then restore the effectors with the spine frozen (Z12).
 
@@ -283,9 +282,6 @@ def apply_lean(
         Flexion increments of the spine DoFs (rad).
     targets_mm : array_like, shape (E, 3)
     active : array_like of bool, shape (E,), optional
-    seed : array_like, shape (D,), optional
-        Where the restore starts for the DoFs other than the spine's (default ``q``):
-        the restore of a nearby lean starts with the effectors almost on their targets.
 
     Returns
     -------
@@ -294,9 +290,8 @@ def apply_lean(
     """
     sk = solver.skeleton
     spine = spine_dof_indices(sk)
-    qa = np.asarray(q, dtype=float)
-    qn = np.array(qa if seed is None else seed, dtype=float)
-    qn[list(spine)] = qa[list(spine)] + np.asarray(taus, dtype=float)
+    qn = np.array(q, dtype=float)
+    qn[list(spine)] += np.asarray(taus, dtype=float)
     qn = np.clip(qn, sk.lower, sk.upper)
     frozen = np.zeros(sk.n_dofs, dtype=bool)
     frozen[list(spine)] = True
@@ -466,21 +461,13 @@ def _bisect_lean(
     """
     sk = solver.skeleton
     split, lo, hi = _lean_range(sk, q)
-    # the restores solved so far by lean: where the restore at zero lean is given (the
-    # tracker's balance step), each trial starts from the nearest one
-    restored: dict[float, FloatArray] = {} if at_zero is None else {0.0: at_zero[0]}
 
     def f(total: float) -> float:
         if total == 0.0 and at_zero is not None:
             qq = at_zero[0]
         else:
             taus = total * split
-            seed = None
-            if restored:
-                seed = restored[min(restored, key=lambda x: abs(x - total))]
-            qq, resid = apply_lean(solver, q, taus, targets, active, seed=seed)
-            if at_zero is not None:
-                restored[total] = qq
+            qq, resid = apply_lean(solver, q, taus, targets, active)
             if made is not None:
                 made.append((taus, qq, resid))
         return cog_offset_mm(sk, qq, support)[0] - goal_mm

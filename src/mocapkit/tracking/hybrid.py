@@ -122,15 +122,6 @@ TRACKING_BISECTION_STEPS = 6
 #: (`BalanceConfig.guided_bisection`: the same leans from 62 restore solves instead of 107
 #: on the bench sessions). ``search="newton"`` is faster still (1.2 ms) but moves the
 #: arm-refining configurations (see docs/design-notes/hybrid.md).
-#: Stall stop of the balance step's restore solves (`IKConfig.stall_iterations`,
-#: ``stall_fraction``): with the spine frozen, head and hands settle a few mm off
-#: (member-marker noise) and 98 % of the restores of a leaning frame ran all 30
-#: iterations without reaching ``tol_mm``; stopped where neither the largest error nor
-#: their sum drops 1 % in 3 iterations, a restore takes about 7 (each trial lean starts
-#: from the nearest lean already restored: `mocapkit.tracking.balance.apply_lean`'s
-#: ``seed``). Bench: per-frame p99 28.7 -> 18.1 ms; accuracy within the jitter spread
-#: (docs/design-notes/hybrid.md).
-BALANCE_RESTORE_STALL = (3, 0.01)
 TRACKING_BALANCE = BalanceConfig(
     mode="solve",
     bisection_steps=TRACKING_BISECTION_STEPS,
@@ -530,20 +521,11 @@ class HybridTracker:
             stall_fraction=0.01,
         )
         self._polish = _CountedSolver(skeleton, effectors, polish_cfg)
-        # The balance step's restores stop where they stall (`BALANCE_RESTORE_STALL`;
-        # not in paper mode).
-        n_stall, stall_share = BALANCE_RESTORE_STALL
-        balance_ik = (
-            self.config.ik
-            if self.config.paper
-            else replace(self.config.ik, stall_iterations=n_stall, stall_fraction=stall_share)
-        )
-        self._balance = _CountedSolver(skeleton, effectors, balance_ik)
         # After the video refinement, the balance step's restore of head and hands must
         # not run the relaxed-pose task: it would pull the refined arms back to the IK's
         # swivel (the paper: "each process modifies only a specific part of the pose").
         self._restore = _CountedSolver(
-            skeleton, effectors, replace(balance_ik, secondary_gain=0.0, min_iterations=0)
+            skeleton, effectors, replace(self.config.ik, secondary_gain=0.0, min_iterations=0)
         )
         self._arms = {side: arm(skeleton, side) for side in SIDES}
         self._timer: StageTimer = NULL_TIMER
@@ -605,7 +587,7 @@ class HybridTracker:
     @timer.setter
     def timer(self, value: StageTimer) -> None:
         self._timer = value
-        for solver in (self.solver, self._polish, self._restore, self._balance):
+        for solver in (self.solver, self._polish, self._restore):
             solver.timer = value
 
     def refiner(self) -> Refiner:
@@ -1007,7 +989,7 @@ class HybridTracker:
         assert self._support is not None
         with timer.stage("balance"):
             bal = balance_pose(
-                self._restore if refined else self._balance,
+                self._restore if refined else self.solver,
                 q,
                 targets,
                 self._root_z0,
