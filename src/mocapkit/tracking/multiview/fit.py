@@ -6,8 +6,9 @@ Residuals live in the normalised image plane of each camera (detections undistor
 view, so that a residual reads as millimetres across the ray at the subject and every
 threshold is independent of the image size. The loss per (view, joint) is Huber's on the
 2-D residual's length, times the detection's weight; a prior pulls each DoF towards a
-reference pose (the previous frame). Joint limits are kept by projecting every step onto
-the box. The Jacobian is analytic: the skeleton's point Jacobian
+reference pose (the previous frame), and a weak one each fitted point towards its place
+there in 3-D (holding the depth that views nearly in line leave free). Joint limits are
+kept by projecting every step onto the box. The Jacobian is analytic: the skeleton's point Jacobian
 (`mocapkit.skeleton.kinematics.points_jacobian_pose_nb`) through the camera rotation and
 the perspective division.
 """
@@ -60,6 +61,12 @@ class FitTargets(NamedTuple):
         Reference pose of the prior.
     prior : ndarray, shape (D,)
         Square root of each DoF's prior weight (mm per rad, or per mm); positive.
+    point_ref_mm : ndarray, shape (K, 3)
+        Reference place of each fitted point (the previous frame's; NaN: none).
+    point_prior : ndarray, shape (K,)
+        Square root of the weight (mm of residual per mm) pulling each point towards
+        ``point_ref_mm`` in 3-D: it holds a point along the rays where its views do not
+        fix its depth (two views nearly in line); 0: none.
     """
 
     observed: FloatArray
@@ -67,6 +74,8 @@ class FitTargets(NamedTuple):
     scale_mm: FloatArray
     q_ref: FloatArray
     prior: FloatArray
+    point_ref_mm: FloatArray
+    point_prior: FloatArray
 
 
 @numba.njit(cache=True)
@@ -165,6 +174,24 @@ def evaluate_nb(
                 grad[a] += irls * (xa * rx + ya * ry)
                 for b in range(a, n_dofs):
                     hess[a, b] += irls * (xa * row_x[b] + ya * row_y[b])
+    for k in range(n_pts):
+        pp = tg.point_prior[k]
+        if pp > 0.0:
+            for a in range(3):
+                ref = tg.point_ref_mm[k, a]
+                if not np.isfinite(ref):
+                    continue
+                e = pp * (pts[k, a] - ref)
+                cost += 0.5 * e * e
+                if not want_normal:
+                    continue
+                for d in range(n_dofs):
+                    ja = pp * jac[3 * k + a, d]
+                    if ja == 0.0:
+                        continue
+                    grad[d] += ja * e
+                    for b in range(d, n_dofs):
+                        hess[d, b] += ja * pp * jac[3 * k + a, b]
     for d in range(n_dofs):
         e = tg.prior[d] * (q[d] - tg.q_ref[d])
         cost += 0.5 * e * e

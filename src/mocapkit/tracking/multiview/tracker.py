@@ -148,6 +148,7 @@ class MultiviewTracker:
         self._tp = np.ascontiguousarray(tp, dtype=np.float64)
         self._kin = kinematic_arrays(skeleton)
         self._views = view_arrays([c.camera_from_world for c in self.cameras])
+        self._centers = np.stack([np.asarray(c.center_in_world, dtype=float) for c in self.cameras])
         self._perm = swap_permutation(self.names)
         self._pairs = np.flatnonzero(self._perm != np.arange(len(self.names)))
         self._base_w = np.array([cfg.rebuilt_weight if n in rebuilt else 1.0 for n in self.names])
@@ -171,6 +172,8 @@ class MultiviewTracker:
             rows = [idx[n] for n in (top, mid, end) if n in idx]
             self._limbs.append((limb(skeleton, part).dofs, rows))
         self._rng = np.random.default_rng(0)
+        self._point_ref = np.full((len(self.names), 3), np.nan)
+        self._point_prior = np.zeros(len(self.names))
         self._q: FloatArray | None = None
         self._last_seen: dict[str, float] = {}
         self._ever_seen: set[str] = set()
@@ -237,7 +240,13 @@ class MultiviewTracker:
         prior: FloatArray,
     ) -> FitTargets:
         return FitTargets(
-            np.ascontiguousarray(norm), np.ascontiguousarray(weight), scale, q_ref, prior
+            np.ascontiguousarray(norm),
+            np.ascontiguousarray(weight),
+            scale,
+            q_ref,
+            prior,
+            self._point_ref,
+            self._point_prior,
         )
 
     def _view_costs(self, q: FloatArray, norm: FloatArray, scale: FloatArray) -> FloatArray:
@@ -301,6 +310,21 @@ class MultiviewTracker:
                 break
             weight = np.where(far, 0.0, weight)
         return weight
+
+    def _point_weights(self, q: FloatArray, obs: FloatArray) -> FloatArray:
+        """Square root of the 3-D point prior's weight per joint (K,): `point_prior` times
+        one less the largest |sin| of the angle between the rays to the subject of two
+        views that detect the joint. Views far apart (|sin| near 1) fix the joint alone and
+        the prior is near 0 (no lag); two facing cameras or a narrow pair leave the depth
+        along their rays free and the prior holds it; one view or none: the full weight."""
+        hips = canonical_positions(self.skeleton, q, ["left_hip", "right_hip"]).mean(axis=0)
+        ray = hips[None, :] - self._centers
+        ray /= np.maximum(np.linalg.norm(ray, axis=1, keepdims=True), 1e-9)
+        sin = np.linalg.norm(np.cross(ray[:, None, :], ray[None, :, :]), axis=2)
+        seen = np.isfinite(obs).all(axis=-1) & (self._base_w[None, :] > 0)  # (V, K)
+        both = seen[:, None, :] & seen[None, :, :]  # (V, V, K)
+        span = np.where(both, sin[:, :, None], 0.0).max(axis=(0, 1))
+        return np.ascontiguousarray(self.config.point_prior * (1.0 - span))
 
     def _restart_limbs(
         self,
@@ -401,6 +425,11 @@ class MultiviewTracker:
         obs = np.where(swapped[:, None, None], norm[:, self._perm], norm)
         q_ref = q.copy()
         prior = self._prior_first if first else self._prior
+        self._point_prior = np.zeros(len(self.names)) if first else self._point_weights(q, obs)
+        if not first:
+            self._point_ref = np.ascontiguousarray(
+                canonical_positions(self.skeleton, q, self.names)
+            )
         iters = cfg.first_iter if first else cfg.max_iter
         weight = self._fit(q, obs, scale, q_ref, prior, iters)
         if self._restart_limbs(q, obs, weight, scale, q_ref, prior):
