@@ -48,7 +48,7 @@ from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments, scale_skeleton
 from mocapkit.tracking.base import FrameResult, canonical_joints_mm
 from mocapkit.tracking.multiview.config import MultiviewConfig
-from mocapkit.tracking.multiview.fit import FitTargets, fit_pose_nb, view_arrays
+from mocapkit.tracking.multiview.fit import FitTargets, fit_pose_nb, points_nb, view_arrays
 from mocapkit.tracking.multiview.lengths import column_median, robust_triangulation
 
 FloatArray = NDArray[np.float64]
@@ -150,6 +150,9 @@ class MultiviewTracker:
         self._views = view_arrays([c.camera_from_world for c in self.cameras])
         self._centers = np.stack([np.asarray(c.center_in_world, dtype=float) for c in self.cameras])
         self._perm = swap_permutation(self.names)
+        self._err_keys = [f"{n}_{c.name}_px" for n in self.names for c in self.cameras]
+        self._views_keys = [f"{n}_views" for n in self.names]
+        self._hip_rows = [self.names.index("left_hip"), self.names.index("right_hip")]
         self._pairs = np.flatnonzero(self._perm != np.arange(len(self.names)))
         self._base_w = np.array([cfg.rebuilt_weight if n in rebuilt else 1.0 for n in self.names])
         free = np.array([n in FREE_DOFS for n in skeleton.dof_names])
@@ -221,15 +224,19 @@ class MultiviewTracker:
         )
         q[self._yaw] = math.atan2(across[1], across[0])
         mid_hips = 0.5 * (pts[idx["left_hip"]] + pts[idx["right_hip"]])
-        model_hips = canonical_positions(sk, q, ["left_hip", "right_hip"]).mean(axis=0)
+        model_hips = self._points(q)[self._hip_rows].mean(axis=0)
         q[self._root_t] += mid_hips - model_hips
         return q
 
     def _scale(self, q: FloatArray) -> FloatArray:
         """Depth (mm) of the model's hips in each view."""
-        hips = canonical_positions(self.skeleton, q, ["left_hip", "right_hip"]).mean(axis=0)
+        hips = self._points(q)[self._hip_rows].mean(axis=0)
         z = np.array([float(c.to_camera(hips)[2]) for c in self.cameras])
         return np.maximum(z, 100.0)
+
+    def _points(self, q: FloatArray) -> FloatArray:
+        """World places (K, 3) of the model's joints at pose ``q``."""
+        return points_nb(np.ascontiguousarray(q, dtype=float), self._kin, self._tj, self._tp)
 
     def _targets(
         self,
@@ -317,7 +324,7 @@ class MultiviewTracker:
         views that detect the joint. Views far apart (|sin| near 1) fix the joint alone and
         the prior is near 0 (no lag); two facing cameras or a narrow pair leave the depth
         along their rays free and the prior holds it; one view or none: the full weight."""
-        hips = canonical_positions(self.skeleton, q, ["left_hip", "right_hip"]).mean(axis=0)
+        hips = self._points(q)[self._hip_rows].mean(axis=0)
         ray = hips[None, :] - self._centers
         ray /= np.maximum(np.linalg.norm(ray, axis=1, keepdims=True), 1e-9)
         sin = np.linalg.norm(np.cross(ray[:, None, :], ray[None, :, :]), axis=2)
@@ -427,9 +434,7 @@ class MultiviewTracker:
         prior = self._prior_first if first else self._prior
         self._point_prior = np.zeros(len(self.names)) if first else self._point_weights(q, obs)
         if not first:
-            self._point_ref = np.ascontiguousarray(
-                canonical_positions(self.skeleton, q, self.names)
-            )
+            self._point_ref = np.ascontiguousarray(self._points(q))
         iters = cfg.first_iter if first else cfg.max_iter
         weight = self._fit(q, obs, scale, q_ref, prior, iters)
         if self._restart_limbs(q, obs, weight, scale, q_ref, prior):
@@ -477,18 +482,15 @@ class MultiviewTracker:
     def _result(self, t: float, q: FloatArray, px: FloatArray, weight: FloatArray) -> FrameResult:
         cfg = self.config
         sk = self.skeleton
-        pts = canonical_positions(sk, q, self.names)
+        pts = self._points(q)
         err = np.full((len(self.cameras), len(self.names)), np.nan)
         for i, c in enumerate(self.cameras):
             proj = c.project(pts)
             err[i] = np.linalg.norm(proj - px[i], axis=1)
         kept = weight > 0
         views = kept.sum(axis=0)
-        fit: dict[str, float] = {}
-        for k, n in enumerate(self.names):
-            for i, c in enumerate(self.cameras):
-                fit[f"{n}_{c.name}_px"] = float(err[i, k])
-            fit[f"{n}_views"] = float(views[k])
+        fit: dict[str, float] = dict(zip(self._err_keys, err.T.ravel().tolist(), strict=True))
+        fit.update(zip(self._views_keys, views.astype(float).tolist(), strict=True))
         kept_err = np.where(kept, err, np.nan)
         finite = np.isfinite(kept_err)
         det = np.isfinite(err)
