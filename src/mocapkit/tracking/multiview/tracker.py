@@ -369,7 +369,8 @@ class MultiviewTracker:
             for seed in seeds:
                 trial[dofs] = seed
                 costs.append(self._cost(trial, tg_free))
-            for k in np.argsort(costs)[:2]:
+            # the best seed refined (refining the best two: no better on the tuning set)
+            for k in np.argsort(costs)[:1]:
                 trial = q.copy()
                 trial[dofs] = seeds[k]
                 c, _ = fit_pose_nb(
