@@ -130,6 +130,7 @@ def track_multiview_session(
     import time
 
     from mocapkit.io.session import load_session
+    from mocapkit.pipelines.camera_check import check_session_cameras
     from mocapkit.pipelines.run import check_result_folder
     from mocapkit.tracking.multiview.lengths import subject_lengths_mm
 
@@ -158,6 +159,7 @@ def track_multiview_session(
             f"{session.path}: the multi-view fit needs keypoints of two or more cameras, found "
             f"{names}"
         )
+    check_session_cameras(session, names)  # before any tracker is built
     kps = [session.keypoints[c] for c in names]
     joint_names = kps[0].joint_names
     for c, k in zip(names, kps, strict=True):
