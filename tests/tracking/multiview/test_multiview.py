@@ -84,7 +84,18 @@ def test_gradient_matches_finite_differences(rng: np.random.Generator) -> None:
     obs = np.stack([c.undistort_pixels(px[c.name]) for c in cams])
     obs += rng.normal(0, 1e-3, obs.shape)
     weight = rng.uniform(0.5, 1.0, obs.shape[:2])
-    tg = FitTargets(obs, weight, np.full(len(cams), 4000.0), q + 0.05, np.full(q.shape, 3.0))
+    # the 3-D point prior: references off the points, one of them absent
+    ref = canonical_positions(sk, q + 0.03, NAMES) + rng.normal(0, 20.0, (len(NAMES), 3))
+    ref[0] = np.nan
+    tg = FitTargets(
+        obs,
+        weight,
+        np.full(len(cams), 4000.0),
+        q + 0.05,
+        np.full(q.shape, 3.0),
+        ref,
+        rng.uniform(0.0, 0.5, len(NAMES)),
+    )
     d = q.shape[0]
     hess, grad = np.empty((d, d)), np.empty(d)
     norms = np.empty(obs.shape[:2])
@@ -126,6 +137,8 @@ def test_fit_recovers_a_pose_from_exact_detections(rng: np.random.Generator) -> 
             np.full(len(cams), 4000.0),
             q.copy(),
             np.full(q.shape, 1e-6),
+            np.full((len(NAMES), 3), np.nan),
+            np.zeros(len(NAMES)),
         )
         norms = np.empty(obs.shape[:2])
         lo = np.where(np.isfinite(sk.lower), sk.lower, -1e9)

@@ -39,6 +39,11 @@ class MultiviewConfig:
         frame.
     prior_root : float
         Temporal prior of the root translation (mm of residual per mm).
+    point_prior : float
+        Temporal prior of each fitted point's place in 3-D (mm of residual per mm), for
+        a joint seen by views nearly in line (two facing cameras, a narrow pair) whose
+        detections leave its depth free; scaled down to 0 as the joint's views spread
+        to 90 degrees (`MultiviewTracker._point_weights`).
     max_iter, first_iter : int
         Levenberg-Marquardt steps per fit, and on the frame that starts a track.
     gap_limit_s : float
@@ -65,6 +70,7 @@ class MultiviewConfig:
     swap_margin_mm: float = 40.0
     prior_mm_per_rad: float = 60.0
     prior_root: float = 0.02
+    point_prior: float = 0.5
     max_iter: int = 12
     first_iter: int = 80
     gap_limit_s: float = 0.25  # mocapkit.tracking.base.BRIDGE_S (a test holds them equal)

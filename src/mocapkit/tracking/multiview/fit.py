@@ -6,8 +6,9 @@ Residuals live in the normalised image plane of each camera (detections undistor
 view, so that a residual reads as millimetres across the ray at the subject and every
 threshold is independent of the image size. The loss per (view, joint) is Huber's on the
 2-D residual's length, times the detection's weight; a prior pulls each DoF towards a
-reference pose (the previous frame). Joint limits are kept by projecting every step onto
-the box. The Jacobian is analytic: the skeleton's point Jacobian
+reference pose (the previous frame), and a weak one each fitted point towards its place
+there in 3-D (holding the depth that views nearly in line leave free). Joint limits are
+kept by projecting every step onto the box. The Jacobian is analytic: the skeleton's point Jacobian
 (`mocapkit.skeleton.kinematics.points_jacobian_pose_nb`) through the camera rotation and
 the perspective division.
 """
@@ -60,6 +61,12 @@ class FitTargets(NamedTuple):
         Reference pose of the prior.
     prior : ndarray, shape (D,)
         Square root of each DoF's prior weight (mm per rad, or per mm); positive.
+    point_ref_mm : ndarray, shape (K, 3)
+        Reference place of each fitted point (the previous frame's; NaN: none).
+    point_prior : ndarray, shape (K,)
+        Square root of the weight (mm of residual per mm) pulling each point towards
+        ``point_ref_mm`` in 3-D: it holds a point along the rays where its views do not
+        fix its depth (two views nearly in line); 0: none.
     """
 
     observed: FloatArray
@@ -67,6 +74,30 @@ class FitTargets(NamedTuple):
     scale_mm: FloatArray
     q_ref: FloatArray
     prior: FloatArray
+    point_ref_mm: FloatArray
+    point_prior: FloatArray
+
+
+@numba.njit(cache=True)
+def points_nb(
+    q: FloatArray, kin: KinematicArrays, target_joint: IntArray, target_point: FloatArray
+) -> FloatArray:
+    """World places (K, 3) of the fitted points at pose ``q``."""
+    n_dofs = q.shape[0]
+    world = np.empty((kin.parents.shape[0], 4, 4))
+    fk_pose_nb(q, kin, world, np.empty((n_dofs, 3)), np.empty((n_dofs, 3)))
+    n_pts = target_joint.shape[0]
+    pts = np.empty((n_pts, 3))
+    for k in range(n_pts):
+        jk = target_joint[k]
+        for a in range(3):
+            pts[k, a] = (
+                world[jk, a, 0] * target_point[k, 0]
+                + world[jk, a, 1] * target_point[k, 1]
+                + world[jk, a, 2] * target_point[k, 2]
+                + world[jk, a, 3]
+            )
+    return pts
 
 
 @numba.njit(cache=True)
@@ -105,18 +136,10 @@ def evaluate_nb(
         hess[:, :] = 0.0
         grad[:] = 0.0
     else:
-        fk_pose_nb(q, kin, world, axis_world, pivot_world)
-        for k in range(n_pts):
-            jk = target_joint[k]
-            for a in range(3):
-                pts[k, a] = (
-                    world[jk, a, 0] * target_point[k, 0]
-                    + world[jk, a, 1] * target_point[k, 1]
-                    + world[jk, a, 2] * target_point[k, 2]
-                    + world[jk, a, 3]
-                )
+        pts[:, :] = points_nb(q, kin, target_joint, target_point)
     row_x = np.empty(n_dofs)
     row_y = np.empty(n_dofs)
+    nz = np.empty(n_dofs, dtype=np.int64)
     cost = 0.0
     for v in range(n_views):
         r = views.rotation[v]
@@ -151,20 +174,47 @@ def evaluate_nb(
             a0 = s / zc
             ax = -s * xc / (zc * zc)
             ay = -s * yc / (zc * zc)
+            # a point moves with the DoFs of its chain only: the rows' nonzero columns
+            n_nz = 0
             for d in range(n_dofs):
                 j0, j1, j2 = jac[3 * k, d], jac[3 * k + 1, d], jac[3 * k + 2, d]
+                if j0 == 0.0 and j1 == 0.0 and j2 == 0.0:
+                    continue
                 c0 = r[0, 0] * j0 + r[0, 1] * j1 + r[0, 2] * j2
                 c1 = r[1, 0] * j0 + r[1, 1] * j1 + r[1, 2] * j2
                 c2 = r[2, 0] * j0 + r[2, 1] * j1 + r[2, 2] * j2
-                row_x[d] = a0 * c0 + ax * c2
-                row_y[d] = a0 * c1 + ay * c2
-            for a in range(n_dofs):
-                xa, ya = row_x[a], row_y[a]
-                if xa == 0.0 and ya == 0.0:
-                    continue
+                row_x[n_nz] = a0 * c0 + ax * c2
+                row_y[n_nz] = a0 * c1 + ay * c2
+                nz[n_nz] = d
+                n_nz += 1
+            for ia in range(n_nz):
+                a = nz[ia]
+                xa, ya = row_x[ia], row_y[ia]
                 grad[a] += irls * (xa * rx + ya * ry)
-                for b in range(a, n_dofs):
-                    hess[a, b] += irls * (xa * row_x[b] + ya * row_y[b])
+                for ib in range(ia, n_nz):
+                    hess[a, nz[ib]] += irls * (xa * row_x[ib] + ya * row_y[ib])
+    for k in range(n_pts):
+        pp = tg.point_prior[k]
+        if pp > 0.0:
+            for a in range(3):
+                ref = tg.point_ref_mm[k, a]
+                if not np.isfinite(ref):
+                    continue
+                e = pp * (pts[k, a] - ref)
+                cost += 0.5 * e * e
+                if not want_normal:
+                    continue
+                n_nz = 0
+                for d in range(n_dofs):
+                    if jac[3 * k + a, d] != 0.0:
+                        nz[n_nz] = d
+                        n_nz += 1
+                for ia in range(n_nz):
+                    d = nz[ia]
+                    ja = pp * jac[3 * k + a, d]
+                    grad[d] += ja * e
+                    for ib in range(ia, n_nz):
+                        hess[d, nz[ib]] += ja * pp * jac[3 * k + a, nz[ib]]
     for d in range(n_dofs):
         e = tg.prior[d] * (q[d] - tg.q_ref[d])
         cost += 0.5 * e * e
@@ -251,5 +301,6 @@ __all__ = [
     "ViewArrays",
     "evaluate_nb",
     "fit_pose_nb",
+    "points_nb",
     "view_arrays",
 ]

@@ -48,7 +48,7 @@ from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments, scale_skeleton
 from mocapkit.tracking.base import FrameResult, canonical_joints_mm
 from mocapkit.tracking.multiview.config import MultiviewConfig
-from mocapkit.tracking.multiview.fit import FitTargets, fit_pose_nb, view_arrays
+from mocapkit.tracking.multiview.fit import FitTargets, fit_pose_nb, points_nb, view_arrays
 from mocapkit.tracking.multiview.lengths import column_median, robust_triangulation
 
 FloatArray = NDArray[np.float64]
@@ -148,7 +148,11 @@ class MultiviewTracker:
         self._tp = np.ascontiguousarray(tp, dtype=np.float64)
         self._kin = kinematic_arrays(skeleton)
         self._views = view_arrays([c.camera_from_world for c in self.cameras])
+        self._centers = np.stack([np.asarray(c.center_in_world, dtype=float) for c in self.cameras])
         self._perm = swap_permutation(self.names)
+        self._err_keys = [f"{n}_{c.name}_px" for n in self.names for c in self.cameras]
+        self._views_keys = [f"{n}_views" for n in self.names]
+        self._hip_rows = [self.names.index("left_hip"), self.names.index("right_hip")]
         self._pairs = np.flatnonzero(self._perm != np.arange(len(self.names)))
         self._base_w = np.array([cfg.rebuilt_weight if n in rebuilt else 1.0 for n in self.names])
         free = np.array([n in FREE_DOFS for n in skeleton.dof_names])
@@ -171,6 +175,8 @@ class MultiviewTracker:
             rows = [idx[n] for n in (top, mid, end) if n in idx]
             self._limbs.append((limb(skeleton, part).dofs, rows))
         self._rng = np.random.default_rng(0)
+        self._point_ref = np.full((len(self.names), 3), np.nan)
+        self._point_prior = np.zeros(len(self.names))
         self._q: FloatArray | None = None
         self._last_seen: dict[str, float] = {}
         self._ever_seen: set[str] = set()
@@ -218,15 +224,19 @@ class MultiviewTracker:
         )
         q[self._yaw] = math.atan2(across[1], across[0])
         mid_hips = 0.5 * (pts[idx["left_hip"]] + pts[idx["right_hip"]])
-        model_hips = canonical_positions(sk, q, ["left_hip", "right_hip"]).mean(axis=0)
+        model_hips = self._points(q)[self._hip_rows].mean(axis=0)
         q[self._root_t] += mid_hips - model_hips
         return q
 
     def _scale(self, q: FloatArray) -> FloatArray:
         """Depth (mm) of the model's hips in each view."""
-        hips = canonical_positions(self.skeleton, q, ["left_hip", "right_hip"]).mean(axis=0)
+        hips = self._points(q)[self._hip_rows].mean(axis=0)
         z = np.array([float(c.to_camera(hips)[2]) for c in self.cameras])
         return np.maximum(z, 100.0)
+
+    def _points(self, q: FloatArray) -> FloatArray:
+        """World places (K, 3) of the model's joints at pose ``q``."""
+        return points_nb(np.ascontiguousarray(q, dtype=float), self._kin, self._tj, self._tp)
 
     def _targets(
         self,
@@ -237,7 +247,13 @@ class MultiviewTracker:
         prior: FloatArray,
     ) -> FitTargets:
         return FitTargets(
-            np.ascontiguousarray(norm), np.ascontiguousarray(weight), scale, q_ref, prior
+            np.ascontiguousarray(norm),
+            np.ascontiguousarray(weight),
+            scale,
+            q_ref,
+            prior,
+            self._point_ref,
+            self._point_prior,
         )
 
     def _view_costs(self, q: FloatArray, norm: FloatArray, scale: FloatArray) -> FloatArray:
@@ -302,6 +318,21 @@ class MultiviewTracker:
             weight = np.where(far, 0.0, weight)
         return weight
 
+    def _point_weights(self, q: FloatArray, obs: FloatArray) -> FloatArray:
+        """Square root of the 3-D point prior's weight per joint (K,): `point_prior` times
+        one less the largest |sin| of the angle between the rays to the subject of two
+        views that detect the joint. Views far apart (|sin| near 1) fix the joint alone and
+        the prior is near 0 (no lag); two facing cameras or a narrow pair leave the depth
+        along their rays free and the prior holds it; one view or none: the full weight."""
+        hips = self._points(q)[self._hip_rows].mean(axis=0)
+        ray = hips[None, :] - self._centers
+        ray /= np.maximum(np.linalg.norm(ray, axis=1, keepdims=True), 1e-9)
+        sin = np.linalg.norm(np.cross(ray[:, None, :], ray[None, :, :]), axis=2)
+        seen = np.isfinite(obs).all(axis=-1) & (self._base_w[None, :] > 0)  # (V, K)
+        both = seen[:, None, :] & seen[None, :, :]  # (V, V, K)
+        span = np.where(both, sin[:, :, None], 0.0).max(axis=(0, 1))
+        return np.ascontiguousarray(self.config.point_prior * (1.0 - span))
+
     def _restart_limbs(
         self,
         q: FloatArray,
@@ -338,7 +369,8 @@ class MultiviewTracker:
             for seed in seeds:
                 trial[dofs] = seed
                 costs.append(self._cost(trial, tg_free))
-            for k in np.argsort(costs)[:2]:
+            # the best seed refined (refining the best two: no better on the tuning set)
+            for k in np.argsort(costs)[:1]:
                 trial = q.copy()
                 trial[dofs] = seeds[k]
                 c, _ = fit_pose_nb(
@@ -401,6 +433,9 @@ class MultiviewTracker:
         obs = np.where(swapped[:, None, None], norm[:, self._perm], norm)
         q_ref = q.copy()
         prior = self._prior_first if first else self._prior
+        self._point_prior = np.zeros(len(self.names)) if first else self._point_weights(q, obs)
+        if not first:
+            self._point_ref = np.ascontiguousarray(self._points(q))
         iters = cfg.first_iter if first else cfg.max_iter
         weight = self._fit(q, obs, scale, q_ref, prior, iters)
         if self._restart_limbs(q, obs, weight, scale, q_ref, prior):
@@ -448,18 +483,15 @@ class MultiviewTracker:
     def _result(self, t: float, q: FloatArray, px: FloatArray, weight: FloatArray) -> FrameResult:
         cfg = self.config
         sk = self.skeleton
-        pts = canonical_positions(sk, q, self.names)
+        pts = self._points(q)
         err = np.full((len(self.cameras), len(self.names)), np.nan)
         for i, c in enumerate(self.cameras):
             proj = c.project(pts)
             err[i] = np.linalg.norm(proj - px[i], axis=1)
         kept = weight > 0
         views = kept.sum(axis=0)
-        fit: dict[str, float] = {}
-        for k, n in enumerate(self.names):
-            for i, c in enumerate(self.cameras):
-                fit[f"{n}_{c.name}_px"] = float(err[i, k])
-            fit[f"{n}_views"] = float(views[k])
+        fit: dict[str, float] = dict(zip(self._err_keys, err.T.ravel().tolist(), strict=True))
+        fit.update(zip(self._views_keys, views.astype(float).tolist(), strict=True))
         kept_err = np.where(kept, err, np.nan)
         finite = np.isfinite(kept_err)
         det = np.isfinite(err)
