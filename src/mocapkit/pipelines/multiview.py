@@ -160,7 +160,6 @@ def track_multiview_session(
             f"{session.path}: the multi-view fit needs keypoints of two or more cameras, found "
             f"{names}"
         )
-    check_session_cameras(session, names)  # before any tracker is built
     kps = [session.keypoints[c] for c in names]
     joint_names = kps[0].joint_names
     for c, k in zip(names, kps, strict=True):
