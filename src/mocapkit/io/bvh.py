@@ -682,9 +682,9 @@ def write_bvh(
 
     emit(0, 0)
     out.write(f"MOTION\nFrames: {n_t}\nFrame Time: {frame_time_s:.10g}\n")
-    np.savetxt(out, values, fmt="%.10f", delimiter=" ")
     with atomic_write(path, "w") as fh:
-        fh.write(out.getvalue())
+        fh.write(out.getvalue())  # the hierarchy; the frames go to the file as written
+        np.savetxt(fh, values, fmt="%.10f", delimiter=" ")
 
 
 __all__ = [

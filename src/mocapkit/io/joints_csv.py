@@ -31,13 +31,11 @@ def write_joints_csv(path: str | os.PathLike[str], motion: Motion) -> None:
     """
     header = ["time_s"] + [f"{n}_{a}_mm" for n in motion.joint_names for a in "xyz"]
     flat = np.asarray(motion.joints_mm).reshape(motion.n_frames, -1)
-    buf = io.StringIO()
-    buf.write(",".join(header) + "\n")
-    if motion.n_frames:
-        fmt = ",".join(["%.9f"] + ["%.6f"] * flat.shape[1])
-        np.savetxt(buf, np.column_stack([motion.time_s, flat]), fmt=fmt, delimiter=",")
-    with atomic_write(path, "w", newline="") as fh:
-        fh.write(buf.getvalue())
+    with atomic_write(path, "w", newline="") as fh:  # rows go to the file as formatted
+        fh.write(",".join(header) + "\n")
+        if motion.n_frames:
+            fmt = ",".join(["%.9f"] + ["%.6f"] * flat.shape[1])
+            np.savetxt(fh, np.column_stack([motion.time_s, flat]), fmt=fmt, delimiter=",")
 
 
 def read_joints_csv(path: str | os.PathLike[str]) -> tuple[FloatArray, tuple[str, ...], FloatArray]:

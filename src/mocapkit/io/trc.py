@@ -259,6 +259,6 @@ def write_trc(
     ]
     with atomic_write(path, "w", newline="\n") as fh:
         fh.write("\n".join(head) + "\n")
-        for i, (ti, row) in enumerate(zip(t.tolist(), scaled.tolist())):
-            cells = ["" if v != v else fmt.format(v) for v in row]
+        for i, (ti, row_arr) in enumerate(zip(t.tolist(), scaled)):
+            cells = ["" if v != v else fmt.format(v) for v in row_arr.tolist()]  # row by row
             fh.write(f"{i + 1}\t{ti:.{_TIME_DECIMALS}f}\t" + "\t".join(cells) + "\n")

@@ -104,3 +104,15 @@ def test_bad_settings_and_shapes_are_refused() -> None:
     sm = KeypointSmoother(3, DT)
     with pytest.raises(ShapeError, match=r"\(3, 2\)"):
         sm.push(np.zeros((2, 2)))
+
+
+def test_keeps_only_the_frames_its_lag_needs() -> None:
+    rng = np.random.default_rng(5)
+    lag = 3
+    sm = KeypointSmoother(2, DT, lag=lag)
+    for _ in range(50):
+        sm.push(rng.normal(200.0, 5.0, size=(2, 2)))
+    assert sm.n_frames == 50 and len(sm._out) == len(sm._valid) == lag + 1
+    assert np.isfinite(sm.smoothed(50 - lag - 1)).all()
+    with pytest.raises(ShapeError, match=r"frame 45 is not kept.*46\.\.49"):
+        sm.smoothed(45)

@@ -15,6 +15,8 @@ measurement (NaN) is skipped (predict only), which is exact; a joint unseen for 
 
 from __future__ import annotations
 
+from collections import deque
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -119,13 +121,16 @@ class KeypointSmoother:
         self._filter = AugmentedFilter(*model, lag, n_points)
         self._started = np.zeros(n_points, dtype=bool)
         self._gap = np.zeros(n_points, dtype=np.int64)
-        self._valid: list[NDArray[np.bool_]] = []
-        self._out: list[FloatArray] = []
+        # the estimates of the last lag + 1 frames only: older ones are final and were
+        # read (memory stays flat however long the recording)
+        self._n_pushed = 0
+        self._valid: deque[NDArray[np.bool_]] = deque(maxlen=lag + 1)
+        self._out: deque[FloatArray] = deque(maxlen=lag + 1)
 
     @property
     def n_frames(self) -> int:
         """Frames pushed so far."""
-        return len(self._valid)
+        return self._n_pushed
 
     def push(self, points_px: ArrayLike) -> None:
         """Add one frame of points (K, 2), NaN where missing."""
@@ -137,7 +142,8 @@ class KeypointSmoother:
         seen = np.isfinite(z).all(axis=1)
         self._gap = np.where(seen, 0, self._gap + 1)
         self._valid.append(self._gap <= self.max_gap)
-        k = self.n_frames - 1
+        self._n_pushed += 1
+        k = self._n_pushed - 1
         kf = self._filter
         first = seen & ~self._started
         kf.x[first, 0::4] = z[first, 0:1]  # every stacked copy starts at the first sighting
@@ -150,15 +156,27 @@ class KeypointSmoother:
         est[:, self._started, 1] = kf.x[self._started, 2::4].T
         self._out.append(np.full((self.n_points, 2), np.nan))
         for i in range(min(self.lag, k) + 1):
-            self._out[k - i] = est[i]
+            self._out[-1 - i] = est[i]
 
     def smoothed(self, frame: int) -> FloatArray:
         """The current estimate (K, 2) of a pushed frame: final once ``lag`` more are pushed.
 
-        NaN for joints never seen yet or unseen for more than ``max_gap`` frames.
+        NaN for joints never seen yet or unseen for more than ``max_gap`` frames. Only
+        the last ``lag + 1`` pushed frames are kept (read each frame once it is final).
+
+        Raises
+        ------
+        ShapeError
+            ``frame`` is not among the last ``lag + 1`` pushed frames.
         """
-        x = self._out[frame].copy()
-        x[~self._valid[frame]] = np.nan
+        first = self._n_pushed - len(self._out)
+        if not first <= frame < self._n_pushed:
+            raise ShapeError(
+                f"KeypointSmoother.smoothed: frame {frame} is not kept; expected one of the "
+                f"last lag + 1 = {self.lag + 1} pushed frames, {first}..{self._n_pushed - 1}"
+            )
+        x = self._out[frame - first].copy()
+        x[~self._valid[frame - first]] = np.nan
         return x
 
 
@@ -175,6 +193,11 @@ def smooth_keypoints(
     if p.ndim != 3 or p.shape[2] != 2:
         raise ShapeError(f"smooth_keypoints: expected (T, K, 2), found {p.shape}")
     sm = KeypointSmoother(p.shape[1], dt_s, lag, noise_px, accel_px_s2, max_gap)
-    for z in p:
+    out = np.full(p.shape, np.nan)
+    for k, z in enumerate(p):
         sm.push(z)
-    return np.stack([sm.smoothed(k) for k in range(p.shape[0])]) if len(p) else p.copy()
+        if k >= lag:
+            out[k - lag] = sm.smoothed(k - lag)
+    for k in range(max(len(p) - lag, 0), len(p)):
+        out[k] = sm.smoothed(k)
+    return out
