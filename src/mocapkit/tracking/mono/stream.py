@@ -20,7 +20,7 @@ from mocapkit.geometry.transforms import transform_points
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
 from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments
-from mocapkit.tracking.base import BRIDGE_S, FrameResult, unobserved_part
+from mocapkit.tracking.base import BRIDGE_S, FrameResult, observation_status, unobserved_part
 from mocapkit.tracking.mono.placement import FloorDepth
 from mocapkit.tracking.mono.pose_fit import fit_stick_pose
 from mocapkit.tracking.mono.stick import StickModel
@@ -221,14 +221,7 @@ class MonoStream:
         for limb, js in self._limbs.items():
             if f.code >= 0 and np.all(np.isfinite(world[js])):
                 self._posed.add(limb)
-                unseen_s = unseen[limb]
-                status[limb] = (
-                    "seen"
-                    if unseen_s == 0.0
-                    else "bridged"
-                    if unseen_s <= self.bridge_s
-                    else "released"
-                )
+                status[limb] = observation_status(unseen[limb], True, self.bridge_s)
             else:
                 status[limb] = "released" if limb in self._posed else "missing"
         fit = {

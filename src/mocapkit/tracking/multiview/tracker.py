@@ -46,7 +46,7 @@ from mocapkit.skeleton.limbs import has_limb, limb
 from mocapkit.skeleton.model import Skeleton
 from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments, scale_skeleton
-from mocapkit.tracking.base import FrameResult, canonical_joints_mm
+from mocapkit.tracking.base import FrameResult, canonical_joints_mm, observation_status
 from mocapkit.tracking.multiview.config import MultiviewConfig
 from mocapkit.tracking.multiview.fit import FitTargets, fit_pose_nb, points_nb, view_arrays
 from mocapkit.tracking.multiview.lengths import column_median, robust_triangulation
@@ -476,9 +476,8 @@ class MultiviewTracker:
             return "seen"
         if part not in self._ever_seen:
             return "missing"
-        if t - self._last_seen[part] <= self.config.gap_limit_s + 1e-9:
-            return "bridged"
-        return "released"
+        # the one rule; 1e-9 s keeps a gap of exactly the limit (in float) bridged
+        return observation_status(t - self._last_seen[part], True, self.config.gap_limit_s + 1e-9)
 
     def _result(self, t: float, q: FloatArray, px: FloatArray, weight: FloatArray) -> FrameResult:
         cfg = self.config
