@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import pkgutil
 import signal
 import sys
@@ -28,6 +29,9 @@ from mocapkit import __version__
 from mocapkit.errors import MocapError
 
 _NOT_SUBCOMMANDS = {"main", "args"}
+
+#: Exit code after Ctrl-C (128 + SIGINT, as shells report it).
+INTERRUPTED_EXIT = 130
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
@@ -76,9 +80,10 @@ class _Interrupts:
     command after a Ctrl-C is reported as the interruption it is.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, after: Any = None) -> None:
         self.seen = False
         self._previous: Any = None
+        self._after = after
 
     def __enter__(self) -> _Interrupts:
         try:
@@ -89,15 +94,20 @@ class _Interrupts:
 
     def __exit__(self, *exc: object) -> None:
         if self._previous is not None:
-            signal.signal(signal.SIGINT, self._previous)
+            signal.signal(signal.SIGINT, self._previous if self._after is None else self._after)
 
     def _handle(self, signum: int, frame: FrameType | None) -> None:
         self.seen = True
         raise KeyboardInterrupt
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None, *, process: bool = False) -> int:
     """Run the command line; returns the process exit code.
+
+    ``process``: this call is the whole process (`entry`): once the command has ended,
+    Ctrl-C is ignored rather than handed back to Python, whose shutdown resets it to the
+    system default, so a Ctrl-C in the last instants would kill the process (exit -2)
+    after its results were written.
 
     Errors of the input (`MocapError`, `OSError`) print one line and return 2; Ctrl-C,
     wherever it lands (loading the subcommands included), prints one line and returns
@@ -105,7 +115,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     command = "mocapkit"
-    with _Interrupts() as interrupts:
+    with _Interrupts(signal.SIG_IGN if process else None) as interrupts:
         try:
             parser = build_parser(_command_in(argv))
             args = parser.parse_args(argv)
@@ -134,7 +144,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def _interrupted(command: str) -> int:
     print(f"{command}: interrupted", file=sys.stderr)
-    return 130
+    return INTERRUPTED_EXIT
 
 
 def _show_input_warnings(command: str) -> None:
@@ -160,5 +170,22 @@ def _os_error_text(exc: OSError) -> str:
     return f"{exc.strerror}: {exc.filename}" if exc.filename is not None else exc.strerror
 
 
+def entry() -> None:
+    """The ``mocapkit`` command: `main` as the whole process.
+
+    After a Ctrl-C the process ends here, at once, with 130: a `KeyboardInterrupt` that
+    landed in Python code run by an extension module while it was being imported is
+    taken by the interpreter as unhandled even though `main` caught it, and its shutdown
+    would then end the process by SIGINT (exit -2). The results are written atomically
+    before this point; only the interpreter's own clean-up is skipped.
+    """
+    code = main(process=True)
+    if code == INTERRUPTED_EXIT:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()
