@@ -62,6 +62,12 @@ class ReplayStats:
     stopped: bool = False
 
 
+#: Seconds the outlets stay open after the last sample of a replay that ran to its end
+#: (LSL has no delivery receipt; an inlet whose source has closed reports it lost, and
+#: the last samples still in flight would never be pulled).
+CLOSE_LINGER_S = 0.5
+
+
 def replay_session(
     session_dir: str | os.PathLike[str],
     speed: float = 1.0,
@@ -184,6 +190,13 @@ def replay_session(
         outlets[role].push_sample(values, stamp)
         counts[names[role]] += 1
         end = t
+    if not stopped:
+        # a consumer that sees a closed source stops pulling: keep the streams open
+        # a moment so that the last samples reach it before they end
+        if stop is not None:
+            stop.wait(CLOSE_LINGER_S)
+        else:
+            time.sleep(CLOSE_LINGER_S)
     outlets.clear()  # closing the outlets ends the streams
     return ReplayStats(counts, t0, end, clock, stopped)
 
