@@ -14,6 +14,7 @@ from mocapkit.cli.args import (
     mocap_folder,
     number,
     parsed_by,
+    shows_default,
 )
 
 # the line of `mocapkit --help` (shown without importing this module's pipeline)
@@ -22,7 +23,7 @@ HELP = "render sessions from real motion clips, track them and report the accura
 
 def register(subparsers: Any) -> None:
     """Add ``accuracy hybrid``."""
-    from mocapkit.pipelines.harness import JITTER_MM
+    from mocapkit.pipelines.harness import JITTER_MM  # light: the argument's own default
 
     p = subparsers.add_parser(
         "accuracy",
@@ -36,8 +37,15 @@ def register(subparsers: Any) -> None:
     )
     h.add_argument("--mocap", help="folder of motion clips (default: ../shared/data/mocap)")
     add_clip_options(h)
-    h.add_argument("--work", default="accuracy-output", help="folder for sessions and results")
-    h.add_argument("--seed", type=int, default=0)
+    h.add_argument(
+        "--work",
+        default="accuracy-output",
+        help="folder for sessions and results (default %(default)s)",
+    )
+    shows_default(
+        h.add_argument("--seed", type=int, default=None, help="seed (default %(stated_default)s)"),
+        "mocapkit.pipelines.accuracy:hybrid_accuracy_repeats.seed",
+    )
     h.add_argument("--json", action="store_true", help="print JSON instead of a table")
     h.add_argument(
         "--jitter-repeats",
@@ -46,14 +54,18 @@ def register(subparsers: Any) -> None:
         default=0,
         help="track N copies of each session with every marker moved by a seeded amount "
         "up to --jitter-mm and report the mean over them and their spread (the figures "
-        "are chaotic in round-off; default 0: one run on the sessions as rendered)",
+        "are chaotic in round-off; default %(default)s: one run on the sessions as rendered)",
     )
-    h.add_argument(
-        "--jitter-mm",
-        metavar="MM",
-        type=number(above=0.0),
-        default=JITTER_MM,
-        help=f"half-width of the marker jitter of --jitter-repeats (default {JITTER_MM:g} mm)",
+    shows_default(
+        h.add_argument(
+            "--jitter-mm",
+            metavar="MM",
+            type=number(above=0.0),
+            default=JITTER_MM,
+            help="half-width of the marker jitter of --jitter-repeats (default "
+            "%(stated_default)s mm)",
+        ),
+        "mocapkit.pipelines.harness:JITTER_MM",
     )
     orientation = h.add_mutually_exclusive_group()
     orientation.add_argument(
@@ -78,6 +90,7 @@ def register(subparsers: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the accuracy study and print it."""
+    from mocapkit.cli.args import given
     from mocapkit.pipelines.accuracy import (
         format_rows,
         hybrid_accuracy_repeats,
@@ -95,11 +108,11 @@ def run(args: argparse.Namespace) -> int:
         mocap,
         args.work,
         chosen_clips(args),
-        args.seed,
         say=say,
         oriented_sets=() if args.positions_only else args.oriented_sets,
         repeats=args.jitter_repeats,
         jitter_mm=args.jitter_mm,
+        **given(seed=args.seed),
     )
     if args.json:
         print(to_json(runs[0]) if args.jitter_repeats == 0 else repeats_to_json(runs))

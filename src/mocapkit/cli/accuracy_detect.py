@@ -24,7 +24,11 @@ def register_method(methods: Any) -> None:
         help="backend: %(choices)s (default: mediapipe)",
     )
     p.add_argument("--model", help="model file of the rtmpose backend (.onnx)")
-    p.add_argument("--work", default="accuracy-output/detect", help="folder for the detections")
+    p.add_argument(
+        "--work",
+        default="accuracy-output/detect",
+        help="folder for the detections (default %(default)s)",
+    )
     p.add_argument("--overwrite", action="store_true", help="detect again where done before")
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
     p.set_defaults(func=_run)

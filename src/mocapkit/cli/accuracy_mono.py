@@ -8,7 +8,10 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from mocapkit.cli.args import add_clip_options, chosen_clips, shows_default
+from mocapkit.cli.args import add_clip_options, chosen_clips, given, shows_default
+from mocapkit.cli.track_mono import COSTS, MONO
+
+_RUN = "mocapkit.pipelines.mono_accuracy:mono_accuracy"
 
 
 def add_mono_accuracy_parser(methods: Any) -> None:
@@ -23,9 +26,22 @@ def add_mono_accuracy_parser(methods: Any) -> None:
     )
     m.add_argument("--mocap", help="folder of motion clips (default: ../shared/data/mocap)")
     add_clip_options(m)
-    m.add_argument("--work", default="accuracy-output/mono", help="sessions and results")
-    m.add_argument("--seed", type=int, default=0)
-    m.add_argument("--noise-px", type=float, default=2.0, help="2-D noise sigma (px)")
+    m.add_argument(
+        "--work", default="accuracy-output/mono", help="sessions and results (default %(default)s)"
+    )
+    shows_default(
+        m.add_argument("--seed", type=int, default=None, help="seed (default %(stated_default)s)"),
+        f"{_RUN}.seed",
+    )
+    shows_default(
+        m.add_argument(
+            "--noise-px",
+            type=float,
+            default=None,
+            help="2-D noise sigma (default %(stated_default)s px)",
+        ),
+        f"{_RUN}.noise_px",
+    )
     src = m.add_mutually_exclusive_group()
     src.add_argument("--openpose", action="store_true", help="track from OpenPose JSON")
     src.add_argument(
@@ -48,19 +64,22 @@ def add_mono_accuracy_parser(methods: Any) -> None:
         "sleeves and no belt, the elbow and wrist placed on the arm blob and the trunk "
         "drawn from the head)",
     )
-    m.add_argument(
-        "--bare-from",
-        choices=("costume", "paper", "elbow", "mid_upper_arm", "shoulder"),
-        default="costume",
-        help="with --skin: where the arms' skin starts (default: the costume's, paper for "
-        "the paper's costume, mid_upper_arm for everyday); paper: the arm ellipse's ends "
-        "as elbow and wrist",
+    shows_default(
+        m.add_argument(
+            "--bare-from",
+            choices=("costume", "paper", "elbow", "mid_upper_arm", "shoulder"),
+            default=None,
+            help="with --skin: where the arms' skin starts (costume: the costume's, paper for "
+            "the paper's costume, mid_upper_arm for everyday; paper: the arm ellipse's ends "
+            "as elbow and wrist; default %(stated_default)s)",
+        ),
+        f"{_RUN}.skin_bare_from",
     )
     m.add_argument("--lag", type=int, default=None, help="online fixed lag (frames)")
-    m.add_argument(
-        "--cost", choices=("acceleration", "joint_acceleration", "rotation"),
-        default="acceleration",
-    )  # fmt: skip
+    shows_default(
+        m.add_argument("--cost", choices=COSTS, help="edge weight (default %(stated_default)s)"),
+        f"{MONO}.cost",
+    )
     shows_default(
         m.add_argument(
             "--arm-prior-weight",
@@ -68,7 +87,7 @@ def add_mono_accuracy_parser(methods: Any) -> None:
             default=None,
             help="weight of the data-driven arm prior per nat (default %(stated_default)s; 0: off)",
         ),
-        "mocapkit.tracking.mono.tracker:MonoConfig.arm_prior_weight",
+        f"{MONO}.arm_prior_weight",
     )
     m.add_argument(
         "--initial-pose",
@@ -93,25 +112,28 @@ def _run(args: argparse.Namespace) -> int:
     from mocapkit.tracking.mono.tracker import MonoConfig
 
     mocap = mocap_folder(args.mocap)
-    w = args.arm_prior_weight
-    prior = {} if w is None else {"arm_prior_weight": w}
+    # "paper": the arm ellipse's ends (the library's None); not given: the library's default
+    bare: dict[str, Any] = {}
+    if args.bare_from is not None:
+        bare["skin_bare_from"] = None if args.bare_from == "paper" else args.bare_from
     if not args.json:
         print(format_rows([]))
     rows = mono_accuracy(
         mocap,
         args.work,
         chosen_clips(args),
-        seed=args.seed,
-        noise_px=args.noise_px,
         openpose=args.openpose,
         skin=args.skin,
-        skin_bare_from=None if args.bare_from == "paper" else args.bare_from,
         costume=args.costume,
         initial_pose=args.initial_pose,
         on_floor=args.on_floor,
         detector=args.detector,
-        config=MonoConfig(lag=args.lag, cost=args.cost, **prior),
+        config=MonoConfig(
+            lag=args.lag, **given(cost=args.cost, arm_prior_weight=args.arm_prior_weight)
+        ),
         say=(lambda _line: None) if args.json else print,
+        **given(seed=args.seed, noise_px=args.noise_px),
+        **bare,
     )
     if args.json:
         print(to_json(rows))

@@ -9,6 +9,10 @@ import argparse
 import json
 from typing import Any
 
+from mocapkit.cli.args import given, shows_default
+
+_RUN = "mocapkit.pipelines.stereo:stereo_accuracy"
+
 
 def register_method(methods: Any) -> None:
     """Add ``stereo`` to the ``accuracy`` methods."""
@@ -17,24 +21,44 @@ def register_method(methods: Any) -> None:
         help="arm joint and torso yaw errors of the stereo tracker on rendered excerpts",
     )
     p.add_argument("--mocap", help="folder of motion clips (default: ../shared/data/mocap)")
-    p.add_argument("--work", default="accuracy-output/stereo", help="sessions folder")
     p.add_argument(
-        "--modes",
-        default="keypoints+torso",
-        help="comma-separated: keypoints+torso, keypoints+torso+static, keypoints, skin "
-        "(default keypoints+torso)",
+        "--work", default="accuracy-output/stereo", help="sessions folder (default %(default)s)"
     )
-    p.add_argument(
-        "--cameras",
-        default="stereo_left,stereo_right",
-        help="views (the sessions have stereo_left, stereo_right, mono)",
+    shows_default(
+        p.add_argument(
+            "--modes",
+            default=None,
+            help="comma-separated: keypoints+torso, keypoints+torso+static, keypoints, skin "
+            "(default %(stated_default)s)",
+        ),
+        f"{_RUN}.modes",
     )
-    p.add_argument("--seed", type=int, default=0, help="the filters' random seed (default 0)")
-    p.add_argument(
-        "--particles",
-        type=int,
-        default=None,
-        help="particles per arm and run (default 150; not with --ablations)",
+    shows_default(
+        p.add_argument(
+            "--cameras",
+            default=None,
+            help="views (the sessions have stereo_left, stereo_right, mono; default "
+            "%(stated_default)s)",
+        ),
+        f"{_RUN}.cameras",
+    )
+    shows_default(
+        p.add_argument(
+            "--seed",
+            type=int,
+            default=None,
+            help="the filters' random seed (default %(stated_default)s)",
+        ),
+        f"{_RUN}.seed",
+    )
+    shows_default(
+        p.add_argument(
+            "--particles",
+            type=int,
+            default=None,
+            help="particles per arm and run (default %(stated_default)s; not with --ablations)",
+        ),
+        "mocapkit.tracking.stereo.arm_filter:ArmFilterConfig.n_particles",
     )
     p.add_argument(
         "--ablations",
@@ -69,11 +93,13 @@ def _run(args: argparse.Namespace) -> int:
     rows = stereo_accuracy(
         mocap,
         args.work,
-        modes=[m.strip() for m in args.modes.split(",") if m.strip()],
-        cameras=args.cameras,
         say=None if args.json else print,
-        seed=args.seed,
         n_particles=args.particles,
+        **given(
+            modes=None if args.modes is None else [m.strip() for m in args.modes.split(",")],
+            cameras=args.cameras,
+            seed=args.seed,
+        ),
     )
     if args.json:
         print(json.dumps(rows, indent=2))
@@ -94,9 +120,8 @@ def _ablations(args: argparse.Namespace, mocap: Any) -> int:
         mocap,
         args.work,
         variants=variants,
-        cameras=args.cameras,
         say=None if args.json else print,
-        seed=args.seed,
+        **given(cameras=args.cameras, seed=args.seed),
     )
     if args.json:
         print(json.dumps(rows, indent=2))

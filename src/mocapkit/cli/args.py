@@ -12,6 +12,7 @@ import argparse
 import importlib
 import math
 from collections.abc import Callable, Iterator, Sequence
+from dataclasses import MISSING
 from pathlib import Path
 from typing import Any, TypeVar, overload
 
@@ -164,10 +165,11 @@ class LazyChoices(Sequence[str]):
 class StatedDefault:
     """A default stated once in the library, read when ``--help`` shows it.
 
-    ``path`` is ``"module:Name"`` or ``"module:ConfigClass.field"`` (a dataclass field's
-    default). Set on an argument with `shows_default`; its help names it as
-    ``%(stated_default)s``, which argparse fills only when it prints the help, so a usage
-    error does not import the library.
+    ``path`` is ``"module:Name"``, ``"module:ConfigClass.field"`` (a dataclass field's
+    default) or ``"module:function.parameter"`` (a keyword's default). Set on an
+    argument with `shows_default`; its help names it as ``%(stated_default)s``, which
+    argparse fills only when it prints the help, so a usage error does not import the
+    library.
     """
 
     def __init__(self, path: str) -> None:
@@ -175,25 +177,46 @@ class StatedDefault:
 
     def value(self) -> Any:
         """The default itself."""
+        import inspect
+
         module, _, attrs = self.path.partition(":")
         obj: Any = importlib.import_module(module)
         for attr in attrs.split("."):
             fields = getattr(obj, "__dataclass_fields__", None)
             if isinstance(obj, type) and fields is not None and attr in fields:
-                obj = fields[attr].default
+                field = fields[attr]
+                obj = field.default_factory() if field.default is MISSING else field.default
+            elif inspect.isfunction(obj):
+                obj = inspect.signature(obj).parameters[attr].default
             else:
                 obj = getattr(obj, attr)
         return obj
 
     def __str__(self) -> str:
         v = self.value()
-        return f"{v:g}" if isinstance(v, float) else str(v)
+        if isinstance(v, float):
+            return f"{v:g}"
+        if isinstance(v, tuple) and all(isinstance(x, int) for x in v):
+            return "x".join(str(x) for x in v)  # an image size: 640x480
+        if isinstance(v, (tuple, list)):
+            return ",".join(str(x) for x in v)  # as the option takes it
+        return str(v)
 
 
 def shows_default(action: argparse.Action, path: str) -> argparse.Action:
-    """Give ``action``'s help the library's default at ``path`` as ``%(stated_default)s``."""
+    """Give ``action``'s help the library's default at ``path`` as ``%(stated_default)s``.
+
+    The argument's own default is then None (the library applies its default: pass the
+    value on only when given, `given`) or, where the library states it in a module light
+    to import, that same value.
+    """
     action.stated_default = StatedDefault(path)  # type: ignore[attr-defined]
     return action
+
+
+def given(**values: Any) -> dict[str, Any]:
+    """The keywords whose value was given (not None): the library's defaults fill the rest."""
+    return {k: v for k, v in values.items() if v is not None}
 
 
 def add_clip_options(parser: argparse.ArgumentParser) -> None:
@@ -223,6 +246,7 @@ __all__ = [
     "add_clip_options",
     "checked_by",
     "chosen_clips",
+    "given",
     "imported",
     "number",
     "parsed_by",

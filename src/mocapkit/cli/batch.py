@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from mocapkit.cli.args import checked_by, imported, number, output_folder
+from mocapkit.cli.args import checked_by, given, imported, number, output_folder, shows_default
 from mocapkit.pipelines.registry import AUTO, TRACKERS
 
 # the line of `mocapkit --help` (shown without importing this module's pipeline)
@@ -38,12 +38,15 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument(
         "--out", required=True, metavar="RESULTS_DIR", type=output_folder, help="results folder"
     )
-    p.add_argument(
-        "--method",
-        default=AUTO,
-        choices=(*TRACKERS, AUTO),
-        help="tracking method; auto: hybrid for markers + video, stereo for two or more "
-        "cameras without markers, mono for one camera (default auto)",
+    shows_default(
+        p.add_argument(
+            "--method",
+            default=AUTO,
+            choices=(*TRACKERS, AUTO),
+            help=f"tracking method; {AUTO}: hybrid for markers + video, stereo for two or more "
+            "cameras without markers, mono for one camera (default %(stated_default)s)",
+        ),
+        "mocapkit.pipelines.batch:batch.method",
     )
     p.add_argument(
         "--markers-glob",
@@ -59,11 +62,15 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         help="marker set of the --markers-glob files (head, left_hand, right_hand); markers "
         "after '/' turn the set without placing it; repeat",
     )
-    p.add_argument(
-        "--joints",
-        default="upper",
-        type=checked_by(imported("mocapkit.eval.metrics:joint_subset"), "joints", default="upper"),
-        help="joints evaluated against truth: 'upper' (default), 'all' or a list",
+    shows_default(
+        p.add_argument(
+            "--joints",
+            default=None,
+            type=checked_by(imported("mocapkit.eval.metrics:joint_subset"), "joints"),
+            help="joints evaluated against truth: 'upper', 'all' or a list (default "
+            "%(stated_default)s)",
+        ),
+        "mocapkit.pipelines.batch:batch.joints",
     )
     p.add_argument("--force", action="store_true", help="redo takes that are complete")
     p.add_argument(
@@ -97,12 +104,12 @@ def run(args: argparse.Namespace) -> int:
         args.method,
         markers_glob=args.markers_glob,
         marker_sets=args.marker_set,
-        joints=args.joints,
         force=args.force,
         scheduler=args.scheduler,
         n_workers=None if args.workers is None else int(args.workers),
         processes=not args.in_process,
         say=lambda line: print(line, file=sys.stderr),
+        **given(joints=args.joints),
     )
     print(result.table())
     c = result.counts

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from mocapkit.cli.args import LazyChoices
+from mocapkit.cli.args import LazyChoices, given, shows_default
 
 # the line of `mocapkit --help` (shown without importing this module's pipeline)
 HELP = "time the kinematics, the hybrid, stereo and mono trackers and the 2-D detector"
@@ -26,7 +26,12 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         help="benchmark to run: %(choices)s",
     )
     p.add_argument("--json", action="store_true", help="print JSON instead of a table")
-    p.add_argument("--repeats", type=int, default=3, help="timed repeats (default 3)")
+    shows_default(
+        p.add_argument(
+            "--repeats", type=int, default=None, help="timed repeats (default %(stated_default)s)"
+        ),
+        "mocapkit.pipelines.bench:run_benchmarks.repeats",
+    )
     p.add_argument(
         "--work",
         default=None,
@@ -40,7 +45,7 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         const="bench/results",
         default=None,
         metavar="FOLDER",
-        help="also write FOLDER/<name>.json (default folder bench/results)",
+        help="also write FOLDER/<name>.json (default folder %(const)s)",
     )
     p.set_defaults(func=run)
 
@@ -49,7 +54,7 @@ def run(args: argparse.Namespace) -> int:
     """Run the benchmark(s), print, optionally save."""
     from mocapkit.pipelines.bench import format_table, run_benchmarks, save_results
 
-    results = run_benchmarks(args.name, repeats=args.repeats, work_dir=args.work)
+    results = run_benchmarks(args.name, work_dir=args.work, **given(repeats=args.repeats))
     if args.save is not None:
         save_results(results, args.save)
     print(json.dumps(results, indent=2) if args.json else format_table(results))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from mocapkit.cli.args import checked_by, imported, number, output_file
+from mocapkit.cli.args import checked_by, imported, number, output_file, shows_default
 
 # the line of `mocapkit --help` (shown without importing this module's pipeline)
 HELP = "calibrate one camera or a stereo pair from chessboard images"
@@ -51,18 +51,24 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         default=None,
         help="comma-separated camera names (default cam0, or left,right)",
     )
-    p.add_argument(
-        "--min-boards",
-        type=number(int, at_least=3),
-        default=DEFAULT_MIN_BOARDS,
-        help=f"fewest images (pairs) with a detected board (default {DEFAULT_MIN_BOARDS})",
+    shows_default(
+        p.add_argument(
+            "--min-boards",
+            type=number(int, at_least=3),
+            default=DEFAULT_MIN_BOARDS,
+            help="fewest images (pairs) with a detected board (default %(stated_default)s)",
+        ),
+        "mocapkit.pipelines.calibrate_config:DEFAULT_MIN_BOARDS",
     )
-    p.add_argument(
-        "--max-rms-px",
-        type=number(above=0.0),
-        default=DEFAULT_MAX_RMS_PX,
-        help="refuse a camera or stereo fit whose RMS reprojection error is above this "
-        f"(default {DEFAULT_MAX_RMS_PX:g} px)",
+    shows_default(
+        p.add_argument(
+            "--max-rms-px",
+            type=number(above=0.0),
+            default=DEFAULT_MAX_RMS_PX,
+            help="refuse a camera or stereo fit whose RMS reprojection error is above this "
+            "(default %(stated_default)s px)",
+        ),
+        "mocapkit.pipelines.calibrate_config:DEFAULT_MAX_RMS_PX",
     )
     p.add_argument(
         "--refine-intrinsics",

@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from mocapkit.cli.args import number, output_folder
+from mocapkit.cli.args import given, number, output_folder, shows_default
+
+_RUN = "mocapkit.pipelines.demo:run_demo"
 
 # the line of `mocapkit --help` (shown without importing this module's pipeline)
 HELP = (
@@ -25,14 +27,23 @@ def register(subparsers: Any) -> None:
         "keypoints) methods, prints one table of upper-body accuracy and speed, writes a "
         "report per tracker under OUT/report and prints the path of its index page.",
     )
-    p.add_argument(
-        "--out",
-        default="demo-output",
-        type=output_folder,
-        help="output folder (default: demo-output)",
+    shows_default(
+        p.add_argument(
+            "--out",
+            default=None,
+            type=output_folder,
+            help="output folder (default: %(stated_default)s)",
+        ),
+        f"{_RUN}.out_dir",
     )
-    p.add_argument(
-        "--seconds", type=number(above=0.0), default=4.0, help="length of the excerpt (s)"
+    shows_default(
+        p.add_argument(
+            "--seconds",
+            type=number(above=0.0),
+            default=None,
+            help="length of the excerpt (default %(stated_default)s s)",
+        ),
+        f"{_RUN}.seconds",
     )
     p.add_argument(
         "--quiet",
@@ -46,5 +57,5 @@ def run(args: argparse.Namespace) -> int:
     """Run the demo."""
     from mocapkit.pipelines.demo import run_demo
 
-    run_demo(args.out, seconds=args.seconds, quiet=args.quiet)
+    run_demo(quiet=args.quiet, **given(out_dir=args.out, seconds=args.seconds))
     return 0

@@ -6,7 +6,9 @@ import argparse
 import json
 import sys
 
-from mocapkit.cli.args import number, output_folder
+from mocapkit.cli.args import given, number, output_folder, shows_default
+
+_CONFIG = "mocapkit.pipelines.live_config:LiveConfig"
 
 HELP = "track live LSL streams and cameras; joints out as an LSL stream"
 
@@ -59,22 +61,33 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         const=STREAM_PREFIX,
         metavar="PREFIX",
         help="take every input from `mocapkit replay SETUP --lsl` (its stream prefix, "
-        f"default {STREAM_PREFIX}); hybrid uses the first camera, mono its keypoints",
+        "default %(const)s); hybrid uses the first camera, mono its keypoints",
     )
-    p.add_argument("--stream", default="mocapkit_joints", help="output LSL stream name")
+    shows_default(
+        p.add_argument(
+            "--stream", default=None, help="output LSL stream name (default %(stated_default)s)"
+        ),
+        "mocapkit.pipelines.live:JOINTS_STREAM",
+    )
     p.add_argument("--out", type=output_folder, help="result folder written at the end")
     p.add_argument("--record", type=output_folder, help="record the inputs as a session folder")
-    p.add_argument(
-        "--lag",
-        type=number(int, at_least=1),
-        default=_DEFAULTS.mono_lag,
-        help=f"mono: online Viterbi lag in frames (default {_DEFAULTS.mono_lag})",
+    shows_default(
+        p.add_argument(
+            "--lag",
+            type=number(int, at_least=1),
+            default=_DEFAULTS.mono_lag,
+            help="mono: online Viterbi lag in frames (default %(stated_default)s)",
+        ),
+        f"{_CONFIG}.mono_lag",
     )
-    p.add_argument(
-        "--lost-after-s",
-        type=number(above=0.0),
-        default=_DEFAULTS.lost_after_s,
-        help=f"stop when an input is silent this long (default {_DEFAULTS.lost_after_s:g} s)",
+    shows_default(
+        p.add_argument(
+            "--lost-after-s",
+            type=number(above=0.0),
+            default=_DEFAULTS.lost_after_s,
+            help="stop when an input is silent this long (default %(stated_default)s s)",
+        ),
+        f"{_CONFIG}.lost_after_s",
     )
     p.add_argument(
         "--view",
@@ -116,9 +129,9 @@ def run(args: argparse.Namespace) -> int:
         inputs,
         args.out,
         args.record,
-        args.stream,
-        config,
+        config=config,
         view=args.view,
+        **given(stream_name=args.stream),
     )
     summary = {
         "method": report.method,

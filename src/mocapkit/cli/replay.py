@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from mocapkit.cli.args import number
+from mocapkit.cli.args import given, number, shows_default
+
+_RUN = "mocapkit.pipelines.replay:replay_session"
 
 HELP = "publish a session's markers, keypoints and video frames as LSL streams"
 
@@ -25,20 +27,32 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     )
     p.add_argument("session", help="session folder")
     p.add_argument("--lsl", action="store_true", required=True, help="publish over LSL")
-    p.add_argument(
-        "--speed",
-        type=number(above=0.0, at_most=100.0),
-        default=1.0,
-        help="replay speed: 1 real time (default), 4 four times faster",
+    shows_default(
+        p.add_argument(
+            "--speed",
+            type=number(above=0.0, at_most=100.0),
+            default=None,
+            help="replay speed: 1 real time, 4 four times faster (default %(stated_default)s)",
+        ),
+        f"{_RUN}.speed",
     )
-    p.add_argument(
-        "--prefix", default=STREAM_PREFIX, help=f"stream name prefix (default {STREAM_PREFIX})"
+    shows_default(
+        p.add_argument(
+            "--prefix",
+            default=STREAM_PREFIX,
+            help="stream name prefix (default %(stated_default)s)",
+        ),
+        f"{_RUN}.prefix",
     )
-    p.add_argument(
-        "--lead-s",
-        type=number(at_least=0.0),
-        default=2.0,
-        help="seconds between the streams appearing and the first sample (default 2)",
+    shows_default(
+        p.add_argument(
+            "--lead-s",
+            type=number(at_least=0.0),
+            default=None,
+            help="seconds between the streams appearing and the first sample (default "
+            "%(stated_default)s)",
+        ),
+        f"{_RUN}.lead_s",
     )
     p.set_defaults(func=run)
 
@@ -51,7 +65,10 @@ def run(args: argparse.Namespace) -> int:
         print("publishing " + ", ".join(names.values()), file=sys.stderr, flush=True)
 
     stats = replay_session(
-        args.session, speed=args.speed, prefix=args.prefix, lead_s=args.lead_s, on_ready=ready
+        args.session,
+        prefix=args.prefix,
+        on_ready=ready,
+        **given(speed=args.speed, lead_s=args.lead_s),
     )
     sent = ", ".join(f"{n}: {k}" for n, k in stats.samples.items())
     print(f"replayed {stats.start_s:.3f}-{stats.end_s:.3f} s ({sent})")

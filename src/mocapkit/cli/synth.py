@@ -4,8 +4,14 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Callable
+from typing import Any
 
-from mocapkit.cli.args import checked_by, imported, number, output_folder
+from mocapkit.cli.args import checked_by, given, imported, number, output_folder, shows_default
+
+#: The session's settings (heavy to import: read by --help only)
+_SYNTH = "mocapkit.synth.session_writer:SynthOptions"
+#: The realism settings (light to import: the arguments' own defaults)
+_REALISM = "mocapkit.synth.options:RealismOptions"
 
 # the line of `mocapkit --help` (shown without importing this module's pipeline)
 HELP = "render a synthetic session from a motion file or a built-in motion"
@@ -81,82 +87,75 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     d = RealismOptions()
     p.add_argument("motion", metavar="MOTION", help="BVH/AMC file or builtin:NAME")
     p.add_argument("--out", required=True, type=output_folder, help="session folder to create")
-    p.add_argument("--rig", choices=RIG_NAMES, default="mono", help="cameras (default mono)")
-    p.add_argument(
-        "--start-s", type=number(at_least=0.0), default=0.0, help="excerpt start in the clip (s)"
-    )
-    p.add_argument(
-        "--seconds", type=number(above=0.0), default=5.0, help="excerpt length (s, default 5)"
-    )
-    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    stated: dict[str, dict[str, Any]] = {
+        "--rig": dict(choices=RIG_NAMES, help="cameras (default %(stated_default)s)"),
+        "--start-s": dict(
+            type=number(at_least=0.0),
+            help="excerpt start in the clip (default %(stated_default)s s)",
+        ),
+        "--seconds": dict(
+            type=number(above=0.0), help="excerpt length (default %(stated_default)s s)"
+        ),
+        "--seed": dict(type=int, help="random seed (default %(stated_default)s)"),
+    }
+    for flag, kwargs in stated.items():
+        field = flag[2:].replace("-", "_")
+        shows_default(p.add_argument(flag, default=None, **kwargs), f"{_SYNTH}.{field}")
     p.add_argument(
         "--height-mm", type=float, default=None, help="scale the skeleton to this stature"
     )
     p.add_argument("--asf", default=None, help="ASF skeleton of an AMC motion")
-    p.add_argument(
-        "--fps",
-        type=number(at_least=FPS_RANGE[0], at_most=FPS_RANGE[1]),
-        default=30.0,
-        help="video rate (default 30)",
-    )
-    p.add_argument(
-        "--marker-rate",
-        type=number(at_least=MARKER_RATE_RANGE_HZ[0], at_most=MARKER_RATE_RANGE_HZ[1]),
-        default=120.0,
-        help="marker rate Hz (default 120)",
-    )
-    p.add_argument(
-        "--size", type=_size, default=(640, 480), help="image size WxH (default 640x480)"
-    )
-    p.add_argument(
-        "--noise",
-        type=_realism("noise"),
-        default=d.noise,
-        help=f"sensor noise sigma, grey levels (default {d.noise})",
-    )
-    p.add_argument(
-        "--blur",
-        type=_realism("blur"),
-        default=d.blur,
-        help=f"motion blur: shutter / frame interval (default {d.blur}; 0 = off)",
-    )
-    p.add_argument("--background", choices=BACKGROUNDS, default=d.background, help="scene")
-    p.add_argument(
-        "--marker-noise-mm",
-        type=_realism("marker_noise_mm"),
-        default=d.marker_noise_mm,
-        help=f"marker noise sigma per axis, mm (default {d.marker_noise_mm})",
-    )
-    p.add_argument(
-        "--dropout",
-        type=_realism("dropout"),
-        default=d.dropout,
-        help=f"probability per marker sample that a drop-out starts (default {d.dropout})",
-    )
-    p.add_argument(
-        "--dropout-s",
-        type=_realism("dropout_s"),
-        default=d.dropout_s,
-        help=f"mean drop-out length, s (default {d.dropout_s})",
-    )
-    p.add_argument(
-        "--video-jitter-s",
-        type=_realism("video_jitter_s"),
-        default=d.video_jitter_s,
-        help=f"video time stamp jitter sigma, s (default {d.video_jitter_s}; 0 = even)",
-    )
+    stated = {
+        "fps": dict(
+            type=number(at_least=FPS_RANGE[0], at_most=FPS_RANGE[1]),
+            help="video rate (default %(stated_default)s Hz)",
+        ),
+        "marker_rate_hz": dict(
+            flag="--marker-rate",
+            type=number(at_least=MARKER_RATE_RANGE_HZ[0], at_most=MARKER_RATE_RANGE_HZ[1]),
+            help="marker rate (default %(stated_default)s Hz)",
+        ),
+        "image_size": dict(
+            flag="--size", type=_size, help="image size WxH (default %(stated_default)s)"
+        ),
+    }
+    for field, kwargs in stated.items():
+        flag = kwargs.pop("flag", "--" + field.replace("_", "-"))
+        shows_default(p.add_argument(flag, default=None, **kwargs), f"{_SYNTH}.{field}")
+    realism = {
+        "noise": "sensor noise sigma, grey levels (default %(stated_default)s)",
+        "blur": "motion blur: shutter / frame interval (default %(stated_default)s; 0 = off)",
+        "background": "scene (default %(stated_default)s)",
+        "marker_noise_mm": "marker noise sigma per axis (default %(stated_default)s mm)",
+        "dropout": "probability per marker sample that a drop-out starts (default "
+        "%(stated_default)s)",
+        "dropout_s": "mean drop-out length (default %(stated_default)s s)",
+        "video_jitter_s": "video time stamp jitter sigma (default %(stated_default)s s; 0 = even)",
+    }
+    for field, text in realism.items():
+        kind = {"choices": BACKGROUNDS} if field == "background" else {"type": _realism(field)}
+        shows_default(
+            p.add_argument(
+                "--" + field.replace("_", "-"), default=getattr(d, field), help=text, **kind
+            ),
+            f"{_REALISM}.{field}",
+        )
     p.add_argument(
         "--sleeve",
         choices=SLEEVES,
         default=None,
         help="shirt sleeves (default: the costume's, short for everyday, elbow for paper)",
     )
-    p.add_argument(
-        "--costume",
-        choices=COSTUMES,
-        default="everyday",
-        help="clothing (default everyday: shirt and trousers; paper: Mamania et al.'s dance "
-        "costume, one dress to the elbows, bare forearms, a skin-like gold belt)",
+    shows_default(
+        p.add_argument(
+            "--costume",
+            choices=COSTUMES,
+            default=None,
+            help="clothing: everyday (shirt and trousers) or paper (Mamania et al.'s dance "
+            "costume, one dress to the elbows, bare forearms, a skin-like gold belt; default "
+            "%(stated_default)s)",
+        ),
+        f"{_SYNTH}.costume",
     )
     p.add_argument(
         "--shirt-colour",
@@ -191,22 +190,24 @@ def run(args: argparse.Namespace) -> int:
         video_jitter_s=args.video_jitter_s,
     )
     options = SynthOptions(
-        rig=args.rig,
-        start_s=args.start_s,
-        seconds=args.seconds,
-        seed=args.seed,
         height_mm=args.height_mm,
         asf=args.asf,
-        fps=args.fps,
-        marker_rate_hz=args.marker_rate,
-        image_size=args.size,
         sleeve=args.sleeve,
-        costume=args.costume,
         shirt_colour=args.shirt_colour,
         video_format="png" if args.png else "mp4",
         overwrite=args.overwrite,
         realism=realism,
         blackout_s=args.blackout_s,
+        **given(
+            rig=args.rig,
+            start_s=args.start_s,
+            seconds=args.seconds,
+            seed=args.seed,
+            fps=args.fps,
+            marker_rate_hz=args.marker_rate,
+            image_size=args.size,
+            costume=args.costume,
+        ),
     )
     summary = synthesize_session(args.motion, args.out, options)
     print(summary.text())

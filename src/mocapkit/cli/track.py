@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from mocapkit.cli.args import number, output_folder, shows_default
+from mocapkit.cli.args import given, number, output_folder, shows_default
 from mocapkit.cli.track_stereo import register_method as register_stereo
 
 # the line of `mocapkit --help` (shown without importing this module's pipeline)
@@ -105,8 +105,8 @@ def register(subparsers: Any) -> None:
         default="auto",
         help="standing, seated (pelvis on a seat whose height is estimated from the head "
         "set, legs held bent and left out: NaN, no feet planted, no balance step) or auto "
-        "(default: seated when the head set's upright height is below 0.88 of the "
-        "stature; prints which and why)",
+        "(seated when the head set's upright height is low for the stature; prints which "
+        "and why; default %(default)s)",
     )
     hyb.add_argument(
         "--static",
@@ -133,13 +133,16 @@ def register(subparsers: Any) -> None:
         action="store_true",
         help="with --markers: the same as --calibration none",
     )
-    hyb.add_argument(
-        "--proportions",
-        choices=("anthropometric", "preset"),
-        default="anthropometric",
-        help="with --markers: the body model's proportions: a population's scaled to the "
-        "stature (default; Drillis & Contini via Winter) or the preset's (zhang21, Table 1) "
-        "scaled by the stature alone",
+    shows_default(
+        hyb.add_argument(
+            "--proportions",
+            choices=("anthropometric", "preset"),
+            default=None,
+            help="with --markers: the body model's proportions: a population's scaled to the "
+            "stature (anthropometric: Drillis & Contini via Winter) or the preset's (zhang21, "
+            "Table 1) scaled by the stature alone (default %(stated_default)s)",
+        ),
+        "mocapkit.pipelines.hybrid:track_hybrid_marker_file.proportions",
     )
     shows_default(
         hyb.add_argument(
@@ -218,7 +221,7 @@ def _run_hybrid(args: argparse.Namespace) -> int:
             posture=args.posture,
             calibration=options.member_calibration,
             static=None if args.static is None else read_markers(args.static),
-            proportions=args.proportions,
+            **given(proportions=args.proportions),
         )
         print(run.frame.summary())
         if run.posture is not None:

@@ -10,7 +10,12 @@ import argparse
 import json
 from typing import Any
 
-from mocapkit.cli.args import output_folder, shows_default
+from mocapkit.cli.args import given, output_folder, shows_default
+
+#: The tracker's settings (heavy to import: read by --help only)
+MONO = "mocapkit.tracking.mono.tracker:MonoConfig"
+#: The mono tracker's edge weights (`MonoConfig.cost`)
+COSTS = ("acceleration", "joint_acceleration", "rotation")
 
 
 def add_mono_parser(methods: Any) -> None:
@@ -27,25 +32,33 @@ def add_mono_parser(methods: Any) -> None:
     p.add_argument("--out", required=True, type=output_folder, help="result folder")
     p.add_argument("--camera", help="camera name (default: the first with keypoints)")
     p.add_argument("--keypoints", help="keypoints CSV file or OpenPose JSON folder")
-    p.add_argument(
-        "--camera-model",
-        choices=("perspective", "weak", "orthographic"),
-        default="perspective",
-        help="perspective (default), weak perspective, or the paper's orthography",
+    shows_default(
+        p.add_argument(
+            "--camera-model",
+            choices=("perspective", "weak", "orthographic"),
+            default=None,
+            help="perspective, weak perspective, or the paper's orthography (default "
+            "%(stated_default)s)",
+        ),
+        f"{MONO}.camera_model",
     )
-    p.add_argument(
-        "--cost",
-        choices=("acceleration", "joint_acceleration", "rotation"),
-        default="acceleration",
-        help="edge weight: angular acceleration over pair states (eq. 3, corrected; "
-        "default), joint acceleration (eq. 4-5, corrected), or first-order rotation",
+    shows_default(
+        p.add_argument(
+            "--cost",
+            choices=COSTS,
+            default=None,
+            help="edge weight: angular acceleration over pair states (eq. 3, corrected), "
+            "joint acceleration (eq. 4-5, corrected), or first-order rotation (default "
+            "%(stated_default)s)",
+        ),
+        f"{MONO}.cost",
     )
     p.add_argument(
         "--lag",
         type=int,
         default=None,
         metavar="FRAMES",
-        help="online fixed-lag Viterbi with this lag (latency: lag + 5 smoother frames); "
+        help="online fixed-lag Viterbi with this lag (latency: the lag plus the smoother's); "
         "default: exact offline",
     )
     p.add_argument(
@@ -86,7 +99,7 @@ def add_mono_parser(methods: Any) -> None:
             default=None,
             help="weight of the data-driven arm prior per nat (default %(stated_default)s; 0: off)",
         ),
-        "mocapkit.tracking.mono.tracker:MonoConfig.arm_prior_weight",
+        f"{MONO}.arm_prior_weight",
     )
     p.add_argument(
         "--initial-pose",
@@ -125,10 +138,10 @@ def _run_mono(args: argparse.Namespace) -> int:
         )
     cfg = MonoConfig(
         legs=args.legs,
-        camera_model=args.camera_model,
-        cost=args.cost,
         lag=args.lag,
-        **({} if args.arm_prior_weight is None else {"arm_prior_weight": args.arm_prior_weight}),
+        **given(
+            camera_model=args.camera_model, cost=args.cost, arm_prior_weight=args.arm_prior_weight
+        ),
     )
     start = None
     if args.initial_pose is not None:

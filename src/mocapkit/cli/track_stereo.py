@@ -10,8 +10,13 @@ import argparse
 import json
 from typing import Any
 
-from mocapkit.cli.args import output_folder, shows_default
+from mocapkit.cli.args import given, output_folder, shows_default
 from mocapkit.tracking.multiview.config import SMOOTHING, STEREO_METHODS, MultiviewRunConfig
+
+#: The stereo tracker's settings (the paper's tracker: heavy to import, read by --help only)
+_STEREO = "mocapkit.tracking.stereo.tracker:StereoConfig"
+#: The multi-view fit's settings (light to import: the arguments' own defaults)
+_FIT = "mocapkit.tracking.multiview.config:MultiviewRunConfig"
 
 
 def register_method(methods: Any) -> None:
@@ -35,27 +40,37 @@ def register_method(methods: Any) -> None:
         metavar="A,B[,C...]",
         help="cameras to use (default: every camera with a video); the cues average over them",
     )
-    p.add_argument(
-        "--method",
-        choices=STEREO_METHODS,
-        default="auto",
-        help="fit: the full-body model fitted to the keypoints; filter: the paper's arm "
-        "particle filters with head and hands from the keypoints; skin: the paper's skin "
-        "blobs; auto (default): fit when every camera has keypoints, else skin",
+    shows_default(
+        p.add_argument(
+            "--method",
+            choices=STEREO_METHODS,
+            default=None,
+            help="fit: the full-body model fitted to the keypoints; filter: the paper's arm "
+            "particle filters with head and hands from the keypoints; skin: the paper's skin "
+            "blobs; auto: fit when every camera has keypoints, else skin (default "
+            "%(stated_default)s)",
+        ),
+        "mocapkit.pipelines.multiview:resolve_stereo_method.method",
     )
-    p.add_argument(
-        "--smooth",
-        choices=SMOOTHING,
-        default=MultiviewRunConfig().smoothing,
-        help="with the fit: smoothing of the poses: none; one-euro (online, a few frames of "
-        "lag on fast motion); butterworth (offline, zero lag, 4th order, as Pose2Sim) "
-        f"(default {MultiviewRunConfig().smoothing})",
+    shows_default(
+        p.add_argument(
+            "--smooth",
+            choices=SMOOTHING,
+            default=MultiviewRunConfig().smoothing,
+            help="with the fit: smoothing of the poses: none; one-euro (online, a few frames "
+            "of lag on fast motion); butterworth (offline, zero lag, 4th order, as Pose2Sim) "
+            "(default %(stated_default)s)",
+        ),
+        f"{_FIT}.smoothing",
     )
-    p.add_argument(
-        "--cutoff-hz",
-        type=float,
-        default=MultiviewRunConfig().cutoff_hz,
-        help=f"with --smooth: cut-off (default {MultiviewRunConfig().cutoff_hz:g} Hz)",
+    shows_default(
+        p.add_argument(
+            "--cutoff-hz",
+            type=float,
+            default=MultiviewRunConfig().cutoff_hz,
+            help="with --smooth: cut-off (default %(stated_default)s Hz)",
+        ),
+        f"{_FIT}.cutoff_hz",
     )
     p.add_argument(
         "--keypoints",
@@ -72,20 +87,28 @@ def register_method(methods: Any) -> None:
         ),
         "mocapkit.tracking.stereo.arm_filter:ArmFilterConfig.n_particles",
     )
-    p.add_argument(
-        "--torso",
-        choices=("shoulders", "keypoints"),
-        default="shoulders",
-        help="torso orientation from the adaptive shoulders (default, the paper's inputs) or "
-        "from the shoulder/neck/pelvis keypoints (with --keypoints)",
+    shows_default(
+        p.add_argument(
+            "--torso",
+            choices=("shoulders", "keypoints"),
+            default=None,
+            help="torso orientation from the adaptive shoulders (the paper's inputs) or "
+            "from the shoulder/neck/pelvis keypoints (with --keypoints; default "
+            "%(stated_default)s)",
+        ),
+        f"{_STEREO}.torso",
     )
-    p.add_argument(
-        "--torso-anchor",
-        choices=("neck", "shoulders"),
-        default="neck",
-        help="with --torso keypoints: hang the arms from the neck keypoint (default; give "
-        "the subject's segment_vectors_mm in session.json) or centre the shoulders on the "
-        "shoulder keypoints (real detections without the subject's measurements)",
+    shows_default(
+        p.add_argument(
+            "--torso-anchor",
+            choices=("neck", "shoulders"),
+            default=None,
+            help="with --torso keypoints: hang the arms from the neck keypoint (give the "
+            "subject's segment_vectors_mm in session.json) or centre the shoulders on the "
+            "shoulder keypoints (real detections without the subject's measurements; "
+            "default %(stated_default)s)",
+        ),
+        f"{_STEREO}.torso_anchor",
     )
     p.add_argument(
         "--fixed-shoulders",
@@ -107,13 +130,15 @@ def _run(args: argparse.Namespace) -> int:
     from mocapkit.tracking.stereo.tracker import StereoConfig
 
     if args.keypoints:
-        if args.method not in ("auto", "filter"):
+        if args.method not in (None, "auto", "filter"):
             raise ConfigError(f"--keypoints is --method filter; found --method {args.method}")
         args.method = "filter"
+    if args.method is None:
+        args.method = "auto"
     paper_options = (
         args.particles is not None
-        or args.torso != "shoulders"
-        or args.torso_anchor != "neck"
+        or args.torso is not None
+        or args.torso_anchor is not None
         or args.fixed_shoulders
     )
     if args.method == "auto" and paper_options:
@@ -136,10 +161,10 @@ def _run(args: argparse.Namespace) -> int:
         raise ConfigError("--torso keypoints needs --keypoints")
     if args.particles is not None and args.particles < 2:
         raise ConfigError(f"--particles: expected at least 2, found {args.particles}")
-    if args.torso_anchor != "neck" and args.torso != "keypoints":
+    if args.torso_anchor is not None and args.torso != "keypoints":
         raise ConfigError("--torso-anchor needs --torso keypoints")
     cfg = StereoConfig(
-        use_keypoints=args.keypoints, torso=args.torso, torso_anchor=args.torso_anchor
+        use_keypoints=args.keypoints, **given(torso=args.torso, torso_anchor=args.torso_anchor)
     )
     if args.fixed_shoulders:
         cfg = replace(cfg, arm=replace(cfg.arm, adaptive_shoulder=False))
@@ -182,8 +207,8 @@ def _run_fit(args: argparse.Namespace) -> int:
 
     for flag, value, default in (
         ("--particles", args.particles, None),
-        ("--torso", args.torso, "shoulders"),
-        ("--torso-anchor", args.torso_anchor, "neck"),
+        ("--torso", args.torso, None),
+        ("--torso-anchor", args.torso_anchor, None),
         ("--fixed-shoulders", args.fixed_shoulders, False),
     ):
         if value != default:
