@@ -142,7 +142,7 @@ def register(subparsers: Any) -> None:
             "stature (anthropometric: Drillis & Contini via Winter) or the preset's (zhang21, "
             "Table 1) scaled by the stature alone (default %(stated_default)s)",
         ),
-        "mocapkit.pipelines.hybrid:track_hybrid_marker_file.proportions",
+        "mocapkit.pipelines.hybrid_markers:track_hybrid_marker_file.proportions",
     )
     shows_default(
         hyb.add_argument(
