@@ -350,13 +350,6 @@ class ArmFilterConfig:
         (the paper leaves it open; a bimodal elbow circle makes the plain mean a pose
         between the two).
     mode_radius_mm : float
-    mode_prior_mm : float
-        With the mode estimate: the best particle is the one with the largest weight
-        times ``exp(-|elbow - previous elbow|^2 / (2 mode_prior_mm^2))`` (0: the largest
-        weight), so that between near-equal modes the elbow stays where it was.
-    alpha_bounds : bool
-        Draw the IK samples' alpha within the side's bounds (§VII, errata A9); off: the
-        whole elbow circle.
     fusion : FusionParams
     """
 
@@ -378,9 +371,7 @@ class ArmFilterConfig:
     max_samples_per_line: int = 48
     oriented_edges: bool = True
     estimate: str = "mode"
-    alpha_bounds: bool = True
     mode_radius_mm: float = 60.0
-    mode_prior_mm: float = 0.0
     fusion: FusionParams = field(default_factory=default_fusion)
 
     def __post_init__(self) -> None:
@@ -450,7 +441,6 @@ class ArmParticleFilter:
         self.prev_dist_sq = math.inf
         self.edge_error = 1.0
         self.last_n_ik = 0
-        self.prev_elbow: FloatArray | None = None
         self._w = np.empty(n)
         self._eg = np.empty(n)
         self._d2 = np.empty(n)
@@ -520,7 +510,7 @@ class ArmParticleFilter:
         return np.asarray(w @ self.particles[:, 4:], dtype=float)
 
     def _ik_samples(self, model: ArmModel, d_prev: FloatArray, n_ik: int) -> FloatArray:
-        lo, hi = ALPHA_RANGE_RAD[self.side] if self.config.alpha_bounds else (-math.pi, math.pi)
+        lo, hi = ALPHA_RANGE_RAD[self.side]  # the side's bounds (paper §VII, errata A9)
         alphas = self.rng.uniform(lo, hi, n_ik)
         rb = model.base_rotation
         s = model.shoulder_base_mm + rb @ d_prev
@@ -541,12 +531,7 @@ class ArmParticleFilter:
             # elbow circle often leaves two modes, whose mean would be neither
             elbows = np.empty((p.shape[0], 3))
             _elbows_nb(p, model, elbows)
-            score = w
-            if self.config.mode_prior_mm > 0 and self.prev_elbow is not None:
-                # between near-equal modes, keep the one the elbow was in
-                d2 = np.sum((elbows - self.prev_elbow) ** 2, axis=1)
-                score = w * np.exp(-0.5 * d2 / self.config.mode_prior_mm**2)
-            best = int(np.argmax(score))
+            best = int(np.argmax(w))
             near = np.linalg.norm(elbows - elbows[best], axis=1) < self.config.mode_radius_mm
             w = np.where(near, w, 0.0)
             w /= w.sum()
@@ -571,7 +556,6 @@ class ArmParticleFilter:
             self.prev_dist_sq = float(d2[0])  # errata A10: the raw error of the estimate
         pts = np.empty((4, 3))
         arm_points_nb(state, model, pts)
-        self.prev_elbow = pts[1].copy()
         return ArmEstimate(
             state,
             pts,
