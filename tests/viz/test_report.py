@@ -22,6 +22,7 @@ from mocapkit.skeleton.model import CANONICAL_JOINTS
 from mocapkit.viz.report.figures import (
     STATUS_COLOURS,
     PointLayer,
+    column_unit,
     error_figure,
     fit_figures,
     skeleton_animation,
@@ -201,6 +202,13 @@ def test_fit_figures_one_trace_per_column_and_state():
     states = {tr.name: (list(tr.x), list(tr.y)) for tr in figs[1].data}
     assert states == {"lost": ([0.2], ["x_status"]), "seen": ([0.0, 0.3], ["x_status"] * 2)}
     assert fit_figures(t, {}, {}) == []
+
+
+def test_column_unit_by_suffix_a_speed_before_its_seconds():
+    assert column_unit("right_elbow_speed_mm_per_s") == "mm/s"
+    assert column_unit("rms_mm") == "mm"
+    assert column_unit("lag_s") == "s"
+    assert column_unit("right_elbow_jump") == ""
 
 
 def test_fit_figures_units_on_labelled_axes_and_status_colours():

@@ -180,6 +180,8 @@ def _run(args: argparse.Namespace) -> int:
     # its limb (NaN in joints.csv, the status in fit.csv): say where, as track hybrid does
     for gap in find_gaps(run.results):
         print(f"gap: {gap}")
+    for jump in run.jumps:
+        print(f"warning: {jump}")
     fps = run.motion.n_frames / max(run.seconds, 1e-9)
     print(f"tracked {run.motion.n_frames} frames in {run.seconds:.1f} s ({fps:.1f} frames/s)")
     print(f"wrote {args.out}")

@@ -38,7 +38,7 @@ from mocapkit.io.motion import Motion
 from mocapkit.pipelines.hybrid import track_hybrid_session
 from mocapkit.pipelines.mono import track_mono
 from mocapkit.pipelines.report import build_report
-from mocapkit.pipelines.stereo import ACCURACY_MODES, track_stereo_session
+from mocapkit.pipelines.stereo import ACCURACY_MODES, elbow_jumps_in_folder, track_stereo_session
 from mocapkit.progress import silenced
 from mocapkit.skeleton import UPPER_BODY_JOINTS, load_preset, standing_height_mm
 from mocapkit.synth.session_writer import SynthOptions, synthesize_session
@@ -353,5 +353,7 @@ def _run(
     tell(f"open {rows['hybrid'].result_dir / 'motion.bvh'} in Blender (File > Import > BVH).")
     if not all(np.isfinite(row.report.elbow_mm) for row in rows.values()):
         say("warning: a tracker produced no comparable pose")
+    for jump in elbow_jumps_in_folder(rows["stereo"].result_dir):
+        say(f"warning: stereo: {jump}")
     say(f"report: {index}")
     return DemoResult(out, session, rows, variants, index)

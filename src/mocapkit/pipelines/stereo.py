@@ -16,14 +16,14 @@ from __future__ import annotations
 import math
 import os
 import time
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, cast
 
 import cv2
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import ConfigError, SessionError, unknown_name
 from mocapkit.io.motion import Motion
@@ -56,9 +56,61 @@ ARM_JOINTS = (
 )
 
 
+@dataclass(frozen=True)
+class ElbowJump:
+    """Consecutive frames on which an arm's elbow jumped (``<side>_elbow_jump`` in fit.csv,
+    `StereoConfig.elbow_jump_mm_per_s`): the pose of those frames is not to be trusted."""
+
+    side: str
+    start_s: float
+    end_s: float
+    n_frames: int
+    top_mm_per_s: float
+
+    def __str__(self) -> str:
+        return (
+            f"the {self.side} elbow jumps at {self.start_s:.3f}-{self.end_s:.3f} s "
+            f"({self.n_frames} frames, up to {self.top_mm_per_s / 1000:.1f} m/s relative to "
+            "the shoulder): the arm filter took the other side of the elbow circle; see fit.csv"
+        )
+
+
+def elbow_jumps(time_s: ArrayLike, fit: Mapping[str, ArrayLike]) -> list[ElbowJump]:
+    """The spans of frames flagged ``<side>_elbow_jump``, in time order.
+
+    Parameters
+    ----------
+    time_s : (T,) array-like
+    fit : mapping of str to (T,) array-like
+        fit.csv's columns (`mocapkit.pipelines.run.read_fit_csv`); without the jump
+        columns (another tracker's result) there are no jumps.
+    """
+    t = np.asarray(time_s, dtype=float)
+    out = []
+    for side in ("left", "right"):
+        if f"{side}_elbow_jump" not in fit:
+            continue
+        flag = (np.asarray(fit[f"{side}_elbow_jump"], dtype=float) > 0).astype(int)
+        speed = np.asarray(fit[f"{side}_elbow_speed_mm_per_s"], dtype=float)
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], flag, [0]])))
+        for a, b in zip(edges[::2], edges[1::2], strict=True):
+            top = float(np.nanmax(speed[a:b]))
+            out.append(ElbowJump(side, float(t[a]), float(t[b - 1]), int(b - a), top))
+    return sorted(out, key=lambda j: (j.start_s, j.side))
+
+
+def elbow_jumps_in_folder(result_dir: str | os.PathLike[str]) -> list[ElbowJump]:
+    """`elbow_jumps` of a result folder's fit.csv (none when it has no jump columns)."""
+    from mocapkit.pipelines.run import FIT_FILE, read_fit_csv
+
+    _, columns = read_fit_csv(Path(result_dir) / FIT_FILE)
+    return elbow_jumps(columns["time_s"], columns)
+
+
 @dataclass
 class StereoRun:
-    """A tracked session: the motion, per-frame diagnostics and `StereoPose` results."""
+    """A tracked session: the motion, per-frame diagnostics, `StereoPose` results and the
+    elbow jumps found in them (`elbow_jumps`)."""
 
     motion: Motion
     yaw_rad: FloatArray  # (T,)
@@ -66,6 +118,7 @@ class StereoRun:
     n_ik: NDArray[np.int64]  # (T, 2)
     seconds: float  # reading and tracking, without writing
     results: list[StereoPose] = field(default_factory=list)  # per frame, as fit.csv
+    jumps: list[ElbowJump] = field(default_factory=list)
 
 
 def parse_cameras(text: str | None, available: Sequence[str]) -> list[str]:
@@ -181,6 +234,7 @@ def track_stereo_session(
         timer=timer,
     )
     poses = [cast(StereoPose, r) for r in run.results]
+    fit_keys = poses[0].fit if poses else {}
     totals = timer.totals_s()
     return StereoRun(
         run.motion,
@@ -189,6 +243,7 @@ def track_stereo_session(
         np.array([[p.arms[s].n_ik for s in ("left", "right")] for p in poses], dtype=np.int64),
         totals.get("input", 0.0) + totals.get("track", 0.0),
         poses,
+        elbow_jumps([p.time_s for p in poses], {k: [p.fit[k] for p in poses] for k in fit_keys}),
     )
 
 
@@ -583,10 +638,13 @@ __all__ = [
     "ACCURACY_MODES",
     "ARM_JOINTS",
     "STEREO_CLIPS",
+    "ElbowJump",
     "StereoRun",
     "accuracy_header",
     "arm_errors_per_frame",
     "bench_stereo",
+    "elbow_jumps",
+    "elbow_jumps_in_folder",
     "evaluate_stereo",
     "format_accuracy_row",
     "frames_to_converge",

@@ -14,8 +14,11 @@ from mocapkit.io.session import load_session
 from mocapkit.pipelines.run import FIT_FILE, read_fit_csv
 from mocapkit.pipelines.stereo import (
     ARM_JOINTS,
+    ElbowJump,
     arm_errors_per_frame,
     bench_stereo,
+    elbow_jumps,
+    elbow_jumps_in_folder,
     evaluate_stereo,
     frames_to_converge,
     parse_cameras,
@@ -138,6 +141,11 @@ def test_skin_blob_tracking_runs_and_finds_the_head(session):
     assert np.median(np.linalg.norm(run.measured_mm[seen, 0] - head[seen], axis=1)) < 100.0
 
 
+def test_elbow_jump_limit_is_checked():
+    with pytest.raises(ConfigError, match="elbow_jump_mm_per_s: expected > 0 mm/s, found 0"):
+        StereoConfig(elbow_jump_mm_per_s=0.0)
+
+
 def test_keypoint_torso_needs_keypoints():
     with pytest.raises(ConfigError, match="use_keypoints"):
         StereoConfig(torso="keypoints")
@@ -189,8 +197,60 @@ def test_cli_track_stereo(session, tmp_path, capsys):
     rows, numeric = read_fit_csv(out / FIT_FILE)
     assert len(rows) == load_session(session).truth.time_s.shape[0]
     assert {"left_hand_mm", "right_hand_mm", "left_arm_edge_error"} <= set(numeric)
+    assert {"right_elbow_speed_mm_per_s", "right_elbow_jump"} <= set(numeric)
+    # the elbows' speeds: from the second frame on wherever the elbow is reported
+    assert np.isnan(numeric["left_elbow_speed_mm_per_s"][0])
+    assert np.isfinite(numeric["left_elbow_speed_mm_per_s"][1])
+    assert elbow_jumps_in_folder(out) == elbow_jumps(numeric["time_s"], numeric)
     text = capsys.readouterr().out
     assert "arm mean" in text and "torso yaw" in text
+
+
+def test_elbow_jumps_known_spans():
+    """Flagged frames become one span per run of consecutive flags, per side, in time order;
+    a fit without the columns (another tracker's) has none."""
+    t = np.arange(6) / 30.0
+    fit = {
+        "left_elbow_jump": [0, 1, 1, 0, 0, 1],
+        "left_elbow_speed_mm_per_s": [np.nan, 7000, 9000, 100, 100, 6500],
+        "right_elbow_jump": [0, 0, 0, 1, 0, 0],
+        "right_elbow_speed_mm_per_s": [np.nan, 100, 100, 12000, 100, 100],
+    }
+    assert elbow_jumps(t, fit) == [
+        ElbowJump("left", t[1], t[2], 2, 9000.0),
+        ElbowJump("right", t[3], t[3], 1, 12000.0),
+        ElbowJump("left", t[5], t[5], 1, 6500.0),
+    ]
+    assert "right elbow jumps at 0.100-0.100 s" in str(elbow_jumps(t, fit)[1])
+    assert elbow_jumps(t, {"rms_mm": np.zeros(6)}) == []
+
+
+def test_an_elbow_moving_faster_than_the_limit_is_a_jump(session):
+    """The tracker's per-frame check: the elbow's speed relative to its shoulder, flagged
+    above `StereoConfig.elbow_jump_mm_per_s`; forgotten when the arms are reset."""
+    s = load_session(session)
+    names = ["stereo_left", "stereo_right"]
+    tracker = StereoTracker(azad_skeleton(), [s.camera(c) for c in names], SMALL)
+    joints = np.zeros((len(CANONICAL_JOINTS), 3))
+
+    def ests(elbow_x_mm: float) -> dict:
+        pts = np.array([[0.0, 0, 0], [elbow_x_mm, 0, -280], [0, 0, -500], [0, 0, -520]])
+        return {side: type("Est", (), {"points_mm": pts})() for side in ("left", "right")}
+
+    first = tracker._elbow_jumps(0.0, ests(0.0), joints)
+    assert np.isnan(first["left_elbow_speed_mm_per_s"]) and first["left_elbow_jump"] == 0.0
+    limit = SMALL.elbow_jump_mm_per_s
+    slow = tracker._elbow_jumps(0.1, ests(0.09 * limit), joints)
+    assert slow["right_elbow_speed_mm_per_s"] == pytest.approx(0.9 * limit)
+    assert slow["right_elbow_jump"] == 0.0
+    fast = tracker._elbow_jumps(0.2, ests(0.09 * limit + 0.11 * limit), joints)
+    assert fast["right_elbow_speed_mm_per_s"] == pytest.approx(1.1 * limit)
+    assert fast["right_elbow_jump"] == 1.0
+    joints[CANONICAL_JOINTS.index("left_elbow")] = np.nan  # not reported: no speed
+    hidden = tracker._elbow_jumps(0.3, ests(0.0), joints)
+    assert np.isnan(hidden["left_elbow_speed_mm_per_s"]) and hidden["left_elbow_jump"] == 0.0
+    tracker.reset_arms()
+    assert np.isnan(tracker._elbow_jumps(0.4, ests(5000.0), joints)["right_elbow_speed_mm_per_s"])
 
 
 def test_arm_rois_hold_every_elbow_on_the_circle(session):

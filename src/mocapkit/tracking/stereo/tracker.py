@@ -59,7 +59,7 @@ from mocapkit.errors import ConfigError, SessionError, ShapeError
 from mocapkit.geometry.rotations import rotvec_from_matrix
 from mocapkit.skeleton.kinematics import canonical_positions, joint_positions
 from mocapkit.skeleton.limbs import arm
-from mocapkit.skeleton.model import Skeleton
+from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
 from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.base import (
     BRIDGE_S,
@@ -131,6 +131,12 @@ class StereoConfig:
     gap_limit_s : float
         Longest gap (s) in a measured point that its status calls ``bridged``; longer
         gaps are ``released`` (the hybrid tracker's default, 0.25 s).
+    elbow_jump_mm_per_s : float
+        An elbow moving faster than this relative to its shoulder from one frame to the
+        next is flagged as a jump (``<side>_elbow_jump`` in fit.csv): the arm filter's
+        cues at times favour the other side of the elbow circle for a frame (the elbow
+        above the head while the hand is right). About twice the fastest true elbow of
+        the tuning clips (3.2 m/s at 30 Hz).
     seed : int
     """
 
@@ -146,6 +152,7 @@ class StereoConfig:
     torso_anchor: str = "neck"
     reach_pad_mm: float = 80.0
     gap_limit_s: float = BRIDGE_S
+    elbow_jump_mm_per_s: float = 6000.0
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -161,6 +168,10 @@ class StereoConfig:
             raise ConfigError(f"yaw_gain: expected a share in [0, 1], found {self.yaw_gain}")
         if not self.gap_limit_s >= 0:
             raise ConfigError(f"gap_limit_s: expected >= 0 s, found {self.gap_limit_s}")
+        if not self.elbow_jump_mm_per_s > 0:
+            raise ConfigError(
+                f"elbow_jump_mm_per_s: expected > 0 mm/s, found {self.elbow_jump_mm_per_s}"
+            )
         if self.hand_offset_mm is not None and not self.hand_offset_mm >= 0:
             raise ConfigError(f"hand_offset_mm: expected >= 0 mm, found {self.hand_offset_mm}")
 
@@ -211,7 +222,11 @@ class StereoPose(FrameResult):
         ``"<side>_hand_mm"``: distance of the arm's hand point to the measured hand (NaN
         when not measured); ``"rms_mm"``, ``"max_mm"`` over the measured ones;
         ``"<side>_arm_edge_error"``: the arm filter's fused edge error (dimensionless, in
-        [0, 1]; 0 when every model point lies on a full gradient).
+        [0, 1]; 0 when every model point lies on a full gradient);
+        ``"<side>_elbow_speed_mm_per_s"``: the elbow's speed relative to its shoulder since
+        the previous frame (NaN on the first, or while the elbow is not reported);
+        ``"<side>_elbow_jump"``: 1 where that speed is above
+        ``StereoConfig.elbow_jump_mm_per_s``, else 0.
     worst : str
         The hand at ``fit["max_mm"]``.
     measured_mm : (3, 3) float array
@@ -312,6 +327,8 @@ class StereoTracker:
         self.n_frames = 0
         #: time (s) each measured point (`MEASURED`) was last measured; None: never
         self.last_seen_s: dict[str, float | None] = dict.fromkeys(MEASURED)
+        #: the previous frame's time and elbows relative to their shoulders (jump check)
+        self._prev_elbows: tuple[float, dict[str, FloatArray]] | None = None
         w, h = self.cameras[0].image_size
         # gradient maps, written in place every frame (no per-frame stacking copies)
         self._gx = np.zeros((len(self.cameras), h, w), np.float32)
@@ -324,6 +341,7 @@ class StereoTracker:
         self.filters = {
             s: ArmParticleFilter(s, self.arm_config, self.filters[s].rng) for s in SIDES
         }
+        self._prev_elbows = None
 
     # ------------------------------------------------------------------ helpers
     def _facing_yaw(self, at: FloatArray) -> float:
@@ -586,6 +604,7 @@ class StereoTracker:
         fit, worst = fit_summary(dist)
         for s in SIDES:
             fit[f"{s}_arm_edge_error"] = float(ests[s].edge_error)
+        fit.update(self._elbow_jumps(time_s, ests, joints))
         return StereoPose(
             time_s=time_s,
             q=q,
@@ -597,6 +616,23 @@ class StereoTracker:
             torso_yaw_rad=yaw,
             arms=ests,
         )
+
+    def _elbow_jumps(
+        self, time_s: float, ests: dict[str, ArmEstimate], joints: FloatArray
+    ) -> dict[str, float]:
+        """Per arm: the elbow's speed relative to its shoulder since the previous frame
+        and whether it is a jump (`StereoConfig.elbow_jump_mm_per_s`)."""
+        elbows = {s: ests[s].points_mm[1] - ests[s].points_mm[0] for s in SIDES}
+        prev, self._prev_elbows = self._prev_elbows, (time_s, elbows)
+        out = {}
+        for s in SIDES:
+            reported = bool(np.all(np.isfinite(joints[CANONICAL_JOINTS.index(f"{s}_elbow")])))
+            speed = math.nan
+            if prev is not None and reported and time_s > prev[0]:
+                speed = float(np.linalg.norm(elbows[s] - prev[1][s])) / (time_s - prev[0])
+            out[f"{s}_elbow_speed_mm_per_s"] = speed
+            out[f"{s}_elbow_jump"] = float(speed > self.config.elbow_jump_mm_per_s)
+        return out
 
     def _status(self, time_s: float, meas: FloatArray) -> dict[str, str]:
         """Per measured point: seen, bridged, released or missing (never measured yet)."""

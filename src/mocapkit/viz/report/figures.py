@@ -36,9 +36,10 @@ STATUS_COLOURS = {
     "released": "#d62728",
     "missing": "#7f7f7f",
 }
-#: Unit suffixes of ``fit.csv`` column names and their axis titles; a column without
-#: one is unitless (a ratio, a count or an edge cost).
-UNIT_SUFFIXES = {"_mm": "mm", "_px": "px", "_deg": "degrees", "_s": "s"}
+#: Unit suffixes of ``fit.csv`` column names and their axis titles, the first that ends
+#: the name wins (a speed before its seconds); a column without one is unitless (a ratio,
+#: a count, a flag or an edge cost).
+UNIT_SUFFIXES = {"_mm_per_s": "mm/s", "_mm": "mm", "_px": "px", "_deg": "degrees", "_s": "s"}
 
 
 @dataclass(frozen=True)
