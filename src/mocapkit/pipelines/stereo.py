@@ -68,10 +68,11 @@ class ElbowJump:
     top_mm_per_s: float
 
     def __str__(self) -> str:
+        frames = f"{self.n_frames} frame{'s' if self.n_frames != 1 else ''}"
         return (
-            f"the {self.side} elbow jumps at {self.start_s:.3f}-{self.end_s:.3f} s "
-            f"({self.n_frames} frames, up to {self.top_mm_per_s / 1000:.1f} m/s relative to "
-            "the shoulder): the arm filter took the other side of the elbow circle; see fit.csv"
+            f"the {self.side} elbow jumps at {self.start_s:.3f}-{self.end_s:.3f} s ({frames}, "
+            f"up to {self.top_mm_per_s / 1000:.1f} m/s relative to the shoulder): the arm "
+            "filter took the other side of the elbow circle; see fit.csv"
         )
 
 
