@@ -35,8 +35,10 @@ from mocapkit.io.openpose import (
 from mocapkit.io.session import Session, load_session
 from mocapkit.io.session_csv import Keypoints, read_keypoints_csv
 from mocapkit.pipelines.camera_check import check_session_cameras, warn_placed_subject
+from mocapkit.pipelines.mono_frames import MonoFrames, camera_joints
 from mocapkit.pipelines.run import check_result_folder, run_tracker
 from mocapkit.progress import Progress
+from mocapkit.tracking.base import FrameResult
 from mocapkit.tracking.mono.lengths import (
     ANTHROPOMETRIC_RATIOS,
     estimate_link_lengths,
@@ -124,41 +126,45 @@ class MonoRun:
     Attributes
     ----------
     motion : Motion
-    frames : list of MonoFrame
+    frames : MonoFrames
+        The last pass's `MonoFrame` answers in compact columns, in frame order.
     lengths : (L,) float
         Link lengths used (mm; px for the orthographic model).
     model : StickModel
     px_per_mm : float
         Image scale used to turn orthographic px into mm (NaN for the other models).
-    results : list of MonoResult
-        The last pass's per-frame results, as written to ``fit.csv``.
+    results : sequence of FrameResult
+        The last pass's per-frame results, as written to ``fit.csv``
+        (`mocapkit.pipelines.result_table.ResultTable`).
     input_px : (T, K, 2) float
         The 2-D joints of ``model`` the tracker was given (px), NaN where unseen.
     """
 
     motion: Motion
-    frames: list[MonoFrame]
+    frames: MonoFrames
     lengths: FloatArray
     model: StickModel
     px_per_mm: float
-    results: list[MonoResult] = field(default_factory=list)
+    results: Sequence[FrameResult] = field(default_factory=list)
     input_px: FloatArray = field(default_factory=lambda: np.zeros((0, 0, 2)))
 
     def summary(self) -> dict[str, float]:
         """Mean survivors, candidates, share pruned, residual (px) and frames with a pose."""
-        posed = [f for f in self.frames if f.code >= 0]
-        cand = np.array([f.n_candidates for f in posed], dtype=float)
-        surv = np.array([f.n_survivors for f in posed], dtype=float)
+        f = self.frames
+        posed = f.code >= 0
+        cand = f.n_candidates[posed].astype(float)
+        surv = f.n_survivors[posed].astype(float)
         share = 1.0 - surv / np.maximum(cand, 1.0)
+        any_posed = bool(posed.any())
         return {
-            "frames": float(len(self.frames)),
-            "posed_frames": float(len(posed)),
-            "candidates_mean": float(cand.mean()) if posed else float("nan"),
-            "survivors_mean": float(surv.mean()) if posed else float("nan"),
-            "pruned_share_mean": float(share.mean()) if posed else float("nan"),
-            "all_pruned_frames": float(sum(f.pruned_all for f in posed)),
-            "residual_px_mean": float(np.nanmean([f.residual_px for f in posed]))
-            if posed
+            "frames": float(len(f)),
+            "posed_frames": float(posed.sum()),
+            "candidates_mean": float(cand.mean()) if any_posed else float("nan"),
+            "survivors_mean": float(surv.mean()) if any_posed else float("nan"),
+            "pruned_share_mean": float(share.mean()) if any_posed else float("nan"),
+            "all_pruned_frames": float(sum(f.pruned_all[posed].tolist())),
+            "residual_px_mean": float(np.nanmean(f.residual_px[posed].tolist()))
+            if any_posed
             else float("nan"),
         }
 
@@ -458,15 +464,15 @@ def _run(
     model: StickModel,
     t: FloatArray,
     px: FloatArray,
-) -> list[MonoFrame]:
+) -> MonoFrames:
     tracker = MonoTracker(lengths, cam, dt, cfg, model)
-    frames: list[MonoFrame] = []
+    frames = MonoFrames()
     with Progress(len(t), "track mono") as prog:
         for ti, p in zip(t, px):
-            frames += tracker.push(float(ti), p)
+            frames.extend(tracker.push(float(ti), p))
             prog.update()
-    frames += tracker.finish()
-    frames.sort(key=lambda f: f.index)
+    frames.extend(tracker.finish())
+    frames.sort()
     return frames
 
 
@@ -495,7 +501,7 @@ def online_mono_stream(
 
 
 def refined_lengths(
-    frames: list[MonoFrame],
+    frames: Sequence[MonoFrame],
     model: StickModel,
     lengths: FloatArray,
     short_link_weight: float = 0.0,
@@ -513,7 +519,7 @@ def refined_lengths(
     proportions at the video's stature are moved the share ``short_link_weight`` of the
     way up (`mocapkit.tracking.mono.lengths.raise_short_links`; 0: off).
     """
-    pos = np.stack([f.joints_in_camera for f in frames])
+    pos = camera_joints(frames)
     vec = pos[:, model.child] - pos[:, model.parent]
     mid = 0.5 * (pos[:, model.child] + pos[:, model.parent])
     ray = mid / np.linalg.norm(mid, axis=-1, keepdims=True)
@@ -670,8 +676,9 @@ def track_mono(
         rebuilt_reach_tolerance=0.0,
     )
     for _ in range(n_refine):
-        frames = _run(lengths, cam, dt, paper_cfg, model, t, px)
-        lengths = refined_lengths(frames, model, lengths, cfg.short_link_weight)
+        pass_frames = _run(lengths, cam, dt, paper_cfg, model, t, px)
+        lengths = refined_lengths(pass_frames, model, lengths, cfg.short_link_weight)
+        del pass_frames
     lengths_mm = lengths / scale if ortho else lengths
     skeleton = output_skeleton(model, lengths_mm)
     tracker = MonoTracker(lengths, cam, dt, cfg, model, initial_pose=initial)
@@ -701,16 +708,39 @@ def track_mono(
     sines: Sequence[FloatArray | None] = [None] * t.shape[0]
     if keypoints3d is not None and cfg.depth_order_weight > 0:
         sines = list(detector_link_sines(keypoints3d, t, model))
+    recorded = _FrameRecorder(stream)
     run = run_tracker(
-        stream,
+        recorded,
         (MonoSample(float(ti), p, a, s) for ti, p, a, s in zip(t, px, feet, sines)),
         len(t),
         out_dir,
         label="track mono",
         source=f"mono tracker (camera {cam_name}) on {session.path}",
         joint_names=stream.joint_names,
+        keep_results=False,
     )
-    results = [r for r in run.results if isinstance(r, MonoResult)]
-    frames = [r.frame for r in results if r.frame is not None]
+    recorded.frames.sort()
     warn_placed_subject(session, cam_name, run.motion.joints_mm, run.motion.joint_names)
-    return MonoRun(run.motion, frames, lengths, model, scale, results, px)
+    return MonoRun(run.motion, recorded.frames, lengths, model, scale, run.frames, px)
+
+
+class _FrameRecorder:
+    """A `MonoStream` whose results' `MonoFrame` are kept in compact columns as they pass
+    (the runner keeps only the results' common fields)."""
+
+    def __init__(self, stream: MonoStream) -> None:
+        self.stream = stream
+        self.skeleton = stream.skeleton
+        self.frames = MonoFrames()
+
+    def push(self, sample: MonoSample) -> list[FrameResult]:
+        return self._record(self.stream.push(sample))
+
+    def finish(self) -> list[FrameResult]:
+        return self._record(self.stream.finish())
+
+    def _record(self, results: list[FrameResult]) -> list[FrameResult]:
+        for r in results:
+            if isinstance(r, MonoResult) and r.frame is not None:
+                self.frames.append(r.frame)
+        return results

@@ -158,7 +158,7 @@ def flip_accuracy(run: MonoRun, truth_in_camera: FloatArray) -> tuple[float, Flo
         True stick joints in the camera frame, frames aligned with ``run.frames``.
     """
     model: StickModel = run.model
-    est = np.stack([f.joints_in_camera for f in run.frames])
+    est = run.frames.joints_in_camera
     dz_true = truth_in_camera[:, model.child, 2] - truth_in_camera[:, model.parent, 2]
     length = np.linalg.norm(model.link_vectors(truth_in_camera), axis=-1)
     dz_est = est[:, model.child, 2] - est[:, model.parent, 2]

@@ -195,7 +195,7 @@ def track_video(
 
         dt = 1.0 / fps
         lengths, _ = video_lengths(px, model, cam, cfg, dt, None)
-        poses = _run(lengths, cam, dt, cfg, model, t, px)
+        poses = list(_run(lengths, cam, dt, cfg, model, t, px))
     return VideoTrack(clip, t, skin, kept, px, poses, model, cam)
 
 

@@ -36,6 +36,7 @@ from mocapkit.io.atomic import (
 from mocapkit.io.motion import Motion
 from mocapkit.io.motion_files import write_result_folder
 from mocapkit.io.opensim import write_opensim_folder
+from mocapkit.pipelines.result_table import ResultTable
 from mocapkit.progress import Progress
 from mocapkit.skeleton.limbs import has_limb, head_dofs, limb
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
@@ -64,19 +65,27 @@ class RunResult:
     motion : Motion
         The tracked motion (poses and canonical joints).
     results : list of FrameResult
-        One per sample, in order.
+        One per sample, in order (empty with ``keep_results`` False: see ``table``).
     out_dir : Path or None
         The result folder written, if any.
+    table : ResultTable or None
+        With ``keep_results`` False, the results' common fields, one row per sample.
     """
 
     motion: Motion
     results: list[FrameResult]
     out_dir: Path | None
+    table: ResultTable | None = None
+
+    @property
+    def frames(self) -> Sequence[FrameResult]:
+        """The per-sample results however they were kept (``results`` or ``table``)."""
+        return self.results if self.table is None else self.table
 
     @property
     def gaps(self) -> list[Gap]:
         """Where effectors were released or missing (`find_gaps`)."""
-        return find_gaps(self.results)
+        return find_gaps(self.frames)
 
 
 def run_tracker(
@@ -89,6 +98,7 @@ def run_tracker(
     timer: StageTimer = NULL_TIMER,
     skeleton: Skeleton | None = None,
     joint_names: Sequence[str] | None = None,
+    keep_results: bool = True,
 ) -> RunResult:
     """Stream ``samples`` through ``tracker.update`` and write the result folder.
 
@@ -118,6 +128,10 @@ def run_tracker(
         Canonical joints of the motion taken from the results' ``joints_mm`` (trackers
         that estimate joints first and fit ``q`` to them, as the mono tracker); default:
         the skeleton's canonical joints by forward kinematics of ``q``.
+    keep_results : bool
+        Keep the tracker's result objects (its own fields, as a pipeline reads them);
+        False: only their common fields, in a `ResultTable` (about a quarter of the
+        memory per frame: what keeps a long recording's run flat).
 
     Raises
     ------
@@ -130,7 +144,7 @@ def run_tracker(
     if out_dir is not None:
         check_result_folder(out_dir)  # before the work, not after it
     sk = tracker.skeleton if skeleton is None else skeleton
-    results: list[FrameResult] = []
+    results: list[FrameResult] | ResultTable = [] if keep_results else ResultTable(n_samples)
     delayed = tracker if isinstance(tracker, DelayedTracker) else None
     streaming = None if isinstance(tracker, DelayedTracker) else tracker
     it = iter(samples)
@@ -143,14 +157,19 @@ def run_tracker(
                 break
             with stage_track:
                 if delayed is not None:
-                    results += delayed.push(sample)
+                    results.extend(delayed.push(sample))
                 elif streaming is not None:
                     results.append(streaming.update(sample))
             prog.update()
     if delayed is not None:
         with stage_track:
-            results += delayed.finish()
-        results.sort(key=lambda r: r.time_s)
+            results.extend(delayed.finish())
+        if isinstance(results, ResultTable):
+            results.sort_by_time()
+        else:
+            results.sort(key=lambda r: r.time_s)
+    if isinstance(results, ResultTable):
+        results.trim()
     if not results:
         raise ShapeError(f"{label}: no samples to track")
     motion = results_motion(results, sk, source, joint_names)
@@ -158,6 +177,8 @@ def run_tracker(
     if out_dir is not None:
         with timer.stage("write"):
             out = write_run_folder(out_dir, motion, results)
+    if isinstance(results, ResultTable):
+        return RunResult(motion, [], out, results)
     return RunResult(motion, results, out)
 
 
@@ -170,8 +191,11 @@ def results_motion(
     """The motion of a run's results (time order), with `unobserved_to_nan` applied:
     joints by forward kinematics of ``q``, or taken from the results' ``joints_mm`` for
     ``joint_names`` (as `run_tracker`'s parameter)."""
-    t = np.array([r.time_s for r in results])
-    q = np.stack([r.q for r in results])
+    if isinstance(results, ResultTable):
+        t, q, all_joints = results.time_s, results.q, results.joints_mm
+    else:
+        t = np.array([r.time_s for r in results])
+        q = np.stack([r.q for r in results])
     if joint_names is None:
         motion = Motion.from_q(skeleton, t, q, source=source)
     else:
@@ -180,7 +204,11 @@ def results_motion(
         if unknown:
             raise unknown_name("canonical joint", unknown[0], CANONICAL_JOINTS, "joint_names")
         rows = [CANONICAL_JOINTS.index(n) for n in names]
-        joints = np.stack([r.joints_mm[rows] for r in results])
+        joints = (
+            all_joints[:, rows]
+            if isinstance(results, ResultTable)
+            else np.stack([r.joints_mm[rows] for r in results])
+        )
         motion = Motion(skeleton, t, q, names, joints, source)
     return unobserved_to_nan(motion, results)
 
