@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from mocapkit.errors import ConfigError, ShapeError
+from mocapkit.ik.config import IKConfig
 from mocapkit.ik.sdls import SDLSSolver
 from mocapkit.skeleton import center_of_mass, load_preset
 from mocapkit.tracking.hybrid.balance import (
@@ -16,6 +17,7 @@ from mocapkit.tracking.hybrid.balance import (
     calibrate_balance,
     cog_offset_mm,
     forward_direction,
+    restore_ik_config,
     restored_lean_slope,
     spine_dof_indices,
     support_points,
@@ -360,3 +362,13 @@ def test_guided_balance_gives_the_same_pose_with_fewer_restores(setup):
         np.testing.assert_array_equal(b.q, a.q)
     assert slope is not None and slope < 0
     assert n_guided < 0.7 * n_plain
+
+
+def test_restore_ik_config_stops_restores_on_their_best_iterate():
+    ik = IKConfig(max_iterations=30, term_clamp_scale=3.0)
+    assert restore_ik_config(ik, BalanceConfig(mode="solve")) is ik
+    cfg = restore_ik_config(ik, BalanceConfig(mode="solve", restore_stall_iterations=3))
+    assert (cfg.stall_iterations, cfg.stall_keep_best) == (3, True)
+    assert cfg.max_iterations == 30 and cfg.term_clamp_scale == 3.0
+    with pytest.raises(ConfigError, match="restore_stall_iterations: expected >= 0"):
+        BalanceConfig(restore_stall_iterations=-1)
