@@ -196,6 +196,34 @@ def test_unreachable_target_stops_early_once_settled(skel, clamp):
     assert b.residual_mm[hand] == pytest.approx(a.residual_mm[hand], rel=0.01)
 
 
+def test_stall_keep_best_ends_on_the_iterate_of_least_error(skel):
+    """With `IKConfig.stall_keep_best` the solve returns the iterate (of those it took)
+    whose summed effector error is smallest: the same pose as the plain solve stopped
+    after that many iterations, which is no worse than where the stall stop came."""
+    base = dict(max_iterations=60, term_clamp_scale=3.0, relax_substeps=3, svd="gesvd")
+    best = SDLSSolver(
+        skel, config=IKConfig(**base, stall_iterations=3, stall_fraction=0.01, stall_keep_best=True)
+    )
+    q0 = best.secondary.omega
+    rng = np.random.default_rng(7)
+    # every effector a little off a standing pose, one hand out of reach
+    targets = best.effector_positions(q0) + rng.normal(0.0, 4.0, (len(best.effectors), 3))
+    targets[best.effector_index("right_hand")] += [1500.0, -80.0, 60.0]
+    res = best.solve(q0, targets)
+    assert not res.converged and 3 <= res.iterations < 60
+    sums = []
+    for n in range(1, res.iterations + 1):
+        plain = SDLSSolver(skel, config=IKConfig(**{**base, "max_iterations": n}))
+        sums.append((float(np.nansum(plain.solve(q0, targets).residual_mm)), n))
+    least, n_best = min(sums)
+    assert np.nansum(res.residual_mm) == pytest.approx(least, rel=1e-12)
+    again = SDLSSolver(skel, config=IKConfig(**{**base, "max_iterations": n_best}))
+    np.testing.assert_allclose(res.q, again.solve(q0, targets).q, rtol=0, atol=1e-12)
+    assert np.nansum(res.residual_mm) <= sums[-1][0]
+    with pytest.raises(ConfigError, match="stall_keep_best: expected a stall stop"):
+        IKConfig(stall_keep_best=True)
+
+
 def test_warm_start_tracks_in_about_one_iteration(skel, solver):
     n = 50
     t = np.arange(n) / 50.0

@@ -159,6 +159,7 @@ class SDLSSolver:
             substeps=int(cfg.relax_substeps),
             term_scale=float(cfg.term_clamp_scale),
             thin_svd=cfg.svd == "gesvd",
+            keep_best=bool(cfg.stall_keep_best),
         )
 
     @property

@@ -97,6 +97,9 @@ class IKSettings(NamedTuple):
         Stop when neither the largest error nor the sum of the errors has dropped by
         ``stall_fraction`` in this many steps (0: off).
     stall_fraction : float
+    keep_best : bool
+        With ``stall_iter``: the solve ends on the iterate where the sum of the errors
+        was smallest (`IKConfig.stall_keep_best`).
     substeps : int
         Gradient steps of the secondary task per iteration (`IKConfig.relax_substeps`).
     term_scale : float
@@ -118,6 +121,7 @@ class IKSettings(NamedTuple):
     substeps: int = 1
     term_scale: float = 1.0
     thin_svd: bool = False
+    keep_best: bool = False
 
 
 class _Buffers(NamedTuple):
@@ -344,7 +348,8 @@ def solve_ik_nb(
     and per-iteration diagnostics to ``trace`` (max_iter, 4). Stops early when the
     largest error and the sum of the errors have not dropped by the share
     ``stall_fraction`` in ``stall_iter`` steps (an unreachable target has settled; more
-    steps only cost time). Returns the number of steps taken.
+    steps only cost time); with ``keep_best`` the solve ends on the iterate where the
+    sum of the errors was smallest. Returns the number of steps taken.
     """
     eff_joint, eff_point, targets, frozen = (
         task.eff_joint,
@@ -384,6 +389,10 @@ def solve_ik_nb(
     since_best = 0
     best_sum = residual.sum()
     since_best_sum = 0
+    keep_best = settings.keep_best and stall_iter > 0
+    q_best = q.copy()
+    residual_best = residual.copy()
+    sum_best = residual.sum()
     while it < settings.max_iter and k_eff > 0:
         if err < tol and it >= min_iter:
             break
@@ -405,6 +414,10 @@ def solve_ik_nb(
             q, kin, eff_joint, eff_point, frames[0], frames[1], frames[2], pts, jac
         )
         err = residuals_nb(targets, pts, residual)
+        if keep_best and residual.sum() < sum_best:
+            sum_best = residual.sum()
+            q_best[:] = q
+            residual_best[:] = residual
         if err < best_err * (1.0 - stall_fraction):
             best_err = err
             since_best = 0
@@ -417,6 +430,9 @@ def solve_ik_nb(
         else:
             since_best_sum += 1
         it += 1
+    if keep_best and residual.sum() > sum_best:
+        q[:] = q_best
+        residual[:] = residual_best
     return it
 
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from mocapkit.errors import ConfigError, ShapeError
+from mocapkit.ik.config import IKConfig
 from mocapkit.ik.sdls import SDLSSolver
 from mocapkit.skeleton import center_of_mass, load_preset
 from mocapkit.tracking.hybrid.balance import (
@@ -16,6 +17,7 @@ from mocapkit.tracking.hybrid.balance import (
     calibrate_balance,
     cog_offset_mm,
     forward_direction,
+    restore_ik_config,
     restored_lean_slope,
     spine_dof_indices,
     support_points,
@@ -62,14 +64,12 @@ def test_tau_zero_at_rest_and_sign(setup):
     np.testing.assert_array_equal(res.taus, 0.0)
 
 
-@pytest.mark.parametrize(
-    ("mode", "search"), [("proportional", "bisect"), ("solve", "bisect"), ("solve", "newton")]
-)
-def test_squat_keeps_markers_and_improves_balance(setup, mode, search):
+@pytest.mark.parametrize("mode", ["proportional", "solve"])
+def test_squat_keeps_markers_and_improves_balance(setup, mode):
     sk, solver, model = setup
     q0 = solver.secondary.omega
     support = support_points(sk, q0)
-    cfg = BalanceConfig(mode=mode, search=search, newton_steps=3)
+    cfg = BalanceConfig(mode=mode)
     worst_off, worst_on, inside = 0.0, 0.0, 0
     depths = np.linspace(-20.0, -300.0, 12)
     for q, t in squat(solver, depths):
@@ -124,35 +124,6 @@ class _Counting(SDLSSolver):
         return super().solve(*args, **kwargs)
 
 
-def test_secant_search_as_close_as_bisection_with_fewer_solves(setup):
-    sk, _solver, _model = setup
-    solver = _Counting(sk)
-    q0 = solver.secondary.omega
-    support = support_points(sk, q0)
-    secant, bisect = BalanceConfig(mode="solve", search="secant"), BalanceConfig(mode="solve")
-    slope = None
-    for q, t in squat(solver, np.linspace(-100.0, -300.0, 5)):
-        cog, back, front = cog_offset_mm(sk, q, support)
-        assert cog > front  # the squat leans forward out of the box: a bow is needed
-        goal = front - secant.margin_fraction * (front - back)
-        _Counting.solves = 0
-        a = balance_pose(solver, q, t, q0[2], support, None, secant, slope_mm_per_rad=slope)
-        n_secant = _Counting.solves
-        slope = a.slope_mm_per_rad
-        _Counting.solves = 0
-        b = balance_pose(solver, q, t, q0[2], support, None, bisect)
-        n_bisect = _Counting.solves
-        # as close to the goal as bisection (which the markers-first halving may pull
-        # away from it), each within the restore's tolerance
-        off_a = abs(cog_offset_mm(sk, a.q, support)[0] - goal)
-        off_b = abs(cog_offset_mm(sk, b.q, support)[0] - goal)
-        assert off_a <= off_b + 1.0
-        assert np.nanmax(a.residual_mm) <= 2.0 * solver.config.tol_mm
-        assert np.all(a.taus > 0)  # a forward bow
-        assert n_secant <= secant.max_evaluations < n_bisect
-        assert slope is not None and slope < 0  # a forward bow moves the CoG backwards
-
-
 def test_no_lean_tried_when_markers_are_off_without_one(setup):
     sk, _solver, _model = setup
     solver = _Counting(sk)
@@ -202,36 +173,7 @@ def test_restored_lean_slope_is_the_cog_derivative_along_the_restoring_direction
     assert cog_offset_mm(sk, a, support)[0] < cog_offset_mm(sk, q, support)[0]
 
 
-def test_newton_search_reaches_the_margin_in_three_solves(setup):
-    sk, _solver, _model = setup
-    solver = _Counting(sk)
-    q0 = solver.secondary.omega
-    support = support_points(sk, q0)
-    newton = BalanceConfig(mode="solve", search="newton", newton_steps=3)
-    bisect = BalanceConfig(mode="solve", bisection_steps=6)
-    for q, t in squat(solver, np.linspace(-100.0, -300.0, 5)):
-        cog, back, front = cog_offset_mm(sk, q, support)
-        assert cog > front  # the squat leans forward out of the box: a bow is needed
-        margin = newton.margin_fraction * (front - back)
-        _Counting.solves = 0
-        a = balance_pose(solver, q, t, q0[2], support, None, newton)
-        n_newton = _Counting.solves
-        _Counting.solves = 0
-        balance_pose(solver, q, t, q0[2], support, None, bisect)
-        n_bisect = _Counting.solves
-        cog_a = cog_offset_mm(sk, a.q, support)[0]
-        # inside the box, within a fifth of the margin of the goal (front - margin); the
-        # bisection's 6 steps resolve the spine's range / 64 (about 0.02 rad, 1-2 mm here)
-        assert back <= cog_a <= front
-        assert abs(cog_a - (front - margin)) < 0.2 * margin
-        assert np.nanmax(a.residual_mm) <= 2.0 * solver.config.tol_mm
-        assert np.all(a.taus > 0)  # a forward bow
-        # a restore at zero lean first where the IK left the markers (by > 2 tol), then the steps
-        assert n_newton <= newton.newton_steps + 1 < n_bisect
-
-
-@pytest.mark.parametrize("search", ["bisect", "newton"])
-def test_pose_kept_without_a_restore_where_no_lean_is_applied_when_asked(setup, search):
+def test_pose_kept_without_a_restore_where_no_lean_is_applied_when_asked(setup):
     sk, _solver, _model = setup
     solver = _Counting(sk)
     q0 = solver.secondary.omega
@@ -240,7 +182,7 @@ def test_pose_kept_without_a_restore_where_no_lean_is_applied_when_asked(setup, 
     cog, back, front = cog_offset_mm(sk, q, support)
     margin = 0.15 * (front - back)
     assert back + margin <= cog <= front - margin  # balanced already
-    skip = BalanceConfig(mode="solve", search=search, restore_without_lean=False)
+    skip = BalanceConfig(mode="solve", restore_without_lean=False)
     _Counting.solves = 0
     res = balance_pose(solver, q, t, q0[2], support, None, skip)
     assert _Counting.solves == 0
@@ -271,15 +213,6 @@ def test_pose_kept_without_a_restore_where_no_lean_is_applied_when_asked(setup, 
     np.testing.assert_array_equal(res.q, q)
     np.testing.assert_array_equal(res.taus, 0.0)
     assert res.residual_mm[1] == pytest.approx(4.0 * solver.config.tol_mm)
-
-
-def test_bad_search_config():
-    with pytest.raises(ConfigError, match="BalanceConfig.search"):
-        BalanceConfig(search="golden")
-    with pytest.raises(ConfigError, match="max_evaluations >= 2"):
-        BalanceConfig(max_evaluations=1)
-    with pytest.raises(ConfigError, match="newton_steps: expected >= 1"):
-        BalanceConfig(newton_steps=0)
 
 
 def _reference_bisection(f, lo, hi, steps):
@@ -360,3 +293,13 @@ def test_guided_balance_gives_the_same_pose_with_fewer_restores(setup):
         np.testing.assert_array_equal(b.q, a.q)
     assert slope is not None and slope < 0
     assert n_guided < 0.7 * n_plain
+
+
+def test_restore_ik_config_stops_restores_on_their_best_iterate():
+    ik = IKConfig(max_iterations=30, term_clamp_scale=3.0)
+    assert restore_ik_config(ik, BalanceConfig(mode="solve")) is ik
+    cfg = restore_ik_config(ik, BalanceConfig(mode="solve", restore_stall_iterations=3))
+    assert (cfg.stall_iterations, cfg.stall_keep_best) == (3, True)
+    assert cfg.max_iterations == 30 and cfg.term_clamp_scale == 3.0
+    with pytest.raises(ConfigError, match="restore_stall_iterations: expected >= 0"):
+        BalanceConfig(restore_stall_iterations=-1)

@@ -26,26 +26,9 @@ Modes
     tried: the markers-first rule would halve it towards nothing (with noisy member
     markers that is most frames, each of which the search and the halving spent 20
     solves on). Otherwise the lean is bisected (14 solves; with ``guided_bisection``
-    the same lean from 3-5 where the restored CoG decreases with the lean), or, with
-    ``search="secant"``, found by a secant search on the CoG offset, which is close to
-    linear in the lean: from the previous frame's slope (or a small probe) to within
-    ``cog_tol_mm``, in 2-5 solves, the last of which is kept. The secant is not the
-    default: its leans differ from bisection's by less than a millimetre of CoG, but
-    the video refinement downstream (with its elbow-jump penalty) is sensitive to
-    such differences: on one accuracy clip with positions only the elbow error
-    with video went from 41.0 to 76.8 mm.
-    With ``search="newton"`` the first lean is a Newton step from the analytic slope
-    of the restored CoG (`restored_lean_slope`: the CoG Jacobian along the lean with the restore's
-    linearised answer), and the next steps use the secant through the restores made:
-    ``newton_steps`` restore solves (3 in the tracker: within 2 mm of the goal on the
-    squat poses of the tests, where the analytic step alone lands 20-60 mm past it,
-    the restore following the lean less than its linearisation says). The markers are
-    checked on the pose itself (no restore at zero lean unless they are off by more
-    than twice the IK tolerance). Not the tracker's default: its leans differ from
-    bisection's by a few millimetres of CoG, and the arm-refining configurations moved
-    by it (positions only, elbow with video 65.3 -> 85.6 mm; docs/design-notes/hybrid.md).
+    the same lean from 3-5 where the restored CoG decreases with the lean).
     ``restore_without_lean=False`` (the tracker's default,
-    `mocapkit.tracking.hybrid.TRACKING_BALANCE`, with any search) skips the restore
+    `mocapkit.tracking.hybrid.tracker.TRACKING_BALANCE`) skips the restore
     solve wherever no lean is applied, unless an effector is more than
     ``restore_above_mm`` off its target.
 ``"off"``
@@ -56,12 +39,13 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import ConfigError, ShapeError
+from mocapkit.ik.config import IKConfig
 from mocapkit.ik.sdls import SDLSSolver
 from mocapkit.skeleton.kinematics import (
     center_of_mass,
@@ -74,7 +58,6 @@ from mocapkit.skeleton.model import Skeleton
 FloatArray = NDArray[np.float64]
 
 _BALANCE_MODES = ("proportional", "solve", "off")
-_SEARCHES = ("bisect", "secant", "newton")
 
 
 @dataclass(frozen=True)
@@ -88,22 +71,11 @@ class BalanceConfig:
         ``"solve"`` mode: keep the centre of gravity this fraction of the box depth
         inside the front and back edges.
     bisection_steps : int
-        Bisection iterations on the lean angle (``search="bisect"`` and the
+        Bisection iterations on the lean angle (``"solve"`` mode and the
         calibration of the proportional rule).
-    search : {"bisect", "secant", "newton"}
-        ``"solve"`` mode: how the lean is found (see the module docstring).
-    cog_tol_mm : float
-        ``search="secant"``: stop when the centre of gravity is this close to its goal.
-    max_evaluations : int
-        ``search="secant"``: most trial leans (restore solves) per frame.
-    newton_steps : int
-        ``search="newton"``: restore solves of the Newton search (each a step on the
-        lean from the analytic slope of the restored CoG; the first is usually within
-        a few millimetres of the goal).
     restore_without_lean : bool
         ``"solve"`` mode: where no lean is applied (the centre of gravity already inside
-        the margin, or ``search="newton"`` and head and hands off their markers by more
-        than twice the IK tolerance at the pose itself), still run the restore solve
+        the margin), still run the restore solve
         (spine frozen) from the pose. When False the pose is returned as it came, with
         no solve (the tracker's smoothing polish solves after the balance step anyway),
         unless an effector is more than ``restore_above_mm`` from its target.
@@ -112,25 +84,28 @@ class BalanceConfig:
         this far (mm) from its target (a foot just re-planted, a hand the refinement
         moved); member-marker noise leaves about 5 mm.
     guided_bisection : bool
-        ``search="bisect"``: find the bisection's lean with fewer restore solves
+        ``"solve"`` mode: find the bisection's lean with fewer restore solves
         (`_monotone_bisection`: regula falsi on the bisection's own midpoints, the
         other midpoints' signs inferred where the restored CoG decreases with the lean,
         as it does with the head pinned). The same lean as the plain bisection wherever
         it decreases over the points involved (every frame of the benchmark and
         accuracy sessions; `mocapkit.tracking.hybrid.TRACKING_BALANCE`). False evaluates
         every bisection step.
+    restore_stall_iterations : int
+        The restore solves stop once neither the largest effector error nor their sum
+        has dropped by 1 % in this many iterations, and end on the iterate of least
+        summed error (`restore_ik_config`, `mocapkit.ik.config.IKConfig.stall_keep_best`);
+        0: they run as the solver is configured. With noisy member markers no restore
+        reaches the IK tolerance: it settles in 5-10 iterations, then chatters.
     """
 
     mode: str = "proportional"
     margin_fraction: float = 0.15
     bisection_steps: int = 12
-    search: str = "bisect"
-    cog_tol_mm: float = 0.5
-    max_evaluations: int = 5
-    newton_steps: int = 1
     restore_without_lean: bool = True
     restore_above_mm: float = 20.0
     guided_bisection: bool = False
+    restore_stall_iterations: int = 0
 
     def __post_init__(self) -> None:
         if self.mode not in _BALANCE_MODES:
@@ -145,19 +120,28 @@ class BalanceConfig:
             raise ConfigError(
                 f"BalanceConfig.bisection_steps: expected >= 1, found {self.bisection_steps}"
             )
-        if self.search not in _SEARCHES:
+        if self.restore_stall_iterations < 0:
             raise ConfigError(
-                f"BalanceConfig.search: expected one of {_SEARCHES}, found {self.search!r}"
+                "BalanceConfig.restore_stall_iterations: expected >= 0 (0: off), found "
+                f"{self.restore_stall_iterations}"
             )
-        if self.newton_steps < 1:
-            raise ConfigError(
-                f"BalanceConfig.newton_steps: expected >= 1, found {self.newton_steps}"
-            )
-        if not self.cog_tol_mm > 0 or self.max_evaluations < 2:
-            raise ConfigError(
-                "BalanceConfig: expected cog_tol_mm > 0 and max_evaluations >= 2, found "
-                f"{self.cog_tol_mm}, {self.max_evaluations}"
-            )
+
+
+#: Share by which the errors must drop within `BalanceConfig.restore_stall_iterations`.
+RESTORE_STALL_FRACTION = 0.01
+
+
+def restore_ik_config(ik: IKConfig, config: BalanceConfig) -> IKConfig:
+    """The settings of the balance step's restore solver: ``ik`` with the stall stop of
+    ``config.restore_stall_iterations`` ending on the best iterate (unchanged when 0)."""
+    if config.restore_stall_iterations == 0:
+        return ik
+    return replace(
+        ik,
+        stall_iterations=config.restore_stall_iterations,
+        stall_fraction=RESTORE_STALL_FRACTION,
+        stall_keep_best=True,
+    )
 
 
 def forward_direction(skeleton: Skeleton, q: ArrayLike) -> FloatArray:
@@ -490,83 +474,6 @@ def _bisect_lean(
     return _plain_bisection(f, a, b, fa, steps), slope_mm_per_rad
 
 
-#: First trial lean (rad) of the secant search when no slope is known yet.
-_PROBE_RAD = 0.1
-
-
-def _secant_lean(
-    solver: SDLSSolver,
-    q: FloatArray,
-    targets: FloatArray,
-    active: NDArray[np.bool_] | None,
-    goal_mm: float,
-    support: FloatArray,
-    config: BalanceConfig,
-    slope_mm_per_rad: float | None,
-    at_zero: tuple[FloatArray, FloatArray],
-) -> tuple[float, tuple[FloatArray, FloatArray], float | None]:
-    """Total lean (rad) whose restored pose puts the CoG at ``goal_mm`` (secant search).
-
-    Returns the lean, the restored pose and residuals at that lean (already solved),
-    and the slope of the CoG offset per radian of lean (least squares through the leans
-    tried that kept the markers; the given slope where fewer than two did).
-    Where the spine's range cannot reach the goal, the end nearest to it is returned,
-    as `_bisect_lean` does.
-    """
-    sk = solver.skeleton
-    split, lo, hi = _lean_range(sk, q)
-    tried: dict[float, tuple[float, FloatArray, FloatArray]] = {}
-
-    def f(total: float) -> float:
-        if total == 0.0:
-            qq, resid = at_zero
-        else:
-            qq, resid = apply_lean(solver, q, total * split, targets, active)
-        value = cog_offset_mm(sk, qq, support)[0] - goal_mm
-        tried[total] = (value, qq, resid)
-        return value
-
-    x0, f0 = 0.0, f(0.0)
-    slope = slope_mm_per_rad
-    limit = 2.0 * solver.config.tol_mm
-    if abs(f0) >= config.cog_tol_mm:
-        if slope is not None and slope < 0:
-            x1 = -f0 / slope
-        else:
-            # with the head pinned, a forward bow moves the CoG backwards (slope < 0)
-            x1 = _PROBE_RAD if f0 > 0 else -_PROBE_RAD
-        x1 = min(max(x1, lo), hi)
-        for _ in range(config.max_evaluations - 1):
-            if x1 in tried:
-                break
-            f1 = f(x1)
-            if np.nanmax(tried[x1][2], initial=0.0) > limit:
-                # the restore fails under this lean (the CoG there is meaningless):
-                # step back halfway towards the last lean that kept the markers
-                x1 = 0.5 * (x0 + x1)
-                continue
-            if abs(f1) < config.cog_tol_mm or f1 == f0:
-                break
-            slope = (f1 - f0) / (x1 - x0)
-            x_next = min(max(x1 - f1 / slope, lo), hi)
-            x0, f0, x1 = x1, f1, x_next
-    # markers first (Z12): the trial nearest the goal among those that keep head and
-    # hands on their markers (zero lean does)
-    ok = [x for x in tried if np.nanmax(tried[x][2], initial=0.0) <= limit]
-    best = min(ok, key=lambda x: abs(tried[x][0]))
-    _value, q_best, resid_best = tried[best]
-    if len(ok) >= 2:
-        # The hint for the next frame is the least-squares slope through every lean that
-        # kept the markers, not the last secant: near the goal the last two leans lie
-        # within the restore's tolerance of each other, and the CoG's round-off between
-        # them (which differs with the BLAS kernel) can even flip the last secant's sign.
-        leans = np.array(ok)
-        values = np.array([tried[x][0] for x in ok])
-        if np.ptp(leans) > 0.0:
-            slope = float(np.polyfit(leans, values, 1)[0])
-    return best, (q_best, resid_best), slope
-
-
 #: Relative singular-value cut of the restore's linearisation in `restored_lean_slope`:
 #: near a stretched knee the free DoFs' Jacobian has singular values ~1e-10 of its
 #: largest, whose least-norm answers reach 1e11 rad (SDLS clamps such terms; the cut
@@ -624,48 +531,6 @@ def restored_lean_slope(
     return float(forward_direction(sk, qa) @ (jcog @ dq))
 
 
-def _newton_lean(
-    solver: SDLSSolver,
-    q: FloatArray,
-    targets: FloatArray,
-    active: NDArray[np.bool_] | None,
-    goal_mm: float,
-    support: FloatArray,
-    config: BalanceConfig,
-) -> tuple[float, tuple[FloatArray, FloatArray]]:
-    """Total lean (rad) that puts the restored CoG at ``goal_mm``: Newton steps from the
-    analytic slope (`restored_lean_slope` at ``q``), one restore solve each.
-
-    ``q`` is a pose whose effectors are on their targets (the linearisation point).
-    Returns the lean and the restored pose and residuals at it. A slope that is not
-    negative (the restore cannot move the CoG the usual way) gives no lean.
-    """
-    sk = solver.skeleton
-    split, lo, hi = _lean_range(sk, q)
-    f0 = cog_offset_mm(sk, q, support)[0] - goal_mm
-    slope = restored_lean_slope(solver, q, targets, active)
-    total = 0.0
-    solved: tuple[FloatArray, FloatArray] | None = None
-    f = f0
-    if slope < 0.0:
-        for _ in range(config.newton_steps):
-            if abs(f) < config.cog_tol_mm:
-                break
-            nxt = min(max(total - f / slope, lo), hi)
-            if nxt == total:
-                break
-            trial = apply_lean(solver, q, nxt * split, targets, active)
-            f_next = cog_offset_mm(sk, trial[0], support)[0] - goal_mm
-            secant = (f_next - f) / (nxt - total)
-            total, f, solved = nxt, f_next, trial
-            if secant < 0.0:  # the restored CoG's own slope for the next step
-                slope = secant
-    if solved is None:
-        total = 0.0
-        solved = apply_lean(solver, q, np.zeros(len(split)), targets, active)
-    return total, solved
-
-
 def calibrate_balance(
     solver: SDLSSolver,
     q_rest: ArrayLike | None = None,
@@ -715,7 +580,8 @@ def calibrate_balance(
 @dataclass
 class BalanceResult:
     """Outcome of the balance step: pose, spine increments and restore residuals, and
-    (secant search) the CoG's slope per radian of lean, a hint for the next frame."""
+    the restored CoG's slope per radian of lean found by the search, a hint for the next
+    frame's (None where not known)."""
 
     q: FloatArray
     taus: FloatArray
@@ -751,8 +617,9 @@ def balance_pose(
     config : BalanceConfig
     active : array_like of bool, shape (E,), optional
     slope_mm_per_rad : float, optional
-        The secant search's first slope (the previous frame's
-        ``BalanceResult.slope_mm_per_rad``); a small probe lean when None.
+        The guided bisection's first slope (the previous frame's
+        ``BalanceResult.slope_mm_per_rad``); the analytic one (`restored_lean_slope`)
+        when None.
     """
     cfg = config or BalanceConfig()
     sk = solver.skeleton
@@ -797,43 +664,26 @@ def balance_pose(
                 if limit < worst <= cfg.restore_above_mm:
                     # off the markers: no lean (markers first), and no restore
                     return BalanceResult(qa.copy(), np.zeros(len(spine)), resid0, slope)
-            if cfg.search == "newton":
-                base = qa
-                if _max_residual(solver, qa, t, act) > limit:
-                    # restore first; no lean if head and hands stay off their markers
-                    zero = apply_lean(solver, qa, np.zeros(len(spine)), t, act)
-                    if np.nanmax(zero[1], initial=0.0) > limit:
-                        return BalanceResult(zero[0], np.zeros(len(spine)), zero[1], slope)
-                    base = zero[0]
-                total, solved = _newton_lean(solver, base, t, act, goal, support, cfg)
-                qa = base
-                taus = total * split
-            else:
-                zero = apply_lean(solver, qa, np.zeros(len(spine)), t, act)
-                if np.nanmax(zero[1], initial=0.0) > 2.0 * solver.config.tol_mm:
-                    # head and hands are off their markers even without a lean: no lean
-                    # (the markers-first rule below would halve any lean towards nothing)
-                    return BalanceResult(zero[0], np.zeros(len(spine)), zero[1], slope)
-                if cfg.search == "secant":
-                    total, solved, slope = _secant_lean(
-                        solver, qa, t, act, goal, support, cfg, slope_mm_per_rad, zero
-                    )
-                else:
-                    total, slope = _bisect_lean(
-                        solver,
-                        qa,
-                        t,
-                        act,
-                        goal,
-                        cfg.bisection_steps,
-                        support,
-                        at_zero=zero,
-                        guided=cfg.guided_bisection,
-                        slope_mm_per_rad=slope_mm_per_rad,
-                        made=made,
-                    )
-                    solved = zero if total == 0.0 else None
-                taus = total * split
+            zero = apply_lean(solver, qa, np.zeros(len(spine)), t, act)
+            if np.nanmax(zero[1], initial=0.0) > limit:
+                # head and hands are off their markers even without a lean: no lean
+                # (the markers-first rule below would halve any lean towards nothing)
+                return BalanceResult(zero[0], np.zeros(len(spine)), zero[1], slope)
+            total, slope = _bisect_lean(
+                solver,
+                qa,
+                t,
+                act,
+                goal,
+                cfg.bisection_steps,
+                support,
+                at_zero=zero,
+                guided=cfg.guided_bisection,
+                slope_mm_per_rad=slope_mm_per_rad,
+                made=made,
+            )
+            solved = zero if total == 0.0 else None
+            taus = total * split
     if not np.any(taus):
         if solved is not None:  # the search's own restore at zero lean
             return BalanceResult(solved[0], taus, solved[1], slope)
@@ -874,13 +724,6 @@ def _residuals(
     if np.any(act):
         out[act] = np.linalg.norm(solver.effector_positions(q)[act] - targets[act], axis=1)
     return out
-
-
-def _max_residual(
-    solver: SDLSSolver, q: FloatArray, targets: FloatArray, active: NDArray[np.bool_] | None
-) -> float:
-    """Largest distance (mm) of an active effector from its target at ``q`` (0 if none)."""
-    return float(np.nanmax(_residuals(solver, q, targets, active), initial=0.0))
 
 
 def _spine_mask(sk: Skeleton, spine: tuple[int, ...]) -> NDArray[np.bool_]:

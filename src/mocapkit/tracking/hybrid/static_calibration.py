@@ -35,6 +35,7 @@ from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.geometry.transforms import points_in_frame
 from mocapkit.skeleton.kinematics import forward_kinematics
 from mocapkit.skeleton.model import Skeleton
+from mocapkit.tracking.hybrid.balance import BalanceConfig
 from mocapkit.tracking.hybrid.tracker import (
     HybridConfig,
     HybridSample,
@@ -192,6 +193,10 @@ def calibrate_member_offsets(
         posture=config.posture,
         paper=config.paper,
         marker_offsets_mm=config.marker_offsets_mm,
+        # the assumed pose has the head straight over the trunk: no balance bow (which
+        # leant the relaxed standing pose 7 deg forward, and by however far its restore
+        # solves happened to settle)
+        balance=BalanceConfig(mode="off"),
     )
     effectors = default_marker_effectors(skeleton)
     arrays = {n: np.asarray(a, dtype=float)[rows] for n, a in sets_mm.items()}

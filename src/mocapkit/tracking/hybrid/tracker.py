@@ -60,6 +60,7 @@ from mocapkit.tracking.hybrid.balance import (
     BalanceModel,
     balance_pose,
     calibrate_balance,
+    restore_ik_config,
     support_points,
 )
 from mocapkit.tracking.hybrid.posture import SEATED_LEFT_OUT
@@ -121,13 +122,15 @@ TRACKING_BISECTION_STEPS = 6
 #: `BalanceConfig.restore_above_mm` off their markers; the smoothing polish solves next
 #: anyway): 2.4 ms a frame against 6.0 (bench, same load). The bisection is guided
 #: (`BalanceConfig.guided_bisection`: the same leans from 62 restore solves instead of 107
-#: on the bench sessions). ``search="newton"`` is faster still (1.2 ms) but moves the
-#: arm-refining configurations (see docs/design-notes/hybrid.md).
+#: on the bench sessions). The restore solves stop where they stall and end on their best
+#: iterate (`BalanceConfig.restore_stall_iterations`): 10-15 iterations instead of the
+#: cap's 30, whose last step lands anywhere in the chatter.
 TRACKING_BALANCE = BalanceConfig(
     mode="solve",
     bisection_steps=TRACKING_BISECTION_STEPS,
     restore_without_lean=False,
     guided_bisection=True,
+    restore_stall_iterations=3,
 )
 
 
@@ -525,8 +528,15 @@ class HybridTracker:
         # After the video refinement, the balance step's restore of head and hands must
         # not run the relaxed-pose task: it would pull the refined arms back to the IK's
         # swivel (the paper: "each process modifies only a specific part of the pose").
+        restore_ik = restore_ik_config(self.config.ik, self.config.balance_config)
         self._restore = _CountedSolver(
-            skeleton, effectors, replace(self.config.ik, secondary_gain=0.0, min_iterations=0)
+            skeleton, effectors, replace(restore_ik, secondary_gain=0.0, min_iterations=0)
+        )
+        # without a refinement the restore keeps the relaxed-pose task (the IK's own)
+        self._restore_relaxed = (
+            self.solver
+            if restore_ik == self.config.ik
+            else _CountedSolver(skeleton, effectors, restore_ik)
         )
         self._arms = {side: arm(skeleton, side) for side in SIDES}
         self._timer: StageTimer = NULL_TIMER
@@ -588,7 +598,7 @@ class HybridTracker:
     @timer.setter
     def timer(self, value: StageTimer) -> None:
         self._timer = value
-        for solver in (self.solver, self._polish, self._restore):
+        for solver in (self.solver, self._polish, self._restore, self._restore_relaxed):
             solver.timer = value
 
     def refiner(self) -> Refiner:
@@ -990,7 +1000,7 @@ class HybridTracker:
         assert self._support is not None
         with timer.stage("balance"):
             bal = balance_pose(
-                self._restore if refined else self.solver,
+                self._restore if refined else self._restore_relaxed,
                 q,
                 targets,
                 self._root_z0,
