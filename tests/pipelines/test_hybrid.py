@@ -75,6 +75,31 @@ def test_tennis_serve_elbows(shared_data, tmp_path):
     assert np.all(np.linalg.norm(est - wrist, axis=2) < 400.0)
 
 
+def test_tennis_serve_leg_sets_drive_the_legs(shared_data):
+    """With the file's pelvis and foot markers as sets the legs follow them: each ankle
+    within its lateral malleolus marker's skin offset (about 50 mm), the knees near their
+    lateral knee markers; from head and hands alone the ankles are 200-500 mm off (median)."""
+    from mocapkit.io.marker_files import read_markers
+    from mocapkit.pipelines.hybrid_markers import track_hybrid_marker_file
+
+    markers = read_markers(shared_data / "c3d" / "kinematics_tennis_serve.c3d")
+    legs = ["pelvis=LASI+RASI+LPSI+RPSI", "left_foot=LHEE+LTOE+LANK", "right_foot=RHEE+RTOE+RANK"]
+    run = track_hybrid_marker_file(markers, [*TENNIS_SETS, *legs])
+    assert "pelvis, left_foot, right_foot calibrated" in run.calibration_note
+    for side in ("left", "right"):
+        s = side[0].upper()
+        ankle = np.linalg.norm(
+            run.motion.joint(f"{side}_ankle") - markers.trajectory(f"{s}ANK"), axis=1
+        )
+        knee = np.linalg.norm(
+            run.motion.joint(f"{side}_knee") - markers.trajectory(f"{s}KNE"), axis=1
+        )
+        assert np.nanpercentile(ankle, 95) < 100.0
+        assert np.nanmedian(knee) < 150.0
+    with pytest.raises(ConfigError, match=r"uses only sets \['head', .*'pelvis', 'left_foot'"):
+        track_hybrid_marker_file(markers, [*TENNIS_SETS, "left_leg=LKNE+LTIB+LANK"])
+
+
 def test_marker_arrays_bad_shapes():
     with pytest.raises(ShapeError, match="missing marker set 'head'"):
         track_hybrid_marker_arrays(np.arange(3.0), {"left_hand": np.zeros((3, 3))}, 1700.0)

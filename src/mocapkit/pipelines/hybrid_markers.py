@@ -59,12 +59,14 @@ from mocapkit.tracking.hybrid.static_calibration import (
     find_static_interval,
 )
 from mocapkit.tracking.hybrid.tracker import (
+    LEG_SETS,
     MARKER_SETS,
     HybridConfig,
     HybridPose,
     HybridSample,
     HybridTracker,
     default_marker_effectors,
+    marker_set_effectors,
 )
 
 if TYPE_CHECKING:
@@ -222,7 +224,7 @@ def track_hybrid_marker_arrays(
         use_video=False, start_upright=False, replant_mm=RAW_MARKERS_REPLANT_MM
     )
     sk = hybrid_skeleton(height_mm) if skeleton is None else skeleton
-    effectors = default_marker_effectors(sk)
+    effectors = marker_set_effectors(sk)
     tracker = HybridTracker(
         sk, None, cfg, timer=timer, marker_effectors={n: effectors[n] for n in arrays}
     )
@@ -249,7 +251,8 @@ def track_hybrid_marker_arrays(
 
 
 def partial_marker_sets(sets: Iterable[str], where: str) -> tuple[str, ...]:
-    """The hybrid marker sets present among ``sets``, in `MARKER_SETS` order.
+    """The hybrid marker sets present among ``sets``, in `MARKER_SETS` order, then the
+    optional `LEG_SETS` present.
 
     A subject instrumented on one side has one hand set: the head set and at least one
     hand set are needed; an arm without its hand set is left out (its elbow and wrist are
@@ -257,13 +260,14 @@ def partial_marker_sets(sets: Iterable[str], where: str) -> tuple[str, ...]:
     """
     given = set(sets)
     present = tuple(n for n in MARKER_SETS if n in given)
+    legs = tuple(n for n in LEG_SETS if n in given)
     if "head" not in given or len(present) < 2:
         raise ShapeError(
             f"{where}: the hybrid tracker needs marker set 'head' and at least one of "
             f"'left_hand', 'right_hand'; missing marker set "
             f"{'head' if 'head' not in given else 'left_hand/right_hand'!r}; found {sorted(given)}"
         )
-    return present
+    return present + legs
 
 
 def drop_unobserved_arms(
@@ -545,10 +549,10 @@ def _checked_request(
         )
     sets = parse_marker_sets(list(marker_sets))
     names = [s.name for s in sets]
-    extra = [n for n in names if n not in MARKER_SETS]
+    extra = [n for n in names if n not in MARKER_SETS + LEG_SETS]
     if extra:
         raise ConfigError(
-            f"marker_sets: the hybrid tracker uses only sets {list(MARKER_SETS)}; "
+            f"marker_sets: the hybrid tracker uses only sets {list(MARKER_SETS + LEG_SETS)}; "
             f"found {extra} as well, which it would ignore"
         )
     try:
@@ -678,7 +682,12 @@ def _calibrated_config(
             calib, how = _calibrate_dynamic(plain, cfg, sets, world, height_mm, timer)
             note = f"{failed}dynamic: {how}"
         if calib is not None:
-            cfg = replace(cfg, member_offsets_mm=calib.offsets_mm)
+            members, centres = _leg_set_offsets(sets, calib.offsets_mm)
+            cfg = replace(
+                cfg,
+                member_offsets_mm=members,
+                marker_offsets_mm={**cfg.marker_offsets_mm, **centres},
+            )
         else:
             note = f"{note}; member offsets not calibrated (positions only)"
             if oriented:
@@ -687,6 +696,35 @@ def _calibrated_config(
         note = "member offsets given"
     note += _blind_turn_note(sets, frozenset(cfg.member_offsets_mm))
     return cfg, calib, note, skeleton
+
+
+def _leg_set_offsets(
+    sets: Sequence[MarkerSet], offsets_mm: Mapping[str, Mapping[str, Sequence[float]]]
+) -> tuple[dict[str, dict[str, Sequence[float]]], dict[str, tuple[float, float, float]]]:
+    """The calibrated member offsets with the leg sets' (`LEG_SETS`) made consistent with
+    where their centres sit, and those centres (offsets in the joint's frame).
+
+    The calibration's pose comes from head and hands alone. It places the pelvis
+    under the head as a standing subject's is, so a pelvis set's centre (well above
+    the hips) is where its members' mean says. It does not know where the feet stand,
+    so a foot set keeps only its layout (members about their mean) and its centre is
+    taken at the ankle (the markers' own offset from the joint, a few cm, against a
+    stance that may differ by a foot's length).
+    """
+    members = {k: dict(v) for k, v in offsets_mm.items()}
+    centres = {}
+    for s in sets:
+        got = offsets_mm.get(s.name, {})
+        if s.name not in LEG_SETS or not all(m in got for m in s.members):
+            continue
+        c = np.mean([np.asarray(got[m], dtype=float) for m in s.members], axis=0)
+        if s.name == "pelvis":
+            centres[s.name] = (float(c[0]), float(c[1]), float(c[2]))
+        else:
+            members[s.name] = {
+                m: [float(x) for x in np.asarray(o, dtype=float) - c] for m, o in got.items()
+            }
+    return members, centres
 
 
 def _blind_turn_note(sets: Sequence[MarkerSet], oriented: frozenset[str]) -> str:

@@ -55,7 +55,7 @@ from mocapkit.geometry.transforms import points_in_frame
 from mocapkit.skeleton.kinematics import forward_kinematics
 from mocapkit.skeleton.limbs import arm
 from mocapkit.skeleton.model import Skeleton
-from mocapkit.tracking.hybrid.tracker import default_marker_effectors
+from mocapkit.tracking.hybrid.tracker import marker_set_effectors
 
 FloatArray = NDArray[np.float64]
 
@@ -340,7 +340,7 @@ def calibrate_members_on_motion(
     world = np.full((n, len(skeleton.joint_names), 4, 4), np.nan)
     if posed.any():
         world[posed] = forward_kinematics(skeleton, qs[posed])
-    effectors = default_marker_effectors(skeleton)
+    effectors = marker_set_effectors(skeleton)
     offsets: dict[str, dict[str, tuple[float, float, float]]] = {}
     spread: dict[str, float] = {}
     used: dict[str, int] = {}

@@ -37,10 +37,11 @@ from mocapkit.skeleton.kinematics import forward_kinematics
 from mocapkit.skeleton.model import Skeleton
 from mocapkit.tracking.hybrid.balance import BalanceConfig
 from mocapkit.tracking.hybrid.tracker import (
+    MARKER_SETS,
     HybridConfig,
     HybridSample,
     HybridTracker,
-    default_marker_effectors,
+    marker_set_effectors,
 )
 
 FloatArray = NDArray[np.float64]
@@ -198,12 +199,18 @@ def calibrate_member_offsets(
         # solves happened to settle)
         balance=BalanceConfig(mode="off"),
     )
-    effectors = default_marker_effectors(skeleton)
+    effectors = marker_set_effectors(skeleton)
     arrays = {n: np.asarray(a, dtype=float)[rows] for n, a in sets_mm.items()}
-    tracker = HybridTracker(skeleton, None, cfg, marker_effectors={n: effectors[n] for n in arrays})
+    # the pose from head and hands alone (legs planted straight under them): the leg
+    # sets' centres sit off the model's pelvis and ankles by offsets not yet known, and
+    # would drag them there; their members are measured on this pose
+    driving = {n: a for n, a in arrays.items() if n in MARKER_SETS}
+    tracker = HybridTracker(
+        skeleton, None, cfg, marker_effectors={n: effectors[n] for n in driving}
+    )
     qs = []
     for i, ti in enumerate(t[rows]):
-        pose = tracker.update(HybridSample(float(ti), {n: a[i] for n, a in arrays.items()}))
+        pose = tracker.update(HybridSample(float(ti), {n: a[i] for n, a in driving.items()}))
         qs.append(pose.q)
     world = forward_kinematics(skeleton, np.asarray(qs))  # (N, J, 4, 4)
     offsets: dict[str, dict[str, tuple[float, float, float]]] = {}

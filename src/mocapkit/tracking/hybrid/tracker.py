@@ -70,6 +70,9 @@ FloatArray = NDArray[np.float64]
 #: Marker-set names the hybrid tracker drives, and their default effectors on ``zhang21``.
 MARKER_SETS: tuple[str, ...] = ("head", "left_hand", "right_hand")
 FEET: tuple[str, ...] = ("left_foot", "right_foot")
+#: Optional marker sets of a full-body file: on the pelvis (the canonical ``pelvis``
+#: point) and on each foot (its ankle); a foot set takes the place of that foot's plant.
+LEG_SETS: tuple[str, ...] = ("pelvis", *FEET)
 
 Refiner = Callable[..., FloatArray]
 
@@ -97,6 +100,17 @@ def default_marker_effectors(skeleton: Skeleton) -> dict[str, Effector]:
         "left_hand": Effector("left_hand", names[arm(skeleton, "left").end]),
         "right_hand": Effector("right_hand", names[arm(skeleton, "right").end]),
     }
+
+
+def marker_set_effectors(skeleton: Skeleton) -> dict[str, Effector]:
+    """`default_marker_effectors` and those of the `LEG_SETS`: the canonical ``pelvis``
+    point and the ankles, with zero marker offsets (the sets' members, calibrated, carry
+    where the markers sit)."""
+    pj, pp = skeleton.canonical["pelvis"]
+    effs = default_marker_effectors(skeleton)
+    effs["pelvis"] = Effector("pelvis", pj, (float(pp[0]), float(pp[1]), float(pp[2])))
+    effs.update({e.name: e for e in foot_effectors(skeleton)})
+    return effs
 
 
 def foot_effectors(skeleton: Skeleton) -> list[Effector]:
@@ -147,9 +161,10 @@ class _CountedSolver(SDLSSolver):
         active: ArrayLike | None = None,
         frozen: ArrayLike | None = None,
         record_trace: bool = False,
+        limits: tuple[ArrayLike, ArrayLike] | None = None,
     ) -> IKResult:
         """`SDLSSolver.solve`, counted."""
-        res = super().solve(q0, targets_mm, active, frozen, record_trace)
+        res = super().solve(q0, targets_mm, active, frozen, record_trace, limits)
         self.timer.count("ik_solves", 1)
         self.timer.count("ik_iterations", res.iterations)
         return res
@@ -513,8 +528,19 @@ class HybridTracker:
                     Effector(f"{name}/{member}", e.joint, (float(p[0]), float(p[1]), float(p[2])))
                 )
                 self.members += ((name, member),)
-        self.marker_sets = tuple(effs)
-        effectors = [effs[n] for n in self.marker_sets] + foot_effectors(skeleton) + member_effs
+        #: Marker sets that drive a foot (`LEG_SETS`): their effectors take the feet's
+        #: rows, the markers' place that of the plant while seen.
+        self.foot_sets = tuple(n for n in FEET if n in effs)
+        self.marker_sets = tuple(n for n in effs if n not in FEET)
+        feet = [effs.get(e.name, e) for e in foot_effectors(skeleton)]
+        effectors = [effs[n] for n in self.marker_sets] + feet + member_effs
+        #: The balance step in effect: none where a pelvis or foot set places the lower
+        #: body (its lean would move them off their markers).
+        self._balance_config = (
+            BalanceConfig(mode="off")
+            if self.foot_sets or "pelvis" in self.marker_sets
+            else self.config.balance_config
+        )
         self.solver = _CountedSolver(skeleton, effectors, self.config.ik)
         polish_cfg = replace(
             self.config.ik,
@@ -528,6 +554,7 @@ class HybridTracker:
         # After the video refinement, the balance step's restore of head and hands must
         # not run the relaxed-pose task: it would pull the refined arms back to the IK's
         # swivel (the paper: "each process modifies only a specific part of the pose").
+        # The re-plant's feet-free solve runs without it too (`_replant_if_stepped`).
         restore_ik = restore_ik_config(self.config.ik, self.config.balance_config)
         self._restore = _CountedSolver(
             skeleton, effectors, replace(restore_ik, secondary_gain=0.0, min_iterations=0)
@@ -573,6 +600,8 @@ class HybridTracker:
         self._prev_elbows: dict[str, FloatArray] | None = None
         self._prev_time_s = 0.0
         self._feet: FloatArray | None = None
+        #: The feet whose marker set is seen in the current sample (`_put_marked_feet`).
+        self._marked_feet = np.zeros(2, dtype=bool)
         self._support: FloatArray | None = None
         self._root_z0 = 0.0
         #: Lowest height (mm) a re-planted foot effector may take: the lower of the
@@ -773,6 +802,13 @@ class HybridTracker:
         free pose's straight legs would put the feet of a subject who jumps or reaches
         up far above where they are (a tennis serve: 440 mm against the ankle markers'
         165 mm). Returns the pose and the extra iterations.
+
+        The feet-free solve moves the body only as far as the head and hand error asks:
+        it runs without the relaxed-pose task (whose pull, with the feet free, carried
+        the root along the null space of head and hands: 430 mm in a frame with them
+        18 mm off, the hips flipping from behind to in front of the feet) and the root's
+        translation stays within the largest marker error of each axis. Real steps and
+        jumps are followed over the frames that follow, as that error asks again.
         """
         assert self._feet is not None
         n = len(self.marker_sets)
@@ -780,13 +816,15 @@ class HybridTracker:
         if not worst > self.config.replant_mm:
             return q, 0
         free = targets.copy()
-        free[n : n + 2] = np.nan
-        res_free = self.solver.solve(q, free)
+        free[n : n + 2][~self._marked_feet] = np.nan
+        reach = np.where(self.skeleton.dof_kind == PRISMATIC, worst, np.inf)
+        res_free = self._restore.solve(q, free, limits=(q - reach, q + reach))
         feet = self.solver.effector_positions(res_free.q)[n : n + 2]
         if self.config.start_upright:
             np.maximum(feet[:, 2], self._floor_z_mm, out=feet[:, 2])
         else:
             feet[:, 2] = self._feet[:, 2]  # the lab floor is known: stay on it
+        feet[self._marked_feet] = targets[n : n + 2][self._marked_feet]  # the markers' place
         self._feet = feet
         self._support = support_points(self.skeleton, res_free.q)
         targets[n : n + 2] = feet
@@ -794,6 +832,27 @@ class HybridTracker:
         self.events.append((sample.time_s, "feet", "replanted"))
         q, extra = self._hold_feet(res.q, targets)
         return q, res_free.iterations + res.iterations + extra
+
+    def _put_marked_feet(self, targets: FloatArray, sample: HybridSample) -> None:
+        """Targets of the feet whose marker set (`foot_sets`) is seen: the markers, which
+        also become the plant that holds the foot while they are unseen."""
+        assert self._feet is not None
+        n = len(self.marker_sets)
+        self._marked_feet = np.zeros(2, dtype=bool)
+        for k, name in enumerate(FEET):
+            raw = sample.markers_mm.get(name) if name in self.foot_sets else None
+            if raw is None:
+                continue
+            p = np.asarray(raw, dtype=float).reshape(-1)
+            if p.shape != (3,):
+                raise ShapeError(
+                    f"sample.markers_mm[{name!r}]: expected 3 coordinates (mm), "
+                    f"found shape {p.shape}"
+                )
+            if np.all(np.isfinite(p)):
+                targets[n + k] = p
+                self._feet[k] = p
+                self._marked_feet[k] = True
 
     def _reseed_lost_arms(self, q: FloatArray, targets: FloatArray) -> tuple[FloatArray, int]:
         """Start an arm again from the relaxed pose where its hand set is lost.
@@ -924,15 +983,17 @@ class HybridTracker:
                 )
                 self._floor_z_mm = float(min(feet[:, 2].min(), standing[n : n + 2, 2].min()))
                 targets[n : n + 2] = feet if self.config.feet_planted else np.nan
+                self._put_marked_feet(targets, sample)
                 for _ in range(max(self.config.init_iterations, 1)):
                     res = self.solver.solve(q, targets)
                     q = res.q
                     iterations += res.iterations
-                if self.config.balance_config.mode == "proportional":
+                if self._balance_config.mode == "proportional":
                     self._balance_model = calibrate_balance(self.solver, q)
             else:
                 assert self._feet is not None
                 targets[n : n + 2] = self._feet if self.config.feet_planted else np.nan
+                self._put_marked_feet(targets, sample)
                 res = self.solver.solve(self._q, targets)
                 q = res.q
                 iterations += res.iterations
@@ -1006,7 +1067,7 @@ class HybridTracker:
                 self._root_z0,
                 self._support,
                 self._balance_model,
-                self.config.balance_config,
+                self._balance_config,
                 slope_mm_per_rad=self._balance_slope,
             )
         if bal.slope_mm_per_rad is not None:
