@@ -32,6 +32,7 @@ segment lengths (`mocapkit.tracking.multiview.lengths`).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -41,6 +42,7 @@ from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import ConfigError, ShapeError
+from mocapkit.geometry.transforms import transform_points
 from mocapkit.skeleton.kinematics import kinematic_arrays
 from mocapkit.skeleton.limbs import has_limb, limb
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
@@ -84,6 +86,13 @@ PARTS: tuple[tuple[str, str, str | None], ...] = (
 )
 
 
+@functools.lru_cache(maxsize=1)
+def _model_preset() -> Skeleton:
+    """The ``zhang21`` preset with `MODEL_OPTIONS`, read once (a frozen skeleton; the
+    scalings return new ones)."""
+    return load_preset("zhang21", MODEL_OPTIONS)
+
+
 def multiview_skeleton(
     lengths_mm: Mapping[str, float] | None = None,
     height_mm: float | None = None,
@@ -92,7 +101,7 @@ def multiview_skeleton(
     """The ``zhang21`` full body with `MODEL_OPTIONS`, scaled to ``height_mm`` and then to
     the measured canonical segment lengths and trunk rest vectors
     (`mocapkit.skeleton.scaling.fit_segments`)."""
-    sk = load_preset("zhang21", MODEL_OPTIONS)
+    sk = _model_preset()
     if height_mm is not None:
         sk = scale_skeleton(sk, height_mm=height_mm)
     return fit_segments(sk, lengths_mm=dict(lengths_mm or {}), vectors_mm=dict(vectors_mm or {}))
@@ -180,6 +189,8 @@ class MultiviewTracker:
             top = f"{side}_{'shoulder' if kind == 'arm' else 'hip'}"
             rows = [idx[n] for n in (top, mid, end) if n in idx]
             self._limbs.append((limb(skeleton, part).dofs.astype(np.int64), rows))
+        self._camera_from_world = np.stack([c.camera_from_world for c in self.cameras])
+        self._swapped_keys = [f"{c.name}_swapped" for c in self.cameras]
         self._rng = np.random.default_rng(0)
         self._point_ref = np.full((len(self.names), 3), np.nan)
         self._q: FloatArray | None = None
@@ -239,11 +250,9 @@ class MultiviewTracker:
                     f"found {arr.shape}"
                 )
             px[i] = arr[self.model_rows]
-        norm = np.full_like(px, np.nan)
-        for i, cam in enumerate(self.cameras):
-            ok = np.isfinite(px[i]).all(axis=1)
-            if ok.any():
-                norm[i, ok] = cam.undistort_pixels(px[i, ok])
+        # each point on its own: rows without a detection come out NaN, as they go in
+        norm = np.stack([cam.undistort_pixels(px[i]) for i, cam in enumerate(self.cameras)])
+        norm[~np.isfinite(px).all(axis=-1)] = np.nan
         return px, norm
 
     def _initial_pose(self, px: FloatArray) -> FloatArray | None:
@@ -268,7 +277,7 @@ class MultiviewTracker:
     def _scale(self, q: FloatArray) -> FloatArray:
         """Depth (mm) of the model's hips in each view."""
         hips = self._points(q)[self._hip_rows].mean(axis=0)
-        z = np.array([float(c.to_camera(hips)[2]) for c in self.cameras])
+        z = transform_points(self._camera_from_world, hips[None, :])[:, 0, 2]
         return np.maximum(z, 100.0)
 
     def _points(self, q: FloatArray) -> FloatArray:
@@ -345,8 +354,7 @@ class MultiviewTracker:
         finite = np.isfinite(kept_err)
         det = np.isfinite(err)
         n_det = det.sum(axis=0)
-        with np.errstate(invalid="ignore"):
-            far = (n_det >= 2) & ((err > cfg.warn_px).sum(axis=0) * 2 > n_det)
+        far = (n_det >= 2) & ((err > cfg.warn_px).sum(axis=0) * 2 > n_det)
         worst = ""
         if finite.any():
             per_joint = np.where(finite, kept_err, -1.0).max(axis=0)
@@ -354,8 +362,7 @@ class MultiviewTracker:
             mean_px, max_px = float(kept_err[finite].mean()), float(kept_err[finite].max())
         else:
             mean_px = max_px = math.nan
-        for i, c in enumerate(self.cameras):
-            fit[f"{c.name}_swapped"] = float(self.swapped[i])
+        fit.update(zip(self._swapped_keys, self.swapped.astype(float).tolist(), strict=True))
         fit.update(
             {
                 "mean_px": mean_px,
