@@ -118,7 +118,7 @@ def test_fit_drops_a_wild_detection_and_keeps_the_rest(rng: np.random.Generator)
         np.full((len(tr.names), 3), np.nan),
         np.zeros(len(tr.names)),
     )
-    fit_rejecting_nb(tr._model, tr._settings, start, tg, 40, np.empty(obs.shape[:2]))
+    fit_rejecting_nb(tr._model, tr._settings, start, tg, 40, np.empty(obs.shape[:2]), False)
     assert tg.weight[2, wrist] == 0.0
     assert (tg.weight > 0).sum() == obs.shape[0] * obs.shape[1] - 1
     err = np.linalg.norm(model_points_nb(tr._model, start) - tr._points(q), axis=1)
@@ -137,3 +137,33 @@ def test_figures_are_the_projections_and_the_canonical_joints(rng: np.random.Gen
     np.testing.assert_allclose(err, want, atol=1e-9, equal_nan=True)
     assert np.isnan(err[3, 2])
     np.testing.assert_allclose(joints, canonical_positions(sk, q), atol=1e-9)
+
+
+def test_a_wild_detection_of_a_joint_seen_twice_is_dropped_by_its_jump(
+    rng: np.random.Generator,
+) -> None:
+    """Two views of a joint have no majority; the previous frame's place decides."""
+    _sk, tr, cams, q = _setup(rng)
+    pts = tr._points(q)
+    obs = _normalised(cams, pts)
+    wrist = tr.names.index("right_wrist")
+    obs[2:, wrist] = np.nan  # seen by two views
+    obs[1, wrist] += 0.15  # one of them wild, about 400 mm off
+    wrist_err = {}
+    for gate, kept in ((True, 0.0), (False, 1.0)):
+        start = q.copy()
+        tg = FitTargets(
+            obs,
+            np.zeros(obs.shape[:2]),
+            tr._scale(q),
+            q.copy(),
+            tr._prior,
+            pts.copy(),  # the previous frame's points: here the same pose
+            np.zeros(len(tr.names)),
+        )
+        fit_rejecting_nb(tr._model, tr._settings, start, tg, 40, np.empty(obs.shape[:2]), gate)
+        assert tg.weight[1, wrist] == kept
+        assert tg.weight[0, wrist] == 1.0
+        wrist_err[gate] = np.linalg.norm(model_points_nb(tr._model, start)[wrist] - pts[wrist])
+    assert wrist_err[True] < 1.0
+    assert wrist_err[False] > 20.0  # without the gate the wild view pulls the wrist

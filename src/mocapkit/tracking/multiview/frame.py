@@ -93,6 +93,7 @@ class FrameSettings(NamedTuple):
     swap_margin_mm: float
     point_prior: float
     restart_mm: float
+    jump_mm: float
 
 
 @numba.njit(cache=True)
@@ -247,6 +248,7 @@ def fit_rejecting_nb(
     tg: FitTargets,
     iters: int,
     norms: FloatArray,
+    gate: bool,
 ) -> None:
     """Fit (in place on ``q``), drop the detections far from the fit, fit again; at most
     three fits. ``tg.weight`` (V, K) is set from the detections and ends with the ones
@@ -254,7 +256,11 @@ def fit_rejecting_nb(
 
     A detection is dropped when further than ``reject_mm`` from the fit and more than
     twice the median residual of its joint over the views kept: when every view is far,
-    the fit is wrong, not the detections, and they keep pulling it.
+    the fit is wrong, not the detections, and they keep pulling it. Two views have no
+    majority (neither residual can be twice their median), so with ``gate`` (a track
+    going on) a joint detected in two views or one drops, before the fit, a detection
+    further than ``jump_mm`` from the previous frame's point (``tg.point_ref_mm``) when
+    another of its detections is within ``reject_mm`` of it.
     """
     n_views, n_pts = tg.weight.shape
     w = tg.weight
@@ -262,6 +268,21 @@ def fit_rejecting_nb(
         for k in range(n_pts):
             seen = np.isfinite(tg.observed[v, k, 0]) and np.isfinite(tg.observed[v, k, 1])
             w[v, k] = m.base_weight[k] if seen else 0.0
+    if gate and st.jump_mm > 0.0:
+        residual_norms_nb(m, tg.point_ref_mm, tg.observed, tg.scale_mm, norms)
+        for k in range(n_pts):
+            agree = False
+            n_seen = 0
+            for v in range(n_views):
+                if w[v, k] > 0.0:
+                    n_seen += 1
+                    if norms[v, k] <= st.reject_mm:
+                        agree = True
+            if not agree or n_seen > 2:
+                continue
+            for v in range(n_views):
+                if w[v, k] > 0.0 and not (norms[v, k] <= st.jump_mm):
+                    w[v, k] = 0.0
     med = np.empty(n_pts)
     for _ in range(3):
         fit_pose_nb(
@@ -349,7 +370,7 @@ def begin_frame_nb(
         point_prior = point_weights_nb(m, st, pts, obs)
         point_ref[:, :] = pts
     tg = FitTargets(obs, np.zeros((n_views, n_pts)), scale, q.copy(), prior, point_ref, point_prior)
-    fit_rejecting_nb(m, st, q, tg, iters, norms)
+    fit_rejecting_nb(m, st, q, tg, iters, norms, not first)
     base = cost_nb(m, st, q, tg, norms)
     n_limbs = m.limb_rows.shape[0]
     restart = np.zeros(n_limbs, dtype=np.bool_)
@@ -441,6 +462,7 @@ def finish_frame_nb(
     swapped: BoolArray,
     moved: bool,
     iters: int,
+    first: bool,
 ) -> tuple[FitTargets, bool]:
     """The rest of a frame's fit after `begin_frame_nb` (and restarts, ``moved``): fitted
     again when a limb was started again; the views' labels tested again against the fit
@@ -450,7 +472,7 @@ def finish_frame_nb(
     n_views, n_pts = norm.shape[0], norm.shape[1]
     norms = np.empty((n_views, n_pts))
     if moved:
-        fit_rejecting_nb(m, st, q, tg, iters, norms)
+        fit_rejecting_nb(m, st, q, tg, iters, norms, not first)
     again = swap_test_nb(m, st, model_points_nb(m, q), tg.observed, tg.scale_mm, norms)
     if again.any():
         for v in range(n_views):
@@ -464,7 +486,7 @@ def finish_frame_nb(
             tg.point_ref_mm,
             tg.point_prior,
         )
-        fit_rejecting_nb(m, st, q, tg, iters, norms)
+        fit_rejecting_nb(m, st, q, tg, iters, norms, not first)
     usable = 0
     kept = 0
     for v in range(n_views):

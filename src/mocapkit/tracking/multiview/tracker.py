@@ -229,6 +229,7 @@ class MultiviewTracker:
             cfg.swap_margin_mm,
             cfg.point_prior,
             cfg.restart_mm,
+            cfg.jump_mm,
         )
 
     # ------------------------------------------------------------------ pieces
@@ -312,7 +313,7 @@ class MultiviewTracker:
             cost = restart_limb_nb(m, st, q, tg, dofs, seeds, base, cfg.max_iter)
             moved |= cost < base
             base = cost
-        tg, lost = finish_frame_nb(m, st, q, norm, tg, swapped, moved, iters)
+        tg, lost = finish_frame_nb(m, st, q, norm, tg, swapped, moved, iters, first)
         # lost: start again from the next frame's triangulation
         self._q = None if lost else q
         self.swapped = swapped
