@@ -68,6 +68,20 @@ def test_good_rig_passes_every_check(rng):
         assert pose_findings(c) == []
 
 
+def test_a_detectors_wild_points_pass(rng):
+    """8 % of the keypoints 50-150 px off (limbs about 55 px long): the limbs' 90th
+    percentile is not theirs (taken over all frames, it refused such keypoints most times)."""
+    cams = _rig()
+    pts = _points(rng, 60)
+    px = np.stack([c.project(pts) for c in cams]) + rng.normal(0.0, 2.0, (2, 60, 5, 2))
+    wild = rng.random(px.shape[:-1]) < 0.08
+    ang = rng.uniform(0.0, 2.0 * np.pi, px.shape[:-1])
+    r = rng.uniform(50.0, 150.0, px.shape[:-1])
+    px[..., 0] += np.where(wild, r * np.cos(ang), 0.0)
+    px[..., 1] += np.where(wild, r * np.sin(ang), 0.0)
+    assert [f for f in view_findings(cams, px, NAMES, REST) if f.refuse] == []
+
+
 @pytest.mark.parametrize("noise_px", [4.0, 8.0])
 def test_a_narrow_pair_with_a_detectors_noise_passes(rng, noise_px):
     """90 mm apart at 3 m: a joint's depth from one frame is off by a quarter or more,

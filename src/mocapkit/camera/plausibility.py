@@ -251,15 +251,21 @@ def view_findings(
     # coordinates times the subject's median depth there. The depth of one joint from a
     # narrow baseline is noisy (4 px of detector noise on a 90 mm pair at 3 m doubles
     # the limbs triangulated in 3-D), the median depth of all of them is not; a limb
-    # seen foreshortened is shorter, so the 90th percentile over the frames is compared.
+    # seen foreshortened is shorter, so the 90th percentile over the frames is compared,
+    # over the frames where both keypoints agree with the other views (a detector's wild
+    # points, a few per cent, would otherwise be that percentile)
     ratios = []
     for i, c in enumerate(cameras):
         subject_depth = float(np.median(c.to_camera(pts[ok])[:, 2]))
         norm = c.undistort_pixels(px[i])  # (T, K, 2)
+        with np.errstate(invalid="ignore"):
+            agree = err[i] <= MAX_REPROJECTION_SHARE * c.image_size[0]  # (T, K)
         for a, b in RIGID_PAIRS:
             if a in names and b in names and a in rest_joints_mm and b in rest_joints_mm:
-                d = np.linalg.norm(norm[:, names.index(a)] - norm[:, names.index(b)], axis=-1)
-                d = d[np.isfinite(d)] * subject_depth
+                ia, ib = names.index(a), names.index(b)
+                d = np.linalg.norm(norm[:, ia] - norm[:, ib], axis=-1)
+                both = np.isfinite(d) & agree[:, ia] & agree[:, ib]
+                d = (d[both] if np.count_nonzero(both) >= 3 else d[np.isfinite(d)]) * subject_depth
                 rest = float(np.linalg.norm(np.subtract(rest_joints_mm[a], rest_joints_mm[b])))
                 if d.size and rest > 0:
                     ratios.append(float(np.percentile(d, 90.0)) / rest)

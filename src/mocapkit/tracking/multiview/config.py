@@ -62,6 +62,11 @@ class MultiviewConfig:
         Weight of the detections a reader placed from others rather than detected (a
         detector's neck and pelvis, midpoints of the shoulders and hips,
         `mocapkit.io.session_csv.Keypoints.rebuilt_joints`); 1 for the others.
+    jump_mm : float
+        A joint detected in two views has no majority to outvote a wild detection: a
+        detection further than this from the joint's place in the previous frame is
+        dropped when the other view's is within ``reject_mm`` of it (a per-frame jump;
+        `mocapkit.tracking.multiview.frame.fit_rejecting_nb`).
     """
 
     delta_mm: float = 25.0
@@ -78,9 +83,17 @@ class MultiviewConfig:
     restart_mm: float = 60.0
     restart_seeds: int = 24
     rebuilt_weight: float = 0.0
+    jump_mm: float = 400.0
 
     def __post_init__(self) -> None:
-        for name in ("delta_mm", "reject_mm", "prior_mm_per_rad", "prior_root", "warn_px"):
+        for name in (
+            "delta_mm",
+            "reject_mm",
+            "prior_mm_per_rad",
+            "prior_root",
+            "warn_px",
+            "jump_mm",
+        ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise ConfigError(f"MultiviewConfig.{name}: expected a positive number, found {v}")

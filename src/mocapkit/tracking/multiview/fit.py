@@ -140,6 +140,15 @@ def evaluate_nb(
     row_x = np.empty(n_dofs)
     row_y = np.empty(n_dofs)
     nz = np.empty(n_dofs, dtype=np.int64)
+    # a point moves with the DoFs of its chain only: each point's nonzero columns, once
+    chain = np.empty((n_pts, n_dofs), dtype=np.int64)
+    n_chain = np.zeros(n_pts, dtype=np.int64)
+    if want_normal:
+        for k in range(n_pts):
+            for d in range(n_dofs):
+                if jac[3 * k, d] != 0.0 or jac[3 * k + 1, d] != 0.0 or jac[3 * k + 2, d] != 0.0:
+                    chain[k, n_chain[k]] = d
+                    n_chain[k] += 1
     cost = 0.0
     for v in range(n_views):
         r = views.rotation[v]
@@ -174,19 +183,16 @@ def evaluate_nb(
             a0 = s / zc
             ax = -s * xc / (zc * zc)
             ay = -s * yc / (zc * zc)
-            # a point moves with the DoFs of its chain only: the rows' nonzero columns
-            n_nz = 0
-            for d in range(n_dofs):
+            n_nz = n_chain[k]
+            for ia in range(n_nz):
+                d = chain[k, ia]
                 j0, j1, j2 = jac[3 * k, d], jac[3 * k + 1, d], jac[3 * k + 2, d]
-                if j0 == 0.0 and j1 == 0.0 and j2 == 0.0:
-                    continue
                 c0 = r[0, 0] * j0 + r[0, 1] * j1 + r[0, 2] * j2
                 c1 = r[1, 0] * j0 + r[1, 1] * j1 + r[1, 2] * j2
                 c2 = r[2, 0] * j0 + r[2, 1] * j1 + r[2, 2] * j2
-                row_x[n_nz] = a0 * c0 + ax * c2
-                row_y[n_nz] = a0 * c1 + ay * c2
-                nz[n_nz] = d
-                n_nz += 1
+                row_x[ia] = a0 * c0 + ax * c2
+                row_y[ia] = a0 * c1 + ay * c2
+                nz[ia] = d
             for ia in range(n_nz):
                 a = nz[ia]
                 xa, ya = row_x[ia], row_y[ia]

@@ -32,6 +32,7 @@ segment lengths (`mocapkit.tracking.multiview.lengths`).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -41,15 +42,24 @@ from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import ConfigError, ShapeError
-from mocapkit.skeleton.kinematics import canonical_positions, kinematic_arrays
+from mocapkit.geometry.transforms import transform_points
+from mocapkit.skeleton.kinematics import kinematic_arrays
 from mocapkit.skeleton.limbs import has_limb, limb
-from mocapkit.skeleton.model import Skeleton
+from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
 from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments, scale_skeleton
-from mocapkit.tracking.base import FrameResult, canonical_joints_mm, observation_status
+from mocapkit.tracking.base import FrameResult, observation_status
 from mocapkit.tracking.multiview.config import MultiviewConfig
-from mocapkit.tracking.multiview.fit import FitTargets, fit_pose_nb, points_nb, view_arrays
-from mocapkit.tracking.multiview.lengths import column_median, robust_triangulation
+from mocapkit.tracking.multiview.fit import points_nb, view_arrays
+from mocapkit.tracking.multiview.frame import (
+    FrameModel,
+    FrameSettings,
+    begin_frame_nb,
+    finish_frame_nb,
+    frame_figures_nb,
+    restart_limb_nb,
+)
+from mocapkit.tracking.multiview.lengths import robust_triangulation
 
 FloatArray = NDArray[np.float64]
 
@@ -76,6 +86,13 @@ PARTS: tuple[tuple[str, str, str | None], ...] = (
 )
 
 
+@functools.lru_cache(maxsize=1)
+def _model_preset() -> Skeleton:
+    """The ``zhang21`` preset with `MODEL_OPTIONS`, read once (a frozen skeleton; the
+    scalings return new ones)."""
+    return load_preset("zhang21", MODEL_OPTIONS)
+
+
 def multiview_skeleton(
     lengths_mm: Mapping[str, float] | None = None,
     height_mm: float | None = None,
@@ -84,7 +101,7 @@ def multiview_skeleton(
     """The ``zhang21`` full body with `MODEL_OPTIONS`, scaled to ``height_mm`` and then to
     the measured canonical segment lengths and trunk rest vectors
     (`mocapkit.skeleton.scaling.fit_segments`)."""
-    sk = load_preset("zhang21", MODEL_OPTIONS)
+    sk = _model_preset()
     if height_mm is not None:
         sk = scale_skeleton(sk, height_mm=height_mm)
     return fit_segments(sk, lengths_mm=dict(lengths_mm or {}), vectors_mm=dict(vectors_mm or {}))
@@ -147,13 +164,10 @@ class MultiviewTracker:
         self._tj = np.ascontiguousarray(tj, dtype=np.int64)
         self._tp = np.ascontiguousarray(tp, dtype=np.float64)
         self._kin = kinematic_arrays(skeleton)
-        self._views = view_arrays([c.camera_from_world for c in self.cameras])
-        self._centers = np.stack([np.asarray(c.center_in_world, dtype=float) for c in self.cameras])
         self._perm = swap_permutation(self.names)
         self._err_keys = [f"{n}_{c.name}_px" for n in self.names for c in self.cameras]
         self._views_keys = [f"{n}_views" for n in self.names]
         self._hip_rows = [self.names.index("left_hip"), self.names.index("right_hip")]
-        self._pairs = np.flatnonzero(self._perm != np.arange(len(self.names)))
         self._base_w = np.array([cfg.rebuilt_weight if n in rebuilt else 1.0 for n in self.names])
         free = np.array([n in FREE_DOFS for n in skeleton.dof_names])
         lower = np.where(np.isfinite(skeleton.lower) & ~free, skeleton.lower, -1e9)
@@ -166,6 +180,7 @@ class MultiviewTracker:
         self._root_t = np.flatnonzero(root_t)
         self._yaw = skeleton.dof_index("root_yaw")
         idx = {n: i for i, n in enumerate(self.names)}
+        self._rows = idx
         self._limbs: list[tuple[NDArray[np.int64], list[int]]] = []
         for part, end, mid in PARTS:
             if mid is None or end not in idx or mid not in idx or not has_limb(skeleton, part):
@@ -173,15 +188,49 @@ class MultiviewTracker:
             side, kind = part.split("_")
             top = f"{side}_{'shoulder' if kind == 'arm' else 'hip'}"
             rows = [idx[n] for n in (top, mid, end) if n in idx]
-            self._limbs.append((limb(skeleton, part).dofs, rows))
+            self._limbs.append((limb(skeleton, part).dofs.astype(np.int64), rows))
+        self._camera_from_world = np.stack([c.camera_from_world for c in self.cameras])
+        self._swapped_keys = [f"{c.name}_swapped" for c in self.cameras]
         self._rng = np.random.default_rng(0)
         self._point_ref = np.full((len(self.names), 3), np.nan)
-        self._point_prior = np.zeros(len(self.names))
         self._q: FloatArray | None = None
         self._last_seen: dict[str, float] = {}
         self._ever_seen: set[str] = set()
-        self._norm = np.empty((len(self.cameras), len(self.names)))
         self.swapped = np.zeros(len(self.cameras), dtype=bool)
+        limb_rows = np.full((len(self._limbs), 3), -1, dtype=np.int64)
+        for i, (_dofs, rows) in enumerate(self._limbs):
+            limb_rows[i, : len(rows)] = rows
+        cj, cp = skeleton.canonical_points()
+        self._canon_rows = np.array(
+            [CANONICAL_JOINTS.index(n) for n in skeleton.canonical_names], dtype=np.int64
+        )
+        self._model = FrameModel(
+            self._kin,
+            self._tj,
+            self._tp,
+            view_arrays([c.camera_from_world for c in self.cameras]),
+            np.stack([c.arrays.K for c in self.cameras]),
+            np.stack([c.arrays.dist for c in self.cameras]),
+            np.stack([np.asarray(c.center_in_world, dtype=float) for c in self.cameras]),
+            np.array(self._hip_rows, dtype=np.int64),
+            self._perm,
+            np.flatnonzero(self._perm != np.arange(len(self.names))).astype(np.int64),
+            self._base_w,
+            self._lower,
+            self._upper,
+            limb_rows,
+            np.ascontiguousarray(cj, dtype=np.int64),
+            np.ascontiguousarray(cp, dtype=float),
+        )
+        self._settings = FrameSettings(
+            cfg.delta_mm,
+            cfg.reject_mm,
+            cfg.swap_ratio,
+            cfg.swap_margin_mm,
+            cfg.point_prior,
+            cfg.restart_mm,
+            cfg.jump_mm,
+        )
 
     # ------------------------------------------------------------------ pieces
 
@@ -202,11 +251,9 @@ class MultiviewTracker:
                     f"found {arr.shape}"
                 )
             px[i] = arr[self.model_rows]
-        norm = np.full_like(px, np.nan)
-        for i, cam in enumerate(self.cameras):
-            ok = np.isfinite(px[i]).all(axis=1)
-            if ok.any():
-                norm[i, ok] = cam.undistort_pixels(px[i, ok])
+        # each point on its own: rows without a detection come out NaN, as they go in
+        norm = np.stack([cam.undistort_pixels(px[i]) for i, cam in enumerate(self.cameras)])
+        norm[~np.isfinite(px).all(axis=-1)] = np.nan
         return px, norm
 
     def _initial_pose(self, px: FloatArray) -> FloatArray | None:
@@ -231,187 +278,12 @@ class MultiviewTracker:
     def _scale(self, q: FloatArray) -> FloatArray:
         """Depth (mm) of the model's hips in each view."""
         hips = self._points(q)[self._hip_rows].mean(axis=0)
-        z = np.array([float(c.to_camera(hips)[2]) for c in self.cameras])
+        z = transform_points(self._camera_from_world, hips[None, :])[:, 0, 2]
         return np.maximum(z, 100.0)
 
     def _points(self, q: FloatArray) -> FloatArray:
         """World places (K, 3) of the model's joints at pose ``q``."""
         return points_nb(np.ascontiguousarray(q, dtype=float), self._kin, self._tj, self._tp)
-
-    def _targets(
-        self,
-        norm: FloatArray,
-        weight: FloatArray,
-        scale: FloatArray,
-        q_ref: FloatArray,
-        prior: FloatArray,
-    ) -> FitTargets:
-        return FitTargets(
-            np.ascontiguousarray(norm),
-            np.ascontiguousarray(weight),
-            scale,
-            q_ref,
-            prior,
-            self._point_ref,
-            self._point_prior,
-        )
-
-    def _view_costs(self, q: FloatArray, norm: FloatArray, scale: FloatArray) -> FloatArray:
-        """Robust cost (V, 2) of each view's left/right joints at pose ``q``: labels as
-        given (column 0) and exchanged (column 1)."""
-        cfg = self.config
-        out = np.zeros((len(self.cameras), 2))
-        w = np.ones((len(self.cameras), len(self.names)))
-        for col, obs in enumerate((norm, norm[:, self._perm])):
-            tg = self._targets(obs, w, scale, q, self._prior)
-            self._cost(q, tg)
-            r = self._norm[:, self._pairs]
-            out[:, col] = np.nansum(np.minimum(r, cfg.reject_mm), axis=1)
-        return out
-
-    def _swap_test(self, q: FloatArray, norm: FloatArray, scale: FloatArray) -> NDArray[np.bool_]:
-        """Views whose exchanged labels fit pose ``q`` clearly better."""
-        cfg = self.config
-        if self._pairs.size == 0:
-            return np.zeros(len(self.cameras), dtype=bool)
-        costs = self._view_costs(q, norm, scale)
-        n_pairs = max(self._pairs.size // 2, 1)
-        return (costs[:, 1] < cfg.swap_ratio * costs[:, 0]) & (
-            (costs[:, 0] - costs[:, 1]) > cfg.swap_margin_mm * n_pairs
-        )
-
-    def _fit(
-        self,
-        q: FloatArray,
-        norm: FloatArray,
-        scale: FloatArray,
-        q_ref: FloatArray,
-        prior: FloatArray,
-        iters: int,
-    ) -> FloatArray:
-        """Fit, drop the detections further than ``reject_mm``, fit again; returns the
-        weights (V, K) kept."""
-        cfg = self.config
-        weight = np.where(np.isfinite(norm).all(axis=-1), self._base_w[None, :], 0.0)
-        for _ in range(3):
-            tg = self._targets(norm, weight, scale, q_ref, prior)
-            fit_pose_nb(
-                q,
-                self._kin,
-                self._tj,
-                self._tp,
-                self._views,
-                tg,
-                self._lower,
-                self._upper,
-                cfg.delta_mm,
-                iters,
-                self._norm,
-            )
-            # a detection is dropped when far from the fit and from what the other views
-            # say (twice their median residual): when every view is far the fit is wrong,
-            # not the detections, and they keep pulling it
-            med = column_median(np.where(weight > 0, self._norm, np.nan))
-            far = (weight > 0) & ~(self._norm <= cfg.reject_mm) & ~(self._norm <= 2.0 * med)
-            if not far.any():
-                break
-            weight = np.where(far, 0.0, weight)
-        return weight
-
-    def _point_weights(self, q: FloatArray, obs: FloatArray) -> FloatArray:
-        """Square root of the 3-D point prior's weight per joint (K,): `point_prior` times
-        one less the largest |sin| of the angle between the rays to the subject of two
-        views that detect the joint. Views far apart (|sin| near 1) fix the joint alone and
-        the prior is near 0 (no lag); two facing cameras or a narrow pair leave the depth
-        along their rays free and the prior holds it; one view or none: the full weight."""
-        hips = self._points(q)[self._hip_rows].mean(axis=0)
-        ray = hips[None, :] - self._centers
-        ray /= np.maximum(np.linalg.norm(ray, axis=1, keepdims=True), 1e-9)
-        sin = np.linalg.norm(np.cross(ray[:, None, :], ray[None, :, :]), axis=2)
-        seen = np.isfinite(obs).all(axis=-1) & (self._base_w[None, :] > 0)  # (V, K)
-        both = seen[:, None, :] & seen[None, :, :]  # (V, V, K)
-        span = np.where(both, sin[:, :, None], 0.0).max(axis=(0, 1))
-        return np.ascontiguousarray(self.config.point_prior * (1.0 - span))
-
-    def _restart_limbs(
-        self,
-        q: FloatArray,
-        obs: FloatArray,
-        weight: FloatArray,
-        scale: FloatArray,
-        q_ref: FloatArray,
-        prior: FloatArray,
-    ) -> bool:
-        """Start each limb left far from its detections again from random poses within
-        its limits (`MultiviewConfig.restart_mm`); keeps the lowest cost, in place on
-        ``q``. The prior of a limb started again no longer holds it to the previous
-        frame's pose, which was wrong (``q_ref`` takes the new pose, in place). Returns
-        whether a limb was started again."""
-        cfg = self.config
-        tg = self._targets(obs, weight, scale, q_ref, prior)
-        base = self._cost(q, tg)
-        norm = self._norm.copy()
-        moved = False
-        for dofs, rows in self._limbs:
-            res = np.where(weight[:, rows] > 0, norm[:, rows], np.nan)
-            med = column_median(res)
-            if not (np.nanmax(med, initial=0.0) > cfg.restart_mm):
-                continue
-            lo, hi = self._lower[dofs], self._upper[dofs]
-            seeds = self._rng.uniform(lo, hi, (cfg.restart_seeds, dofs.size))
-            # the candidates are judged without the limb's prior (its reference pose is
-            # the one that went wrong), the current pose with it
-            free = prior.copy()
-            free[dofs] = 1e-3
-            tg_free = self._targets(obs, weight, scale, q_ref, free)
-            costs = []
-            trial = q.copy()
-            for seed in seeds:
-                trial[dofs] = seed
-                costs.append(self._cost(trial, tg_free))
-            # the best seed refined (refining the best two: no better on the tuning set)
-            for k in np.argsort(costs)[:1]:
-                trial = q.copy()
-                trial[dofs] = seeds[k]
-                c, _ = fit_pose_nb(
-                    trial,
-                    self._kin,
-                    self._tj,
-                    self._tp,
-                    self._views,
-                    tg_free,
-                    self._lower,
-                    self._upper,
-                    cfg.delta_mm,
-                    cfg.max_iter,
-                    self._norm,
-                )
-                if c < base:
-                    base = c
-                    q[:] = trial
-                    q_ref[dofs] = trial[dofs]
-                    moved = True
-        return moved
-
-    def _cost(self, q: FloatArray, tg: FitTargets) -> float:
-        from mocapkit.tracking.multiview.fit import evaluate_nb
-
-        d = q.shape[0]
-        return float(
-            evaluate_nb(
-                q,
-                self._kin,
-                self._tj,
-                self._tp,
-                self._views,
-                tg,
-                self.config.delta_mm,
-                False,
-                np.empty((d, d)),
-                np.empty(d),
-                self._norm,
-            )
-        )
 
     # ------------------------------------------------------------------ update
 
@@ -426,33 +298,26 @@ class MultiviewTracker:
         if self._q is None:
             return self._no_pose(t, px)
         q = self._q.copy()
-        scale = self._scale(q)
-        swapped = np.zeros(len(self.cameras), dtype=bool)
-        if not first:
-            swapped = self._swap_test(q, norm, scale)
-        obs = np.where(swapped[:, None, None], norm[:, self._perm], norm)
-        q_ref = q.copy()
         prior = self._prior_first if first else self._prior
-        self._point_prior = np.zeros(len(self.names)) if first else self._point_weights(q, obs)
-        if not first:
-            self._point_ref = np.ascontiguousarray(self._points(q))
         iters = cfg.first_iter if first else cfg.max_iter
-        weight = self._fit(q, obs, scale, q_ref, prior, iters)
-        if self._restart_limbs(q, obs, weight, scale, q_ref, prior):
-            weight = self._fit(q, obs, scale, q_ref, prior, iters)
-        again = self._swap_test(q, obs, scale)
-        if again.any():
-            swapped ^= again
-            obs = np.where(swapped[:, None, None], norm[:, self._perm], norm)
-            weight = self._fit(q, obs, scale, q_ref, prior, iters)
-        n_det = np.isfinite(obs).all(axis=-1)
-        if (weight > 0).sum() < 0.5 * max(int((n_det & (self._base_w > 0)).sum()), 1):
-            self._q = None  # lost: start again from the next frame's triangulation
-        else:
-            self._q = q
+        m, st = self._model, self._settings
+        tg, swapped, restart, base = begin_frame_nb(
+            m, st, q, norm, first, prior, self._point_ref, iters, self._scale(q)
+        )
+        moved = False
+        for i in np.flatnonzero(restart):
+            dofs = self._limbs[i][0]
+            seeds = self._rng.uniform(
+                self._lower[dofs], self._upper[dofs], (cfg.restart_seeds, dofs.size)
+            )
+            cost = restart_limb_nb(m, st, q, tg, dofs, seeds, base, cfg.max_iter)
+            moved |= cost < base
+            base = cost
+        tg, lost = finish_frame_nb(m, st, q, norm, tg, swapped, moved, iters, first)
+        # lost: start again from the next frame's triangulation
+        self._q = None if lost else q
         self.swapped = swapped
-        px_used = np.where(swapped[:, None, None], px[:, self._perm], px)
-        return self._result(t, q, px_used, weight)
+        return self._result(t, q, px, tg.weight)
 
     def _no_pose(self, t: float, px: FloatArray) -> FrameResult:
         status = {p: self._status(p, t, False) for p, _e, _m in PARTS}
@@ -481,12 +346,7 @@ class MultiviewTracker:
 
     def _result(self, t: float, q: FloatArray, px: FloatArray, weight: FloatArray) -> FrameResult:
         cfg = self.config
-        sk = self.skeleton
-        pts = self._points(q)
-        err = np.full((len(self.cameras), len(self.names)), np.nan)
-        for i, c in enumerate(self.cameras):
-            proj = c.project(pts)
-            err[i] = np.linalg.norm(proj - px[i], axis=1)
+        err, canon = frame_figures_nb(self._model, q, px, self.swapped, weight)
         kept = weight > 0
         views = kept.sum(axis=0)
         fit: dict[str, float] = dict(zip(self._err_keys, err.T.ravel().tolist(), strict=True))
@@ -494,19 +354,16 @@ class MultiviewTracker:
         kept_err = np.where(kept, err, np.nan)
         finite = np.isfinite(kept_err)
         det = np.isfinite(err)
-        with np.errstate(invalid="ignore"):
-            far = (det.sum(axis=0) >= 2) & ((err > cfg.warn_px).sum(axis=0) * 2 > det.sum(axis=0))
+        n_det = det.sum(axis=0)
+        far = (n_det >= 2) & ((err > cfg.warn_px).sum(axis=0) * 2 > n_det)
         worst = ""
         if finite.any():
-            per_joint = np.where(
-                finite.any(axis=0), np.nanmax(np.where(finite, kept_err, -1), axis=0), -1
-            )
+            per_joint = np.where(finite, kept_err, -1.0).max(axis=0)
             worst = self.names[int(np.argmax(per_joint))]
-            mean_px, max_px = float(np.nanmean(kept_err)), float(np.nanmax(kept_err))
+            mean_px, max_px = float(kept_err[finite].mean()), float(kept_err[finite].max())
         else:
             mean_px = max_px = math.nan
-        for i, c in enumerate(self.cameras):
-            fit[f"{c.name}_swapped"] = float(self.swapped[i])
+        fit.update(zip(self._swapped_keys, self.swapped.astype(float).tolist(), strict=True))
         fit.update(
             {
                 "mean_px": mean_px,
@@ -515,16 +372,16 @@ class MultiviewTracker:
                 "far_joints": float(far.sum()),
             }
         )
-        idx = {n: i for i, n in enumerate(self.names)}
         status = {}
         for part, end, mid in PARTS:
-            if end not in idx:
+            if end not in self._rows:
                 continue
-            seen = views[idx[end]] >= 2 or (
-                views[idx[end]] >= 1 and mid is not None and mid in idx and views[idx[mid]] >= 2
-            )
+            e = self._rows[end]
+            m = self._rows.get(mid or "", -1)
+            seen = views[e] >= 2 or (views[e] >= 1 and m >= 0 and views[m] >= 2)
             status[part] = self._status(part, t, bool(seen))
-        joints = canonical_joints_mm(sk, canonical_positions(sk, q))
+        joints = np.full((len(CANONICAL_JOINTS), 3), np.nan)
+        joints[self._canon_rows] = canon
         return FrameResult(t, q.copy(), joints, status, fit, worst)
 
 
