@@ -56,6 +56,12 @@ def add_mono_accuracy_parser(methods: Any) -> None:
         "the paper's costume, mid_upper_arm for everyday); paper: the arm ellipse's ends "
         "as elbow and wrist",
     )
+    m.add_argument(
+        "--legs",
+        action="store_true",
+        help="track the legs too (track mono --legs) and measure the whole body instead of "
+        "the upper body",
+    )
     m.add_argument("--lag", type=int, default=None, help="online fixed lag (frames)")
     m.add_argument(
         "--cost", choices=("acceleration", "joint_acceleration", "rotation"),
@@ -110,24 +116,27 @@ def _run(args: argparse.Namespace) -> int:
         initial_pose=args.initial_pose,
         on_floor=args.on_floor,
         detector=args.detector,
-        config=MonoConfig(lag=args.lag, cost=args.cost, **prior),
+        config=MonoConfig(lag=args.lag, cost=args.cost, legs=args.legs, **prior),
         say=(lambda _line: None) if args.json else print,
     )
     if args.json:
         print(to_json(rows))
     else:
+        body = "whole-body" if args.legs else "upper-body"
         print(
-            f"mean: Procrustes upper-body error {np.mean([r.pa_mpjpe_mm for r in rows]):.1f} mm, "
+            f"mean: Procrustes {body} error {np.mean([r.pa_mpjpe_mm for r in rows]):.1f} mm, "
             f"flips right {100 * np.mean([r.flips_right for r in rows]):.1f} %, pruned "
             f"{100 * np.mean([r.pruned_share_mean for r in rows]):.1f} % of the poses per frame"
         )
         if args.detector:
             print(
                 f"mean: arm {np.mean([r.arm_pa_mpjpe_mm for r in rows]):.1f} mm; the "
-                f"detector's own 3-D: upper body "
+                f"detector's own 3-D: {body} "
                 f"{np.mean([r.detector3d_pa_mpjpe_mm for r in rows]):.1f}, arm "
                 f"{np.mean([r.detector3d_arm_pa_mm for r in rows]):.1f} mm; world MPJPE "
-                f"{np.mean([r.mpjpe_mm for r in rows]):.1f} mm"
+                f"{np.mean([r.mpjpe_mm for r in rows]):.1f} mm; arms swapped in the input on "
+                f"{sum(r.swapped_frames for r in rows)} frames, right in the answer on "
+                f"{sum(r.swaps_handled for r in rows)}"
             )
         if args.skin:
             for r in rows:
