@@ -60,6 +60,20 @@ def test_trc_is_y_up_in_mm_and_the_model_has_a_marker_per_joint(
     assert {t.get("name") for t in setup.iter("IKMarkerTask")} == set(motion.joint_names)
 
 
+def test_joints_the_skeleton_lacks_are_left_out_of_the_export(tmp_path: Path) -> None:
+    """A mono result with legs: its skeleton is the upper-body stick, its joints go on to
+    the ankles; the export holds the skeleton's joints (it raised ValueError before)."""
+    sk = load_preset("upper_stick")
+    motion = Motion.from_q(sk, [0.0, 0.02], np.tile(sk.zero_pose(), (2, 1)), "standing")
+    legs = np.full((2, 1, 3), 100.0)
+    names = (*motion.joint_names, "left_ankle")
+    joints = np.concatenate([motion.joints_mm, legs], axis=1)
+    write_opensim_folder(tmp_path, Motion(sk, motion.time_s, motion.q, names, joints))
+    trc = read_trc(tmp_path / MARKER_FILE)
+    assert trc.names == motion.joint_names
+    np.testing.assert_allclose(trc.positions_mm, motion.joints_mm @ OPENSIM_FROM_WORLD.T, atol=1e-6)
+
+
 def test_trc_writer_renames_markers_and_turns_them_in_one_call(tmp_path: Path) -> None:
     names = ["head", "left_elbow", "right_knee"]
     pos = np.arange(2 * 3 * 3, dtype=float).reshape(2, 3, 3)

@@ -501,3 +501,26 @@ def test_detector_3d_on_canonical_joints_is_measured_like_the_tracker(tmp_path: 
     np.savez(path, time_s=truth.time_s, names=np.array(BODY_25), world_mm=world)
     assert detector3d_accuracy(path, truth)[1] > 1.0
     assert np.isnan(detector3d_accuracy(tmp_path / "none.npz", truth)[0])
+
+
+def test_arm_swaps_counts_swapped_input_frames_and_those_the_answer_puts_right() -> None:
+    """Input arms swapped left for right on frames 2-4, the answer still swapped on frame
+    3 alone: 3 swapped, 2 handled; a frame with unknown points counts as not swapped."""
+    from mocapkit.pipelines.mono_accuracy import ARM_JOINTS, arm_swaps
+
+    rng = np.random.default_rng(5)
+    names = ("neck", *ARM_JOINTS)
+    true = np.zeros((8, len(names), 2))
+    true[:, 1:4] = [[260.0, 200.0], [250.0, 260.0], [255.0, 320.0]]  # left arm
+    true[:, 4:7] = [[380.0, 200.0], [390.0, 260.0], [385.0, 320.0]]  # right arm
+    true += rng.normal(scale=2.0, size=true.shape)
+    mirror = [0, 4, 5, 6, 1, 2, 3]
+    inp = true + rng.normal(scale=3.0, size=true.shape)
+    inp[2:5] = inp[2:5][:, mirror]
+    inp[6, 2] = np.nan
+    out = true.copy()
+    out[3] = out[3][mirror]
+    assert arm_swaps(inp, out, true, names) == (3, 2)
+    assert arm_swaps(true, true, true, names) == (0, 0)
+    with pytest.raises(ValueError, match="not in"):
+        arm_swaps(inp, out, true, ("neck",))

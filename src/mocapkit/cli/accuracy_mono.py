@@ -75,6 +75,12 @@ def add_mono_accuracy_parser(methods: Any) -> None:
         ),
         f"{_RUN}.skin_bare_from",
     )
+    m.add_argument(
+        "--legs",
+        action="store_true",
+        help="track the legs too (track mono --legs) and measure the whole body instead of "
+        "the upper body",
+    )
     m.add_argument("--lag", type=int, default=None, help="online fixed lag (frames)")
     shows_default(
         m.add_argument("--cost", choices=COSTS, help="edge weight (default %(stated_default)s)"),
@@ -129,7 +135,9 @@ def _run(args: argparse.Namespace) -> int:
         on_floor=args.on_floor,
         detector=args.detector,
         config=MonoConfig(
-            lag=args.lag, **given(cost=args.cost, arm_prior_weight=args.arm_prior_weight)
+            lag=args.lag,
+            legs=args.legs,
+            **given(cost=args.cost, arm_prior_weight=args.arm_prior_weight),
         ),
         say=(lambda _line: None) if args.json else print,
         **given(seed=args.seed, noise_px=args.noise_px),
@@ -138,18 +146,21 @@ def _run(args: argparse.Namespace) -> int:
     if args.json:
         print(to_json(rows))
     else:
+        body = "whole-body" if args.legs else "upper-body"
         print(
-            f"mean: Procrustes upper-body error {np.mean([r.pa_mpjpe_mm for r in rows]):.1f} mm, "
+            f"mean: Procrustes {body} error {np.mean([r.pa_mpjpe_mm for r in rows]):.1f} mm, "
             f"flips right {100 * np.mean([r.flips_right for r in rows]):.1f} %, pruned "
             f"{100 * np.mean([r.pruned_share_mean for r in rows]):.1f} % of the poses per frame"
         )
         if args.detector:
             print(
                 f"mean: arm {np.mean([r.arm_pa_mpjpe_mm for r in rows]):.1f} mm; the "
-                f"detector's own 3-D: upper body "
+                f"detector's own 3-D: {body} "
                 f"{np.mean([r.detector3d_pa_mpjpe_mm for r in rows]):.1f}, arm "
                 f"{np.mean([r.detector3d_arm_pa_mm for r in rows]):.1f} mm; world MPJPE "
-                f"{np.mean([r.mpjpe_mm for r in rows]):.1f} mm"
+                f"{np.mean([r.mpjpe_mm for r in rows]):.1f} mm; arms swapped in the input on "
+                f"{sum(r.swapped_frames for r in rows)} frames, right in the answer on "
+                f"{sum(r.swaps_handled for r in rows)}"
             )
         if args.skin:
             for r in rows:

@@ -266,10 +266,13 @@ def _write_xml(path: Path, doc: ET.Element) -> None:
 
 def pose_joints_mm(motion: Motion) -> FloatArray:
     """The canonical joints of ``motion``'s pose (forward kinematics of ``q``, in the
-    world frame), NaN wherever ``motion.joints_mm`` is NaN (not observed)."""
+    world frame), NaN wherever ``motion.joints_mm`` is NaN (not observed) and for joints
+    the skeleton lacks (a mono result's legs beside its upper-body stick)."""
     posed = Motion.from_q(motion.skeleton, motion.time_s, motion.q)
-    rows = [posed.joint_names.index(n) for n in motion.joint_names]
-    joints = np.array(posed.joints_mm[:, rows], copy=True)
+    joints = np.full(np.shape(motion.joints_mm), np.nan)
+    have = [k for k, n in enumerate(motion.joint_names) if n in posed.joint_names]
+    rows = [posed.joint_names.index(motion.joint_names[k]) for k in have]
+    joints[:, have] = posed.joints_mm[:, rows]
     joints[np.isnan(motion.joints_mm).any(axis=-1)] = np.nan
     return joints
 

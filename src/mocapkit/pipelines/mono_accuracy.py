@@ -4,12 +4,15 @@ For each clip a mono session is rendered (`mocapkit synth --rig mono`), the true
 keypoints get seeded Gaussian noise (2 px per coordinate by default), and the session is
 tracked from them (or from OpenPose BODY_25 JSON written from those noisy keypoints with
 a second, smaller person added beside the subject, or from the rendered video by skin
-blobs, ``skin``). Reported per clip: the upper-body
-error after a per-frame similarity (Procrustes) alignment (``pa_mpjpe_mm``), MPJPE, the
+blobs, ``skin``). Reported per clip: the upper-body error (with legs tracked,
+``MonoConfig.legs``: the whole stick's, legs included) after a per-frame similarity
+(Procrustes) alignment (``pa_mpjpe_mm``), MPJPE, the
 share of link-frames whose flip (towards or away from the camera) is right, the mean
 survivors and share pruned per frame, and the 2-D error of the tracker's input points
 against the true keypoints (``input_px_median``: median over the seen joint-frames,
-``input_seen``: the share of joint-frames seen; per joint in ``input_px_by_joint``).
+``input_seen``: the share of joint-frames seen; per joint in ``input_px_by_joint``), and
+the frames whose input arms are swapped left for right (`arm_swaps`) with the share of
+them the tracker's answer has on the right sides.
 
 A link-frame counts for the flip figure when the true link leaves the image plane by at
 least ``FLIP_MIN_SINE`` (0.2, about 12 deg): nearer the plane both flips give nearly the
@@ -94,6 +97,8 @@ class MonoClipAccuracy:
     arm_pa_mpjpe_mm: float = float("nan")
     detector3d_pa_mpjpe_mm: float = float("nan")
     detector3d_arm_pa_mm: float = float("nan")
+    swapped_frames: int = 0
+    swaps_handled: int = 0
 
 
 #: The arm joints of the arm figures (PA-aligned on these six alone).
@@ -102,21 +107,24 @@ ARM_JOINTS: tuple[str, ...] = (
 )  # fmt: skip
 
 
-def detector3d_accuracy(world_npz: Path, truth: Truth | None) -> tuple[float, float]:
+def detector3d_accuracy(
+    world_npz: Path, truth: Truth | None, joints: Sequence[str] = UPPER_BODY_JOINTS
+) -> tuple[float, float]:
     """PA-MPJPE (mm) of a detector's own 3-D (``keypoints3d/<camera>.npz``) against the
     truth, per frame aligned as the tracker's (`mocapkit.eval.metrics.evaluate_joints`):
-    over the upper body and over the arms alone. NaN, NaN without the file."""
+    over ``joints`` (default the upper body) and over the arms alone. NaN, NaN without
+    the file."""
     if not world_npz.is_file() or truth is None:
         return float("nan"), float("nan")
     with np.load(world_npz) as z:
         time_s, world = np.asarray(z["time_s"], dtype=float), np.asarray(z["world_mm"])
-    names, joints = canonical_from_body25_world(world)
+    names, points = canonical_from_body25_world(world)
     tr = truth
     upper, arms = (
         evaluate_joints(
-            time_s, names, joints, tr.time_s, tr.joint_names, tr.joints_mm, joints=sel
+            time_s, names, points, tr.time_s, tr.joint_names, tr.joints_mm, joints=sel
         ).pa_mpjpe_mm
-        for sel in (UPPER_BODY_JOINTS, ARM_JOINTS)
+        for sel in (tuple(joints), ARM_JOINTS)
     )
     return upper, arms
 
@@ -194,6 +202,48 @@ def input_error(run: MonoRun, true_px: FloatArray) -> tuple[float, float, dict[s
     }
     med = float(np.median(d[ok])) if ok.any() else float("nan")
     return med, float(ok.mean()), by_joint
+
+
+def arm_swaps(
+    input_px: FloatArray, output_px: FloatArray, true_px: FloatArray, names: Sequence[str]
+) -> tuple[int, int]:
+    """Frames whose input arms are swapped left for right, and how many of them the
+    tracker's answer has on the right sides.
+
+    An arm pair is swapped in a frame when its left and right shoulder, elbow and wrist
+    lie nearer the other side's true points than their own (summed distances, px).
+
+    Parameters
+    ----------
+    input_px, output_px, true_px : (T, K, 2) float
+        The tracker's input points, its answer projected into the image and the true
+        keypoints, of the joints ``names`` (NaN where unknown: such a frame counts as
+        not swapped).
+    names : sequence of str
+        Needs the six arm joints (`ARM_JOINTS`).
+
+    Returns
+    -------
+    swapped : int
+        Frames whose input is swapped.
+    handled : int
+        Of those, the frames whose answer is not.
+    """
+    left = [list(names).index(n) for n in ARM_JOINTS[:3]]
+    right = [list(names).index(n) for n in ARM_JOINTS[3:]]
+
+    def swapped(px: FloatArray) -> NDArray[np.bool_]:
+        def dist(a: list[int], b: list[int]) -> FloatArray:
+            return np.asarray(np.linalg.norm(px[:, a] - true_px[:, b], axis=-1).sum(axis=1))
+
+        with np.errstate(invalid="ignore"):
+            return np.asarray(
+                dist(left, right) + dist(right, left) < dist(left, left) + dist(right, right)
+            )
+
+    was = swapped(np.asarray(input_px, dtype=float))
+    still = swapped(np.asarray(output_px, dtype=float))
+    return int(was.sum()), int((was & ~still).sum())
 
 
 def noisy_keypoints(session_path: Path, model: StickModel, noise_px: float, seed: int) -> tuple:
@@ -334,6 +384,7 @@ def mono_accuracy(
     skin_options = costume_skin_options(dress, **own_arms)
     cfg = config or MonoConfig()
     source = "skin" if skin else "openpose" if openpose else detector or "keypoints"
+    measured = _model(cfg).joint_names if cfg.legs else UPPER_BODY_JOINTS
     rows = []
     for clip in clips or tuple(MONO_CLIPS):
         base = Path(work_dir) / Path(clip).stem
@@ -387,14 +438,22 @@ def mono_accuracy(
                 on_floor=on_floor,
                 initial_pose=first_pose,
             )
-        rep = evaluate_result(out, session, joints=UPPER_BODY_JOINTS)
+        rep = evaluate_result(out, session, joints=measured)
         arm = evaluate_result(out, session, joints=ARM_JOINTS).pa_mpjpe_mm
         det3d = (
-            detector3d_accuracy(world_npz, s.truth) if world_npz is not None else (np.nan, np.nan)
+            detector3d_accuracy(world_npz, s.truth, measured)
+            if world_npz is not None
+            else (np.nan, np.nan)
         )
         flips, _ = flip_accuracy(run, truth_in_camera(s, cam, run.model))
         true_px = s.keypoints[cam].pixels[:, [names.index(n) for n in run.model.joint_names]]
         med, seen, by_joint = input_error(run, true_px)
+        swaps = (0, 0)
+        if cfg.camera_model != "orthographic":  # the orthographic answer is not in mm
+            answer_px = s.camera(cam).project_camera_points(
+                np.stack([f.joints_in_camera for f in run.frames])
+            )
+            swaps = arm_swaps(run.input_px, answer_px, true_px, run.model.joint_names)
         summ = run.summary()
         row = MonoClipAccuracy(
             clip,
@@ -415,6 +474,7 @@ def mono_accuracy(
             arm,
             float(det3d[0]),
             float(det3d[1]),
+            *swaps,
         )
         say(format_rows([row]).splitlines()[-1])
         rows.append(row)
@@ -432,7 +492,7 @@ def format_rows(rows: Sequence[MonoClipAccuracy]) -> str:
     lines = [
         f"{'clip':<18}{'input':<15}{'PA mm':>8}{'MPJPE':>8}{'flips':>7}{'surv':>7}"
         f"{'cand':>7}{'pruned':>8}{'allpr':>6}{'res px':>8}{'cover':>7}{'in px':>7}{'seen':>7}"
-        f"{'arm PA':>8}{'det3D':>7}{'d3 arm':>8}"
+        f"{'arm PA':>8}{'det3D':>7}{'d3 arm':>8}{'swaps':>7}"
     ]
     for r in rows:
         what = f"{r.source} {r.costume}" if r.costume else r.source
@@ -442,6 +502,7 @@ def format_rows(rows: Sequence[MonoClipAccuracy]) -> str:
             f"{100 * r.pruned_share_mean:7.1f}%{r.all_pruned_frames:6d}{r.residual_px_mean:8.2f}"
             f"{r.coverage:7.3f}{r.input_px_median:7.2f}{100 * r.input_seen:6.1f}%"
             f"{r.arm_pa_mpjpe_mm:8.1f}{r.detector3d_pa_mpjpe_mm:7.1f}{r.detector3d_arm_pa_mm:8.1f}"
+            f"{f'{r.swaps_handled}/{r.swapped_frames}':>7}"
         )
     return "\n".join(lines)
 
