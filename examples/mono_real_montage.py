@@ -70,7 +70,7 @@ def distance_px(session, camera: str, motion) -> float:
     return float(np.nanmedian(d))
 
 
-def tile(session, camera: str, frame: int, motion, label: str) -> np.ndarray:
+def tile(session, camera: str, frame: int, motion, label: str, height: int = TILE_H) -> np.ndarray:
     """The camera's frame: its detections (thin: right orange, left cyan) and the result
     drawn through its calibration (thick green)."""
     img = np.ascontiguousarray(session.video(camera).read(frame))
@@ -79,8 +79,8 @@ def tile(session, camera: str, frame: int, motion, label: str) -> np.ndarray:
     draw_sticks_px(img, kp.joint_names, kp.pixels[frame], (0, 140, 255), thick, (255, 200, 0))
     draw_sticks(img, session.camera(camera), motion.joint_names, motion.joints_mm[frame],
                 colour=(0, 220, 0), thickness=2 * thick)  # fmt: skip
-    w = round(img.shape[1] * TILE_H / img.shape[0])
-    t = cv2.resize(img, (w, TILE_H), interpolation=cv2.INTER_AREA)
+    w = round(img.shape[1] * height / img.shape[0])
+    t = cv2.resize(img, (w, height), interpolation=cv2.INTER_AREA)
     (tw, th), _ = cv2.getTextSize(label, cv2.FONT_HERSHEY_SIMPLEX, 0.38, 1)
     cv2.rectangle(t, (0, 0), (tw + 6, th + 8), (0, 0, 0), -1)
     cv2.putText(t, label, (3, th + 3), cv2.FONT_HERSHEY_SIMPLEX, 0.38, (255, 255, 255), 1,
@@ -127,15 +127,15 @@ def sports2d_session(video: Path, detected: Path, session_dir: Path) -> None:
         shutil.copytree(detected / sub, session_dir / sub, dirs_exist_ok=True)
 
 
-def side_tile(motion, frame: int, width: int) -> np.ndarray:
+def side_tile(motion, frame: int, width: int, height: int) -> np.ndarray:
     """The result seen from a virtual camera on the image's left (2 m from the frame's
     neck, level, looking along the image's x): the tracked camera's depth runs left to
     right, so flips towards or away from it show."""
     mid = motion.joints_mm[frame, motion.joint_names.index("neck")] - np.array([0, 0, 250.0])
-    size = (width, TILE_H)
+    size = (width, height)
     side = Camera("side", size, intrinsics_from_fov(size, 40.0), np.zeros(0),
                   look_at(mid - np.array([2000.0, 0, 0]), mid))  # fmt: skip
-    img = np.full((TILE_H, width, 3), 60, np.uint8)
+    img = np.full((height, width, 3), 60, np.uint8)
     draw_sticks(img, side, motion.joint_names, motion.joints_mm[frame], (0, 220, 0), 3)
     cv2.putText(img, f"#{frame} from the left", (3, 14), cv2.FONT_HERSHEY_SIMPLEX,
                 0.38, (255, 255, 255), 1, cv2.LINE_AA)  # fmt: skip
@@ -147,8 +147,9 @@ def sports2d(session_dir: Path, result: Path, dest: Path, frames=(70, 110, 150, 
     c = next(iter(session.keypoints))
     m = load_motion_npz(result / "motion.npz")
     print(f"{c}: median px to detections {distance_px(session, c, m):.0f}")
-    row = [tile(session, c, f, m, f"tracked {c} #{f}") for f in frames]
-    sides = [side_tile(m, f, TILE_H * 2 // 3) for f in frames]
+    h = 270
+    row = [tile(session, c, f, m, f"tracked {c} #{f}", h) for f in frames]
+    sides = [side_tile(m, f, h * 2 // 3, h) for f in frames]
     rows = [np.concatenate([row[i], sides[i], row[i + 1], sides[i + 1]], axis=1) for i in (0, 2)]
     write_small_png(dest, np.concatenate(rows, axis=0))
 
