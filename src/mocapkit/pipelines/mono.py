@@ -475,12 +475,23 @@ def _run(
     return frames
 
 
+#: The joints whose image points place the subject by the feet on the floor (left, right).
+ANKLES = ("left_ankle", "right_ankle")
+
+
 def online_mono_stream(
-    session: Session, camera: str, config: MonoConfig, dt_s: float
+    session: Session,
+    camera: str,
+    config: MonoConfig,
+    dt_s: float,
+    ankles: bool = False,
+    placement: FloorConfig | None = None,
 ) -> MonoStream:
     """The online mono tracker on a session's camera with its measured link lengths
     (``session.json`` ``subject.bone_lengths_mm``): what ``track mono --session-lengths
     --lag L`` runs, for samples that come one at a time (`mocapkit.pipelines.live`).
+    With ``ankles`` (the samples carry them) the subject is placed by the feet on the
+    floor as `track_mono` places it (``placement``, default `FloorConfig()`).
 
     Raises
     ------
@@ -496,7 +507,23 @@ def online_mono_stream(
     lengths = session_lengths(session, model)
     cam = session.camera(camera)
     tracker = MonoTracker(lengths, cam, dt_s, config, model)
-    return MonoStream(tracker, output_skeleton(model, lengths), cam, float("nan"))
+    floor = _floor(session, cam, config, ankles, placement)
+    return MonoStream(tracker, output_skeleton(model, lengths), cam, float("nan"), floor=floor)
+
+
+def _floor(
+    session: Session,
+    cam: Camera,
+    config: MonoConfig,
+    ankles: bool,
+    placement: FloorConfig | None,
+) -> FloorDepth | None:
+    """The placement by the feet on the floor, where it applies: asked for (the default),
+    the perspective model, the ankles seen; the session's stature, else the default."""
+    place = placement or FloorConfig()
+    if not (place.on_floor and ankles and config.camera_model == "perspective"):
+        return None
+    return FloorDepth(cam, session.height_mm or DEFAULT_HEIGHT_MM, place)
 
 
 def refined_lengths(
@@ -682,13 +709,9 @@ def track_mono(
     skeleton = output_skeleton(model, lengths_mm)
     tracker = MonoTracker(lengths, cam, dt, cfg, model, initial_pose=initial)
     feet = ankles_px
-    ankles = ("left_ankle", "right_ankle")
-    if feet is None and set(ankles) <= set(kp.joint_names):
-        feet = kp.pixels[:, [kp.joint_names.index(n) for n in ankles]]
-    place = placement or FloorConfig()
-    floor = None
-    if place.on_floor and cfg.camera_model == "perspective" and feet is not None:
-        floor = FloorDepth(cam, session.height_mm or DEFAULT_HEIGHT_MM, place)
+    if feet is None and set(ANKLES) <= set(kp.joint_names):
+        feet = kp.pixels[:, [kp.joint_names.index(n) for n in ANKLES]]
+    floor = _floor(session, cam, cfg, feet is not None, placement)
     stream = MonoStream(tracker, skeleton, cam, scale, floor=floor)
     if feet is None:
         feet = np.full((t.shape[0], 2, 2), np.nan)
