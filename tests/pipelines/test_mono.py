@@ -121,6 +121,11 @@ def test_bench_mono_reports_its_figures() -> None:
     assert out["image_fps"] > 0 and out["image_2d_fps"] > 0 and out["fps_wall"] > 0
     assert 0.0 <= float(out["pruned_share"]) <= 1.0
     assert float(out["survivors_mean"]) <= float(out["candidates_mean"])
+    # the start-up apart, in a fresh process: the import and the session's load take time
+    assert float(out["startup_import_s"]) > 0 and float(out["startup_session_s"]) > 0
+    assert float(out["startup_total_s"]) == pytest.approx(
+        sum(float(out[f"startup_{k}_s"]) for k in ("import", "session", "kernels"))
+    )
 
 
 def test_bench_frames_are_read_back_by_skin_tracking() -> None:
@@ -424,11 +429,11 @@ def test_truth_in_camera_is_the_stick_joints_seen_from_the_camera(tmp_path: Path
         truth_in_camera(load_session(folder), cam.name, model)
 
 
-def test_on_floor_places_the_neck_above_the_standing_foot(tmp_path: Path) -> None:
-    """With ``on_floor`` and an ankle seen standing below the neck, the neck lands where
-    the truth has it (its depth from the floor, its image from the tracker); without,
-    at the depth from the link lengths. Refused without a calibrated perspective model."""
-    from mocapkit.tracking.mono.placement import ANKLE_SHARE
+def test_the_feet_on_the_floor_place_the_neck_by_default(tmp_path: Path) -> None:
+    """With an ankle seen standing below the neck, the neck lands where the truth has it
+    (its depth from the floor, its image from the tracker); with ``on_floor`` False, or
+    the weak-perspective model, or no ankles, at the depth from the link lengths."""
+    from mocapkit.tracking.mono.placement import ANKLE_SHARE, FloorConfig
 
     session = _session(tmp_path / "s")
     joints, names, _ = stick_motion(N)
@@ -436,17 +441,18 @@ def test_on_floor_places_the_neck_above_the_standing_foot(tmp_path: Path) -> Non
     foot = neck.copy()
     foot[:, 2] = ANKLE_SHARE * 1700.0
     ankles = np.stack([camera().project(foot), np.full((N, 2), np.nan)], axis=1)
-    placed = track_mono(session, None, ankles_px=ankles, on_floor=True)
-    free = track_mono(session, None)
+    placed = track_mono(session, None, ankles_px=ankles)
+    free = track_mono(session, None, ankles_px=ankles, placement=FloorConfig(on_floor=False))
     got = placed.motion.joints_mm[:, placed.motion.joint_names.index("neck")]
     own = free.motion.joints_mm[:, free.motion.joint_names.index("neck")]
     err = np.linalg.norm(got - neck, axis=1)
     assert np.nanmax(err) < 5.0
     assert np.nanmean(err) < 0.5 * np.nanmean(np.linalg.norm(own - neck, axis=1))
-    with pytest.raises(ConfigError, match="on-floor: needs the perspective"):
-        track_mono(session, None, on_floor=True, config=MonoConfig(camera_model="weak"))
-    with pytest.raises(SessionError, match="on-floor needs the ankles"):
-        track_mono(session, None, on_floor=True)
+    assert placed.summary()["on_floor_share"] == 1.0
+    assert free.summary()["on_floor_share"] == 0.0
+    weak = track_mono(session, None, ankles_px=ankles, config=MonoConfig(camera_model="weak"))
+    assert weak.summary()["on_floor_share"] == 0.0
+    assert track_mono(session, None).summary()["on_floor_share"] == 0.0  # no ankles
 
 
 def test_detector_3d_on_canonical_joints_is_measured_like_the_tracker(tmp_path: Path) -> None:

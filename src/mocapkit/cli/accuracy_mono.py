@@ -102,9 +102,9 @@ def add_mono_accuracy_parser(methods: Any) -> None:
         "report these figures apart",
     )
     m.add_argument(
-        "--on-floor",
+        "--no-floor",
         action="store_true",
-        help="place the subject with the feet on the floor (track mono --on-floor)",
+        help="place the subject by the link lengths alone (track mono --no-floor)",
     )
     m.add_argument("--json", action="store_true", help="print JSON instead of a table")
     m.set_defaults(func=_run)
@@ -115,6 +115,7 @@ def _run(args: argparse.Namespace) -> int:
 
     from mocapkit.cli.args import mocap_folder
     from mocapkit.pipelines.mono_accuracy import format_rows, mono_accuracy, to_json
+    from mocapkit.tracking.mono.placement import FloorConfig
     from mocapkit.tracking.mono.tracker import MonoConfig
 
     mocap = mocap_folder(args.mocap)
@@ -132,7 +133,7 @@ def _run(args: argparse.Namespace) -> int:
         skin=args.skin,
         costume=args.costume,
         initial_pose=args.initial_pose,
-        on_floor=args.on_floor,
+        placement=FloorConfig(on_floor=False) if args.no_floor else None,
         detector=args.detector,
         config=MonoConfig(
             lag=args.lag,

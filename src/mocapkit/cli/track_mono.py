@@ -108,11 +108,11 @@ def add_mono_parser(methods: Any) -> None:
         "joints.csv (world frame, mm) whose first row is used; the neck is required",
     )
     p.add_argument(
-        "--on-floor",
+        "--no-floor",
         action="store_true",
-        help="the subject stands on the world's floor (z = 0) where an ankle is seen: "
-        "place each pose at the depth the feet give (calibrated camera, stature in "
-        "session.json); off: the depth from the link lengths",
+        help="place the subject by the depth the link lengths give alone; default: by the "
+        "feet where they stand on the world's floor (z = 0, z up) and agree with that "
+        "depth (calibrated camera, ankles in the keypoints)",
     )
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.set_defaults(func=_run_mono)
@@ -126,6 +126,7 @@ def _run_mono(args: argparse.Namespace) -> int:
         track_mono,
     )
     from mocapkit.pipelines.run import find_gaps
+    from mocapkit.tracking.mono.placement import FloorConfig
     from mocapkit.tracking.mono.stick import stick_model
     from mocapkit.tracking.mono.tracker import MonoConfig
 
@@ -166,7 +167,7 @@ def _run_mono(args: argparse.Namespace) -> int:
         skin=args.skin,
         initial_pose=start,
         skin_options=skin_options,
-        on_floor=args.on_floor,
+        placement=FloorConfig(on_floor=False) if args.no_floor else None,
     )
     summary = run.summary()
     if not args.json:  # limbs unseen past the bridge: NaN joints, status in fit.csv
@@ -179,6 +180,7 @@ def _run_mono(args: argparse.Namespace) -> int:
             f"tracked {run.motion.n_frames} frames -> {args.out}: "
             f"{summary['survivors_mean']:.1f} of {summary['candidates_mean']:.1f} poses survive "
             f"pruning on average ({100 * summary['pruned_share_mean']:.0f} % pruned), "
-            f"2-D residual {summary['residual_px_mean']:.2f} px"
+            f"2-D residual {summary['residual_px_mean']:.2f} px; placed by the feet on the "
+            f"floor in {100 * summary['on_floor_share']:.0f} % of the frames"
         )
     return 0

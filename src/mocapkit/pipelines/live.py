@@ -133,7 +133,7 @@ def _mono(
     setup: Session, inputs: LiveInputs, config: LiveConfig
 ) -> Callable[[LiveFeed], LiveTracker]:
     from mocapkit.io.session_csv import Keypoints
-    from mocapkit.pipelines.mono import MonoSample, online_mono_stream, stick_pixels
+    from mocapkit.pipelines.mono import ANKLES, MonoSample, online_mono_stream, stick_pixels
     from mocapkit.tracking.mono.tracker import MonoConfig
 
     if len(inputs.keypoints) != 1:
@@ -147,7 +147,8 @@ def _mono(
     def build(feed: LiveFeed) -> LiveTracker:
         layout = feed.layouts[f"keypoints:{cam}"]
         rate = layout.rate_hz or setup.rates.get("video_hz", 30.0)
-        stream = online_mono_stream(setup, cam, cfg, 1.0 / rate)
+        feet = [layout.points.index(n) for n in ANKLES if n in layout.points]
+        stream = online_mono_stream(setup, cam, cfg, 1.0 / rate, ankles=len(feet) == 2)
         model = stream.tracker.model
         where = f"LSL stream {layout.name!r}"
         stick_pixels(Keypoints(np.zeros(1), layout.points, np.zeros((1, len(layout.points), 2)),
@@ -155,7 +156,11 @@ def _mono(
         idx = [layout.points.index(n) for n in model.joint_names]
         return LiveTracker(
             stream,
-            lambda s: MonoSample(s.time_s, np.asarray(s.keypoints_px[cam][idx], dtype=float)),
+            lambda s: MonoSample(
+                s.time_s,
+                np.asarray(s.keypoints_px[cam][idx], dtype=float),
+                np.asarray(s.keypoints_px[cam][feet], dtype=float) if len(feet) == 2 else None,
+            ),
             f"keypoints:{cam}",
             stream.skeleton,
             stream.joint_names,

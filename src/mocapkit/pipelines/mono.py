@@ -41,11 +41,12 @@ from mocapkit.progress import Progress
 from mocapkit.tracking.base import FrameResult
 from mocapkit.tracking.mono.lengths import (
     ANTHROPOMETRIC_RATIOS,
+    DEFAULT_HEIGHT_MM,
     estimate_link_lengths,
     pixels_per_mm,
     raise_short_links,
 )
-from mocapkit.tracking.mono.placement import FloorDepth
+from mocapkit.tracking.mono.placement import FloorConfig, FloorDepth
 from mocapkit.tracking.mono.smoother import smooth_keypoints
 from mocapkit.tracking.mono.stick import StickModel, stick_model
 from mocapkit.tracking.mono.stream import (
@@ -149,7 +150,8 @@ class MonoRun:
     input_px: FloatArray = field(default_factory=lambda: np.zeros((0, 0, 2)))
 
     def summary(self) -> dict[str, float]:
-        """Mean survivors, candidates, share pruned, residual (px) and frames with a pose."""
+        """Mean survivors, candidates, share pruned, residual (px), frames with a pose
+        and the share of frames placed by the feet on the floor."""
         f = self.frames
         posed = f.code >= 0
         cand = f.n_candidates[posed].astype(float)
@@ -165,6 +167,9 @@ class MonoRun:
             "all_pruned_frames": float(sum(f.pruned_all[posed].tolist())),
             "residual_px_mean": float(np.nanmean(f.residual_px[posed].tolist()))
             if any_posed
+            else float("nan"),
+            "on_floor_share": float(np.mean([r.fit["on_floor"] for r in self.results]))
+            if self.results
             else float("nan"),
         }
 
@@ -476,12 +481,23 @@ def _run(
     return frames
 
 
+#: The joints whose image points place the subject by the feet on the floor (left, right).
+ANKLES = ("left_ankle", "right_ankle")
+
+
 def online_mono_stream(
-    session: Session, camera: str, config: MonoConfig, dt_s: float
+    session: Session,
+    camera: str,
+    config: MonoConfig,
+    dt_s: float,
+    ankles: bool = False,
+    placement: FloorConfig | None = None,
 ) -> MonoStream:
     """The online mono tracker on a session's camera with its measured link lengths
     (``session.json`` ``subject.bone_lengths_mm``): what ``track mono --session-lengths
     --lag L`` runs, for samples that come one at a time (`mocapkit.pipelines.live`).
+    With ``ankles`` (the samples carry them) the subject is placed by the feet on the
+    floor as `track_mono` places it (``placement``, default `FloorConfig()`).
 
     Raises
     ------
@@ -497,7 +513,23 @@ def online_mono_stream(
     lengths = session_lengths(session, model)
     cam = session.camera(camera)
     tracker = MonoTracker(lengths, cam, dt_s, config, model)
-    return MonoStream(tracker, output_skeleton(model, lengths), cam, float("nan"))
+    floor = _floor(session, cam, config, ankles, placement)
+    return MonoStream(tracker, output_skeleton(model, lengths), cam, float("nan"), floor=floor)
+
+
+def _floor(
+    session: Session,
+    cam: Camera,
+    config: MonoConfig,
+    ankles: bool,
+    placement: FloorConfig | None,
+) -> FloorDepth | None:
+    """The placement by the feet on the floor, where it applies: asked for (the default),
+    the perspective model, the ankles seen; the session's stature, else the default."""
+    place = placement or FloorConfig()
+    if not (place.on_floor and ankles and config.camera_model == "perspective"):
+        return None
+    return FloorDepth(cam, session.height_mm or DEFAULT_HEIGHT_MM, place)
 
 
 def refined_lengths(
@@ -540,7 +572,7 @@ def track_mono(
     use_session_lengths: bool = False,
     pixels: FloatArray | None = None,
     ankles_px: FloatArray | None = None,
-    on_floor: bool = False,
+    placement: FloorConfig | None = None,
     length_passes: int = 2,
     skin: bool = False,
     initial_pose: FloatArray | None = None,
@@ -564,15 +596,16 @@ def track_mono(
         Take link lengths from session.json instead of the video.
     pixels : (T, K, 2) float, optional
         Replace the keypoints' pixels of the stick's joints (e.g. with noise added).
-    on_floor : bool
-        The subject stands on the world's floor (z = 0, z up) where an ankle is seen:
-        each pose is placed at the neck depth this gives (`MonoStream`'s ``floor``,
-        `mocapkit.tracking.mono.placement`) instead of the tracker's. Needs the
-        perspective model and the session's stature. Off by default: on a step or a
-        box (two of the five report clips) it places the subject worse.
+    placement : FloorConfig, optional
+        Default `FloorConfig()`: with the perspective model and the ankles, each pose is
+        placed at the neck depth of the feet on the world's floor (z = 0, z up) where
+        they are seen standing on it and that depth agrees with the tracker's
+        (`MonoStream`'s ``floor``, `mocapkit.tracking.mono.placement`; the stature of
+        session.json, else `DEFAULT_HEIGHT_MM`); elsewhere, and with ``on_floor``
+        False, the tracker's depth from the link lengths.
     ankles_px : (T, 2, 2) float, optional
-        With ``on_floor``: the left and right ankles (px, NaN where unseen); default:
-        the keypoints' ankles.
+        The left and right ankles (px, NaN where unseen) for the placement; default:
+        the keypoints' ankles where they have them.
     skin : bool
         Read the 2-D joints off the camera's video by skin blobs (`skin_keypoints`)
         instead of keypoints.
@@ -683,22 +716,9 @@ def track_mono(
     skeleton = output_skeleton(model, lengths_mm)
     tracker = MonoTracker(lengths, cam, dt, cfg, model, initial_pose=initial)
     feet = ankles_px
-    floor = None
-    if on_floor:
-        if cfg.camera_model != "perspective" or not session.height_mm:
-            raise ConfigError(
-                "track mono --on-floor: needs the perspective camera model (found "
-                f"{cfg.camera_model!r}) and the subject's stature in session.json "
-                f"(found {session.height_mm})"
-            )
-        if feet is None:
-            ankles = ("left_ankle", "right_ankle")
-            if not set(ankles) <= set(kp.joint_names):
-                raise SessionError(
-                    f"{kp.source}: --on-floor needs the ankles, found {list(kp.joint_names)}"
-                )
-            feet = kp.pixels[:, [kp.joint_names.index(n) for n in ankles]]
-        floor = FloorDepth(cam, session.height_mm)
+    if feet is None and set(ANKLES) <= set(kp.joint_names):
+        feet = kp.pixels[:, [kp.joint_names.index(n) for n in ANKLES]]
+    floor = _floor(session, cam, cfg, feet is not None, placement)
     stream = MonoStream(tracker, skeleton, cam, scale, floor=floor)
     if feet is None:
         feet = np.full((t.shape[0], 2, 2), np.nan)

@@ -45,6 +45,7 @@ from mocapkit.pipelines.mono import (
 )
 from mocapkit.skeleton.model import UPPER_BODY_JOINTS
 from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+from mocapkit.tracking.mono.placement import FloorConfig
 from mocapkit.tracking.mono.stick import StickModel
 from mocapkit.tracking.mono.tracker import MonoConfig
 
@@ -350,7 +351,7 @@ def mono_accuracy(
     initial_pose: bool = False,
     skin_bare_from: str | None = "costume",
     costume: str | None = None,
-    on_floor: bool = False,
+    placement: FloorConfig | None = None,
     detector: str | None = None,
 ) -> list[MonoClipAccuracy]:
     """Render (or reuse), track from noisy true keypoints (or OpenPose JSON, or the video
@@ -366,9 +367,8 @@ def mono_accuracy(
 
     With ``initial_pose`` the tracker is given the true pose of the first frame (the
     paper's assumption 3; `mocapkit.pipelines.mono.track_mono`), so those figures are
-    to be reported apart from the default ones. With ``on_floor`` the poses are placed
-    with the feet on the floor (`mocapkit.pipelines.mono.track_mono`; from the keypoints:
-    the noisy ankles).
+    to be reported apart from the default ones. ``placement`` is
+    `mocapkit.pipelines.mono.track_mono`'s (from the keypoints: the noisy ankles).
 
     With ``detector`` (a `mocapkit.detect` backend, e.g. ``"mediapipe"``) the rendered
     video is given to that detector (its detections kept in ``WORK/<clip>/detect_<name>``
@@ -422,7 +422,7 @@ def mono_accuracy(
                 keypoints=folder,
                 config=cfg,
                 initial_pose=first_pose,
-                on_floor=on_floor,
+                placement=placement,
                 keypoints3d=world_npz,
             )
         else:
@@ -434,8 +434,8 @@ def mono_accuracy(
                 camera=cam,
                 config=cfg,
                 pixels=px[:, idx],
-                ankles_px=px[:, feet] if on_floor and len(feet) == 2 else None,
-                on_floor=on_floor,
+                ankles_px=px[:, feet] if len(feet) == 2 else None,
+                placement=placement,
                 initial_pose=first_pose,
             )
         rep = evaluate_result(out, session, joints=measured)

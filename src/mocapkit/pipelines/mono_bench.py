@@ -18,13 +18,20 @@ exact offline mode (all frames, then the backtrack), the enumeration alone, and 
 tracking alone. Times are the process's CPU time (``time.process_time``, all threads;
 OpenCV on one thread): on a dedicated core that is the wall time, on a shared machine it
 is what the work itself took. The wall-clock rate is reported too (``fps_wall``).
+The rates exclude the start-up (after a warm-up), which `mono_startup` times apart in a
+fresh process: imports, the session's load, the Numba kernels' cache load (or compile).
 `mono_scaling` times the 3-D step against the number of links and of frames.
 """
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+import tempfile
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import cv2
@@ -32,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
-from mocapkit.errors import ShapeError
+from mocapkit.errors import MocapError, ShapeError
 from mocapkit.skeleton.kinematics import canonical_positions
 from mocapkit.skeleton.limbs import arm, leg
 from mocapkit.skeleton.presets import load_preset
@@ -190,7 +197,7 @@ def bench_mono(
         ``first_order_fps`` (online plain Viterbi), ``offline_fps`` (exact pair-state
         Viterbi), ``enumerations_per_s``, ``survivors_mean``, ``candidates_mean``,
         ``pruned_share``, ``latency_frames``, ``mean_flip_accuracy``, sizes and the
-        pipeline description.
+        pipeline description; the start-up cost apart (`mono_startup`: ``startup_*``).
     """
     if repeats < 1 or n_frames < 10:
         raise ShapeError(
@@ -262,11 +269,91 @@ def bench_mono(
         "n_frames": float(n_frames),
         "image_size": "640x480",
         "clock": "CPU (process_time); fps_wall: wall clock",
+        **mono_startup(),
         "pipeline": "2-D keypoints + 2 px noise (fps) or skin blobs from 640x480 frames "
         "(image_fps) -> fixed-lag smoother -> depth bound -> flips with pruning during "
         "the search -> Viterbi, lag 10 (online; fps: pair states, first_order_fps: plain "
         "states)",
     }
+
+
+#: Run in a fresh interpreter by `mono_startup`: the import of the mono pipeline, the
+#: session's load and two `track_mono` runs of the session (the first loads or compiles
+#: the Numba kernels); prints the wall and CPU seconds as JSON.
+_STARTUP_CHILD = """
+import json, sys, time
+c, w = time.process_time, time.perf_counter
+t = [(c(), w())]
+from mocapkit.pipelines.mono import load_keypoints, track_mono
+from mocapkit.io.session import load_session
+t.append((c(), w()))
+s = load_session(sys.argv[1]); load_keypoints(s, s.camera_names[0], None)
+t.append((c(), w()))
+track_mono(sys.argv[1], None)
+t.append((c(), w()))
+track_mono(sys.argv[1], None)
+t.append((c(), w()))
+d = [(b[0] - a[0], b[1] - a[1]) for a, b in zip(t, t[1:])]
+print(json.dumps({"import": d[0], "session": d[1], "first": d[2], "warm": d[3]}))
+"""
+
+
+def mono_startup(n_frames: int = 30, rate_hz: float = 30.0, seed: int = 0) -> dict[str, float]:
+    """Start-up cost of ``track mono`` apart from its per-frame work, in a fresh process.
+
+    A session of `mono_sequence` (true 2-D + 2 px noise, ``n_frames``) is written to a
+    temporary folder and tracked twice by `mocapkit.pipelines.mono.track_mono` in a new
+    interpreter: the first run pays the one-off costs, the second only the frames.
+
+    Returns
+    -------
+    dict
+        Wall seconds (``*_s``) and CPU seconds (``*_cpu_s``) of ``startup_import``
+        (importing the mono pipeline: NumPy, SciPy, OpenCV, Numba, mocapkit),
+        ``startup_session`` (loading the session and its keypoints) and
+        ``startup_kernels`` (the first run less the second: loading the Numba kernels
+        from their cache, or compiling them on a fresh install, and lazy imports);
+        ``startup_total`` their sum; ``startup_frames``.
+    """
+    from mocapkit.io.cameras import write_cameras
+    from mocapkit.io.session import write_session_json
+    from mocapkit.io.session_csv import write_keypoints_csv
+
+    joints, cam, model, _ = mono_sequence(n_frames, rate_hz)
+    rng = np.random.default_rng(seed)
+    px = cam.project(joints) + rng.normal(scale=2.0, size=(n_frames, model.n_joints, 2))
+    with tempfile.TemporaryDirectory(prefix="mocapkit-bench-mono-") as tmp:
+        folder = Path(tmp)
+        write_cameras(folder / "cameras.json", [cam])
+        write_session_json(folder / "session.json", {"rates": {"video_hz": rate_hz}})
+        (folder / "keypoints").mkdir()
+        write_keypoints_csv(
+            folder / "keypoints" / f"{cam.name}.csv",
+            np.arange(n_frames) / rate_hz,
+            model.joint_names,
+            px,
+        )
+        done = subprocess.run(
+            [sys.executable, "-c", _STARTUP_CHILD, str(folder)],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+    if done.returncode != 0:
+        raise MocapError(f"bench mono start-up: the child process failed:\n{done.stderr}")
+    d = json.loads(done.stdout.strip().splitlines()[-1])
+    parts = {
+        "startup_import": d["import"],
+        "startup_session": d["session"],
+        "startup_kernels": [a - b for a, b in zip(d["first"], d["warm"])],
+    }
+    out: dict[str, float] = {}
+    for key, (cpu, wall) in parts.items():
+        out[f"{key}_s"] = float(wall)
+        out[f"{key}_cpu_s"] = float(cpu)
+    out["startup_total_s"] = sum(out[f"{k}_s"] for k in parts)
+    out["startup_frames"] = float(n_frames)
+    return out
 
 
 def mono_scaling(

@@ -6,7 +6,12 @@ import numpy as np
 import pytest
 
 from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
-from mocapkit.tracking.mono.placement import ANKLE_SHARE, FloorDepth, floor_neck_depth
+from mocapkit.tracking.mono.placement import (
+    ANKLE_SHARE,
+    FloorConfig,
+    FloorDepth,
+    floor_neck_depth,
+)
 
 STATURE = 1700.0
 
@@ -36,9 +41,9 @@ def test_a_standing_subject_gets_its_necks_depth_and_a_raised_foot_is_ignored() 
     assert np.isnan(floor_neck_depth(cam, STATURE, high[0], high[1:]))
 
 
-def test_floor_depth_is_the_median_of_the_window_around_a_frame() -> None:
+def test_floor_depth_is_a_percentile_of_the_window_around_a_frame() -> None:
     cam = _camera()
-    floor = FloorDepth(cam, STATURE, half_window=2)
+    floor = FloorDepth(cam, STATURE, FloorConfig(half_window=2, percentile=25.0))
     depths = []
     for y in (0.0, 100.0, 200.0, 300.0, 400.0, 500.0):
         foot = np.array([0.0, y, ANKLE_SHARE * STATURE])
@@ -47,6 +52,32 @@ def test_floor_depth_is_the_median_of_the_window_around_a_frame() -> None:
         floor.push(px[0], px[1:])
         depths.append(cam.to_camera(neck[None])[0, 2])
     floor.push(np.full(2, np.nan), np.full((2, 2), np.nan))  # an unseen frame adds nothing
-    assert floor.depth(0) == pytest.approx(np.median(depths[:3]))
-    assert floor.depth(3) == pytest.approx(np.median(depths[1:6]))
-    assert floor.depth(6) == pytest.approx(np.median(depths[4:6]))
+    assert floor.window_depth(0) == pytest.approx(np.percentile(depths[:3], 25.0))
+    assert floor.window_depth(3) == pytest.approx(np.percentile(depths[1:6], 25.0))
+    assert floor.window_depth(6) == pytest.approx(np.percentile(depths[4:6], 25.0))
+
+
+def test_the_floor_is_not_trusted_where_the_tracker_puts_the_foot_well_above_it() -> None:
+    """A subject on a box: the foot's ray meets the floor beyond it. At the tracker's
+    (true) depth the foot stands ``gap`` above the floor: the floor's depth is refused
+    above ``gap_mm`` and taken below it; a tracker's depth beyond the floor's is never
+    a reason to refuse (the foot would be under the floor). The subject bends (its neck
+    0.6 of the stature above the foot), so that the neck's height band passes it."""
+    cam = _camera()
+    box_mm = 300.0
+    foot = np.array([0.0, 500.0, ANKLE_SHARE * STATURE + box_mm])
+    neck = foot + np.array([0.0, 0.0, 0.6 * STATURE])
+    px = cam.project(np.stack([neck, foot]))
+    true_z = float(cam.to_camera(neck[None])[0, 2])
+    for gap_mm, trusted in ((200.0, False), (400.0, True)):
+        floor = FloorDepth(cam, STATURE, FloorConfig(half_window=0, gap_mm=gap_mm))
+        floor.push(px[0], px[1:])
+        z_floor = floor.window_depth(0)
+        assert z_floor > true_z + 300.0  # placed too far
+        # the height at the tracker's depth, by similar triangles along the foot's ray
+        lift = 1600.0 - ANKLE_SHARE * STATURE
+        assert lift * (1 - true_z / z_floor) == pytest.approx(box_mm, rel=0.1)
+        got = floor.depth(0, true_z)
+        assert (got == pytest.approx(z_floor)) if trusted else np.isnan(got)
+        assert floor.depth(0, z_floor + 1000.0) == pytest.approx(z_floor)
+        assert np.isnan(floor.depth(1, true_z))  # no floor depth: the tracker's stays

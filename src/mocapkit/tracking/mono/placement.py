@@ -10,11 +10,21 @@ z up). Where an ankle is seen and stands on the floor, its viewing ray meets the
 depth. Of the two ankles the nearer intersection is taken (a raised foot's ray meets the
 plane beyond the foot). A frame counts only where the neck so placed stands a plausible
 height above the foot (``neck_share`` of the stature, a band); the depth of a frame is
-the median over a window of such frames around it. Where none is found, the tracker's
-own depth stays.
+a low percentile (`FloorConfig.percentile`) over a window of such frames around it (a
+foot lifted in a step meets the floor beyond itself: its depths lie on the far side).
+
+Where the subject does not stand on the floor (a step, a box, a treadmill) the floor
+places it too far. So the floor's depth is tested against the tracker's (the stature's)
+depth of the same frame: at the tracker's depth the foot would stand
+``(camera height - ankle height) (1 - tracker depth / floor depth)`` above the floor;
+where that exceeds `FloorConfig.gap_mm` the floor is not trusted and the tracker's depth
+stays. One-sided: a floor depth nearer than the tracker's (the foot would be below the
+floor) is kept. Where no floor depth is found the tracker's depth stays too.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -29,6 +39,30 @@ ANKLE_SHARE = 0.055
 #: Band of the neck's height above the standing ankle, as shares of the stature:
 #: upright about 0.78; lower when bent or squatting; above it the foot is off the floor.
 NECK_SHARE = (0.45, 0.85)
+
+
+@dataclass(frozen=True)
+class FloorConfig:
+    """How `FloorDepth` places the subject (module docstring).
+
+    Attributes
+    ----------
+    on_floor : bool
+        Place the subject by its feet where they stand on the floor (with a calibrated
+        perspective camera and the ankles seen); False: the tracker's depth throughout.
+    half_window : int
+        Frames on each side of a frame whose floor depths its depth takes.
+    percentile : float
+        Percentile of the window's floor depths (a lifted foot's lie beyond).
+    gap_mm : float
+        Largest height (mm) the foot may stand above the floor at the tracker's depth
+        for the floor's depth to be taken.
+    """
+
+    on_floor: bool = True
+    half_window: int = 15
+    percentile: float = 10.0
+    gap_mm: float = 200.0
 
 
 def floor_neck_depth(
@@ -76,36 +110,54 @@ def floor_neck_depth(
 
 
 class FloorDepth:
-    """`floor_neck_depth` per frame, and its median over a window of frames around one.
+    """`floor_neck_depth` per frame, a percentile of it over a window of frames around
+    one, and the test against the tracker's depth (module docstring).
 
     Parameters
     ----------
     camera : Camera
     stature_mm : float
-    half_window : int
-        Frames on each side of a frame whose depths its median takes.
+    config : FloorConfig, optional
     """
 
-    def __init__(self, camera: Camera, stature_mm: float, half_window: int = 15) -> None:
+    def __init__(
+        self, camera: Camera, stature_mm: float, config: FloorConfig | None = None
+    ) -> None:
         self.camera = camera
         self.stature_mm = float(stature_mm)
-        self.half_window = half_window
+        self.config = config or FloorConfig()
+        self._lift = float(np.linalg.inv(camera.camera_from_world)[2, 3]) - (
+            ANKLE_SHARE * self.stature_mm
+        )
         self._depth: dict[int, float] = {}
         self._n = 0
+        self.trusted = 0
+        self.rejected = 0
 
     def push(self, neck_px: ArrayLike, ankles_px: ArrayLike) -> None:
         """The next frame's neck and ankles (px, NaN where unseen)."""
         self._depth[self._n] = floor_neck_depth(self.camera, self.stature_mm, neck_px, ankles_px)
         self._n += 1
 
-    def depth(self, frame: int) -> float:
-        """Median depth of the window around ``frame`` among the frames pushed (NaN if it
-        has none); frames older than the window are forgotten (call in frame order)."""
-        for k in [k for k in self._depth if k < frame - self.half_window]:
+    def window_depth(self, frame: int) -> float:
+        """The ``percentile`` of the floor depths of the window around ``frame`` among the
+        frames pushed (NaN if it has none); frames older than the window are forgotten
+        (call in frame order)."""
+        hw = self.config.half_window
+        for k in [k for k in self._depth if k < frame - hw]:
             del self._depth[k]
-        w = [
-            v
-            for k, v in self._depth.items()
-            if abs(k - frame) <= self.half_window and np.isfinite(v)
-        ]
-        return float(np.median(w)) if w else float("nan")
+        w = [v for k, v in self._depth.items() if abs(k - frame) <= hw and np.isfinite(v)]
+        return float(np.percentile(w, self.config.percentile)) if w else float("nan")
+
+    def depth(self, frame: int, own_depth_mm: float) -> float:
+        """The floor's depth of ``frame`` where it passes the test against the tracker's
+        depth ``own_depth_mm`` (NaN: keep the tracker's; module docstring)."""
+        z = self.window_depth(frame)
+        if not np.isfinite(z):
+            return z
+        if np.isfinite(own_depth_mm) and self._lift > 0:
+            if self._lift * (1.0 - own_depth_mm / z) > self.config.gap_mm:
+                self.rejected += 1
+                return float("nan")
+        self.trusted += 1
+        return z

@@ -118,7 +118,8 @@ class MonoResult(FrameResult):
     2-D distance of the chosen pose's projection to the input points), ``candidates``
     and ``survivors`` (poses before and after pruning), ``all_pruned`` (1 where every
     pose was pruned and the unpruned set kept), ``depth_mm`` (neck depth; NaN
-    orthographic) and ``flips`` (the chosen flip code, -1 without a pose).
+    orthographic), ``flips`` (the chosen flip code, -1 without a pose) and ``on_floor``
+    (1 where the depth is the feet's on the floor, `mocapkit.tracking.mono.placement`).
     """
 
     frame: MonoFrame | None = None
@@ -145,8 +146,9 @@ class MonoStream:
         (`mocapkit.tracking.base.BRIDGE_S`, as the hybrid and stereo trackers).
     floor : FloorDepth or None
         Perspective model: each pose is scaled about the camera's centre (its image
-        unchanged) to the neck depth of the feet on the floor where that is found
-        (`mocapkit.tracking.mono.placement`); None: the tracker's depth.
+        unchanged) to the neck depth of the feet on the floor where that is found and
+        agrees with the tracker's depth (`mocapkit.tracking.mono.placement`); None: the
+        tracker's depth.
     """
 
     def __init__(
@@ -208,10 +210,12 @@ class MonoStream:
     def _result(self, f: MonoFrame) -> MonoResult:
         t = self.tracker
         unseen = self._unseen.pop(f.index)
-        if self.floor is not None and f.code >= 0:
-            z = self.floor.depth(f.index)
-            if np.isfinite(z) and np.isfinite(f.depth_mm) and f.depth_mm > 0:
+        on_floor = 0.0
+        if self.floor is not None and f.code >= 0 and np.isfinite(f.depth_mm) and f.depth_mm > 0:
+            z = self.floor.depth(f.index, f.depth_mm)
+            if np.isfinite(z):
                 f = replace(f, joints_in_camera=f.joints_in_camera * (z / f.depth_mm), depth_mm=z)
+                on_floor = 1.0
         world = to_world([f], t.model, self.camera, t.config, self.px_per_mm)[0]
         joints = world[self._order]
         q = fit_stick_pose(self.skeleton, self.joint_names, joints[None])[0]
@@ -231,5 +235,6 @@ class MonoStream:
             "all_pruned": float(f.pruned_all),
             "depth_mm": f.depth_mm,
             "flips": float(f.code),
+            "on_floor": on_floor,
         }
         return MonoResult(f.time_s, q, canonical, status, fit, "", frame=f)
