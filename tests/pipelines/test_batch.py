@@ -264,9 +264,15 @@ def test_batch_option_errors(study, tmp_path, monkeypatch):
 
 def _swapped_in(out):
     """Takes whose result folder is in place: a ``take.json`` still inside a folder being
-    built (``.NAME.new-*``, hidden) is not a finished take, and a kill then deletes it."""
-    found = (p.parent.relative_to(out) for p in out.glob(f"**/{TAKE_FILE}"))
-    return sorted(r.as_posix() for r in found if not any(s.startswith(".") for s in r.parts))
+    built (``.NAME.new-*``, hidden) is not a finished take, and a kill then deletes it.
+    The running batch renames and removes such folders while the tree is walked: a walk
+    that meets one vanishing is taken again."""
+    while True:
+        try:
+            found = [p.parent.relative_to(out) for p in out.glob(f"**/{TAKE_FILE}")]
+        except FileNotFoundError:
+            continue
+        return sorted(r.as_posix() for r in found if not any(s.startswith(".") for s in r.parts))
 
 
 def test_killed_run_resumes_without_redoing_or_mixing(study, tmp_path):
