@@ -395,6 +395,36 @@ def test_result_bvh_matches_joints_csv_and_its_roll_steps_are_bounded(
     assert np.abs(np.diff(channels, axis=0)).max() < 300.0  # degrees: no whole-turn wraps
 
 
+@pytest.mark.parametrize("chunk", [1, 13])
+def test_bvh_written_in_chunks_is_byte_identical_to_one_chunk(
+    tmp_path: Path, rng: np.random.Generator, monkeypatch: pytest.MonkeyPatch, chunk: int
+) -> None:
+    """`write_bvh` works through the frames in chunks (bounded memory on long motions):
+    the roll limit and the Euler continuity carry over the chunk edges, so the file is the
+    one of the whole motion at once, on a motion whose bones flip by half turns and with
+    frames without a pose."""
+    from mocapkit.io import bvh
+    from mocapkit.io.bvh import MAX_ROLL_SPEED_RAD_S, write_bvh
+
+    sk = load_preset("zhang21", ["root_rotation", "forearm_rotation", "clavicle"])
+    n = 90
+    lo = np.where(np.isfinite(sk.lower), sk.lower, -300.0)
+    hi = np.where(np.isfinite(sk.upper), sk.upper, 300.0)
+    walk = np.cumsum(rng.normal(0.0, 0.02, (n, sk.n_dofs)), axis=0)
+    q = np.clip(0.5 * (lo + hi) + walk * (hi - lo), lo, hi)
+    revolute = np.flatnonzero(sk.dof_kind != 1)
+    q[:, revolute] += np.pi * np.cumsum(rng.random((n, revolute.size)) < 0.03, axis=0)
+    q[[0, 1, 40, 41, 42]] = np.nan
+    motion = Motion.from_q(sk, np.arange(n) / 30, q, "walk")
+    monkeypatch.setattr(bvh, "_WRITE_CHUNK", n)
+    write_bvh(tmp_path / "whole.bvh", motion, max_roll_speed_rad_s=MAX_ROLL_SPEED_RAD_S)
+    monkeypatch.setattr(bvh, "_WRITE_CHUNK", chunk)
+    write_bvh(tmp_path / "chunks.bvh", motion, max_roll_speed_rad_s=MAX_ROLL_SPEED_RAD_S)
+    whole = (tmp_path / "whole.bvh").read_bytes()
+    assert (tmp_path / "chunks.bvh").read_bytes() == whole
+    assert whole.count(b"\n") > n
+
+
 def test_continuous_euler_passes_frames_without_a_pose_through() -> None:
     from mocapkit.io.bvh import continuous_euler
 

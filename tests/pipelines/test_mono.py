@@ -35,11 +35,11 @@ from tests.tracking.mono.test_tracker import FPS, camera, stick_motion
 N = 30
 
 
-def _session(folder: Path, lengths: bool = False) -> Path:
-    joints, names, _ = stick_motion(N)
+def _session(folder: Path, lengths: bool = False, n: int = N) -> Path:
+    joints, names, _ = stick_motion(n)
     cam = camera()
     folder.mkdir()
-    t = np.arange(N) / FPS
+    t = np.arange(n) / FPS
     px = cam.project(joints)
     write_cameras(folder / "cameras.json", [cam])
     (folder / "keypoints").mkdir()

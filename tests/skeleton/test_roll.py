@@ -59,3 +59,20 @@ def test_limit_roll_rejects_bad_input() -> None:
         limit_roll(sk, np.zeros((3, 2, 3, 3)), 0.1)
     with pytest.raises(ShapeError, match="positive angle"):
         limit_roll(sk, np.tile(np.eye(3), (2, sk.n_joints, 1, 1)), 0.0)
+
+
+@pytest.mark.parametrize("chunk", [1, 7, 45])
+def test_roll_limiter_over_chunks_equals_limit_roll_over_the_whole(chunk: int) -> None:
+    """Chunk edges before, on and after the 170 deg jump: the offsets being caught up and
+    the step into each chunk's first frame are carried over exactly."""
+    from mocapkit.skeleton.roll import RollLimiter
+
+    sk, q = _arm_motion()
+    rot = forward_kinematics(sk, q)[..., :3, :3]
+    rot[60] = np.nan  # a frame without a pose restarts the follow, in chunks too
+    limit = np.deg2rad(10.0)
+    whole = limit_roll(sk, rot, limit)
+    limiter = RollLimiter(sk, limit)
+    parts = np.concatenate([limiter(rot[a : a + chunk]) for a in range(0, len(rot), chunk)])
+    np.testing.assert_array_equal(parts, whole)
+    assert not np.array_equal(whole[46:50], rot[46:50])  # the jump is being caught up

@@ -76,7 +76,7 @@ from mocapkit.io.units import (
 )
 from mocapkit.skeleton.kinematics import forward_kinematics
 from mocapkit.skeleton.model import PRISMATIC, REVOLUTE, Skeleton
-from mocapkit.skeleton.roll import limit_roll
+from mocapkit.skeleton.roll import RollLimiter
 
 FloatArray = NDArray[np.float64]
 
@@ -616,40 +616,15 @@ def write_bvh(
         frame_time_s = float(np.median(steps)) if steps.size else 1.0 / 30.0
     if not frame_time_s > 0:
         raise FormatError(f"write_bvh({path}): frame time must be > 0 s, found {frame_time_s!r}")
-    world = forward_kinematics(skel, q)  # (T, J, 4, 4)
-    rot = world[..., :3, :3]
-    pos = world[..., :3, 3]
-    if max_roll_speed_rad_s is not None:
-        rot = limit_roll(skel, rot, max_roll_speed_rad_s * frame_time_s)
-    f = FILE_FROM_WORLD
     n_t, n_j = q.shape[0], skel.n_joints
     parents = skel.parents
     has_prismatic = np.zeros(n_j, dtype=bool)
     has_prismatic[skel.dof_joint[skel.dof_kind == PRISMATIC]] = True
-    columns: list[FloatArray] = []
-    eulers: list[FloatArray] = []
-    slots: list[int] = []
-    for j in range(n_j):
-        p = parents[j]
-        if p < 0:
-            local_r = rot[:, j]
-            local_t = pos[:, j]
-        else:
-            local_r = np.einsum("tki,tkl->til", rot[:, p], rot[:, j])
-            local_t = np.einsum("tki,tk->ti", rot[:, p], pos[:, j] - pos[:, p])
-        if p < 0 or has_prismatic[j]:
-            columns.append((local_t @ f.T) / unit_mm)
-        r_file = np.einsum("ik,tkl,jl->tij", f, local_r, f)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # gimbal lock: the matrix is still exact
-            eulers.append(Rotation.from_matrix(r_file).as_euler("ZYX"))
-        slots.append(len(columns))
-        columns.append(np.zeros((n_t, 0)))  # joint j's angles, made continuous below
-    if eulers:
-        smooth = np.rad2deg(continuous_euler(np.stack(eulers, axis=1)))
-        for j, slot in enumerate(slots):
-            columns[slot] = smooth[:, j]
-    values = np.concatenate(columns, axis=1) if columns else np.zeros((n_t, 0))
+    limiter = (
+        None
+        if max_roll_speed_rad_s is None
+        else RollLimiter(skel, max_roll_speed_rad_s * frame_time_s)
+    )
 
     names = [_NAME_SAFE.sub("_", n) for n in skel.joint_names]
     children: list[list[int]] = [[] for _ in range(n_j)]
@@ -659,7 +634,7 @@ def write_bvh(
     out.write("HIERARCHY\n")
 
     def vec(v: FloatArray) -> str:
-        return " ".join(f"{x:.10f}" for x in (f @ v) / unit_mm)
+        return " ".join(f"{x:.10f}" for x in (FILE_FROM_WORLD @ v) / unit_mm)
 
     def emit(j: int, depth: int) -> None:
         ind = "\t" * depth
@@ -684,7 +659,71 @@ def write_bvh(
     out.write(f"MOTION\nFrames: {n_t}\nFrame Time: {frame_time_s:.10g}\n")
     with atomic_write(path, "w") as fh:
         fh.write(out.getvalue())  # the hierarchy; the frames go to the file as written
-        np.savetxt(fh, values, fmt="%.10f", delimiter=" ")
+        # in chunks of frames, the roll limit and the Euler continuity carried across
+        # their edges (the same values as the whole motion at once, in bounded memory)
+        last: FloatArray | None = None
+        for a in range(0, n_t, _WRITE_CHUNK):
+            values, last = _bvh_values(
+                skel, q[a : a + _WRITE_CHUNK], has_prismatic, unit_mm, limiter, last
+            )
+            np.savetxt(fh, values, fmt="%.10f", delimiter=" ")
+
+
+#: Frames whose channel values `write_bvh` computes at a time.
+_WRITE_CHUNK = 512
+
+
+def _bvh_values(
+    skel: Skeleton,
+    q: FloatArray,
+    has_prismatic: NDArray[np.bool_],
+    unit_mm: float,
+    limiter: RollLimiter | None,
+    previous: FloatArray | None,
+) -> tuple[FloatArray, FloatArray | None]:
+    """Channel values (T, C) of consecutive frames ``q`` of `write_bvh`, and their last
+    frame's Euler angles (J, 3) (rad) that the next chunk continues from (``previous``:
+    those of the chunk before; None at the first)."""
+    world = forward_kinematics(skel, q)  # (T, J, 4, 4)
+    rot = world[..., :3, :3]
+    pos = world[..., :3, 3]
+    if limiter is not None:
+        rot = limiter(rot)
+    f = FILE_FROM_WORLD
+    n_t, n_j = q.shape[0], skel.n_joints
+    parents = skel.parents
+    columns: list[FloatArray] = []
+    eulers: list[FloatArray] = []
+    slots: list[int] = []
+    for j in range(n_j):
+        p = parents[j]
+        if p < 0:
+            local_r = rot[:, j]
+            local_t = pos[:, j]
+        else:
+            local_r = np.einsum("tki,tkl->til", rot[:, p], rot[:, j])
+            local_t = np.einsum("tki,tk->ti", rot[:, p], pos[:, j] - pos[:, p])
+        if p < 0 or has_prismatic[j]:
+            columns.append((local_t @ f.T) / unit_mm)
+        r_file = np.einsum("ik,tkl,jl->tij", f, local_r, f)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # gimbal lock: the matrix is still exact
+            eulers.append(Rotation.from_matrix(r_file).as_euler("ZYX"))
+        slots.append(len(columns))
+        columns.append(np.zeros((n_t, 0)))  # joint j's angles, made continuous below
+    last = previous
+    if eulers:
+        angles = np.stack(eulers, axis=1)
+        if previous is not None:
+            angles = continuous_euler(np.concatenate([previous[None], angles]))[1:]
+        else:
+            angles = continuous_euler(angles)
+        last = angles[-1].copy()
+        smooth = np.rad2deg(angles)
+        for j, slot in enumerate(slots):
+            columns[slot] = smooth[:, j]
+    values = np.concatenate(columns, axis=1) if columns else np.zeros((n_t, 0))
+    return values, last
 
 
 __all__ = [

@@ -27,6 +27,10 @@ def _readonly(a: ArrayLike, dtype: Any = float) -> NDArray[Any]:
     return arr
 
 
+#: Frames whose canonical joints `Motion.from_q` computes at a time.
+_FK_CHUNK = 512
+
+
 @dataclass(frozen=True, eq=False)
 class Motion:
     """A motion clip: a skeleton, its joint parameters over time and the canonical joints.
@@ -96,9 +100,13 @@ class Motion:
             )
         names = skeleton.canonical_names
         joints = np.full((qa.shape[0], len(names), 3), np.nan)
-        valid = ~np.any(np.isnan(qa), axis=1)
-        if names and np.any(valid):
-            joints[valid] = canonical_positions(skeleton, qa[valid], names)
+        valid = np.flatnonzero(~np.any(np.isnan(qa), axis=1))
+        if names:
+            # in chunks: forward kinematics holds every joint's transform (J x 128 bytes
+            # a frame), the joints are a few of them
+            for a in range(0, valid.size, _FK_CHUNK):
+                rows = valid[a : a + _FK_CHUNK]
+                joints[rows] = canonical_positions(skeleton, qa[rows], names)
         return cls(skeleton, ta, qa, names, joints, source)
 
     @property

@@ -15,7 +15,6 @@ that part at its last observed pose (`motion_for_bvh`). Method pipelines
 from __future__ import annotations
 
 import csv
-import io
 import math
 import os
 from collections.abc import Iterable, Sequence
@@ -450,20 +449,18 @@ def write_fit_csv(path: str | os.PathLike[str], results: Sequence[FrameResult]) 
     figures by name (``nan`` where missing) and ``worst``.
     """
     status_cols, fit_cols = _columns(results)
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["time_s", *(f"{n}_status" for n in status_cols), *fit_cols, "worst"])
-    for r in results:
-        w.writerow(
-            [
-                f"{r.time_s:.9f}",
-                *(r.status.get(n, "") for n in status_cols),
-                *(f"{r.fit.get(n, math.nan):.6f}" for n in fit_cols),
-                r.worst,
-            ]
-        )
-    with atomic_write(path, "w", newline="") as fh:
-        fh.write(buf.getvalue())
+    with atomic_write(path, "w", newline="") as fh:  # rows go to the file as formatted
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(["time_s", *(f"{n}_status" for n in status_cols), *fit_cols, "worst"])
+        for r in results:
+            w.writerow(
+                [
+                    f"{r.time_s:.9f}",
+                    *(r.status.get(n, "") for n in status_cols),
+                    *(f"{r.fit.get(n, math.nan):.6f}" for n in fit_cols),
+                    r.worst,
+                ]
+            )
 
 
 def read_fit_csv(path: str | os.PathLike[str]) -> tuple[list[dict[str, str]], dict[str, Any]]:

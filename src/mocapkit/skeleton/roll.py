@@ -145,7 +145,7 @@ def limit_roll(skeleton: Skeleton, world_rot: ArrayLike, max_step_rad: float) ->
     step; after a larger turn it catches up by ``max_step_rad`` a frame, the shorter
     way round. Only roll-free bones turn (about their own axis), and every other joint
     keeps its world rotation, so no joint moves. NaN frames are passed through and
-    restart the follow.
+    restart the follow. `RollLimiter` does the same over a recording in chunks.
 
     Parameters
     ----------
@@ -154,30 +154,63 @@ def limit_roll(skeleton: Skeleton, world_rot: ArrayLike, max_step_rad: float) ->
     max_step_rad : float
         Positive.
     """
-    rot = np.array(_check(skeleton, world_rot), copy=True)
-    if not max_step_rad > 0:
-        raise ShapeError(f"max_step_rad: expected a positive angle, found {max_step_rad!r}")
-    bones, steps = roll_steps(skeleton, rot)
-    if steps.shape[0] == 0 or bones.size == 0:
+    return RollLimiter(skeleton, max_step_rad)(world_rot)
+
+
+class RollLimiter:
+    """`limit_roll` over a recording given in consecutive chunks of frames: calling it on
+    each chunk in turn gives the chunks of ``limit_roll`` on the whole recording (the
+    previous chunk's last input frame and roll offsets are carried over).
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    max_step_rad : float
+        Positive.
+    """
+
+    def __init__(self, skeleton: Skeleton, max_step_rad: float) -> None:
+        if not max_step_rad > 0:
+            raise ShapeError(f"max_step_rad: expected a positive angle, found {max_step_rad!r}")
+        self.skeleton = skeleton
+        self.max_step_rad = float(max_step_rad)
+        self._last: FloatArray | None = None  # the previous chunk's last input frame
+        self._offset: FloatArray | None = None  # input roll - output roll there
+
+    def __call__(self, world_rot: ArrayLike) -> FloatArray:
+        """The next chunk (T, J, 3, 3) of world rotations, limited."""
+        skeleton, max_step_rad = self.skeleton, self.max_step_rad
+        rot = np.array(_check(skeleton, world_rot), copy=True)
+        if rot.shape[0] == 0:
+            return rot
+        prev = self._last
+        self._last = rot[-1].copy()
+        full = rot if prev is None else np.concatenate([prev[None], rot])
+        bones, steps = roll_steps(skeleton, full)
+        if steps.shape[0] == 0 or bones.size == 0:
+            return rot
+        # output roll = input roll - offset; the output's step from its previous frame to
+        # the input is the input's step plus the previous offset (both about the same axis)
+        offsets = np.zeros((rot.shape[0], bones.size))
+        offset = np.zeros(bones.size) if self._offset is None else self._offset
+        two_pi = 2.0 * np.pi
+        first = 1 if prev is None else 0  # the chunk's frame that steps[0] leads to
+        for t, step in enumerate(steps, start=first):
+            wanted = step + offset
+            wanted = wanted - two_pi * np.round(wanted / two_pi)
+            offset = np.where(
+                np.isfinite(wanted), wanted - np.clip(wanted, -max_step_rad, max_step_rad), 0.0
+            )
+            offsets[t] = offset
+        self._offset = offset
+        moved = np.flatnonzero(np.any(offsets != 0.0, axis=1))
+        if moved.size:
+            axes = _axes(skeleton, rot[moved], bones)
+            turn = matrix_from_axis_angle(axes, -offsets[moved])
+            rot[np.ix_(moved, bones)] = np.einsum(
+                "tbij,tbjk->tbik", turn, rot[np.ix_(moved, bones)]
+            )
         return rot
-    # output roll = input roll - offset; the output's step from its previous frame to the
-    # input is the input's step plus the previous offset (both about the same axis)
-    offsets = np.zeros((rot.shape[0], bones.size))
-    offset = np.zeros(bones.size)
-    two_pi = 2.0 * np.pi
-    for t, step in enumerate(steps, start=1):
-        wanted = step + offset
-        wanted = wanted - two_pi * np.round(wanted / two_pi)
-        offset = np.where(
-            np.isfinite(wanted), wanted - np.clip(wanted, -max_step_rad, max_step_rad), 0.0
-        )
-        offsets[t] = offset
-    moved = np.flatnonzero(np.any(offsets != 0.0, axis=1))
-    if moved.size:
-        axes = _axes(skeleton, rot[moved], bones)
-        turn = matrix_from_axis_angle(axes, -offsets[moved])
-        rot[np.ix_(moved, bones)] = np.einsum("tbij,tbjk->tbik", turn, rot[np.ix_(moved, bones)])
-    return rot
 
 
-__all__ = ["limit_roll", "roll_free_bones", "roll_steps"]
+__all__ = ["RollLimiter", "limit_roll", "roll_free_bones", "roll_steps"]
