@@ -26,7 +26,8 @@ Modes
     tried: the markers-first rule would halve it towards nothing (with noisy member
     markers that is most frames, each of which the search and the halving spent 20
     solves on). Otherwise the lean is bisected (14 solves; with ``guided_bisection``
-    the same lean from 3-5 where the restored CoG decreases with the lean).
+    the same lean, or one already at the goal, from 1-5 where the restored CoG decreases
+    with the lean).
     ``restore_without_lean=False`` (the tracker's default,
     `mocapkit.tracking.hybrid.tracker.TRACKING_BALANCE`) skips the restore
     solve wherever no lean is applied, unless an effector is more than
@@ -88,9 +89,9 @@ class BalanceConfig:
         (`_monotone_bisection`: regula falsi on the bisection's own midpoints, the
         other midpoints' signs inferred where the restored CoG decreases with the lean,
         as it does with the head pinned). The same lean as the plain bisection wherever
-        it decreases over the points involved (every frame of the benchmark and
-        accuracy sessions; `mocapkit.tracking.hybrid.TRACKING_BALANCE`). False evaluates
-        every bisection step.
+        it decreases over the points involved, or a midpoint on the way already within
+        `AT_GOAL_MM` of the goal (`mocapkit.tracking.hybrid.tracker.TRACKING_BALANCE`).
+        False evaluates every bisection step.
     restore_stall_iterations : int
         The restore solves stop once neither the largest effector error nor their sum
         has dropped by 1 % in this many iterations, and end on the iterate of least
