@@ -10,6 +10,7 @@ from mocapkit.ik.config import IKConfig
 from mocapkit.ik.sdls import SDLSSolver
 from mocapkit.skeleton import center_of_mass, load_preset
 from mocapkit.tracking.hybrid.balance import (
+    AT_GOAL_MM,
     BalanceConfig,
     _monotone_bisection,
     apply_lean,
@@ -215,6 +216,11 @@ def test_pose_kept_without_a_restore_where_no_lean_is_applied_when_asked(setup):
     assert res.residual_mm[1] == pytest.approx(4.0 * solver.config.tol_mm)
 
 
+#: How far apart (mm) the restored CoGs of nearby leans settle, beyond what the lean
+#: itself moves (1-2 mm on the benchmark's leaning frames).
+RESTORE_NOISE_MM = 2.0
+
+
 def _reference_bisection(f, lo, hi, steps):
     """`_bisect_lean`'s plain bisection of ``f`` over ``[lo, hi]`` (as before the guided one)."""
     f0 = f(0.0)
@@ -233,8 +239,11 @@ def _reference_bisection(f, lo, hi, steps):
 
 
 def test_guided_bisection_gives_the_plain_bisections_lean_with_fewer_evaluations():
+    """The plain bisection's lean bit for bit, or a point of its grid evaluated on the
+    way whose value is within `AT_GOAL_MM` of the goal (the search stops there)."""
     rng = np.random.default_rng(7)
     guided, plain = 0, 0
+    early = 0
     for trial in range(300):
         lo, hi = -rng.uniform(0.3, 1.0), rng.uniform(0.5, 1.3)
         root = rng.uniform(1.2 * lo, 1.2 * hi)  # some beyond the range: its best end
@@ -256,10 +265,15 @@ def test_guided_bisection_gives_the_plain_bisections_lean_with_fewer_evaluations
         slope = None if trial % 3 == 0 else -k * rng.uniform(0.3, 3.0)
         lean, found = _monotone_bisection(counted, f(0.0), lo, hi, 6, slope)
         guided += len(calls)
-        assert lean == expected  # bit for bit
+        if lean != expected:  # stopped early, at a grid point already at the goal
+            assert abs(f(lean)) < AT_GOAL_MM and lean in calls
+            early += 1
+        else:
+            assert lean == expected  # bit for bit
         assert len(set(calls)) == len(calls)  # no point evaluated twice
         assert found is None or found < 0
     assert guided < 0.7 * plain
+    assert early > 0
 
 
 def test_guided_bisection_keeps_the_plain_bisections_answer_where_f_is_not_decreasing():
@@ -272,15 +286,21 @@ def test_guided_bisection_keeps_the_plain_bisections_answer_where_f_is_not_decre
     assert lean == pytest.approx(0.2, abs=1.0 / 64)
 
 
-def test_guided_balance_gives_the_same_pose_with_fewer_restores(setup):
+def test_guided_balance_as_close_to_the_goal_with_fewer_restores(setup):
+    """The guided search (stopped at a lean already at the goal) ends as close to the
+    goal as the plain bisection, up to the spread of restores of nearby leans, with head
+    and hands on their markers and fewer restore solves."""
     sk, _solver, _model = setup
     solver = _Counting(sk)
     q0 = solver.secondary.omega
     support = support_points(sk, q0)
     plain = BalanceConfig(mode="solve", bisection_steps=6)
     guided = BalanceConfig(mode="solve", bisection_steps=6, guided_bisection=True)
-    n_plain, n_guided, slope = 0, 0, None
+    n_plain, n_guided, slope, compared = 0, 0, None, 0
     for q, t in squat(solver, np.linspace(-100.0, -300.0, 5)):
+        cog, back, front = cog_offset_mm(sk, q, support)
+        assert cog > front  # the squat leans forward out of the box: a bow is needed
+        goal = front - plain.margin_fraction * (front - back)
         _Counting.solves = 0
         a = balance_pose(solver, q, t, q0[2], support, None, plain)
         n_plain += _Counting.solves
@@ -288,11 +308,16 @@ def test_guided_balance_gives_the_same_pose_with_fewer_restores(setup):
         b = balance_pose(solver, q, t, q0[2], support, None, guided, slope_mm_per_rad=slope)
         n_guided += _Counting.solves
         slope = b.slope_mm_per_rad
-        assert np.all(a.taus > 0)  # a forward bow was needed
-        np.testing.assert_array_equal(b.taus, a.taus)
-        np.testing.assert_array_equal(b.q, a.q)
+        assert np.all(a.taus > 0) and np.all(b.taus > 0)  # a forward bow
+        off_a = abs(cog_offset_mm(sk, a.q, support)[0] - goal)
+        off_b = abs(cog_offset_mm(sk, b.q, support)[0] - goal)
+        if off_a < 5.0:  # where the markers-first rule did not halve the plain one's lean
+            # restores of nearby leans settle up to RESTORE_NOISE_MM apart
+            assert off_b <= off_a + RESTORE_NOISE_MM
+            compared += 1
+        assert np.nanmax(b.residual_mm) <= 2.0 * solver.config.tol_mm
     assert slope is not None and slope < 0
-    assert n_guided < 0.7 * n_plain
+    assert compared >= 2 and n_guided < 0.7 * n_plain
 
 
 def test_restore_ik_config_stops_restores_on_their_best_iterate():

@@ -26,7 +26,8 @@ Modes
     tried: the markers-first rule would halve it towards nothing (with noisy member
     markers that is most frames, each of which the search and the halving spent 20
     solves on). Otherwise the lean is bisected (14 solves; with ``guided_bisection``
-    the same lean from 3-5 where the restored CoG decreases with the lean).
+    the same lean, or one already at the goal, from 1-5 where the restored CoG decreases
+    with the lean).
     ``restore_without_lean=False`` (the tracker's default,
     `mocapkit.tracking.hybrid.tracker.TRACKING_BALANCE`) skips the restore
     solve wherever no lean is applied, unless an effector is more than
@@ -88,9 +89,9 @@ class BalanceConfig:
         (`_monotone_bisection`: regula falsi on the bisection's own midpoints, the
         other midpoints' signs inferred where the restored CoG decreases with the lean,
         as it does with the head pinned). The same lean as the plain bisection wherever
-        it decreases over the points involved (every frame of the benchmark and
-        accuracy sessions; `mocapkit.tracking.hybrid.TRACKING_BALANCE`). False evaluates
-        every bisection step.
+        it decreases over the points involved, or a midpoint on the way already within
+        `AT_GOAL_MM` of the goal (`mocapkit.tracking.hybrid.tracker.TRACKING_BALANCE`).
+        False evaluates every bisection step.
     restore_stall_iterations : int
         The restore solves stop once neither the largest effector error nor their sum
         has dropped by 1 % in this many iterations, and end on the iterate of least
@@ -126,6 +127,10 @@ class BalanceConfig:
                 f"{self.restore_stall_iterations}"
             )
 
+
+#: A restored CoG this close (mm) to the lean search's goal is at it: no lean is tried
+#: where zero lean is, and the guided bisection stops at a lean that is (`_monotone_bisection`).
+AT_GOAL_MM = 1.0
 
 #: Share by which the errors must drop within `BalanceConfig.restore_stall_iterations`.
 RESTORE_STALL_FRACTION = 0.01
@@ -318,8 +323,14 @@ def _monotone_bisection(
     the points involved, with fewer evaluations (restore solves) where the guesses are
     good.
 
+    A midpoint evaluated on the way whose ``|f|`` is below `AT_GOAL_MM` (as zero lean is
+    taken below it) ends the search there: the restored CoG moves by 1-2 mm between
+    restores of nearby leans (they settle differently), as much as a bisection cell
+    moves it, and resolving that noise had cost up to 14 restores a frame.
+
     Returns the lean and the chord slope of ``f`` from zero lean to the bisection's
-    last cell (None where it is not known), a guess of ``slope`` for the next frame.
+    last cell (or to the lean taken; None where it is not known), a guess of ``slope``
+    for the next frame.
     """
     known: dict[float, float] = {0.0: f0}
 
@@ -374,7 +385,10 @@ def _monotone_bisection(
         if not todo:
             break
         pick = min(todo, key=lambda c: abs(c - x))
-        side = 1 if value(pick) > 0 else -1
+        if abs(value(pick)) < AT_GOAL_MM:
+            # at the goal within the restore's own noise: this lean, already restored
+            return pick, (known[pick] - f0) / pick
+        side = 1 if known[pick] > 0 else -1
         if side == last_side:
             scale[-side] *= 0.5
         else:
@@ -457,7 +471,7 @@ def _bisect_lean(
         return cog_offset_mm(sk, qq, support)[0] - goal_mm
 
     f0 = f(0.0)
-    if abs(f0) < 1.0:
+    if abs(f0) < AT_GOAL_MM:
         return 0.0, slope_mm_per_rad
     if guided:
         slope = slope_mm_per_rad

@@ -135,10 +135,10 @@ TRACKING_BISECTION_STEPS = 6
 #: applied (the CoG inside the margin, or head and hands 2 x tol to
 #: `BalanceConfig.restore_above_mm` off their markers; the smoothing polish solves next
 #: anyway): 2.4 ms a frame against 6.0 (bench, same load). The bisection is guided
-#: (`BalanceConfig.guided_bisection`: the same leans from 62 restore solves instead of 107
-#: on the bench sessions). The restore solves stop where they stall and end on their best
-#: iterate (`BalanceConfig.restore_stall_iterations`): 10-15 iterations instead of the
-#: cap's 30, whose last step lands anywhere in the chatter.
+#: (`BalanceConfig.guided_bisection`: the plain bisection's leans, or one already at the
+#: goal, from fewer restore solves). The restore solves stop where they stall and end on
+#: their best iterate (`BalanceConfig.restore_stall_iterations`): 10-15 iterations instead
+#: of the cap's 30, whose last step lands anywhere in the chatter.
 TRACKING_BALANCE = BalanceConfig(
     mode="solve",
     bisection_steps=TRACKING_BISECTION_STEPS,
