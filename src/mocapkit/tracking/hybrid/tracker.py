@@ -550,7 +550,6 @@ class HybridTracker:
         # After the video refinement, the balance step's restore of head and hands must
         # not run the relaxed-pose task: it would pull the refined arms back to the IK's
         # swivel (the paper: "each process modifies only a specific part of the pose").
-        # The re-plant's feet-free solve runs without it too (`_replant_if_stepped`).
         self._restore = _CountedSolver(
             skeleton, effectors, replace(self.config.ik, secondary_gain=0.0, min_iterations=0)
         )
@@ -791,13 +790,6 @@ class HybridTracker:
         free pose's straight legs would put the feet of a subject who jumps or reaches
         up far above where they are (a tennis serve: 440 mm against the ankle markers'
         165 mm). Returns the pose and the extra iterations.
-
-        The feet-free solve runs without the relaxed-pose task: with the feet free, its
-        pull carried the root along the null space of head and hands (430 mm in a frame
-        with them 18 mm off, the hips flipping from behind to in front of the feet), so
-        the body moves only as far as the head and hand error asks. (Bounding the root's
-        move by that error as well cost upper-body MPJPE 40 -> 49 mm on the accuracy
-        clips: a body that steps then leans after its markers instead of following.)
         """
         assert self._feet is not None
         n = len(self.marker_sets)
@@ -806,7 +798,7 @@ class HybridTracker:
             return q, 0
         free = targets.copy()
         free[n : n + 2][~self._marked_feet] = np.nan
-        res_free = self._restore.solve(q, free)
+        res_free = self.solver.solve(q, free)
         feet = self.solver.effector_positions(res_free.q)[n : n + 2]
         if self.config.start_upright:
             np.maximum(feet[:, 2], self._floor_z_mm, out=feet[:, 2])
