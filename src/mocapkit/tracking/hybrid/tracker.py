@@ -981,6 +981,7 @@ class HybridTracker:
                     self.config.feet_planted
                     and self.config.replant_mm > 0
                     and not self.config.paper
+                    and not self._marked_feet.all()  # foot sets place both feet
                 ):
                     q, extra = self._replant_if_stepped(q, targets, res.residual_mm[:n], sample)
                     iterations += extra
