@@ -254,26 +254,6 @@ def test_inactive_and_frozen(skel, solver, rng):
     assert res.q[skel.dof_index("l_elbow_flexion")] == q0[skel.dof_index("l_elbow_flexion")]
 
 
-def test_limits_of_one_solve(skel, solver):
-    """``limits`` hold the root within a box for one solve (a target 300 mm away, the
-    root allowed 50 mm), intersected with the joint limits; the skeleton's own limits
-    give the same solve as none."""
-    q0 = solver.secondary.omega
-    targets = solver.effector_positions(q0)
-    targets[:3, 0] += 300.0  # head and hands 300 mm to the side, feet where they are
-    targets[3:] = np.nan
-    reach = np.where(skel.dof_kind == PRISMATIC, 50.0, np.inf)
-    res = solver.solve(q0, targets, limits=(q0 - reach, q0 + reach))
-    free = solver.solve(q0, targets)
-    assert abs(free.q[0] - q0[0]) > 200.0  # without the box the root goes most of the way
-    assert np.all(np.abs(res.q[:3] - q0[:3]) <= 50.0 + 1e-9)
-    assert np.all(res.q >= skel.lower) and np.all(res.q <= skel.upper)
-    same = solver.solve(q0, targets, limits=(skel.lower, skel.upper))
-    np.testing.assert_array_equal(same.q, free.q)
-    with pytest.raises(ShapeError, match="limits: expected two arrays"):
-        solver.solve(q0, targets, limits=(skel.lower[:3], skel.upper))
-
-
 def test_bad_inputs_raise(skel, solver):
     with pytest.raises(ShapeError, match="targets_mm: expected shape"):
         solver.solve(solver.secondary.omega, np.zeros((2, 3)))

@@ -84,7 +84,7 @@ def test_tennis_serve_leg_sets_drive_the_legs(shared_data):
 
     markers = read_markers(shared_data / "c3d" / "kinematics_tennis_serve.c3d")
     legs = ["pelvis=LASI+RASI+LPSI+RPSI", "left_foot=LHEE+LTOE+LANK", "right_foot=RHEE+RTOE+RANK"]
-    run = track_hybrid_marker_file(markers, [*TENNIS_SETS, *legs])
+    run = track_hybrid_marker_file(markers, [*TENNIS_SETS, *legs], posture="auto")
     assert "pelvis, left_foot, right_foot calibrated" in run.calibration_note
     for side in ("left", "right"):
         s = side[0].upper()

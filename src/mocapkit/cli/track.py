@@ -62,7 +62,8 @@ def register(subparsers: Any) -> None:
         action="append",
         default=[],
         metavar="NAME=M1+M2[/T1]",
-        help="marker set for --markers (head, left_hand, right_hand); markers after '/' "
+        help="marker set for --markers (head, left_hand, right_hand; optionally pelvis, "
+        "left_foot, right_foot, which drive the legs); markers after '/' "
         "turn the set without placing it (e.g. a forearm marker with a wrist bar: "
         "left_hand=LWRA+LWRB/LFRM); repeat",
     )

@@ -212,7 +212,6 @@ class SDLSSolver:
         active: ArrayLike | None = None,
         frozen: ArrayLike | None = None,
         record_trace: bool = False,
-        limits: tuple[ArrayLike, ArrayLike] | None = None,
     ) -> IKResult:
         """Run the IK loop from ``q0`` (warm start).
 
@@ -229,30 +228,13 @@ class SDLSSolver:
             DoFs held fixed.
         record_trace : bool
             Keep per-iteration diagnostics in the result.
-        limits : (array_like, array_like), each shape (D,), optional
-            Lower and upper bounds (rad, mm) for this solve only, within the skeleton's
-            joint limits (the tighter of the two holds): a DoF reaching one is held
-            there as at a joint limit.
         """
         sk = self.skeleton
         q = np.ascontiguousarray(np.asarray(q0, dtype=float).copy())
         sk.check_q(q, "q0")
         if q.shape != (sk.n_dofs,):
             raise ShapeError(f"q0: expected shape ({sk.n_dofs},), found {q.shape}")
-        weighting = self._weighting
-        if limits is not None:
-            lo, hi = (np.asarray(b, dtype=float) for b in limits)
-            if lo.shape != (sk.n_dofs,) or hi.shape != (sk.n_dofs,):
-                raise ShapeError(
-                    f"limits: expected two arrays of shape ({sk.n_dofs},), found "
-                    f"{lo.shape} and {hi.shape}"
-                )
-            lo = np.maximum(lo, self._lower)
-            hi = np.maximum(np.minimum(hi, self._upper), lo)
-            weighting = weighting._replace(
-                lower=np.ascontiguousarray(lo), upper=np.ascontiguousarray(hi)
-            )
-        q = np.clip(q, weighting.lower, weighting.upper)
+        q = np.clip(q, self._lower, self._upper)
         t = np.asarray(targets_mm, dtype=float)
         n_eff = len(self.effectors)
         if t.shape != (n_eff, 3):
@@ -281,7 +263,7 @@ class SDLSSolver:
             targets=np.ascontiguousarray(t[idx]),
             frozen=frz,
         )
-        n_it = solve_ik_nb(q, self._kin, task, weighting, self._settings, residual, trace)
+        n_it = solve_ik_nb(q, self._kin, task, self._weighting, self._settings, residual, trace)
         res_all = np.full(n_eff, np.nan)
         res_all[idx] = residual
         converged = bool(len(idx) == 0 or np.all(residual < cfg.tol_mm))

@@ -614,7 +614,7 @@ def _stature_and_posture(
                 probe,
                 head_point,
                 head_pos,
-                [take.pos[:, i] for i, n in enumerate(names) if n != "head"],
+                [take.pos[:, i] for i, n in enumerate(names) if n in HAND_SETS],
                 take.source,
             )
             how = "from the head-to-hand reach"

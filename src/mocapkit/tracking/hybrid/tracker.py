@@ -161,10 +161,9 @@ class _CountedSolver(SDLSSolver):
         active: ArrayLike | None = None,
         frozen: ArrayLike | None = None,
         record_trace: bool = False,
-        limits: tuple[ArrayLike, ArrayLike] | None = None,
     ) -> IKResult:
         """`SDLSSolver.solve`, counted."""
-        res = super().solve(q0, targets_mm, active, frozen, record_trace, limits)
+        res = super().solve(q0, targets_mm, active, frozen, record_trace)
         self.timer.count("ik_solves", 1)
         self.timer.count("ik_iterations", res.iterations)
         return res
@@ -554,7 +553,6 @@ class HybridTracker:
         # After the video refinement, the balance step's restore of head and hands must
         # not run the relaxed-pose task: it would pull the refined arms back to the IK's
         # swivel (the paper: "each process modifies only a specific part of the pose").
-        # The re-plant's feet-free solve runs without it too (`_replant_if_stepped`).
         restore_ik = restore_ik_config(self.config.ik, self.config.balance_config)
         self._restore = _CountedSolver(
             skeleton, effectors, replace(restore_ik, secondary_gain=0.0, min_iterations=0)
@@ -802,13 +800,6 @@ class HybridTracker:
         free pose's straight legs would put the feet of a subject who jumps or reaches
         up far above where they are (a tennis serve: 440 mm against the ankle markers'
         165 mm). Returns the pose and the extra iterations.
-
-        The feet-free solve moves the body only as far as the head and hand error asks:
-        it runs without the relaxed-pose task (whose pull, with the feet free, carried
-        the root along the null space of head and hands: 430 mm in a frame with them
-        18 mm off, the hips flipping from behind to in front of the feet) and the root's
-        translation stays within the largest marker error of each axis. Real steps and
-        jumps are followed over the frames that follow, as that error asks again.
         """
         assert self._feet is not None
         n = len(self.marker_sets)
@@ -817,8 +808,7 @@ class HybridTracker:
             return q, 0
         free = targets.copy()
         free[n : n + 2][~self._marked_feet] = np.nan
-        reach = np.where(self.skeleton.dof_kind == PRISMATIC, worst, np.inf)
-        res_free = self._restore.solve(q, free, limits=(q - reach, q + reach))
+        res_free = self.solver.solve(q, free)
         feet = self.solver.effector_positions(res_free.q)[n : n + 2]
         if self.config.start_upright:
             np.maximum(feet[:, 2], self._floor_z_mm, out=feet[:, 2])
@@ -1001,6 +991,7 @@ class HybridTracker:
                     self.config.feet_planted
                     and self.config.replant_mm > 0
                     and not self.config.paper
+                    and not self._marked_feet.all()  # foot sets place both feet
                 ):
                     q, extra = self._replant_if_stepped(q, targets, res.residual_mm[:n], sample)
                     iterations += extra
