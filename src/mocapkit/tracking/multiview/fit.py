@@ -100,6 +100,22 @@ def points_nb(
     return pts
 
 
+@numba.njit(cache=True, inline="always")
+def view_residual_nb(
+    r: FloatArray, t: FloatArray, s: float, p: FloatArray, ox: float, oy: float
+) -> tuple[float, float, float, float, float]:
+    """A point ``p`` (3,) in a view's camera frame (``r``, ``t``) and its residual (mm
+    across the ray: normalised coordinates times ``s``) against the detection ``(ox,
+    oy)``; the residual is meaningless when the depth is below 1 mm (not visible)."""
+    x, y, z = p[0], p[1], p[2]
+    xc = r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + t[0]
+    yc = r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + t[1]
+    zc = r[2, 0] * x + r[2, 1] * y + r[2, 2] * z + t[2]
+    if zc < 1.0:
+        return xc, yc, zc, np.nan, np.nan
+    return xc, yc, zc, s * (xc / zc - ox), s * (yc / zc - oy)
+
+
 @numba.njit(cache=True)
 def evaluate_nb(
     q: FloatArray,
@@ -159,14 +175,9 @@ def evaluate_nb(
             ox, oy = tg.observed[v, k, 0], tg.observed[v, k, 1]
             if not (np.isfinite(ox) and np.isfinite(oy)):
                 continue
-            x, y, z = pts[k, 0], pts[k, 1], pts[k, 2]
-            xc = r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + t[0]
-            yc = r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + t[1]
-            zc = r[2, 0] * x + r[2, 1] * y + r[2, 2] * z + t[2]
+            xc, yc, zc, rx, ry = view_residual_nb(r, t, s, pts[k], ox, oy)
             if zc < 1.0:
                 continue
-            rx = s * (xc / zc - ox)
-            ry = s * (yc / zc - oy)
             n = np.sqrt(rx * rx + ry * ry)
             norms[v, k] = n
             wk = tg.weight[v, k]
@@ -349,4 +360,5 @@ __all__ = [
     "fit_pose_nb",
     "points_nb",
     "view_arrays",
+    "view_residual_nb",
 ]
