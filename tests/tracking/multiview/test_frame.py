@@ -167,3 +167,16 @@ def test_a_wild_detection_of_a_joint_seen_twice_is_dropped_by_its_jump(
         wrist_err[gate] = np.linalg.norm(model_points_nb(tr._model, start)[wrist] - pts[wrist])
     assert wrist_err[True] < 1.0
     assert wrist_err[False] > 20.0  # without the gate the wild view pulls the wrist
+
+
+def test_cholesky_step_solves_and_refuses_an_indefinite_matrix(rng: np.random.Generator) -> None:
+    from mocapkit.tracking.multiview.fit import cholesky_solve_nb
+
+    m = rng.normal(size=(34, 34))
+    a = m @ m.T + 0.1 * np.eye(34)
+    g = rng.normal(size=34)
+    out = np.empty(34)
+    assert cholesky_solve_nb(a.copy(), g, out)
+    np.testing.assert_allclose(out, np.linalg.solve(a, -g), rtol=1e-8, atol=1e-10)
+    a[5, 5] = -1.0
+    assert not cholesky_solve_nb(a.copy(), g, out)

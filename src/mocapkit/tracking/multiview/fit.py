@@ -100,6 +100,22 @@ def points_nb(
     return pts
 
 
+@numba.njit(cache=True, inline="always")
+def view_residual_nb(
+    r: FloatArray, t: FloatArray, s: float, p: FloatArray, ox: float, oy: float
+) -> tuple[float, float, float, float, float]:
+    """A point ``p`` (3,) in a view's camera frame (``r``, ``t``) and its residual (mm
+    across the ray: normalised coordinates times ``s``) against the detection ``(ox,
+    oy)``; the residual is meaningless when the depth is below 1 mm (not visible)."""
+    x, y, z = p[0], p[1], p[2]
+    xc = r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + t[0]
+    yc = r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + t[1]
+    zc = r[2, 0] * x + r[2, 1] * y + r[2, 2] * z + t[2]
+    if zc < 1.0:
+        return xc, yc, zc, np.nan, np.nan
+    return xc, yc, zc, s * (xc / zc - ox), s * (yc / zc - oy)
+
+
 @numba.njit(cache=True)
 def evaluate_nb(
     q: FloatArray,
@@ -159,14 +175,9 @@ def evaluate_nb(
             ox, oy = tg.observed[v, k, 0], tg.observed[v, k, 1]
             if not (np.isfinite(ox) and np.isfinite(oy)):
                 continue
-            x, y, z = pts[k, 0], pts[k, 1], pts[k, 2]
-            xc = r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + t[0]
-            yc = r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + t[1]
-            zc = r[2, 0] * x + r[2, 1] * y + r[2, 2] * z + t[2]
+            xc, yc, zc, rx, ry = view_residual_nb(r, t, s, pts[k], ox, oy)
             if zc < 1.0:
                 continue
-            rx = s * (xc / zc - ox)
-            ry = s * (yc / zc - oy)
             n = np.sqrt(rx * rx + ry * ry)
             norms[v, k] = n
             wk = tg.weight[v, k]
@@ -235,6 +246,38 @@ def evaluate_nb(
 
 
 @numba.njit(cache=True)
+def cholesky_solve_nb(a: FloatArray, grad: FloatArray, out: FloatArray) -> bool:
+    """``out = -a^-1 grad`` for a symmetric positive definite ``a`` (D, D) by Cholesky,
+    in place on ``a``'s lower triangle; False (``a`` spoilt) when it is not positive
+    definite."""
+    n = a.shape[0]
+    for j in range(n):
+        d = a[j, j]
+        for k in range(j):
+            d -= a[j, k] * a[j, k]
+        if not d > 0.0:
+            return False
+        d = np.sqrt(d)
+        a[j, j] = d
+        for i in range(j + 1, n):
+            v = a[i, j]
+            for k in range(j):
+                v -= a[i, k] * a[j, k]
+            a[i, j] = v / d
+    for i in range(n):  # L y = -grad
+        v = -grad[i]
+        for k in range(i):
+            v -= a[i, k] * out[k]
+        out[i] = v / a[i, i]
+    for i in range(n - 1, -1, -1):  # L^T x = y
+        v = out[i]
+        for k in range(i + 1, n):
+            v -= a[k, i] * out[k]
+        out[i] = v / a[i, i]
+    return True
+
+
+@numba.njit(cache=True)
 def fit_pose_nb(
     q: FloatArray,
     kin: KinematicArrays,
@@ -249,7 +292,8 @@ def fit_pose_nb(
     norms: FloatArray,
 ) -> tuple[float, int]:
     """Levenberg-Marquardt (Marquardt's diagonal scaling) on the robust cost, in place
-    on ``q``, each step projected onto the joint limits ``[lower, upper]``.
+    on ``q``, each step projected onto the joint limits ``[lower, upper]``; the damped
+    normal equations solved by Cholesky (`cholesky_solve_nb`; LU if not positive definite).
 
     Stops when a step lowers the cost by less than 1e-6 of it, when the damping grows
     past 1e8, or after ``max_iter`` accepted or rejected steps. Returns the final cost
@@ -266,6 +310,7 @@ def fit_pose_nb(
     lam = 1e-3
     trial = np.empty(n)
     a = np.empty((n, n))
+    dq = np.empty(n)
     steps = 0
     for _ in range(max_iter):
         steps += 1
@@ -273,7 +318,12 @@ def fit_pose_nb(
             for j in range(n):
                 a[i, j] = hess[i, j]
             a[i, i] += lam * hess[i, i] + 1e-9
-        dq = np.linalg.solve(a, -grad)
+        if not cholesky_solve_nb(a, grad, dq):  # not positive definite: LU (a again)
+            for i in range(n):
+                for j in range(n):
+                    a[i, j] = hess[i, j]
+                a[i, i] += lam * hess[i, i] + 1e-9
+            dq[:] = np.linalg.solve(a, -grad)
         for d in range(n):
             trial[d] = min(max(q[d] + dq[d], lower[d]), upper[d])
         c_new = evaluate_nb(
@@ -305,8 +355,10 @@ def view_arrays(camera_from_world: list[FloatArray]) -> ViewArrays:
 __all__ = [
     "FitTargets",
     "ViewArrays",
+    "cholesky_solve_nb",
     "evaluate_nb",
     "fit_pose_nb",
     "points_nb",
     "view_arrays",
+    "view_residual_nb",
 ]

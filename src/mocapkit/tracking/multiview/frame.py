@@ -26,6 +26,7 @@ from mocapkit.tracking.multiview.fit import (
     evaluate_nb,
     fit_pose_nb,
     points_nb,
+    view_residual_nb,
 )
 
 FloatArray = NDArray[np.float64]
@@ -118,14 +119,9 @@ def residual_norms_nb(
             ox, oy = obs[v, k, 0], obs[v, k, 1]
             if not (np.isfinite(ox) and np.isfinite(oy)):
                 continue
-            x, y, z = pts[k, 0], pts[k, 1], pts[k, 2]
-            xc = r[0, 0] * x + r[0, 1] * y + r[0, 2] * z + t[0]
-            yc = r[1, 0] * x + r[1, 1] * y + r[1, 2] * z + t[1]
-            zc = r[2, 0] * x + r[2, 1] * y + r[2, 2] * z + t[2]
+            _xc, _yc, zc, rx, ry = view_residual_nb(r, t, s, pts[k], ox, oy)
             if zc < 1.0:
                 continue
-            rx = s * (xc / zc - ox)
-            ry = s * (yc / zc - oy)
             norms[v, k] = np.sqrt(rx * rx + ry * ry)
 
 
