@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.io.marker_files import read_markers
-from mocapkit.pipelines.hybrid import RAW_MARKERS_REPLANT_MM, track_hybrid_markers
-from mocapkit.tracking.hybrid import TRACKING_IK, HybridConfig
+from mocapkit.pipelines.hybrid_markers import RAW_MARKERS_REPLANT_MM, track_hybrid_markers
+from mocapkit.tracking.hybrid.tracker import TRACKING_IK, HybridConfig
 
 MARKER_SETS = ["head=LFHD+RFHD+LBHD+RBHD", "left_hand=LWRA+LWRB", "right_hand=RWRA+RWRB"]
 

@@ -10,7 +10,7 @@ import pytest
 from mocapkit.cli.main import build_parser
 from mocapkit.pipelines import fit_report
 from mocapkit.pipelines.harness import JITTER_MM
-from mocapkit.tracking.arm_refinement import RefineConfig
+from mocapkit.tracking.hybrid.arm_refinement import RefineConfig
 from mocapkit.tracking.mono.tracker import MonoConfig
 from mocapkit.tracking.multiview.config import MultiviewRunConfig
 from mocapkit.tracking.stereo.arm_filter import ArmFilterConfig

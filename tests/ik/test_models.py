@@ -8,18 +8,11 @@ import numpy as np
 import pytest
 
 from mocapkit.errors import UnknownNameError
-from mocapkit.ik.sdls import (
-    DEFAULT_GAMMA_RAD,
-    Effector,
-    IKConfig,
-    SDLSSolver,
-    arm_length_mm,
-    canonical_effector,
-    default_effectors,
-    dof_weights,
-    leg_length_mm,
-)
+from mocapkit.ik.config import DEFAULT_GAMMA_RAD, IKConfig
+from mocapkit.ik.effectors import Effector, canonical_effector, default_effectors
+from mocapkit.ik.sdls import SDLSSolver
 from mocapkit.ik.secondary import planted_feet, relaxed_pose
+from mocapkit.ik.weights import arm_length_mm, dof_weights, leg_length_mm
 from mocapkit.skeleton import BALL, PRISMATIC, joint_positions, limbs, load_preset
 
 

@@ -8,17 +8,15 @@ import numpy as np
 import pytest
 
 from mocapkit.errors import ConfigError, ShapeError, UnknownNameError
-from mocapkit.ik.sdls import (
-    DEFAULT_GAMMA_RAD,
-    IKConfig,
-    SDLSSolver,
-    arm_length_mm,
+from mocapkit.ik.config import DEFAULT_GAMMA_RAD, IKConfig
+from mocapkit.ik.sdls import SDLSSolver
+from mocapkit.ik.sdls_step import (
     clamp_max_abs,
     clamp_target_error,
-    dof_weights,
     nullspace_projector,
     sdls_response,
 )
+from mocapkit.ik.weights import arm_length_mm, dof_weights
 from mocapkit.skeleton import PRISMATIC, load_preset
 
 

@@ -10,13 +10,9 @@ import numpy as np
 import pytest
 
 from mocapkit.errors import ConfigError
-from mocapkit.ik.sdls import (
-    IKConfig,
-    SDLSSolver,
-    clamp_max_abs,
-    nullspace_projector,
-    sdls_response,
-)
+from mocapkit.ik.config import IKConfig
+from mocapkit.ik.sdls import SDLSSolver
+from mocapkit.ik.sdls_step import clamp_max_abs, nullspace_projector, sdls_response
 from mocapkit.skeleton import PRISMATIC, load_preset
 
 

@@ -12,15 +12,10 @@ import numpy as np
 import pytest
 
 from mocapkit.errors import ConfigError
-from mocapkit.ik.sdls import (
-    DEFAULT_GAMMA_RAD,
-    SIGMA_CUTOFF,
-    IKConfig,
-    SDLSSolver,
-    nullspace_projector,
-    sdls_response,
-    thin_svd_v_nb,
-)
+from mocapkit.ik.config import DEFAULT_GAMMA_RAD, IKConfig
+from mocapkit.ik.lapack import thin_svd_v_nb
+from mocapkit.ik.sdls import SDLSSolver
+from mocapkit.ik.sdls_step import SIGMA_CUTOFF, nullspace_projector, sdls_response
 from mocapkit.skeleton import PRISMATIC, load_preset
 from mocapkit.skeleton.kinematics import points_and_jacobian
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from mocapkit.errors import ShapeError
-from mocapkit.ik.sdls import IKConfig, SDLSSolver
+from mocapkit.ik.config import IKConfig
+from mocapkit.ik.sdls import SDLSSolver
 from mocapkit.ik.secondary import (
     SecondaryTask,
     carried_mass_planted,

@@ -116,7 +116,7 @@ def test_tennis_y_up_tracks_like_z_up(shared_data, tmp_path):
     with the member offsets calibrated on the still start (default) or on the motion."""
     from mocapkit.io.joints_csv import read_joints_csv
     from mocapkit.io.marker_files import read_markers
-    from mocapkit.pipelines.hybrid import track_hybrid_marker_file
+    from mocapkit.pipelines.hybrid_markers import track_hybrid_marker_file
 
     m = read_markers(shared_data / "c3d" / TENNIS[0])
     n = 150

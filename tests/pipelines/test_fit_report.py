@@ -70,7 +70,7 @@ def test_short_stature_warns_on_tennis_serve(shared_data):
     """A 900 mm stature for an adult player: the head set is out of the model's reach."""
     from mocapkit.io.marker_files import read_markers
     from mocapkit.io.markers import MarkerData
-    from mocapkit.pipelines.hybrid import track_hybrid_marker_file
+    from mocapkit.pipelines.hybrid_markers import track_hybrid_marker_file
 
     m = read_markers(shared_data / "c3d" / "kinematics_tennis_serve.c3d")
     n = 100

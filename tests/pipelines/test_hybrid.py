@@ -9,16 +9,11 @@ import pytest
 
 from mocapkit.cli.main import main
 from mocapkit.errors import ConfigError, SessionError, ShapeError
-from mocapkit.pipelines.hybrid import (
-    bench_ik,
-    hybrid_skeleton,
-    parse_oriented_sets,
-    track_hybrid_marker_arrays,
-    track_hybrid_markers,
-    track_hybrid_session,
-)
+from mocapkit.pipelines.hybrid import hybrid_skeleton, parse_oriented_sets, track_hybrid_session
+from mocapkit.pipelines.hybrid_markers import track_hybrid_marker_arrays, track_hybrid_markers
+from mocapkit.pipelines.ik_bench import bench_ik
 from mocapkit.skeleton import canonical_positions
-from mocapkit.tracking.hybrid import HybridConfig
+from mocapkit.tracking.hybrid.tracker import HybridConfig
 
 TENNIS_SETS = ["head=LFHD+RFHD+LBHD+RBHD", "left_hand=LWRA+LWRB", "right_hand=RWRA+RWRB"]
 
@@ -437,7 +432,7 @@ def test_session_config_keeps_the_session_offsets_under_a_given_config() -> None
     from types import SimpleNamespace
 
     from mocapkit.pipelines.hybrid import session_config
-    from mocapkit.tracking.hybrid import HybridConfig
+    from mocapkit.tracking.hybrid.tracker import HybridConfig
 
     session = SimpleNamespace(
         path="s",

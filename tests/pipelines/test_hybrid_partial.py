@@ -9,14 +9,11 @@ from mocapkit.cli.main import main
 from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.io.joints_csv import read_joints_csv
 from mocapkit.io.marker_sets import evaluate_marker_sets
-from mocapkit.pipelines.hybrid import (
-    hybrid_skeleton,
-    track_hybrid_marker_arrays,
-    track_hybrid_marker_file,
-)
+from mocapkit.pipelines.hybrid import hybrid_skeleton
+from mocapkit.pipelines.hybrid_markers import track_hybrid_marker_arrays, track_hybrid_marker_file
 from mocapkit.pipelines.run import read_fit_csv
 from mocapkit.skeleton import canonical_positions
-from mocapkit.tracking.hybrid import HybridConfig, default_marker_effectors
+from mocapkit.tracking.hybrid.tracker import HybridConfig, default_marker_effectors
 
 #: Vicon Z-up to OpenSim Y-up (x kept, file y = Vicon z, file z = -Vicon y).
 YUP_FROM_ZUP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -142,7 +139,7 @@ def test_seated_as_asked_with_given_stature(shared_data):
     that stature; an unknown posture is refused."""
     from mocapkit.io.marker_files import read_markers
     from mocapkit.io.markers import MarkerData
-    from mocapkit.tracking.posture import UPRIGHT_PERCENTILE, pelvis_to_head_mm
+    from mocapkit.tracking.hybrid.posture import UPRIGHT_PERCENTILE, pelvis_to_head_mm
 
     m = read_markers(shared_data / "c3d" / "kinematics_basket_sprint.c3d")
     part = slice(1650, 1700)

@@ -13,7 +13,7 @@ from mocapkit.pipelines.run import FIT_FILE, read_fit_csv, run_tracker
 from mocapkit.skeleton import CANONICAL_JOINTS, canonical_positions, load_preset
 from mocapkit.timing import StageTimer
 from mocapkit.tracking.base import DelayedTracker, FrameResult, canonical_joints_mm
-from mocapkit.tracking.hybrid import HybridConfig, HybridSample, HybridTracker
+from mocapkit.tracking.hybrid.tracker import HybridConfig, HybridSample, HybridTracker
 
 
 class ReplayTracker:

@@ -18,7 +18,7 @@ from mocapkit.pipelines.run import FIT_FILE, find_gaps, motion_for_bvh, read_fit
 from mocapkit.skeleton import forward_kinematics, load_preset
 from mocapkit.skeleton.limbs import arm
 from mocapkit.tracking.base import BRIDGE_S, unobserved_part
-from mocapkit.tracking.hybrid import HybridConfig, HybridSample, HybridTracker
+from mocapkit.tracking.hybrid.tracker import HybridConfig, HybridSample, HybridTracker
 
 
 def _bvh_channels(path: Path, joints: list[str]) -> np.ndarray:

@@ -10,7 +10,7 @@ import pytest
 from mocapkit.errors import ShapeError
 from mocapkit.skeleton import CANONICAL_JOINTS, canonical_positions, load_preset
 from mocapkit.tracking.base import STATUSES, FrameResult, Tracker, canonical_joints_mm, fit_summary
-from mocapkit.tracking.hybrid import HybridConfig, HybridSample, HybridTracker
+from mocapkit.tracking.hybrid.tracker import HybridConfig, HybridSample, HybridTracker
 
 
 def test_canonical_joints_spread_over_the_canonical_order() -> None:

@@ -54,7 +54,7 @@ def register(subparsers: Any) -> None:
             "jumping between frames (default %(stated_default)s; raise it for fast sports, "
             "0 turns the penalty off)",
         ),
-        "mocapkit.tracking.arm_refinement:RefineConfig.elbow_speed_mm_per_s",
+        "mocapkit.tracking.hybrid.arm_refinement:RefineConfig.elbow_speed_mm_per_s",
     )
     hyb.add_argument("--markers", help="raw marker file (.c3d, .trc, .csv) instead of a session")
     hyb.add_argument(
@@ -176,7 +176,8 @@ def _run_hybrid(args: argparse.Namespace) -> int:
     from mocapkit.io.lab_frame import parse_up
     from mocapkit.io.marker_files import read_markers
     from mocapkit.pipelines.fit_report import WARN_FRACTION, WARN_MM, summarize_fit
-    from mocapkit.pipelines.hybrid import track_hybrid_marker_file, track_hybrid_session_run
+    from mocapkit.pipelines.hybrid import track_hybrid_session_run
+    from mocapkit.pipelines.hybrid_markers import track_hybrid_marker_file
     from mocapkit.pipelines.hybrid_options import HybridRunOptions
     from mocapkit.pipelines.run import find_gaps
 

@@ -17,7 +17,7 @@ one is refused as "uses dynamic globals". The simplex logic therefore lives once
 `nelder_mead_core`, inlined at the IR level (``inline="always"``) into each caller
 before typing: a production caller is a cached ``@njit(cache=True)`` function in its own
 module that calls ``nelder_mead_core(its_cost, a, b, ...)`` with its cost as a
-module-level global (e.g. `mocapkit.tracking.arm_refinement.nelder_mead_arm_nb`).
+module-level global (e.g. `mocapkit.tracking.hybrid.arm_refinement.nelder_mead_arm_nb`).
 `nelder_mead_nb` takes any cost as an argument and is compiled anew in every process.
 """
 

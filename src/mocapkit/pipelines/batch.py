@@ -362,7 +362,7 @@ def _track_into(job: TakeJob, method: str, folder: Path) -> dict[str, float]:
 
     take, opts = job.take, job.options
     if take.kind == "markers":
-        from mocapkit.pipelines.hybrid import track_hybrid_markers
+        from mocapkit.pipelines.hybrid_markers import track_hybrid_markers
 
         track_hybrid_markers(take.source, opts["marker_sets"], None, folder)
     else:

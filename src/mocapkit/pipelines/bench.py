@@ -204,16 +204,17 @@ def bench_hybrid(
         ``balance``, ``smoothing`` with its IK polish, ``write`` the result folder),
         ``other`` (the rest of ``update``) and ``io`` (load + input + write);
         ``ik_solves_per_frame``, ``ik_iterations_per_solve``; ``ik_micro_solves_per_s``
-        (the warm-started IK micro-benchmark, `mocapkit.pipelines.hybrid.bench_ik`);
+        (the warm-started IK micro-benchmark, `mocapkit.pipelines.ik_bench.bench_ik`);
         ``elbow_jump_penalty`` (on in the tracked configuration); sessions and sizes.
     """
     if repeats < 1:
         raise ConfigError(f"bench_hybrid: expected repeats >= 1, found {repeats}")
     import tempfile
 
-    from mocapkit.pipelines.hybrid import bench_ik, track_hybrid_session_run
+    from mocapkit.pipelines.hybrid import track_hybrid_session_run
+    from mocapkit.pipelines.ik_bench import bench_ik
     from mocapkit.timing import StageTimer
-    from mocapkit.tracking.arm_refinement import RefineConfig
+    from mocapkit.tracking.hybrid.arm_refinement import RefineConfig
 
     cache = (
         Path(work_dir)

@@ -66,7 +66,7 @@ class LiveTracker:
 
 def _hybrid(setup: Session, inputs: LiveInputs) -> Callable[[LiveFeed], LiveTracker]:
     from mocapkit.pipelines.hybrid import hybrid_sample, hybrid_setup, member_markers
-    from mocapkit.tracking.hybrid import MARKER_SETS, HybridTracker
+    from mocapkit.tracking.hybrid.tracker import MARKER_SETS, HybridTracker
 
     if inputs.markers is None:
         raise ConfigError("live hybrid: expected a marker stream (--markers NAME)")

@@ -72,7 +72,7 @@ def _smooth_q(q: FloatArray, time_s: FloatArray, run: MultiviewRunConfig) -> Flo
             bb, aa = butter(4, run.cutoff_hz / nyq)
             out[a:b] = filtfilt(bb, aa, seg, axis=0)
         else:
-            from mocapkit.tracking.hybrid import OneEuroFilter
+            from mocapkit.tracking.hybrid.tracker import OneEuroFilter
 
             f = OneEuroFilter(run.cutoff_hz, run.one_euro_beta)
             for i in range(a, b):

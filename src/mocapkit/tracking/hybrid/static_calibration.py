@@ -35,7 +35,7 @@ from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.geometry.transforms import points_in_frame
 from mocapkit.skeleton.kinematics import forward_kinematics
 from mocapkit.skeleton.model import Skeleton
-from mocapkit.tracking.hybrid import (
+from mocapkit.tracking.hybrid.tracker import (
     HybridConfig,
     HybridSample,
     HybridTracker,

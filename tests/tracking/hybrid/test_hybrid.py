@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from mocapkit.errors import ConfigError, ShapeError, UnknownNameError
-from mocapkit.ik.sdls import IKConfig
+from mocapkit.ik.config import IKConfig
 from mocapkit.skeleton import canonical_positions, forward_kinematics, load_preset
-from mocapkit.tracking.balance import BalanceConfig
-from mocapkit.tracking.hybrid import (
+from mocapkit.tracking.hybrid.balance import BalanceConfig
+from mocapkit.tracking.hybrid.tracker import (
     HybridConfig,
     HybridSample,
     HybridTracker,

@@ -1,7 +1,7 @@
 """Member-marker offsets of the hybrid tracker's marker sets, calibrated on the motion itself.
 
 A raw marker file does not say where each member marker of a set sits on the body; the
-static calibration (`mocapkit.tracking.static_calibration`) finds it on a still second.
+static calibration (`mocapkit.tracking.hybrid.static_calibration`) finds it on a still second.
 Where a take has none (or none is wanted), the offsets are calibrated on the motion, as
 biomechanics does with a functional calibration or OpenSim's marker placement on a
 dynamic trial: the take is tracked from the set centres alone (positions only), each
@@ -55,7 +55,7 @@ from mocapkit.geometry.transforms import points_in_frame
 from mocapkit.skeleton.kinematics import forward_kinematics
 from mocapkit.skeleton.limbs import arm
 from mocapkit.skeleton.model import Skeleton
-from mocapkit.tracking.hybrid import default_marker_effectors
+from mocapkit.tracking.hybrid.tracker import default_marker_effectors
 
 FloatArray = NDArray[np.float64]
 

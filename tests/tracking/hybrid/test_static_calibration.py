@@ -7,21 +7,21 @@ import pytest
 
 from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.io.markers import MarkerData
-from mocapkit.pipelines.hybrid import (
+from mocapkit.pipelines.hybrid import hybrid_skeleton
+from mocapkit.pipelines.hybrid_markers import (
     RAW_MARKERS_REPLANT_MM,
     head_band_offset_mm,
-    hybrid_skeleton,
     track_hybrid_marker_file,
 )
 from mocapkit.pipelines.run import read_fit_csv
 from mocapkit.skeleton.kinematics import canonical_positions, forward_kinematics
-from mocapkit.tracking.hybrid import HybridConfig, HybridTracker, default_marker_effectors
-from mocapkit.tracking.static_calibration import (
+from mocapkit.tracking.hybrid.static_calibration import (
     MAX_STATIC_RMS_MM,
     calibrate_member_offsets,
     find_static_interval,
     rotation_between_deg,
 )
+from mocapkit.tracking.hybrid.tracker import HybridConfig, HybridTracker, default_marker_effectors
 
 RATE_HZ = 50.0
 #: True member offsets (mm, effector joint frame, from the default point); zero mean per

@@ -17,7 +17,7 @@ from mocapkit.ik.nelder_mead import initial_simplex
 from mocapkit.ik.swivel import swivel_arm
 from mocapkit.skeleton import forward_kinematics, joint_positions, load_preset
 from mocapkit.skeleton.limbs import arm
-from mocapkit.tracking.arm_refinement import (
+from mocapkit.tracking.hybrid.arm_refinement import (
     SIDES,
     ArmDiagnostics,
     RefineConfig,
@@ -388,7 +388,7 @@ def test_refinement_recovers_a_perturbed_swivel_on_either_model(preset):
 
 
 def test_arm_shape_scores_a_hand_only_where_it_has_a_bone():
-    from mocapkit.tracking.arm_refinement import arm_shape
+    from mocapkit.tracking.hybrid.arm_refinement import arm_shape
 
     zhang, azad = SKEL, load_preset("azad14")
     assert arm_shape(zhang, "left", (0.0, 0.0, 0.0)).n_segments == 3
@@ -400,7 +400,7 @@ def test_arm_shape_scores_a_hand_only_where_it_has_a_bone():
 
 def test_arms_that_the_refinement_cannot_take_raise():
     from mocapkit.skeleton.serialize import skeleton_from_dict, skeleton_to_dict
-    from mocapkit.tracking.arm_refinement import arm_limb
+    from mocapkit.tracking.hybrid.arm_refinement import arm_limb
 
     def moved(**canonical: str):
         data = skeleton_to_dict(SKEL)

@@ -1,6 +1,6 @@
 """The compiled cost of one arm (Zhang et al. 2011 eq. 14) and its named kernel structures.
 
-The arm problem of `mocapkit.tracking.arm_refinement`, as Numba kernels on NamedTuples:
+The arm problem of `mocapkit.tracking.hybrid.arm_refinement`, as Numba kernels on NamedTuples:
 `ArmModel` holds the arm's chain below the shoulder's fixed parent
 (`mocapkit.skeleton.chains.LimbChain`), its cones and hand effector (`ArmShape`), the
 camera (`mocapkit.camera.projection.CameraArrays`) and the cost's targets and weights
@@ -22,7 +22,7 @@ with the normalised chamfer).
 Outlines are the cones' exact contour generators (`mocapkit.geometry.cones`), scored by
 `mocapkit.cues.chamfer`. The elbow-jump term adds ``elbow_jump_weight_per_mm`` times how
 far the elbow lies beyond ``elbow_free_mm`` from the previous frame's elbow (see
-`mocapkit.tracking.arm_refinement`).
+`mocapkit.tracking.hybrid.arm_refinement`).
 """
 
 from __future__ import annotations

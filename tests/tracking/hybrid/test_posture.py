@@ -9,13 +9,7 @@ from mocapkit.errors import ConfigError
 from mocapkit.pipelines.hybrid import hybrid_skeleton
 from mocapkit.skeleton import canonical_positions
 from mocapkit.skeleton.model import CANONICAL_JOINTS
-from mocapkit.tracking.hybrid import (
-    HybridConfig,
-    HybridSample,
-    HybridTracker,
-    default_marker_effectors,
-)
-from mocapkit.tracking.posture import (
+from mocapkit.tracking.hybrid.posture import (
     SEATED_HEAD_RATIO,
     SEATED_LEFT_OUT,
     SEATED_NECK_FLEXION_RAD,
@@ -26,6 +20,12 @@ from mocapkit.tracking.posture import (
     pelvis_to_head_mm,
     seat_skeleton,
     stature_from_reach_mm,
+)
+from mocapkit.tracking.hybrid.tracker import (
+    HybridConfig,
+    HybridSample,
+    HybridTracker,
+    default_marker_effectors,
 )
 
 PELVIS = CANONICAL_JOINTS.index("pelvis")

@@ -15,7 +15,7 @@ problem only; its pieces are shared with the other trackers:
 - the image term (`mocapkit.cues.chamfer`);
 - the search: `mocapkit.ik.nelder_mead` (SciPy's iterates, compiled) and the swivel
   (`mocapkit.ik.swivel`);
-- the compiled cost of eq. 14 on named structures (`mocapkit.tracking.arm_cost`, with
+- the compiled cost of eq. 14 on named structures (`mocapkit.tracking.hybrid.arm_cost`, with
   the notes on its outline chamfer, errata Z11).
 
 Optimiser. The cost is compiled with Numba; `nelder_mead_arm_nb` runs the generic
@@ -83,7 +83,7 @@ from mocapkit.skeleton.chains import limb_chain
 from mocapkit.skeleton.kinematics import forward_kinematics
 from mocapkit.skeleton.limbs import SIDES
 from mocapkit.skeleton.model import Skeleton
-from mocapkit.tracking.arm_cost import (
+from mocapkit.tracking.hybrid.arm_cost import (
     ArmModel,
     ArmShape,
     ArmTerms,

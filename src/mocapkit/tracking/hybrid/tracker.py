@@ -2,7 +2,7 @@
 
 Per sample (Fig. 3): marker targets -> IK (:mod:`mocapkit.ik.sdls`) -> optional video
 refinement of each arm (``refiner`` hook) -> balance heuristic
-(:mod:`mocapkit.tracking.balance`) -> optional temporal smoothing -> pose.
+(:mod:`mocapkit.tracking.hybrid.balance`) -> optional temporal smoothing -> pose.
 
 Streams (§3): markers and video run at different rates; the caller samples them as
 the paper does, giving each `HybridSample` the video frame and the newest marker
@@ -33,7 +33,9 @@ from numpy.typing import ArrayLike, NDArray
 from mocapkit.cues.edges import EdgeConfig, prepare_frame
 from mocapkit.errors import ConfigError, ShapeError, unknown_name
 from mocapkit.geometry.transforms import points_in_frame
-from mocapkit.ik.sdls import Effector, IKConfig, IKResult, SDLSSolver
+from mocapkit.ik.config import IKConfig, IKResult
+from mocapkit.ik.effectors import Effector
+from mocapkit.ik.sdls import SDLSSolver
 from mocapkit.skeleton.kinematics import canonical_positions, forward_kinematics
 from mocapkit.skeleton.limbs import (
     SIDES,
@@ -45,14 +47,6 @@ from mocapkit.skeleton.limbs import (
 )
 from mocapkit.skeleton.model import CANONICAL_JOINTS, PRISMATIC, Skeleton
 from mocapkit.timing import NULL_TIMER, StageTimer
-from mocapkit.tracking.arm_refinement import ArmDiagnostics, RefineConfig, refine_arms
-from mocapkit.tracking.balance import (
-    BalanceConfig,
-    BalanceModel,
-    balance_pose,
-    calibrate_balance,
-    support_points,
-)
 from mocapkit.tracking.base import (
     BRIDGE_S,
     FrameResult,
@@ -60,7 +54,15 @@ from mocapkit.tracking.base import (
     fit_summary,
     nan_unobserved,
 )
-from mocapkit.tracking.posture import SEATED_LEFT_OUT
+from mocapkit.tracking.hybrid.arm_refinement import ArmDiagnostics, RefineConfig, refine_arms
+from mocapkit.tracking.hybrid.balance import (
+    BalanceConfig,
+    BalanceModel,
+    balance_pose,
+    calibrate_balance,
+    support_points,
+)
+from mocapkit.tracking.hybrid.posture import SEATED_LEFT_OUT
 
 FloatArray = NDArray[np.float64]
 
@@ -109,8 +111,7 @@ def foot_effectors(skeleton: Skeleton) -> list[Effector]:
 #: default-configuration elbow 43 -> 55 mm (round-off chaos); averaged over four jittered
 #: repeats (`mocapkit accuracy hybrid --jitter-repeats 4`) every figure of the three
 #: configurations is within 0.3 mm of dgesdd's or better (docs/design-notes/hybrid.md,
-#: Speed). The active-set release of locked DoFs (``lock_release="kkt"``: deterministic,
-#: 165 frames/s) moved the default's MPJPE by 1.6-4 mm and is left out.
+#: Speed).
 TRACKING_IK = IKConfig(max_iterations=30, term_clamp_scale=3.0, relax_substeps=3, svd="gesvd")
 #: Bisection steps of the balance lean (`BalanceConfig.bisection_steps`) in ``"solve"`` mode.
 TRACKING_BISECTION_STEPS = 6
@@ -237,11 +238,11 @@ class HybridConfig:
     posture : str
         ``"standing"`` (default) or ``"seated"``. Seated: no foot is planted or
         re-planted, no balance step runs (the seat, not the feet, carries the body),
-        and the leg joints (`mocapkit.tracking.posture.SEATED_LEFT_OUT`) are NaN in the
+        and the leg joints (`mocapkit.tracking.hybrid.posture.SEATED_LEFT_OUT`) are NaN in the
         results. The skeleton must sit already
-        (`mocapkit.tracking.posture.seat_skeleton`: pelvis held at the seat's height,
+        (`mocapkit.tracking.hybrid.posture.seat_skeleton`: pelvis held at the seat's height,
         legs held bent); ``auto`` is resolved before the tracker
-        (`mocapkit.tracking.posture.choose_posture`).
+        (`mocapkit.tracking.hybrid.posture.choose_posture`).
     """
 
     ik: IKConfig = field(default_factory=lambda: TRACKING_IK)
@@ -446,7 +447,7 @@ class HybridTracker:
     config : HybridConfig
     refiner : callable, optional
         ``refine(skeleton, camera, q, image, hand_targets_mm, config) -> q``; by default
-        ``mocapkit.tracking.arm_refinement.refine_arms`` when that module is installed.
+        ``mocapkit.tracking.hybrid.arm_refinement.refine_arms`` when that module is installed.
         When ``config`` is a `RefineConfig` with the elbow-jump penalty on (its
         default) and the refiner accepts them, calls after the first also pass
         ``previous_elbows_mm`` (side -> the previous frame's elbow carried by the

@@ -7,14 +7,14 @@ import pytest
 
 from mocapkit.errors import ConfigError, ShapeError, UnknownNameError
 from mocapkit.geometry.rotations import matrix_from_axis_angle
-from mocapkit.pipelines.hybrid import (
+from mocapkit.pipelines.hybrid_markers import (
     head_band_offset_mm,
     raw_marker_skeleton,
     track_hybrid_marker_file,
 )
 from mocapkit.skeleton.kinematics import forward_kinematics
 from mocapkit.skeleton.limbs import arm
-from mocapkit.tracking.dynamic_calibration import (
+from mocapkit.tracking.hybrid.dynamic_calibration import (
     HANGING_FRACTION,
     MAX_FIT_MM,
     calibrate_members_on_motion,
@@ -22,8 +22,8 @@ from mocapkit.tracking.dynamic_calibration import (
     consensus_frames,
     layout_turn_deg,
 )
-from mocapkit.tracking.hybrid import HybridConfig, HybridTracker, default_marker_effectors
-from mocapkit.tracking.static_calibration import rotation_between_deg
+from mocapkit.tracking.hybrid.static_calibration import rotation_between_deg
+from mocapkit.tracking.hybrid.tracker import HybridConfig, HybridTracker, default_marker_effectors
 
 from .test_static_calibration import (
     RATE_HZ,
