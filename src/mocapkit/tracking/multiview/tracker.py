@@ -16,7 +16,9 @@ view's 2-D detections each frame.
    on the Huber loss of each detection's reprojection (in mm across the ray at the
    subject), a prior towards the previous frame, joint limits; warm-started from the
    previous frame. Detections further than ``reject_mm`` from the fit are dropped per
-   joint and view and the frame is fitted again.
+   joint and view and the frame is fitted again; a joint seen by two views (no
+   majority) drops a detection further than ``jump_mm`` from the joint's place in the
+   previous frame when the other is near it.
 4. **Status** per body part (head, arms, legs) by the detections kept: ``seen`` when
    its end joint is kept in two views (or one view with the middle joint in two),
    ``bridged`` over gaps up to ``gap_limit_s``, then ``released``
@@ -26,8 +28,9 @@ view's 2-D detections each frame.
    views whose labels were exchanged, and ``far_joints``: joints further than
    ``warn_px`` from their detections in most views that see them.
 
-The skeleton is the ``zhang21`` full body (`multiview_skeleton`) with the subject's
-segment lengths (`mocapkit.tracking.multiview.lengths`).
+Steps 2, 3 and 5 run as compiled kernels (`mocapkit.tracking.multiview.frame`), a few
+calls per frame. The skeleton is the ``zhang21`` full body (`multiview_skeleton`) with
+the subject's segment lengths (`mocapkit.tracking.multiview.lengths`).
 """
 
 from __future__ import annotations
