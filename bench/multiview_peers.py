@@ -13,7 +13,9 @@ and a side camera), the script
 3. optionally injects faults into the MediaPipe detections (``--faults``): one view with
    left and right exchanged for 0.5 s, one view missing for 1 s, 5 % of the points moved
    by 50-150 px (seeded);
-4. gives the same detections to mocapkit (`track_multiview_session`, shipped defaults), to
+4. gives the same detections to mocapkit (`track_multiview_session`, shipped defaults:
+   MediaPipe's keypoint offsets, as ``keypoints/detect.json`` names the backend;
+   ``--no-offsets``: without them), to
    a plain all-view DLT (`mocapkit.camera.triangulation.triangulate_views`) and, with
    ``--pose2sim-python``, to Pose2Sim's own triangulation and Butterworth filtering
    (``triangulate_all`` and ``filter_all`` of its package, run in its environment on a
@@ -34,7 +36,7 @@ Usage::
 
     .venv/bin/python bench/multiview_peers.py --set report --rigs ring,multi \\
         --work /tmp/mvbench --mediapipe-python /tmp/mp/bin/python \\
-        --pose2sim-python /tmp/p2s/bin/python [--faults] [--json out.json]
+        --pose2sim-python /tmp/p2s/bin/python [--faults] [--no-offsets] [--json out.json]
 """
 
 from __future__ import annotations
@@ -139,6 +141,16 @@ def mediapipe_session(truth: Path, out: Path, mp_python: str) -> Path:
     return out
 
 
+def record_backend(session: Path, backend: str = "mediapipe") -> Path:
+    """Write ``keypoints/detect.json`` as ``mocapkit detect`` does, naming the backend of
+    every camera's keypoints (the fit takes that backend's offsets), when absent."""
+    path = session / "keypoints" / "detect.json"
+    if not path.is_file():
+        cams = sorted(p.stem for p in (session / "keypoints").glob("*.csv"))
+        path.write_text(json.dumps({c: {"backend": backend} for c in cams}, indent=1))
+    return session
+
+
 def fault_session(src: Path, out: Path, seed: int = 0) -> Path:
     """A copy of ``src`` with faults in its keypoints: the second view's left and right
     exchanged over 0.5 s, the third view missing over 1 s, 5 % of all points moved by
@@ -190,8 +202,12 @@ def score(session: Path, time_s: Any, names: Any, joints: Any) -> dict[str, floa
     return {"mpjpe_mm": float(np.mean(list(per.values()))), **per}
 
 
-def run_mocapkit(session: Path) -> tuple[dict[str, float], dict[str, float], float]:
-    run = track_multiview_session(session, config=MultiviewRunConfig())
+def run_mocapkit(
+    session: Path, offsets: bool = True
+) -> tuple[dict[str, float], dict[str, float], float]:
+    run = track_multiview_session(
+        session, config=MultiviewRunConfig(), point_offsets_mm=None if offsets else {}
+    )
     m = run.motion
     truth = load_session(session).truth
     tn = list(truth.joint_names)
@@ -358,6 +374,11 @@ def main() -> int:
     ap.add_argument("--faults", action="store_true")
     ap.add_argument("--json", default=None)
     ap.add_argument(
+        "--no-offsets",
+        action="store_true",
+        help="fit without the detector's keypoint offsets (detector_offsets.py)",
+    )
+    ap.add_argument(
         "--prepare", action="store_true", help="only render and detect (the slow part), no scores"
     )
     args = ap.parse_args()
@@ -377,15 +398,19 @@ def main() -> int:
             truth = render(mocap, clip, start, rig, base / "truth")
             inputs = {"true2d": truth}
             if args.mediapipe_python:
-                inputs["mediapipe"] = mediapipe_session(truth, base / "mp", args.mediapipe_python)
+                inputs["mediapipe"] = record_backend(
+                    mediapipe_session(truth, base / "mp", args.mediapipe_python)
+                )
                 if args.faults:
-                    inputs["mp+faults"] = fault_session(inputs["mediapipe"], base / "mp_faults")
+                    inputs["mp+faults"] = record_backend(
+                        fault_session(inputs["mediapipe"], base / "mp_faults")
+                    )
             if args.prepare:
                 print(f"{rig} {clip}: ready", flush=True)
                 continue
             for label, session in inputs.items():
                 t0 = time.time()
-                mk, lens, fps = run_mocapkit(session)
+                mk, lens, fps = run_mocapkit(session, offsets=not args.no_offsets)
                 row = {
                     "rig": rig,
                     "clip": clip,

@@ -179,3 +179,31 @@ def test_auto_detects_missing_keypoints_when_a_detector_is_installed(
     assert len(asked) == 1 and len(asked[0]) == 4
     assert resolve_stereo_method(bare) == "fit"  # kept in the session: not detected again
     assert len(asked) == 1
+
+
+def test_keypoints_of_a_backend_with_offsets_get_them(ring_session, tmp_path) -> None:
+    import json
+
+    from mocapkit.tracking.multiview.detector_offsets import detector_offsets, offset_segments
+    from mocapkit.tracking.multiview.tracker import multiview_skeleton
+
+    detected = tmp_path / "session"
+    shutil.copytree(ring_session, detected, symlinks=True)
+    cams = sorted(p.stem for p in (detected / "keypoints").glob("*.csv"))
+    (detected / "keypoints" / "detect.json").write_text(
+        json.dumps({c: {"backend": "mediapipe"} for c in cams})
+    )
+    cfg = MultiviewRunConfig(smoothing="none")
+    plain = track_multiview_session(ring_session, config=cfg, max_frames=8)
+    mp = track_multiview_session(detected, config=cfg, max_frames=8)
+    off = detector_offsets("mediapipe")
+    want, _ = offset_segments(multiview_skeleton(), plain.lengths_mm, {}, off)
+    assert mp.lengths_mm == pytest.approx(want)
+    assert mp.lengths_mm["left_shank"] > plain.lengths_mm["left_shank"] + 30.0
+    # the joints move off the detections by about the offsets (the ankles' ~60 mm)
+    d = np.linalg.norm(mp.motion.joints_mm - plain.motion.joints_mm, axis=-1)
+    ankle = list(mp.motion.joint_names).index("left_ankle")
+    assert 30.0 < float(np.median(d[:, ankle])) < 120.0
+    # offsets given explicitly (none) win over the recorded backend
+    none = track_multiview_session(detected, config=cfg, max_frames=8, point_offsets_mm={})
+    assert none.lengths_mm == plain.lengths_mm

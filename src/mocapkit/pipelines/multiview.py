@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -113,6 +113,7 @@ def track_multiview_session(
     cameras: str | Sequence[str] | None = None,
     config: MultiviewRunConfig | None = None,
     max_frames: int | None = None,
+    point_offsets_mm: Mapping[str, Sequence[float]] | None = None,
 ) -> MultiviewRun:
     """Track a session's 2-D keypoints with the model-based multi-view fit.
 
@@ -126,12 +127,21 @@ def track_multiview_session(
         ``"A,B[,C...]"``; default every camera with keypoints.
     config : MultiviewRunConfig, optional
     max_frames : int, optional
+    point_offsets_mm : mapping of str to (3,) array, optional
+        The detector's offset per canonical joint (`MultiviewTracker`); default: the table
+        of the backend that ``keypoints/detect.json`` names for every camera
+        (`mocapkit.tracking.multiview.detector_offsets`), none for other keypoints.
     """
     import time
 
     from mocapkit.io.session import load_session
     from mocapkit.pipelines.camera_check import check_session_cameras
     from mocapkit.pipelines.run import check_result_folder
+    from mocapkit.tracking.multiview.detector_offsets import (
+        detector_offsets,
+        offset_segments,
+        session_backend,
+    )
     from mocapkit.tracking.multiview.lengths import subject_lengths_mm
     from mocapkit.tracking.stereo.tracker import azad_skeleton
 
@@ -182,9 +192,16 @@ def track_multiview_session(
     lengths, vectors = subject_lengths_mm(
         cams, joint_names, pixels, reject_mm=run_cfg.reject_mm, good_mm=run_cfg.good_mm
     )
+    if point_offsets_mm is None:
+        point_offsets_mm = detector_offsets(session_backend(session_dir, names))
+    lengths, vectors = offset_segments(
+        multiview_skeleton(), lengths, vectors, dict(point_offsets_mm)
+    )
     sk = multiview_skeleton(lengths, height_mm=session.height_mm, vectors_mm=vectors)
     rebuilt = sorted({j for k in kps for j in k.rebuilt_joints})
-    tracker = MultiviewTracker(sk, cams, joint_names, run_cfg.fit, rebuilt=rebuilt)
+    tracker = MultiviewTracker(
+        sk, cams, joint_names, run_cfg.fit, rebuilt=rebuilt, point_offsets_mm=point_offsets_mm
+    )
     time_s = kps[0].time_s[:n]
     samples = (
         _Sample(float(time_s[i]), {c: pixels[v, i] for v, c in enumerate(names)}) for i in range(n)

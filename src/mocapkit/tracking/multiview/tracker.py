@@ -53,6 +53,7 @@ from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments, scale_skeleton
 from mocapkit.tracking.base import FrameResult, observation_status
 from mocapkit.tracking.multiview.config import MultiviewConfig
+from mocapkit.tracking.multiview.detector_offsets import offset_points
 from mocapkit.tracking.multiview.fit import points_nb, view_arrays
 from mocapkit.tracking.multiview.frame import (
     FrameModel,
@@ -136,6 +137,10 @@ class MultiviewTracker:
     rebuilt : sequence of str
         Joints the keypoints' reader placed from others (weighted by
         `MultiviewConfig.rebuilt_weight`).
+    point_offsets_mm : mapping of str to (3,) array, optional
+        The detector's systematic offset per canonical joint, in that joint's frame of the
+        skeleton (`mocapkit.tracking.multiview.detector_offsets.offset_points`): the point
+        matched to the detections is the joint plus its offset; the output stays the joint.
     """
 
     def __init__(
@@ -145,6 +150,7 @@ class MultiviewTracker:
         joint_names: Sequence[str],
         config: MultiviewConfig | None = None,
         rebuilt: Sequence[str] = (),
+        point_offsets_mm: Mapping[str, Sequence[float]] | None = None,
     ) -> None:
         if len(cameras) < 2:
             raise ConfigError(f"the multi-view fit needs two or more cameras, found {len(cameras)}")
@@ -163,7 +169,7 @@ class MultiviewTracker:
                 "the multi-view fit needs detections of both shoulders and both hips, found "
                 f"{list(names)}"
             )
-        tj, tp = skeleton.canonical_points(self.names)
+        tj, tp = offset_points(skeleton, self.names, point_offsets_mm or {})
         self._tj = np.ascontiguousarray(tj, dtype=np.int64)
         self._tp = np.ascontiguousarray(tp, dtype=np.float64)
         self._kin = kinematic_arrays(skeleton)

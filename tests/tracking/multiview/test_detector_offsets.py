@@ -1,0 +1,144 @@
+"""The multi-view fit's detector offsets: where the offset point lies, the session's
+backend, the segment lengths without the offsets, and a fit to offset detections."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mocapkit.skeleton.kinematics import canonical_positions, forward_kinematics, points_on_joints
+from mocapkit.skeleton.model import CANONICAL_JOINTS, CANONICAL_SEGMENTS
+from mocapkit.synth.rigs import make_rig
+from mocapkit.tracking.multiview.detector_offsets import (
+    detector_offsets,
+    offset_points,
+    offset_segments,
+    session_backend,
+)
+from mocapkit.tracking.multiview.tracker import MultiviewTracker, multiview_skeleton
+
+NAMES = CANONICAL_JOINTS
+LIMB_JOINTS = [n for n in NAMES if n.startswith(("left_", "right_"))]
+
+
+@dataclass
+class Sample:
+    time_s: float
+    keypoints_px: dict[str, Any]
+
+
+def _offsets(rng: np.random.Generator) -> dict[str, tuple[float, float, float]]:
+    return {n: tuple(rng.uniform(-40, 40, 3)) for n in [*LIMB_JOINTS, "head"]}  # type: ignore[misc]
+
+
+def _pose(sk: Any, rng: np.random.Generator) -> np.ndarray:
+    lo = np.where(np.isfinite(sk.lower), sk.lower, -0.5)
+    hi = np.where(np.isfinite(sk.upper), sk.upper, 0.5)
+    q = np.clip(0.5 * (lo + hi) + 0.3 * rng.uniform(-1, 1, sk.n_dofs) * (hi - lo) / 2, lo, hi)
+    q[[sk.dof_index(n) for n in ("root_tx", "root_ty", "root_tz")]] = (0.0, 0.0, 1000.0)
+    return q
+
+
+def test_offset_point_is_the_joint_moved_in_its_segment_frame(rng: np.random.Generator) -> None:
+    sk = multiview_skeleton()
+    q = _pose(sk, rng)
+    world = forward_kinematics(sk, q)
+    plain = canonical_positions(sk, q, NAMES)
+    tj0, tp0 = offset_points(sk, NAMES, {})
+    np.testing.assert_allclose(points_on_joints(sk, q, tj0, tp0), plain, atol=1e-9)
+    off = _offsets(rng)
+    tj, tp = offset_points(sk, NAMES, off)
+    got = points_on_joints(sk, q, tj, tp)
+    for k, n in enumerate(NAMES):
+        if n not in off:
+            np.testing.assert_allclose(got[k], plain[k], atol=1e-9)
+            continue
+        jn, _ = sk.canonical[n]
+        j = sk.joint_index(jn)
+        frame = j if n == "head" else int(sk.parents[j])  # the head is not a joint's origin
+        want = plain[k] + world[frame, :3, :3] @ np.asarray(off[n])
+        np.testing.assert_allclose(got[k], want, atol=1e-9)
+
+
+def test_a_backend_without_a_table_has_no_offsets() -> None:
+    assert detector_offsets(None) == {}
+    assert detector_offsets("rtmpose") == {}
+    table = detector_offsets("mediapipe")
+    assert set(table) >= set(LIMB_JOINTS)
+    assert all(np.all(np.isfinite(v)) for v in table.values())
+
+
+def test_session_backend_reads_detect_json(tmp_path: Path) -> None:
+    (tmp_path / "keypoints").mkdir()
+    assert session_backend(tmp_path, ["a", "b"]) is None
+    path = tmp_path / "keypoints" / "detect.json"
+    path.write_text(json.dumps({"a": {"backend": "mediapipe"}, "b": {"backend": "mediapipe"}}))
+    assert session_backend(tmp_path, ["a", "b"]) == "mediapipe"
+    path.write_text(json.dumps({"a": {"backend": "mediapipe"}, "b": {"backend": "rtmpose"}}))
+    assert session_backend(tmp_path, ["a", "b"]) is None
+    assert session_backend(tmp_path, ["a", "c"]) is None
+    path.write_text("{not json")
+    assert session_backend(tmp_path, ["a"]) is None
+
+
+def test_segments_lose_the_offsets_at_rest(rng: np.random.Generator) -> None:
+    sk = multiview_skeleton()
+    off = _offsets(rng)
+    # at rest every joint frame has the body's axes: the detector's points are the
+    # joints plus their offsets, the midpoint joints the mean of their pair's
+    rest = canonical_positions(sk, sk.zero_pose(), NAMES)
+    pts = {n: rest[k] + np.asarray(off.get(n, (0.0, 0.0, 0.0))) for k, n in enumerate(NAMES)}
+    pts["neck"] = rest[NAMES.index("neck")] + 0.5 * np.add(
+        off["left_shoulder"], off["right_shoulder"]
+    )
+    pts["pelvis"] = rest[NAMES.index("pelvis")] + 0.5 * np.add(off["left_hip"], off["right_hip"])
+    true_len = {
+        s: float(np.linalg.norm(rest[NAMES.index(b)] - rest[NAMES.index(a)]))
+        for s, (a, b) in CANONICAL_SEGMENTS.items()
+        if s.endswith(("arm", "thigh", "shank"))
+    }
+    seen_len = {
+        s: float(np.linalg.norm(pts[b] - pts[a]))
+        for s, (a, b) in CANONICAL_SEGMENTS.items()
+        if s in true_len
+    }
+    true_vec = {
+        s: rest[NAMES.index(b)] - rest[NAMES.index(a)]
+        for s, (a, b) in CANONICAL_SEGMENTS.items()
+        if s in ("trunk", "left_pelvis")
+    }
+    seen_vec = {s: pts[b] - pts[a] for s, (a, b) in CANONICAL_SEGMENTS.items() if s in true_vec}
+    lengths, vectors = offset_segments(sk, seen_len, seen_vec, off)
+    for s, v in true_len.items():
+        a, b = CANONICAL_SEGMENTS[s]
+        d = np.asarray(off[b]) - np.asarray(off[a])  # the limbs hang along -z at rest
+        # exact along the segment; across it, the second-order term is left
+        across = float(np.hypot(d[0], d[1]))
+        assert abs(lengths[s] - v) <= across**2 / (2.0 * (v - d[2])) + 1e-6
+    for s, v in true_vec.items():
+        np.testing.assert_allclose(vectors[s], v, atol=1e-9)
+    assert offset_segments(sk, seen_len, seen_vec, {}) == (seen_len, seen_vec)
+
+
+def test_fit_to_offset_detections_finds_the_joints(rng: np.random.Generator) -> None:
+    sk = multiview_skeleton()
+    cams = make_rig("ring", [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 1300.0)
+    off = detector_offsets("mediapipe")  # detections where this detector would put them
+    tj, tp = offset_points(sk, NAMES, off)
+    q0 = _pose(sk, rng)
+    qs = [q0 + 0.02 * k * (sk.dof_kind == 0) for k in range(6)]
+    frames = [{c.name: c.project(points_on_joints(sk, q, tj, tp)) for c in cams} for q in qs]
+    with_off = MultiviewTracker(sk, cams, NAMES, point_offsets_mm=off)
+    without = MultiviewTracker(sk, cams, NAMES)
+    for i, (q, f) in enumerate(zip(qs, frames, strict=True)):
+        truth = canonical_positions(sk, q)
+        r = with_off.update(Sample(i / 30.0, f))
+        r0 = without.update(Sample(i / 30.0, f))
+    assert np.nanmax(np.linalg.norm(r.joints_mm - truth, axis=1)) < 5.0
+    assert r.fit["mean_px"] < 1.0
+    # without the offsets the fit follows the detections instead
+    assert np.nanmax(np.linalg.norm(r0.joints_mm - truth, axis=1)) > 40.0
