@@ -34,6 +34,7 @@ import sys
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -362,16 +363,38 @@ def ensure_keypoints(
     return tuple(missing)
 
 
+def read_detect_summary(session_dir: str | os.PathLike[str]) -> dict[str, Any]:
+    """What `detect_session` recorded per camera in ``keypoints/detect.json`` (backend,
+    followed person, frames found); empty when the file is absent, unreadable or not a
+    mapping of cameras."""
+    path = Path(session_dir) / "keypoints" / "detect.json"
+    try:
+        summary = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    return summary if isinstance(summary, dict) else {}
+
+
+def detected_backend(session_dir: str | os.PathLike[str], cameras: Sequence[str]) -> str | None:
+    """The detector backend that wrote every one of ``cameras``' keypoints, as
+    ``keypoints/detect.json`` records it; ``None`` when the file is absent or unreadable,
+    or the cameras' backends differ or are not given."""
+    summary = read_detect_summary(session_dir)
+    found = {
+        summary[c].get("backend") if isinstance(summary.get(c), dict) else None for c in cameras
+    }
+    if len(found) != 1:
+        return None
+    (backend,) = found
+    return backend if isinstance(backend, str) else None
+
+
 def _mark_detected(session: Session, cameras: Sequence[str]) -> None:
     """Keypoints that `detect_session` wrote (``keypoints/detect.json`` lists their camera)
     carry a rebuilt neck and pelvis (`mocapkit.io.openpose.REBUILT_JOINTS`), which the CSV
     cannot say: set it on the session's `Keypoints`, so the trackers treat them as a
     detector's."""
-    path = session.path / "keypoints" / "detect.json"
-    try:
-        done = json.loads(path.read_text()) if path.is_file() else {}
-    except (OSError, json.JSONDecodeError):
-        return
+    done = read_detect_summary(session.path)
     for cam in cameras:
         kp = session.keypoints.get(cam)
         if kp is not None and cam in done and not kp.rebuilt_joints:
@@ -399,6 +422,8 @@ __all__ = [
     "detect_session",
     "detect_sources",
     "detect_video",
+    "detected_backend",
     "ensure_keypoints",
+    "read_detect_summary",
     "video_source",
 ]

@@ -134,13 +134,13 @@ def track_multiview_session(
     """
     import time
 
+    from mocapkit.detect.run import detected_backend
     from mocapkit.io.session import load_session
     from mocapkit.pipelines.camera_check import check_session_cameras
     from mocapkit.pipelines.run import check_result_folder
     from mocapkit.tracking.multiview.detector_offsets import (
         detector_offsets,
         offset_segments,
-        session_backend,
     )
     from mocapkit.tracking.multiview.lengths import subject_lengths_mm
     from mocapkit.tracking.stereo.tracker import azad_skeleton
@@ -193,7 +193,7 @@ def track_multiview_session(
         cams, joint_names, pixels, reject_mm=run_cfg.reject_mm, good_mm=run_cfg.good_mm
     )
     if point_offsets_mm is None:
-        point_offsets_mm = detector_offsets(session_backend(session_dir, names))
+        point_offsets_mm = detector_offsets(detected_backend(session_dir, names))
     lengths, vectors = offset_segments(
         multiview_skeleton(), lengths, vectors, dict(point_offsets_mm)
     )

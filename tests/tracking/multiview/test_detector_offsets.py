@@ -1,11 +1,9 @@
-"""The multi-view fit's detector offsets: where the offset point lies, the session's
-backend, the segment lengths without the offsets, and a fit to offset detections."""
+"""The multi-view fit's detector offsets: where the offset point lies, the segment lengths
+without the offsets, and a fit to offset detections."""
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -17,7 +15,6 @@ from mocapkit.tracking.multiview.detector_offsets import (
     detector_offsets,
     offset_points,
     offset_segments,
-    session_backend,
 )
 from mocapkit.tracking.multiview.tracker import MultiviewTracker, multiview_skeleton
 
@@ -70,19 +67,6 @@ def test_a_backend_without_a_table_has_no_offsets() -> None:
     table = detector_offsets("mediapipe")
     assert set(table) >= set(LIMB_JOINTS)
     assert all(np.all(np.isfinite(v)) for v in table.values())
-
-
-def test_session_backend_reads_detect_json(tmp_path: Path) -> None:
-    (tmp_path / "keypoints").mkdir()
-    assert session_backend(tmp_path, ["a", "b"]) is None
-    path = tmp_path / "keypoints" / "detect.json"
-    path.write_text(json.dumps({"a": {"backend": "mediapipe"}, "b": {"backend": "mediapipe"}}))
-    assert session_backend(tmp_path, ["a", "b"]) == "mediapipe"
-    path.write_text(json.dumps({"a": {"backend": "mediapipe"}, "b": {"backend": "rtmpose"}}))
-    assert session_backend(tmp_path, ["a", "b"]) is None
-    assert session_backend(tmp_path, ["a", "c"]) is None
-    path.write_text("{not json")
-    assert session_backend(tmp_path, ["a"]) is None
 
 
 def test_segments_lose_the_offsets_at_rest(rng: np.random.Generator) -> None:

@@ -9,15 +9,13 @@ wrist: `offset_points`), fixed by the detections where the joint's own frame (th
 the hand's) is not; learned by
 ``tools/multiview_detector_offsets.py`` on the tuning clips; the table is
 `mocapkit.tracking.multiview.detector_offsets_table`. A backend without a table (and
-keypoints of unknown origin) has none.
+keypoints of unknown origin) has none; which backend wrote a session's keypoints is
+`mocapkit.detect.run.detected_backend`.
 """
 
 from __future__ import annotations
 
-import json
-import os
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -108,30 +106,9 @@ def offset_segments(
     return lengths, vectors
 
 
-def session_backend(session_dir: str | os.PathLike[str], cameras: Sequence[str]) -> str | None:
-    """The detector backend that wrote every one of ``cameras``' keypoints, as
-    ``keypoints/detect.json`` (written by ``mocapkit detect``) records it; ``None`` when
-    the file is absent or unreadable, or the cameras' backends differ or are not given."""
-    path = Path(session_dir) / "keypoints" / "detect.json"
-    try:
-        summary = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
-    if not isinstance(summary, dict):
-        return None
-    found = {
-        summary[c].get("backend") if isinstance(summary.get(c), dict) else None for c in cameras
-    }
-    if len(found) != 1:
-        return None
-    (backend,) = found
-    return backend if isinstance(backend, str) else None
-
-
 __all__ = [
     "MIDPOINTS",
     "detector_offsets",
     "offset_points",
     "offset_segments",
-    "session_backend",
 ]
