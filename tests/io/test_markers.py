@@ -11,7 +11,7 @@ import pytest
 from mocapkit.errors import FormatError, ShapeError, UnknownNameError
 from mocapkit.io.marker_csv import read_markers_csv, write_markers_csv
 from mocapkit.io.marker_files import read_markers, write_markers
-from mocapkit.io.markers import MarkerData, bare_marker_name, longest_true_run
+from mocapkit.io.markers import MarkerData, bare_marker_name, longest_true_run, true_runs
 
 
 def _data(names: tuple[str, ...], n_frames: int = 6, rate_hz: float = 100.0) -> MarkerData:
@@ -100,6 +100,14 @@ def test_occlusion_report_counts_and_longest_gaps() -> None:
 def test_longest_true_run() -> None:
     mask = np.array([[1, 0], [1, 0], [0, 1], [1, 1], [1, 0], [1, 0]], dtype=bool)
     np.testing.assert_array_equal(longest_true_run(mask), [3, 2])
+
+
+def test_true_runs_are_half_open_and_in_order() -> None:
+    assert true_runs([1, 1, 0, 1, 0, 0, 1]) == [(0, 2), (3, 4), (6, 7)]
+    assert true_runs(np.zeros(4, dtype=bool)) == []
+    assert true_runs(np.array([0.0, 2.5, 1.0])) == [(1, 3)]
+    with pytest.raises(ShapeError, match=r"true_runs: expected a 1-D mask, found shape \(2, 2\)"):
+        true_runs(np.ones((2, 2), dtype=bool))
 
 
 @pytest.mark.parametrize(

@@ -101,6 +101,15 @@ class OcclusionReport:
         return "\n".join(lines)
 
 
+def true_runs(mask: ArrayLike) -> list[tuple[int, int]]:
+    """The runs of True in a 1-D mask, in order, as half-open ``(start, stop)`` indices."""
+    m = np.asarray(mask, dtype=bool).astype(np.int8)
+    if m.ndim != 1:
+        raise ShapeError(f"true_runs: expected a 1-D mask, found shape {m.shape}")
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], m, [0]))))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
+
+
 def longest_true_run(mask: NDArray[np.bool_]) -> NDArray[np.int64]:
     """Length of the longest run of True along axis 0.
 
@@ -117,13 +126,9 @@ def longest_true_run(mask: NDArray[np.bool_]) -> NDArray[np.int64]:
     flat = m.reshape(t, -1)
     out = np.zeros(flat.shape[1], dtype=np.int64)
     for j in range(flat.shape[1]):
-        col = flat[:, j]
-        if not col.any():
-            continue
-        edges = np.diff(np.concatenate(([0], col.view(np.int8), [0])))
-        starts = np.flatnonzero(edges == 1)
-        ends = np.flatnonzero(edges == -1)
-        out[j] = int((ends - starts).max())
+        runs = true_runs(flat[:, j])
+        if runs:
+            out[j] = max(b - a for a, b in runs)
     return out.reshape(m.shape[1:])
 
 

@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.errors import SessionError, unknown_name
+from mocapkit.io.markers import true_runs
 from mocapkit.io.motion import Motion
 from mocapkit.pipelines.run import run_tracker, write_run_folder
 from mocapkit.tracking.base import FrameResult
@@ -60,8 +61,7 @@ def _smooth_q(q: FloatArray, time_s: FloatArray, run: MultiviewRunConfig) -> Flo
     out = q.copy()
     ok = np.isfinite(q).all(axis=1)
     dt = float(np.median(np.diff(time_s))) if time_s.shape[0] > 1 else 1.0 / 30.0
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], ok.astype(int), [0]])))
-    for a, b in zip(edges[::2], edges[1::2], strict=True):
+    for a, b in true_runs(ok):
         seg = q[a:b]
         if run.smoothing == "butterworth":
             from scipy.signal import butter, filtfilt
@@ -100,8 +100,7 @@ def far_spans(
         det = np.isfinite(err)
         with np.errstate(invalid="ignore"):
             flag = (det.sum(axis=1) >= 2) & ((err > warn).sum(axis=1) * 2 > det.sum(axis=1))
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], flag.astype(int), [0]])))
-        for a, b in zip(edges[::2], edges[1::2], strict=True):
+        for a, b in true_runs(flag):
             if b - a >= min_frames:
                 out.append((n, results[a].time_s, results[b - 1].time_s, int(b - a)))
     return sorted(out, key=lambda s: (s[1], s[0]))

@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import ConfigError, SessionError, unknown_name
+from mocapkit.io.markers import true_runs
 from mocapkit.io.motion import Motion
 from mocapkit.pipelines.camera_check import check_session_cameras
 from mocapkit.pipelines.run import run_tracker
@@ -91,10 +92,9 @@ def elbow_jumps(time_s: ArrayLike, fit: Mapping[str, ArrayLike]) -> list[ElbowJu
     for side in ("left", "right"):
         if f"{side}_elbow_jump" not in fit:
             continue
-        flag = (np.asarray(fit[f"{side}_elbow_jump"], dtype=float) > 0).astype(int)
+        flag = np.asarray(fit[f"{side}_elbow_jump"], dtype=float) > 0
         speed = np.asarray(fit[f"{side}_elbow_speed_mm_per_s"], dtype=float)
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], flag, [0]])))
-        for a, b in zip(edges[::2], edges[1::2], strict=True):
+        for a, b in true_runs(flag):
             top = float(np.nanmax(speed[a:b]))
             out.append(ElbowJump(side, float(t[a]), float(t[b - 1]), int(b - a), top))
     return sorted(out, key=lambda j: (j.start_s, j.side))
