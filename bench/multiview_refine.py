@@ -34,7 +34,16 @@ Usage::
 
     .venv/bin/python bench/multiview_refine.py --set report --work /tmp/mvbench \\
         --out /tmp/mvrefine [--sources mediapipe,exact] \\
-        [--grid "name:field=value,...;blank:"] [--json f]
+        [--grid "name:field=value,...;blank:"] [--displaced DEG] [--json f]
+
+The figures of the design notes::
+
+    bench/multiview_refine.py --set tuning --grid "default:;blank:"
+    bench/multiview_refine.py --set report --sources mediapipe,faults,exact \\
+        --grid "default:;blank:"
+    bench/multiview_refine.py --set report --sources mediapipe,faults,exact \\
+        --grid "wide:spread_rad=0.1,n_runs=5,n_particles=200"
+    bench/multiview_refine.py --set tuning --clips 13_26 --sources exact --displaced 5
 """
 
 from __future__ import annotations
@@ -101,6 +110,9 @@ class ArmRefineConfig:
         shoulder is kept).
     hand_radius_mm : float
         Algorithm 1's minimum radius around the fit's wrist.
+    spread_rad : float
+        Spread (std) of the first run's particles around the fit's arm in the shoulder's
+        rotation and the elbow angle, before the filter's own noise (0: all at the fit's).
     radii_mm : (4,)
         Cone radii of the upper arm (proximal, distal) and forearm (mm).
     gradient : GradientConfig
@@ -112,12 +124,13 @@ class ArmRefineConfig:
     noise_rad_per_error: float = 0.05
     shoulder_box_mm: float = 20.0
     hand_radius_mm: float = 60.0
+    spread_rad: float = 0.0
     radii_mm: tuple[float, float, float, float] = (48.0, 40.0, 38.0, 30.0)
     gradient: GradientConfig = field(default_factory=GradientConfig)
     seed: int = 0
 
     def __post_init__(self) -> None:
-        for name in ("noise_rad_per_error", "shoulder_box_mm", "hand_radius_mm"):
+        for name in ("noise_rad_per_error", "shoulder_box_mm", "hand_radius_mm", "spread_rad"):
             v = getattr(self, name)
             if not v >= 0:
                 raise ConfigError(f"ArmRefineConfig.{name}: expected >= 0, found {v}")
@@ -249,6 +262,10 @@ class ArmRefiner:
             start = arm_state(sh, el, wr)
             filt = self.filters[s]
             filt.particles[:] = start
+            if self.config.spread_rad > 0:
+                p = filt.particles
+                p[:, :4] += filt.rng.normal(0.0, self.config.spread_rad, (p.shape[0], 4))
+                np.clip(p[:, 3], -np.pi, 0.0, out=p[:, 3])
             filt.weights[:] = 1.0 / filt.weights.shape[0]
             wt, eg, d2 = np.empty(1), np.empty(1), np.empty(1)
             arm_weights_nb(start[None, :], model, views, self.arm_config.fusion, 0.0, wt, eg, d2)
@@ -318,8 +335,36 @@ def smoothed(fit: np.ndarray, refined: np.ndarray, time_s: np.ndarray, hz: float
     return fit + filtfilt(b, a, d, axis=0)
 
 
-def run_one(session: Path, configs: dict[str, ArmRefineConfig]) -> dict[str, Any]:
+def displaced(session: Path, time_s: np.ndarray, joints: np.ndarray, deg: float) -> np.ndarray:
+    """The truth's joints at the fit's times with each arm turned ``deg`` about its
+    shoulder around a random axis (seeded): a start whose error the edges can see."""
+    from scipy.spatial.transform import Rotation
+
+    truth = load_session(session).truth
+    if truth is None:
+        raise SystemExit(f"{session}: no truth.npz to displace")
+    rng = np.random.default_rng(0)
+    out = joints.copy()
+    tn = list(truth.joint_names)
+    for k, t in enumerate(time_s):
+        i = int(np.argmin(np.abs(truth.time_s - t)))
+        for j, name in enumerate(CANONICAL_JOINTS):
+            if name in tn:
+                out[k, j] = truth.joints_mm[i, tn.index(name)]
+        for side in SIDES:
+            sh, el, wr = ARM_ROWS[side]
+            axis = rng.normal(size=3)
+            r = Rotation.from_rotvec(np.radians(deg) * axis / np.linalg.norm(axis)).as_matrix()
+            out[k, [el, wr]] = out[k, sh] + (out[k, [el, wr]] - out[k, sh]) @ r.T
+    return out
+
+
+def run_one(
+    session: Path, configs: dict[str, ArmRefineConfig], displaced_deg: float = 0.0
+) -> dict[str, Any]:
     joints, time_s, fit_s = fitted(session)
+    if displaced_deg > 0:
+        joints = displaced(session, time_s, joints, displaced_deg)
     s = load_session(session)
     names = sorted(s.keypoints)
     cams = [s.camera(c) for c in names]
@@ -381,6 +426,14 @@ def main() -> int:
         "(ArmRefineConfig fields; default: the shipped defaults); a name starting with "
         "'blank' runs on blank images (a control: what the filter does without edges)",
     )
+    p.add_argument(
+        "--displaced",
+        type=float,
+        default=0.0,
+        metavar="DEG",
+        help="start from the truth with each arm turned DEG about its shoulder instead of "
+        "the fit (the 'fit' column is then that start): what the edges bring back",
+    )
     p.add_argument("--json", type=Path)
     a = p.parse_args()
     configs = parse_grid(a.grid)
@@ -401,7 +454,7 @@ def main() -> int:
             session = copy_session(a.work / "ring" / clip / SOURCES[src], a.out / clip / src)
             if src in ("mediapipe", "faults"):
                 record_backend(session)
-            r = run_one(session, configs)
+            r = run_one(session, configs, a.displaced)
             rows[f"{clip}/{src}"] = r
             print(
                 f"{clip:12} {src:9} {r['fit']['arm']:6.1f} "
