@@ -7,7 +7,10 @@ the session is fitted (`track_multiview_session`, shipped settings) and, for eve
 detected canonical joint, the fitted joint minus the true joint is taken into the frame in
 which the fit places its offset (`offset_points`: the segment ending at the joint); the
 offset is the mean over all frames and clips, the left and the mirrored right side's
-averaged. The fit is run again with the offsets so far and the remaining mean added
+averaged. A joint gets an offset only where it carries from clip to clip: leaving each
+clip out in turn, the other clips' mean must shrink that clip's own mean offset by at
+least ``--min-gain-mm`` on average (`held_out_gains_mm`, from the fits without
+offsets). The fit is run again with the offsets so far and the remaining mean added
 (``--rounds``), since offsets move the fit (and the segment lengths, `offset_segments`),
 which moves the frames they are measured in.
 
@@ -74,12 +77,38 @@ def clip_offsets(
     return out, float(np.mean(errs))
 
 
+def held_out_gains_mm(per_clip: list[dict[str, np.ndarray]]) -> dict[str, float]:
+    """Per joint, how much the other clips' mean offset reduces each clip's own (the
+    norm of its mean offset, less that of the rest), averaged over the clips left out
+    in turn: an offset that does not carry from clip to clip gains nothing."""
+
+    def side_mean(means: dict[str, np.ndarray], k: str) -> np.ndarray:
+        other = mirror_name(k)
+        return 0.5 * (means[k] + means[other] * MIRROR) if other in means else means[k]
+
+    out = {}
+    for k in per_clip[0]:
+        gains = []
+        for i, own in enumerate(per_clip):
+            rest = np.mean([side_mean(m, k) for j, m in enumerate(per_clip) if j != i], axis=0)
+            b = side_mean(own, k)
+            gains.append(float(np.linalg.norm(b) - np.linalg.norm(b - rest)))
+        out[k] = float(np.mean(gains))
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--work", default="/tmp/mvbench")
     ap.add_argument("--rigs", default="ring")
     ap.add_argument("--backend", default="mediapipe")
     ap.add_argument("--rounds", type=int, default=2)
+    ap.add_argument(
+        "--min-gain-mm",
+        type=float,
+        default=1.0,
+        help="a joint gets an offset when its held_out_gains_mm is at least this",
+    )
     ap.add_argument("--dry-run", action="store_true", help="print, do not write the table")
     args = ap.parse_args()
     sessions = [
@@ -89,19 +118,29 @@ def main() -> int:
         if (Path(args.work) / rig / clip / "mp" / "keypoints").is_dir()
     ]
     offsets: dict[str, tuple[float, float, float]] = {}
+    keep: set[str] | None = None
     for r in range(args.rounds + 1):
         pooled: dict[str, list[np.ndarray]] = {}
+        per_clip: list[dict[str, np.ndarray]] = []
         line = []
         for s in sessions:
             per, mpjpe = clip_offsets(s, offsets)
             line.append(f"{s.parent.parent.name}/{s.parent.name} {mpjpe:.1f}")
+            per_clip.append({k: np.concatenate(v).mean(axis=0) for k, v in per.items()})
             for k, v in per.items():
                 pooled.setdefault(k, []).extend(v)
         print(f"round {r}: " + ", ".join(line), flush=True)
         if r == args.rounds:
             break
+        if keep is None:
+            gains = held_out_gains_mm(per_clip)
+            keep = {k for k, g in gains.items() if g >= args.min_gain_mm}
+            for k, g in sorted(gains.items()):
+                print(f"  {k:16} held-out bias gain {g:6.1f} mm: {'kept' if k in keep else 'none'}")
         means = {k: np.concatenate(v).mean(axis=0) for k, v in pooled.items()}
         for k in pooled:
+            if k not in keep:
+                continue
             mean = means[k]
             other = mirror_name(k)
             if other in means:  # one body: left and mirrored right share their mean
@@ -119,8 +158,9 @@ def main() -> int:
     OUT.write_text(
         '"""Shipped detector offsets of the multi-view fit (generated; do not edit).\n\n'
         "Written by ``tools/multiview_detector_offsets.py``\n"
-        f"(``--rigs {args.rigs} --rounds {args.rounds}``): mm, in the frame of the segment\n"
-        "ending at each joint (`offset_points`), from the fits of the tuning clips' renders\n"
+        f"(``--rigs {args.rigs} --rounds {args.rounds} --min-gain-mm {args.min_gain_mm:g}``):\n"
+        "mm, in the frame of the segment ending at each joint (`offset_points`), from the\n"
+        "fits of the tuning clips' renders\n"
         f"({clips})\nwith the backend's keypoints against the truth.\n"
         '"""\n\n'
         "OFFSETS_MM: dict[str, dict[str, tuple[float, float, float]]] = {\n"

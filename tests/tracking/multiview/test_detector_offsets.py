@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import pytest
 
 from mocapkit.skeleton.kinematics import canonical_positions, forward_kinematics, points_on_joints
 from mocapkit.skeleton.model import CANONICAL_JOINTS, CANONICAL_SEGMENTS
@@ -65,8 +66,35 @@ def test_a_backend_without_a_table_has_no_offsets() -> None:
     assert detector_offsets(None) == {}
     assert detector_offsets("rtmpose") == {}
     table = detector_offsets("mediapipe")
-    assert set(table) >= set(LIMB_JOINTS)
+    # only joints whose offset carries from clip to clip (the tool's held-out rule)
+    assert {"left_ankle", "right_ankle"} <= set(table) <= {*LIMB_JOINTS, "head"}
     assert all(np.all(np.isfinite(v)) for v in table.values())
+
+
+def _tool() -> Any:
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[3] / "tools" / "multiview_detector_offsets.py"
+    spec = importlib.util.spec_from_file_location("multiview_detector_offsets", path)
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_held_out_gain_keeps_offsets_that_carry_from_clip_to_clip() -> None:
+    tool = _tool()
+    same = np.array([3.0, 4.0, 0.0])  # every clip: the same 5 mm offset
+    flip = [np.array([0.0, 0.0, s * 10.0]) for s in (1, -1, 1, -1)]
+    clips = [{"left_ankle": same, "right_ankle": same * tool.MIRROR, "head": f} for f in flip]
+    gains = tool.held_out_gains_mm(clips)
+    # the rest's mean takes a consistent offset out whole
+    assert gains["left_ankle"] == pytest.approx(5.0)
+    assert gains["right_ankle"] == pytest.approx(5.0)
+    # an offset whose sign changes between clips: the rest's mean makes each clip worse
+    # (|10 - (-10/3)| - 10 = 10/3 mm lost)
+    assert gains["head"] == pytest.approx(-10.0 / 3.0)
 
 
 def test_segments_lose_the_offsets_at_rest(rng: np.random.Generator) -> None:
