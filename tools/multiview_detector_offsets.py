@@ -7,10 +7,10 @@ the session is fitted (`track_multiview_session`, shipped settings) and, for eve
 detected canonical joint, the fitted joint minus the true joint is taken into the frame in
 which the fit places its offset (`offset_points`: the segment ending at the joint); the
 offset is the mean over all frames and clips, the left and the mirrored right side's
-averaged. A joint gets an offset only where it carries from clip to clip: leaving each
-clip out in turn, the other clips' mean must shrink that clip's own mean offset by at
-least ``--min-gain-mm`` on average (`held_out_gains_mm`, from the fits without
-offsets). The fit is run again with the offsets so far and the remaining mean added
+averaged. Each joint's offset is then shrunk towards zero by how well it carries from
+clip to clip (`held_out_shrinkage`: leaving each clip out in turn, the factor on the
+other clips' mean that best predicts that clip's own, from the fits without offsets).
+The fit is run again with the offsets so far and the remaining mean added
 (``--rounds``), since offsets move the fit (and the segment lengths, `offset_segments`),
 which moves the frames they are measured in.
 
@@ -77,10 +77,12 @@ def clip_offsets(
     return out, float(np.mean(errs))
 
 
-def held_out_gains_mm(per_clip: list[dict[str, np.ndarray]]) -> dict[str, float]:
-    """Per joint, how much the other clips' mean offset reduces each clip's own (the
-    norm of its mean offset, less that of the rest), averaged over the clips left out
-    in turn: an offset that does not carry from clip to clip gains nothing."""
+def held_out_shrinkage(per_clip: list[dict[str, np.ndarray]]) -> dict[str, float]:
+    """Per joint, the factor ``s`` in [0, 1] on the mean offset of the other clips that
+    best predicts each clip's own mean offset, left out in turn (least squares over the
+    clips: ``sum(b . m) / sum(m . m)``, ``b`` the clip's offset, ``m`` the others' mean;
+    left and mirrored right pooled): 1 for an offset every clip shares, 0 for one that
+    changes from clip to clip as much as it is large."""
 
     def side_mean(means: dict[str, np.ndarray], k: str) -> np.ndarray:
         other = mirror_name(k)
@@ -88,12 +90,12 @@ def held_out_gains_mm(per_clip: list[dict[str, np.ndarray]]) -> dict[str, float]
 
     out = {}
     for k in per_clip[0]:
-        gains = []
+        num = den = 0.0
         for i, own in enumerate(per_clip):
             rest = np.mean([side_mean(m, k) for j, m in enumerate(per_clip) if j != i], axis=0)
-            b = side_mean(own, k)
-            gains.append(float(np.linalg.norm(b) - np.linalg.norm(b - rest)))
-        out[k] = float(np.mean(gains))
+            num += float(side_mean(own, k) @ rest)
+            den += float(rest @ rest)
+        out[k] = float(np.clip(num / den, 0.0, 1.0)) if den > 0 else 0.0
     return out
 
 
@@ -103,12 +105,6 @@ def main() -> int:
     ap.add_argument("--rigs", default="ring")
     ap.add_argument("--backend", default="mediapipe")
     ap.add_argument("--rounds", type=int, default=2)
-    ap.add_argument(
-        "--min-gain-mm",
-        type=float,
-        default=1.0,
-        help="a joint gets an offset when its held_out_gains_mm is at least this",
-    )
     ap.add_argument("--dry-run", action="store_true", help="print, do not write the table")
     args = ap.parse_args()
     sessions = [
@@ -118,7 +114,7 @@ def main() -> int:
         if (Path(args.work) / rig / clip / "mp" / "keypoints").is_dir()
     ]
     offsets: dict[str, tuple[float, float, float]] = {}
-    keep: set[str] | None = None
+    shrink: dict[str, float] | None = None
     for r in range(args.rounds + 1):
         pooled: dict[str, list[np.ndarray]] = {}
         per_clip: list[dict[str, np.ndarray]] = []
@@ -132,21 +128,26 @@ def main() -> int:
         print(f"round {r}: " + ", ".join(line), flush=True)
         if r == args.rounds:
             break
-        if keep is None:
-            gains = held_out_gains_mm(per_clip)
-            keep = {k for k, g in gains.items() if g >= args.min_gain_mm}
-            for k, g in sorted(gains.items()):
-                print(f"  {k:16} held-out bias gain {g:6.1f} mm: {'kept' if k in keep else 'none'}")
+        if shrink is None:
+            shrink = held_out_shrinkage(per_clip)
+            for k, f in sorted(shrink.items()):
+                print(f"  {k:16} held-out shrinkage {f:4.2f}")
         means = {k: np.concatenate(v).mean(axis=0) for k, v in pooled.items()}
         for k in pooled:
-            if k not in keep:
-                continue
             mean = means[k]
             other = mirror_name(k)
             if other in means:  # one body: left and mirrored right share their mean
                 mean = 0.5 * (mean + means[other] * MIRROR)
             prev = np.array(offsets.get(k, (0.0, 0.0, 0.0)))
             offsets[k] = tuple(float(x) for x in prev + mean)  # type: ignore[assignment]
+    assert shrink is not None
+    # the learned offsets (those that remove each joint's mean over the tuning clips),
+    # shrunk by how well they carry from clip to clip; joints shrunk to nothing left out
+    offsets = {
+        k: tuple(float(x) * shrink[k] for x in v)  # type: ignore[misc]
+        for k, v in offsets.items()
+        if shrink[k] > 0.0
+    }
     for k, v in sorted(offsets.items()):
         print(f"  {k:16} " + " ".join(f"{x:7.1f}" for x in v))
     if args.dry_run:
@@ -158,9 +159,9 @@ def main() -> int:
     OUT.write_text(
         '"""Shipped detector offsets of the multi-view fit (generated; do not edit).\n\n'
         "Written by ``tools/multiview_detector_offsets.py``\n"
-        f"(``--rigs {args.rigs} --rounds {args.rounds} --min-gain-mm {args.min_gain_mm:g}``):\n"
-        "mm, in the frame of the segment ending at each joint (`offset_points`), from the\n"
-        "fits of the tuning clips' renders\n"
+        f"(``--rigs {args.rigs} --rounds {args.rounds}``): mm, each shrunk by its\n"
+        "held-out factor (`held_out_shrinkage`), in the frame of the segment ending at\n"
+        "each joint (`offset_points`), from the fits of the tuning clips' renders\n"
         f"({clips})\nwith the backend's keypoints against the truth.\n"
         '"""\n\n'
         "OFFSETS_MM: dict[str, dict[str, tuple[float, float, float]]] = {\n"
