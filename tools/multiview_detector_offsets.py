@@ -7,7 +7,10 @@ the session is fitted (`track_multiview_session`, shipped settings) and, for eve
 detected canonical joint, the fitted joint minus the true joint is taken into the frame in
 which the fit places its offset (`offset_points`: the segment ending at the joint); the
 offset is the mean over all frames and clips, the left and the mirrored right side's
-averaged. The fit is run again with the offsets so far and the remaining mean added
+averaged. Each joint's offset is then shrunk towards zero by how well it carries from
+clip to clip (`held_out_shrinkage`: leaving each clip out in turn, the factor on the
+other clips' mean that best predicts that clip's own, from the fits without offsets).
+The fit is run again with the offsets so far and the remaining mean added
 (``--rounds``), since offsets move the fit (and the segment lengths, `offset_segments`),
 which moves the frames they are measured in.
 
@@ -74,6 +77,28 @@ def clip_offsets(
     return out, float(np.mean(errs))
 
 
+def held_out_shrinkage(per_clip: list[dict[str, np.ndarray]]) -> dict[str, float]:
+    """Per joint, the factor ``s`` in [0, 1] on the mean offset of the other clips that
+    best predicts each clip's own mean offset, left out in turn (least squares over the
+    clips: ``sum(b . m) / sum(m . m)``, ``b`` the clip's offset, ``m`` the others' mean;
+    left and mirrored right pooled): 1 for an offset every clip shares, 0 for one that
+    changes from clip to clip as much as it is large."""
+
+    def side_mean(means: dict[str, np.ndarray], k: str) -> np.ndarray:
+        other = mirror_name(k)
+        return 0.5 * (means[k] + means[other] * MIRROR) if other in means else means[k]
+
+    out = {}
+    for k in per_clip[0]:
+        num = den = 0.0
+        for i, own in enumerate(per_clip):
+            rest = np.mean([side_mean(m, k) for j, m in enumerate(per_clip) if j != i], axis=0)
+            num += float(side_mean(own, k) @ rest)
+            den += float(rest @ rest)
+        out[k] = float(np.clip(num / den, 0.0, 1.0)) if den > 0 else 0.0
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--work", default="/tmp/mvbench")
@@ -89,17 +114,24 @@ def main() -> int:
         if (Path(args.work) / rig / clip / "mp" / "keypoints").is_dir()
     ]
     offsets: dict[str, tuple[float, float, float]] = {}
+    shrink: dict[str, float] | None = None
     for r in range(args.rounds + 1):
         pooled: dict[str, list[np.ndarray]] = {}
+        per_clip: list[dict[str, np.ndarray]] = []
         line = []
         for s in sessions:
             per, mpjpe = clip_offsets(s, offsets)
             line.append(f"{s.parent.parent.name}/{s.parent.name} {mpjpe:.1f}")
+            per_clip.append({k: np.concatenate(v).mean(axis=0) for k, v in per.items()})
             for k, v in per.items():
                 pooled.setdefault(k, []).extend(v)
         print(f"round {r}: " + ", ".join(line), flush=True)
         if r == args.rounds:
             break
+        if shrink is None:
+            shrink = held_out_shrinkage(per_clip)
+            for k, f in sorted(shrink.items()):
+                print(f"  {k:16} held-out shrinkage {f:4.2f}")
         means = {k: np.concatenate(v).mean(axis=0) for k, v in pooled.items()}
         for k in pooled:
             mean = means[k]
@@ -108,6 +140,14 @@ def main() -> int:
                 mean = 0.5 * (mean + means[other] * MIRROR)
             prev = np.array(offsets.get(k, (0.0, 0.0, 0.0)))
             offsets[k] = tuple(float(x) for x in prev + mean)  # type: ignore[assignment]
+    assert shrink is not None
+    # the learned offsets (those that remove each joint's mean over the tuning clips),
+    # shrunk by how well they carry from clip to clip; joints shrunk to nothing left out
+    offsets = {
+        k: tuple(float(x) * shrink[k] for x in v)  # type: ignore[misc]
+        for k, v in offsets.items()
+        if shrink[k] > 0.0
+    }
     for k, v in sorted(offsets.items()):
         print(f"  {k:16} " + " ".join(f"{x:7.1f}" for x in v))
     if args.dry_run:
@@ -119,8 +159,9 @@ def main() -> int:
     OUT.write_text(
         '"""Shipped detector offsets of the multi-view fit (generated; do not edit).\n\n'
         "Written by ``tools/multiview_detector_offsets.py``\n"
-        f"(``--rigs {args.rigs} --rounds {args.rounds}``): mm, in the frame of the segment\n"
-        "ending at each joint (`offset_points`), from the fits of the tuning clips' renders\n"
+        f"(``--rigs {args.rigs} --rounds {args.rounds}``): mm, each shrunk by its\n"
+        "held-out factor (`held_out_shrinkage`), in the frame of the segment ending at\n"
+        "each joint (`offset_points`), from the fits of the tuning clips' renders\n"
         f"({clips})\nwith the backend's keypoints against the truth.\n"
         '"""\n\n'
         "OFFSETS_MM: dict[str, dict[str, tuple[float, float, float]]] = {\n"

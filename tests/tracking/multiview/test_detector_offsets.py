@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import pytest
 
 from mocapkit.skeleton.kinematics import canonical_positions, forward_kinematics, points_on_joints
 from mocapkit.skeleton.model import CANONICAL_JOINTS, CANONICAL_SEGMENTS
@@ -26,6 +27,24 @@ LIMB_JOINTS = [n for n in NAMES if n.startswith(("left_", "right_"))]
 class Sample:
     time_s: float
     keypoints_px: dict[str, Any]
+
+
+#: Offsets of MediaPipe's size (mm; its full means on the tuning renders, unshrunk).
+DETECTOR_LIKE: dict[str, tuple[float, float, float]] = {
+    "head": (0.0, -0.1, -2.9),
+    "left_wrist": (-0.4, 5.8, 0.0),
+    "right_wrist": (0.4, 5.8, 0.0),
+    "left_ankle": (11.7, 8.0, 61.8),
+    "left_elbow": (3.1, 17.9, 31.5),
+    "left_hip": (-15.7, 2.3, 24.1),
+    "left_knee": (8.5, -3.1, 15.7),
+    "left_shoulder": (-6.2, 12.7, 3.4),
+    "right_ankle": (-11.7, 8.0, 61.8),
+    "right_elbow": (-3.1, 17.9, 31.5),
+    "right_hip": (15.7, 2.3, 24.1),
+    "right_knee": (-8.5, -3.1, 15.7),
+    "right_shoulder": (6.2, 12.7, 3.4),
+}
 
 
 def _offsets(rng: np.random.Generator) -> dict[str, tuple[float, float, float]]:
@@ -65,8 +84,39 @@ def test_a_backend_without_a_table_has_no_offsets() -> None:
     assert detector_offsets(None) == {}
     assert detector_offsets("rtmpose") == {}
     table = detector_offsets("mediapipe")
-    assert set(table) >= set(LIMB_JOINTS)
+    assert {"left_ankle", "right_ankle"} <= set(table) <= {*LIMB_JOINTS, "head"}
     assert all(np.all(np.isfinite(v)) for v in table.values())
+
+
+def _tool() -> Any:
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[3] / "tools" / "multiview_detector_offsets.py"
+    spec = importlib.util.spec_from_file_location("multiview_detector_offsets", path)
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_held_out_shrinkage_keeps_offsets_that_carry_from_clip_to_clip() -> None:
+    tool = _tool()
+    same = np.array([3.0, 4.0, 0.0])  # every clip: the same offset
+    flip = [np.array([0.0, 0.0, s * 10.0]) for s in (1, -1, 1, -1)]
+    spread = [np.array([0.0, 0.0, z]) for z in (10.0, 20.0, 30.0, 40.0)]
+    clips = [
+        {"left_ankle": same, "right_ankle": same * tool.MIRROR, "head": f, "neck": g}
+        for f, g in zip(flip, spread, strict=True)
+    ]
+    shrink = tool.held_out_shrinkage(clips)
+    # the rest's mean predicts a consistent offset whole, for both sides
+    assert shrink["left_ankle"] == pytest.approx(1.0)
+    assert shrink["right_ankle"] == pytest.approx(1.0)
+    # an offset whose sign changes between clips: the rest's mean points the wrong way
+    assert shrink["head"] == 0.0
+    # 10..40 mm: the others' means are 30, 26.7, 23.3, 20 mm; sum(b m) / sum(m m)
+    assert shrink["neck"] == pytest.approx(2333.333 / 2555.556, rel=1e-5)
 
 
 def test_segments_lose_the_offsets_at_rest(rng: np.random.Generator) -> None:
@@ -111,7 +161,7 @@ def test_segments_lose_the_offsets_at_rest(rng: np.random.Generator) -> None:
 def test_fit_to_offset_detections_finds_the_joints(rng: np.random.Generator) -> None:
     sk = multiview_skeleton()
     cams = make_rig("ring", [0.0, 0.0, 0.0], [0.0, 1.0, 0.0], 1300.0)
-    off = detector_offsets("mediapipe")  # detections where this detector would put them
+    off = DETECTOR_LIKE  # detections where a detector with these offsets would put them
     tj, tp = offset_points(sk, NAMES, off)
     q0 = _pose(sk, rng)
     qs = [q0 + 0.02 * k * (sk.dof_kind == 0) for k in range(6)]
