@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -12,6 +14,7 @@ from mocapkit.skeleton import center_of_mass, load_preset
 from mocapkit.tracking.hybrid.balance import (
     AT_GOAL_MM,
     BalanceConfig,
+    _lean_range,
     _monotone_bisection,
     apply_lean,
     balance_pose,
@@ -328,3 +331,82 @@ def test_restore_ik_config_stops_restores_on_their_best_iterate():
     assert cfg.max_iterations == 30 and cfg.term_clamp_scale == 3.0
     with pytest.raises(ConfigError, match="restore_stall_iterations: expected >= 0"):
         BalanceConfig(restore_stall_iterations=-1)
+
+
+#: Frames the stepped search (`BalanceConfig.restores_per_frame`) is given on a held pose.
+HELD_FRAMES = 4
+
+
+def test_stepped_search_reaches_the_full_searchs_lean_on_a_held_pose(setup):
+    """Two restores a frame, carried over frames: on each held squat pose the lean is
+    within one bisection cell of the full search's after `HELD_FRAMES` frames, as close
+    to the goal (up to the restores' spread), never more than two restores a frame, and
+    head and hands on their markers. Where the markers-first rule halved the full
+    search's lean, the stepped one keeps a lean at least as close to the goal."""
+    sk, _solver, _model = setup
+    solver = _Counting(sk)
+    q0 = solver.secondary.omega
+    support = support_points(sk, q0)
+    full = BalanceConfig(
+        mode="solve", bisection_steps=6, restore_without_lean=False, guided_bisection=True
+    )
+    stepped = replace(full, restores_per_frame=2)
+    compared, halved = 0, 0
+    for q, t in squat(solver, np.linspace(-100.0, -300.0, 5)):
+        cog, back, front = cog_offset_mm(sk, q, support)
+        assert cog > front  # a bow is needed
+        goal = front - full.margin_fraction * (front - back)
+        a = balance_pose(solver, q, t, q0[2], support, None, full)
+        lean, slope = None, None
+        for _ in range(HELD_FRAMES):
+            _Counting.solves = 0
+            b = balance_pose(
+                solver, q, t, q0[2], support, None, stepped, slope_mm_per_rad=slope, lean_rad=lean
+            )
+            assert _Counting.solves <= stepped.restores_per_frame
+            lean, slope = b.next_lean_rad, b.slope_mm_per_rad
+            assert np.nanmax(b.residual_mm) <= 2.0 * solver.config.tol_mm
+        assert lean == pytest.approx(np.sum(b.taus))
+        off_a = abs(cog_offset_mm(sk, a.q, support)[0] - goal)
+        off_b = abs(cog_offset_mm(sk, b.q, support)[0] - goal)
+        if off_a < 5.0:  # the full search reached its goal
+            _split, lo, hi = _lean_range(sk, q)
+            assert abs(np.sum(b.taus) - np.sum(a.taus)) <= (hi - lo) / 2**full.bisection_steps
+            assert off_b <= off_a + RESTORE_NOISE_MM
+            compared += 1
+        else:  # markers first: the full search halved its lean
+            assert off_b <= off_a
+            halved += 1
+    assert compared >= 3 and halved >= 1
+
+
+def test_stepped_search_follows_a_squat_with_two_restores_a_frame(setup):
+    """A squat going down over 30 frames: the stepped search restores at most twice a
+    frame, keeps head and hands on their markers, and keeps the restored CoG nearer the
+    goal than without a lean on every frame."""
+    sk, _solver, _model = setup
+    solver = _Counting(sk)
+    q0 = solver.secondary.omega
+    support = support_points(sk, q0)
+    cfg = BalanceConfig(mode="solve", bisection_steps=6, restores_per_frame=2)
+    lean, slope, leant = None, None, 0
+    for q, t in squat(solver, np.linspace(-100.0, -250.0, 30)):
+        cog, back, front = cog_offset_mm(sk, q, support)
+        goal = front - cfg.margin_fraction * (front - back)
+        _Counting.solves = 0
+        b = balance_pose(
+            solver, q, t, q0[2], support, None, cfg, slope_mm_per_rad=slope, lean_rad=lean
+        )
+        assert _Counting.solves <= 2
+        lean, slope = b.next_lean_rad, b.slope_mm_per_rad
+        assert np.nanmax(b.residual_mm) <= 2.0 * solver.config.tol_mm
+        assert abs(cog_offset_mm(sk, b.q, support)[0] - goal) < abs(cog - goal)
+        leant += bool(np.any(b.taus))
+    assert leant == 30
+
+
+def test_stepped_search_needs_two_restores_a_frame():
+    with pytest.raises(ConfigError, match="restores_per_frame: expected 0 .* or >= 2"):
+        BalanceConfig(mode="solve", restores_per_frame=1)
+    with pytest.raises(ConfigError, match="restores_per_frame: expected 0"):
+        BalanceConfig(mode="solve", restores_per_frame=-1)

@@ -98,6 +98,13 @@ class BalanceConfig:
         summed error (`restore_ik_config`, `mocapkit.ik.config.IKConfig.stall_keep_best`);
         0: they run as the solver is configured. With noisy member markers no restore
         reaches the IK tolerance: it settles in 5-10 iterations, then chatters.
+    restores_per_frame : int
+        ``"solve"`` mode: 0 searches the lean in full on each frame (the bisection);
+        n >= 2 carries the search over frames (`_stepped_lean`): each frame restores at
+        most n leans, the first the previous frame's (``lean_rad`` of `balance_pose`),
+        each next one a secant step towards the goal (or half way back where head and
+        hands cannot be restored under it), so a frame costs at most n restore solves
+        and a lean held still is reached over a few frames.
     """
 
     mode: str = "proportional"
@@ -107,6 +114,7 @@ class BalanceConfig:
     restore_above_mm: float = 20.0
     guided_bisection: bool = False
     restore_stall_iterations: int = 0
+    restores_per_frame: int = 0
 
     def __post_init__(self) -> None:
         if self.mode not in _BALANCE_MODES:
@@ -120,6 +128,12 @@ class BalanceConfig:
         if self.bisection_steps < 1:
             raise ConfigError(
                 f"BalanceConfig.bisection_steps: expected >= 1, found {self.bisection_steps}"
+            )
+        if self.restores_per_frame < 0 or self.restores_per_frame == 1:
+            raise ConfigError(
+                "BalanceConfig.restores_per_frame: expected 0 (the full search each frame) "
+                "or >= 2 (the previous frame's lean, then steps towards the goal), found "
+                f"{self.restores_per_frame}"
             )
         if self.restore_stall_iterations < 0:
             raise ConfigError(
@@ -595,12 +609,102 @@ def calibrate_balance(
 class BalanceResult:
     """Outcome of the balance step: pose, spine increments and restore residuals, and
     the restored CoG's slope per radian of lean found by the search, a hint for the next
-    frame's (None where not known)."""
+    frame's (None where not known); with `BalanceConfig.restores_per_frame`, the total
+    lean (rad) the next frame restores first (None: none carried over)."""
 
     q: FloatArray
     taus: FloatArray
     residual_mm: FloatArray
     slope_mm_per_rad: float | None = None
+    next_lean_rad: float | None = None
+
+
+@dataclass
+class _Steps:
+    """What `_stepped_lean` found: the restored lean nearest the goal with head and
+    hands on their markers (lean, pose, residuals; None where none), the restore at zero
+    lean (where one was made), the next frame's first lean (the one found, else zero)
+    and the slope to step with."""
+
+    best: tuple[float, FloatArray, FloatArray] | None
+    zero: tuple[FloatArray, FloatArray] | None
+    next_lean_rad: float
+    slope_mm_per_rad: float | None
+
+
+def _stepped_lean(
+    solver: SDLSSolver,
+    q: FloatArray,
+    targets: FloatArray,
+    active: NDArray[np.bool_] | None,
+    goal_mm: float,
+    support: FloatArray,
+    budget: int,
+    steps: int,
+    start_rad: float | None,
+    slope_mm_per_rad: float | None,
+) -> _Steps:
+    """The lean search carried over frames: at most ``budget`` restores from ``start_rad``.
+
+    The first restore is at ``start_rad`` (the previous frame's lean; zero lean where
+    None), clipped to the spine's range. Each restore whose head and hands stay within
+    twice the IK tolerance of their markers is a candidate, and the next lean a secant
+    step from it towards ``goal_mm`` (the slope of this frame's last two candidates
+    where they differ by more than the restores' own spread, `AT_GOAL_MM` twice, and it
+    is negative; else ``slope_mm_per_rad``; else the analytic `restored_lean_slope`).
+    A restore that leaves the markers (markers first, Z12) steps half way back to the
+    nearest candidate (zero lean where there is none) and halves the steps that follow
+    (the slope doubled), and one at zero lean ends the search with no lean, as the full
+    search does; a candidate within `AT_GOAL_MM` of the goal ends it too. The candidate
+    nearest the goal is taken, and the next frame restores it first (so ``budget`` >=
+    2 to step at all): a lean held still is reached within a few frames, one that moves
+    is followed a step behind. No step is shorter than a cell of the full search's
+    bisection (``steps`` halvings of the spine's range), its resolution.
+    """
+    sk = solver.skeleton
+    split, lo, hi = _lean_range(sk, q)
+    limit = 2.0 * solver.config.tol_mm
+    slope = slope_mm_per_rad if slope_mm_per_rad is not None and slope_mm_per_rad < 0 else None
+    x = float(np.clip(0.0 if start_rad is None else start_rad, lo, hi))
+    cell = (hi - lo) / 2**steps  # the full search's resolution: the shortest step
+    found: list[tuple[float, float, FloatArray, FloatArray]] = []  # lean, f, q, residuals
+    zero: tuple[FloatArray, FloatArray] | None = None
+    for _ in range(budget):
+        qx, resid = apply_lean(solver, q, x * split, targets, active)
+        if x == 0.0:
+            zero = (qx, resid)
+        if np.nanmax(resid, initial=0.0) > limit:
+            # head and hands cannot be restored under this lean (markers first): back
+            # half way to the nearest lean they could be restored under (zero lean where
+            # none was); without a lean, no lean is tried, as in the full search
+            if x == 0.0:
+                break
+            if found and slope is not None:
+                slope *= 2.0  # the step was too long: the next ones half as long
+            x = 0.5 * (x + min((c[0] for c in found), key=lambda c: abs(c - x), default=0.0))
+            continue
+        fx = cog_offset_mm(sk, qx, support)[0] - goal_mm
+        found.append((x, fx, qx, resid))
+        if abs(fx) < AT_GOAL_MM:
+            break
+        if len(found) >= 2:
+            (x0, f0), (x1, f1) = found[-2][:2], found[-1][:2]
+            if abs(f1 - f0) > 2.0 * AT_GOAL_MM and (f1 - f0) / (x1 - x0) < 0:
+                slope = (f1 - f0) / (x1 - x0)
+        if slope is None:
+            s = restored_lean_slope(solver, qx, targets, active)
+            slope = s if s < 0 else None
+        if slope is None:  # the restored CoG does not move back with the lean here
+            break
+        dx = -fx / slope
+        step = float(np.clip(x + np.sign(dx) * max(abs(dx), cell), lo, hi))
+        if step == x:  # the end of the spine's range: the goal is beyond it
+            break
+        x = step
+    if not found:
+        return _Steps(None, zero, 0.0, slope)
+    lean, _f, qb, rb = min(found, key=lambda c: abs(c[1]))
+    return _Steps((lean, qb, rb), zero, lean, slope)
 
 
 def balance_pose(
@@ -613,6 +717,7 @@ def balance_pose(
     config: BalanceConfig | None = None,
     active: ArrayLike | None = None,
     slope_mm_per_rad: float | None = None,
+    lean_rad: float | None = None,
 ) -> BalanceResult:
     """Apply the balance heuristic to an IK pose and restore head and hands (Z12).
 
@@ -634,6 +739,9 @@ def balance_pose(
         The guided bisection's first slope (the previous frame's
         ``BalanceResult.slope_mm_per_rad``); the analytic one (`restored_lean_slope`)
         when None.
+    lean_rad : float, optional
+        With `BalanceConfig.restores_per_frame`: the first total lean to restore (the
+        previous frame's ``BalanceResult.next_lean_rad``); zero lean when None.
     """
     cfg = config or BalanceConfig()
     sk = solver.skeleton
@@ -667,7 +775,7 @@ def balance_pose(
                 resid = _residuals(solver, qa, t, act)
                 if not np.nanmax(resid, initial=0.0) > cfg.restore_above_mm:
                     # balanced: no lean, and no restore asked for
-                    return BalanceResult(qa.copy(), taus, resid, slope)
+                    return BalanceResult(qa.copy(), taus, resid, slope, 0.0)
         else:
             goal = lo if cog < lo else hi
             split = _spine_split(sk, spine)
@@ -677,7 +785,35 @@ def balance_pose(
                 worst = float(np.nanmax(resid0, initial=0.0))
                 if limit < worst <= cfg.restore_above_mm:
                     # off the markers: no lean (markers first), and no restore
-                    return BalanceResult(qa.copy(), np.zeros(len(spine)), resid0, slope)
+                    return BalanceResult(qa.copy(), np.zeros(len(spine)), resid0, slope, lean_rad)
+            if cfg.restores_per_frame:
+                step = _stepped_lean(
+                    solver,
+                    qa,
+                    t,
+                    act,
+                    goal,
+                    support,
+                    cfg.restores_per_frame,
+                    cfg.bisection_steps,
+                    lean_rad,
+                    slope,
+                )
+                if step.best is not None:
+                    lean, qn, resid = step.best
+                    return BalanceResult(
+                        qn, lean * split, resid, step.slope_mm_per_rad, step.next_lean_rad
+                    )
+                # no lean restored with head and hands on their markers: no lean
+                none = np.zeros(len(spine))
+                if step.zero is not None:
+                    qn, resid = step.zero
+                elif cfg.restore_without_lean or worst > cfg.restore_above_mm:
+                    res = solver.solve(qa, t, active=act, frozen=_spine_mask(sk, spine))
+                    qn, resid = res.q, res.residual_mm
+                else:
+                    qn, resid = qa.copy(), resid0
+                return BalanceResult(qn, none, resid, step.slope_mm_per_rad, step.next_lean_rad)
             zero = apply_lean(solver, qa, np.zeros(len(spine)), t, act)
             if np.nanmax(zero[1], initial=0.0) > limit:
                 # head and hands are off their markers even without a lean: no lean

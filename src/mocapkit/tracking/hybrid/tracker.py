@@ -607,8 +607,10 @@ class HybridTracker:
         #: (the lab floor), so a subject who starts on a box may later step down from it.
         self._floor_z_mm = 0.0
         self._balance_model: BalanceModel | None = None
-        #: The balance search's last slope of the CoG per radian of lean (its next start).
+        #: The balance search's last slope of the CoG per radian of lean (its next start),
+        #: and the lean it restores first on the next frame.
         self._balance_slope: float | None = None
+        self._balance_lean: float | None = None
         self._tracks = {n: _Track() for n in self.marker_sets}
         self._filter: OneEuroFilter | None = None
         #: Log of events: (time_s, marker set or "feet",
@@ -945,6 +947,7 @@ class HybridTracker:
         self._feet = None
         self._filter = None
         self._balance_slope = None
+        self._balance_lean = None
         self._tracks = {n: _Track() for n in self.marker_sets}
         self.events = []
 
@@ -1060,9 +1063,11 @@ class HybridTracker:
                 self._balance_model,
                 self._balance_config,
                 slope_mm_per_rad=self._balance_slope,
+                lean_rad=self._balance_lean,
             )
         if bal.slope_mm_per_rad is not None:
             self._balance_slope = bal.slope_mm_per_rad
+        self._balance_lean = bal.next_lean_rad
         q = bal.q
         if self.config.smoothing:
             with timer.stage("smoothing"):
