@@ -455,6 +455,37 @@ def test_the_feet_on_the_floor_place_the_neck_by_default(tmp_path: Path) -> None
     assert track_mono(session, None).summary()["on_floor_share"] == 0.0  # no ankles
 
 
+def test_the_ankle_points_of_a_named_detector_are_lifted_by_its_offsets(tmp_path: Path) -> None:
+    """The backend that wrote the keypoints is read from the detection's detect.json (the
+    session's own keypoints, or a CSV or OpenPose folder in the detection's layout; none
+    elsewhere), and the floor cuts its ankle points' rays at its known ankle offset."""
+    import json
+
+    from mocapkit.io.session import load_session
+    from mocapkit.pipelines.mono import keypoints_backend, online_mono_stream
+    from mocapkit.tracking.mono.placement import ankle_lift_mm
+    from mocapkit.tracking.multiview.detector_offsets import detector_offsets
+
+    session = load_session(_session(tmp_path / "s", lengths=True))
+    det = tmp_path / "det"
+    (det / "keypoints" / "openpose" / "mono").mkdir(parents=True)
+    (det / "keypoints" / "mono.csv").write_text("")
+    assert keypoints_backend(session, "mono") is None  # no detect.json: unknown origin
+    (det / "keypoints" / "detect.json").write_text(json.dumps({"mono": {"backend": "mediapipe"}}))
+    assert (
+        keypoints_backend(session, "mono", det / "keypoints" / "openpose" / "mono") == "mediapipe"
+    )
+    assert keypoints_backend(session, "mono", det / "keypoints" / "mono.csv") == "mediapipe"
+    assert keypoints_backend(session, "mono", tmp_path / "elsewhere" / "mono") is None
+    cfg = MonoConfig(lag=5)
+    lift = ankle_lift_mm(detector_offsets("mediapipe"))
+    assert lift > 0.0
+    stream = online_mono_stream(session, "mono", cfg, 1.0 / FPS, ankles=True, backend="mediapipe")
+    assert stream.floor is not None and stream.floor.ankle_lift_mm == lift
+    plain = online_mono_stream(session, "mono", cfg, 1.0 / FPS, ankles=True)
+    assert plain.floor is not None and plain.floor.ankle_lift_mm == 0.0
+
+
 def test_detector_3d_on_canonical_joints_is_measured_like_the_tracker(tmp_path: Path) -> None:
     """A detector's 3-D that is the truth turned, scaled and moved scores 0 mm after the
     per-frame alignment; the neck and pelvis follow the girdle rule in 3-D."""
