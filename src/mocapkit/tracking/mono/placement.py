@@ -68,7 +68,7 @@ class FloorConfig:
 
     on_floor: bool = True
     half_window: int = 15
-    percentile: float = 10.0
+    percentile: float = 25.0
     gap_mm: float = 200.0
 
 
