@@ -429,6 +429,27 @@ def test_truth_in_camera_is_the_stick_joints_seen_from_the_camera(tmp_path: Path
         truth_in_camera(load_session(folder), cam.name, model)
 
 
+def test_depth_error_splits_the_placement_from_the_world_error(tmp_path: Path) -> None:
+    """An answer that is the truth scaled about the camera by 1.1 (same image) is placed
+    0.1 x the neck's depth too far and has no error left at the true depth; an unposed
+    frame is left out."""
+    from dataclasses import replace
+
+    from mocapkit.io.session import load_session
+    from mocapkit.pipelines.mono_accuracy import depth_error, truth_in_camera
+    from mocapkit.pipelines.mono_frames import MonoFrames
+
+    folder = _session(tmp_path / "s")
+    run = track_mono(folder, None)
+    true_cam = truth_in_camera(load_session(folder), camera().name, run.model)
+    far = [replace(f, joints_in_camera=1.1 * true_cam[i]) for i, f in enumerate(run.frames)]
+    far[0] = replace(far[0], joints_in_camera=np.full_like(true_cam[0], np.nan))
+    dz, at_depth = depth_error(replace(run, frames=MonoFrames(far)), true_cam, UPPER_BODY_JOINTS)
+    neck = run.model.joint_names.index("neck")
+    assert dz == pytest.approx(0.1 * np.median(true_cam[1:, neck, 2]))
+    assert at_depth == pytest.approx(0.0, abs=1e-9)
+
+
 def test_the_feet_on_the_floor_place_the_neck_by_default(tmp_path: Path) -> None:
     """With an ankle seen standing below the neck, the neck lands where the truth has it
     (its depth from the floor, its image from the tracker); with ``on_floor`` False, or
