@@ -484,7 +484,7 @@ def test_the_ankle_points_of_a_named_detector_are_lifted_by_its_offsets(tmp_path
 
     from mocapkit.io.session import load_session
     from mocapkit.pipelines.mono import keypoints_backend, online_mono_stream
-    from mocapkit.tracking.mono.placement import ankle_lift_mm
+    from mocapkit.tracking.mono.placement import detector_ankle_lift_mm
     from mocapkit.tracking.multiview.detector_offsets import detector_offsets
 
     session = load_session(_session(tmp_path / "s", lengths=True))
@@ -499,7 +499,7 @@ def test_the_ankle_points_of_a_named_detector_are_lifted_by_its_offsets(tmp_path
     assert keypoints_backend(session, "mono", det / "keypoints" / "mono.csv") == "mediapipe"
     assert keypoints_backend(session, "mono", tmp_path / "elsewhere" / "mono") is None
     cfg = MonoConfig(lag=5)
-    lift = ankle_lift_mm(detector_offsets("mediapipe"))
+    lift = detector_ankle_lift_mm(detector_offsets("mediapipe"))
     assert lift > 0.0
     stream = online_mono_stream(session, "mono", cfg, 1.0 / FPS, ankles=True, backend="mediapipe")
     assert stream.floor is not None and stream.floor.ankle_lift_mm == lift

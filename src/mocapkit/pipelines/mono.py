@@ -46,7 +46,12 @@ from mocapkit.tracking.mono.lengths import (
     pixels_per_mm,
     raise_short_links,
 )
-from mocapkit.tracking.mono.placement import ANKLE_JOINTS, FloorConfig, FloorDepth, ankle_lift_mm
+from mocapkit.tracking.mono.placement import (
+    ANKLE_JOINTS,
+    FloorConfig,
+    FloorDepth,
+    detector_ankle_lift_mm,
+)
 from mocapkit.tracking.mono.smoother import smooth_keypoints
 from mocapkit.tracking.mono.stick import StickModel, stick_model
 from mocapkit.tracking.mono.stream import (
@@ -550,11 +555,11 @@ def _floor(
 ) -> FloorDepth | None:
     """The placement by the feet on the floor, where it applies: asked for (the default),
     the perspective model, the ankles seen; the session's stature, else the default; the
-    ankle points where ``backend``'s known offsets put them (`ankle_lift_mm`)."""
+    ankle points where ``backend``'s known offsets put them (`detector_ankle_lift_mm`)."""
     place = placement or FloorConfig()
     if not (place.on_floor and ankles and config.camera_model == "perspective"):
         return None
-    lift = ankle_lift_mm(detector_offsets(backend))
+    lift = detector_ankle_lift_mm(detector_offsets(backend))
     return FloorDepth(cam, session.height_mm or DEFAULT_HEIGHT_MM, place, lift)
 
 

@@ -10,7 +10,7 @@ from mocapkit.tracking.mono.placement import (
     ANKLE_SHARE,
     FloorConfig,
     FloorDepth,
-    ankle_lift_mm,
+    detector_ankle_lift_mm,
     floor_neck_depth,
 )
 
@@ -91,9 +91,9 @@ def test_a_detectors_raised_ankle_point_is_cut_with_a_raised_plane() -> None:
     offsets in the shank's frame (z up at rest), their mean."""
     offsets = {"left_ankle": (11.7, 8.0, 61.0), "right_ankle": (-11.7, 8.0, 63.0),
                "left_wrist": (0.0, 5.0, 40.0)}  # fmt: skip
-    lift = ankle_lift_mm(offsets)
+    lift = detector_ankle_lift_mm(offsets)
     assert lift == pytest.approx(62.0)
-    assert ankle_lift_mm({"left_wrist": (0.0, 5.0, 40.0)}) == 0.0
+    assert detector_ankle_lift_mm({"left_wrist": (0.0, 5.0, 40.0)}) == 0.0
     cam = _camera()
     foot = np.array([100.0, 400.0, ANKLE_SHARE * STATURE])
     neck = foot + np.array([0.0, 0.0, 0.78 * STATURE])

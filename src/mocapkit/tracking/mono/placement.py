@@ -21,11 +21,11 @@ where that exceeds `FloorConfig.gap_mm` the floor is not trusted and the tracker
 stays. One-sided: a floor depth nearer than the tracker's (the foot would be below the
 floor) is kept. Where no floor depth is found the tracker's depth stays too.
 
-A detector marks the ankle where its training labels put it, not at the joint: MediaPipe's
-sits some 60 mm above it. Where the keypoints name their detector, its known offset
-(`mocapkit.tracking.multiview.detector_offsets`, read by the pipeline) raises the plane
-the ankle's ray is cut with (``ankle_lift_mm``, `ankle_lift_mm`); without it MediaPipe's
-floor depths land 50-250 mm beyond the subject.
+A detector marks the ankle where its training labels put it, not at the joint:
+MediaPipe's sits some 60 mm above it. Where the keypoints name their detector, its known
+offset (`mocapkit.tracking.multiview.detector_offsets`, read by the pipeline) raises the
+plane the ankle's ray is cut with (``ankle_lift_mm``, `detector_ankle_lift_mm`); without
+it MediaPipe's floor depths land 50-250 mm beyond the subject.
 """
 
 from __future__ import annotations
@@ -76,7 +76,7 @@ class FloorConfig:
 ANKLE_JOINTS = ("left_ankle", "right_ankle")
 
 
-def ankle_lift_mm(offsets_mm: Mapping[str, Sequence[float]]) -> float:
+def detector_ankle_lift_mm(offsets_mm: Mapping[str, Sequence[float]]) -> float:
     """Height (mm) of a detector's ankle point above the ankle joint of a foot standing on
     the floor, from its per-joint offsets (`mocapkit.tracking.multiview.detector_offsets`:
     mm in the shank's frame, whose z is up at the rest pose, standing): the mean z of the
@@ -107,7 +107,7 @@ def floor_neck_depth(
         NaN where not seen.
     ankle_lift_mm : float
         Height of the ankle points above the ankle joint (a detector's offset,
-        `ankle_lift_mm`; 0: the joint itself).
+        `detector_ankle_lift_mm`; 0: the joint itself).
     """
     neck = np.asarray(neck_px, dtype=float).reshape(1, 2)
     ankles = np.asarray(ankles_px, dtype=float).reshape(-1, 2)
