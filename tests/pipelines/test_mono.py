@@ -429,6 +429,27 @@ def test_truth_in_camera_is_the_stick_joints_seen_from_the_camera(tmp_path: Path
         truth_in_camera(load_session(folder), cam.name, model)
 
 
+def test_depth_error_splits_the_placement_from_the_world_error(tmp_path: Path) -> None:
+    """An answer that is the truth scaled about the camera by 1.1 (same image) is placed
+    0.1 x the neck's depth too far and has no error left at the true depth; an unposed
+    frame is left out."""
+    from dataclasses import replace
+
+    from mocapkit.io.session import load_session
+    from mocapkit.pipelines.mono_accuracy import depth_error, truth_in_camera
+    from mocapkit.pipelines.mono_frames import MonoFrames
+
+    folder = _session(tmp_path / "s")
+    run = track_mono(folder, None)
+    true_cam = truth_in_camera(load_session(folder), camera().name, run.model)
+    far = [replace(f, joints_in_camera=1.1 * true_cam[i]) for i, f in enumerate(run.frames)]
+    far[0] = replace(far[0], joints_in_camera=np.full_like(true_cam[0], np.nan))
+    dz, at_depth = depth_error(replace(run, frames=MonoFrames(far)), true_cam, UPPER_BODY_JOINTS)
+    neck = run.model.joint_names.index("neck")
+    assert dz == pytest.approx(0.1 * np.median(true_cam[1:, neck, 2]))
+    assert at_depth == pytest.approx(0.0, abs=1e-9)
+
+
 def test_the_feet_on_the_floor_place_the_neck_by_default(tmp_path: Path) -> None:
     """With an ankle seen standing below the neck, the neck lands where the truth has it
     (its depth from the floor, its image from the tracker); with ``on_floor`` False, or
@@ -453,6 +474,37 @@ def test_the_feet_on_the_floor_place_the_neck_by_default(tmp_path: Path) -> None
     weak = track_mono(session, None, ankles_px=ankles, config=MonoConfig(camera_model="weak"))
     assert weak.summary()["on_floor_share"] == 0.0
     assert track_mono(session, None).summary()["on_floor_share"] == 0.0  # no ankles
+
+
+def test_the_ankle_points_of_a_named_detector_are_lifted_by_its_offsets(tmp_path: Path) -> None:
+    """The backend that wrote the keypoints is read from the detection's detect.json (the
+    session's own keypoints, or a CSV or OpenPose folder in the detection's layout; none
+    elsewhere), and the floor cuts its ankle points' rays at its known ankle offset."""
+    import json
+
+    from mocapkit.io.session import load_session
+    from mocapkit.pipelines.mono import keypoints_backend, online_mono_stream
+    from mocapkit.tracking.mono.placement import detector_ankle_lift_mm
+    from mocapkit.tracking.multiview.detector_offsets import detector_offsets
+
+    session = load_session(_session(tmp_path / "s", lengths=True))
+    det = tmp_path / "det"
+    (det / "keypoints" / "openpose" / "mono").mkdir(parents=True)
+    (det / "keypoints" / "mono.csv").write_text("")
+    assert keypoints_backend(session, "mono") is None  # no detect.json: unknown origin
+    (det / "keypoints" / "detect.json").write_text(json.dumps({"mono": {"backend": "mediapipe"}}))
+    assert (
+        keypoints_backend(session, "mono", det / "keypoints" / "openpose" / "mono") == "mediapipe"
+    )
+    assert keypoints_backend(session, "mono", det / "keypoints" / "mono.csv") == "mediapipe"
+    assert keypoints_backend(session, "mono", tmp_path / "elsewhere" / "mono") is None
+    cfg = MonoConfig(lag=5)
+    lift = detector_ankle_lift_mm(detector_offsets("mediapipe"))
+    assert lift > 0.0
+    stream = online_mono_stream(session, "mono", cfg, 1.0 / FPS, ankles=True, backend="mediapipe")
+    assert stream.floor is not None and stream.floor.ankle_lift_mm == lift
+    plain = online_mono_stream(session, "mono", cfg, 1.0 / FPS, ankles=True)
+    assert plain.floor is not None and plain.floor.ankle_lift_mm == 0.0
 
 
 def test_detector_3d_on_canonical_joints_is_measured_like_the_tracker(tmp_path: Path) -> None:

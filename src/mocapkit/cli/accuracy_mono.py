@@ -159,7 +159,9 @@ def _run(args: argparse.Namespace) -> int:
                 f"detector's own 3-D: {body} "
                 f"{np.mean([r.detector3d_pa_mpjpe_mm for r in rows]):.1f}, arm "
                 f"{np.mean([r.detector3d_arm_pa_mm for r in rows]):.1f} mm; world MPJPE "
-                f"{np.mean([r.mpjpe_mm for r in rows]):.1f} mm; arms swapped in the input on "
+                f"{np.mean([r.mpjpe_mm for r in rows]):.1f} mm "
+                f"({np.mean([r.mpjpe_at_true_depth_mm for r in rows]):.1f} at the true neck "
+                f"depth); arms swapped in the input on "
                 f"{sum(r.swapped_frames for r in rows)} frames, right in the answer on "
                 f"{sum(r.swaps_handled for r in rows)}"
             )

@@ -46,7 +46,12 @@ from mocapkit.tracking.mono.lengths import (
     pixels_per_mm,
     raise_short_links,
 )
-from mocapkit.tracking.mono.placement import FloorConfig, FloorDepth
+from mocapkit.tracking.mono.placement import (
+    ANKLE_JOINTS,
+    FloorConfig,
+    FloorDepth,
+    detector_ankle_lift_mm,
+)
 from mocapkit.tracking.mono.smoother import smooth_keypoints
 from mocapkit.tracking.mono.stick import StickModel, stick_model
 from mocapkit.tracking.mono.stream import (
@@ -56,6 +61,7 @@ from mocapkit.tracking.mono.stream import (
     output_skeleton,
 )
 from mocapkit.tracking.mono.tracker import MonoConfig, MonoFrame, MonoTracker
+from mocapkit.tracking.multiview.detector_offsets import detector_offsets
 
 FloatArray = NDArray[np.float64]
 
@@ -482,7 +488,27 @@ def _run(
 
 
 #: The joints whose image points place the subject by the feet on the floor (left, right).
-ANKLES = ("left_ankle", "right_ankle")
+ANKLES = ANKLE_JOINTS
+
+
+def keypoints_backend(
+    session: Session, camera: str, keypoints: str | os.PathLike[str] | None = None
+) -> str | None:
+    """The detector backend that wrote the keypoints tracked, as the detection's
+    ``keypoints/detect.json`` records it (`mocapkit.detect.run.detected_backend`): the
+    session's own keypoints of ``camera``, or a keypoints file or folder given in
+    `mocapkit.detect.run.detect_session`'s layout (``OUT/keypoints/<camera>.csv``,
+    ``OUT/keypoints/openpose/<camera>/``); None for keypoints of unknown origin."""
+    from mocapkit.detect.run import detected_backend
+
+    if keypoints is None:
+        return detected_backend(session.path, [camera])
+    p = Path(keypoints)
+    if p.parent.name == "keypoints" and p.suffix == ".csv":
+        return detected_backend(p.parent.parent, [p.stem])
+    if p.parent.name == "openpose" and p.parent.parent.name == "keypoints":
+        return detected_backend(p.parent.parent.parent, [p.name])
+    return None
 
 
 def online_mono_stream(
@@ -492,12 +518,14 @@ def online_mono_stream(
     dt_s: float,
     ankles: bool = False,
     placement: FloorConfig | None = None,
+    backend: str | None = None,
 ) -> MonoStream:
     """The online mono tracker on a session's camera with its measured link lengths
     (``session.json`` ``subject.bone_lengths_mm``): what ``track mono --session-lengths
     --lag L`` runs, for samples that come one at a time (`mocapkit.pipelines.live`).
     With ``ankles`` (the samples carry them) the subject is placed by the feet on the
-    floor as `track_mono` places it (``placement``, default `FloorConfig()`).
+    floor as `track_mono` places it (``placement``, default `FloorConfig()``; the ankle
+    points of the detector ``backend`` that gives them, None: unknown, at the joint).
 
     Raises
     ------
@@ -513,7 +541,7 @@ def online_mono_stream(
     lengths = session_lengths(session, model)
     cam = session.camera(camera)
     tracker = MonoTracker(lengths, cam, dt_s, config, model)
-    floor = _floor(session, cam, config, ankles, placement)
+    floor = _floor(session, cam, config, ankles, placement, backend)
     return MonoStream(tracker, output_skeleton(model, lengths), cam, float("nan"), floor=floor)
 
 
@@ -523,13 +551,16 @@ def _floor(
     config: MonoConfig,
     ankles: bool,
     placement: FloorConfig | None,
+    backend: str | None,
 ) -> FloorDepth | None:
     """The placement by the feet on the floor, where it applies: asked for (the default),
-    the perspective model, the ankles seen; the session's stature, else the default."""
+    the perspective model, the ankles seen; the session's stature, else the default; the
+    ankle points where ``backend``'s known offsets put them (`detector_ankle_lift_mm`)."""
     place = placement or FloorConfig()
     if not (place.on_floor and ankles and config.camera_model == "perspective"):
         return None
-    return FloorDepth(cam, session.height_mm or DEFAULT_HEIGHT_MM, place)
+    lift = detector_ankle_lift_mm(detector_offsets(backend))
+    return FloorDepth(cam, session.height_mm or DEFAULT_HEIGHT_MM, place, lift)
 
 
 def refined_lengths(
@@ -601,8 +632,9 @@ def track_mono(
         placed at the neck depth of the feet on the world's floor (z = 0, z up) where
         they are seen standing on it and that depth agrees with the tracker's
         (`MonoStream`'s ``floor``, `mocapkit.tracking.mono.placement`; the stature of
-        session.json, else `DEFAULT_HEIGHT_MM`); elsewhere, and with ``on_floor``
-        False, the tracker's depth from the link lengths.
+        session.json, else `DEFAULT_HEIGHT_MM`; the ankle points where the detector
+        that wrote the keypoints, `keypoints_backend`, is known to put them); elsewhere,
+        and with ``on_floor`` False, the tracker's depth from the link lengths.
     ankles_px : (T, 2, 2) float, optional
         The left and right ankles (px, NaN where unseen) for the placement; default:
         the keypoints' ankles where they have them.
@@ -718,7 +750,8 @@ def track_mono(
     feet = ankles_px
     if feet is None and set(ANKLES) <= set(kp.joint_names):
         feet = kp.pixels[:, [kp.joint_names.index(n) for n in ANKLES]]
-    floor = _floor(session, cam, cfg, feet is not None, placement)
+    backend = None if skin else keypoints_backend(session, cam_name, keypoints)
+    floor = _floor(session, cam, cfg, feet is not None, placement, backend)
     stream = MonoStream(tracker, skeleton, cam, scale, floor=floor)
     if feet is None:
         feet = np.full((t.shape[0], 2, 2), np.nan)

@@ -12,7 +12,8 @@ survivors and share pruned per frame, and the 2-D error of the tracker's input p
 against the true keypoints (``input_px_median``: median over the seen joint-frames,
 ``input_seen``: the share of joint-frames seen; per joint in ``input_px_by_joint``), and
 the frames whose input arms are swapped left for right (`arm_swaps`) with the share of
-them the tracker's answer has on the right sides.
+them the tracker's answer has on the right sides, and the placement's part of the world
+error (`depth_error`: the neck's depth error, the MPJPE at the true depth).
 
 A link-frame counts for the flip figure when the true link leaves the image plane by at
 least ``FLIP_MIN_SINE`` (0.2, about 12 deg): nearer the plane both flips give nearly the
@@ -100,6 +101,8 @@ class MonoClipAccuracy:
     detector3d_arm_pa_mm: float = float("nan")
     swapped_frames: int = 0
     swaps_handled: int = 0
+    neck_depth_error_mm: float = float("nan")
+    mpjpe_at_true_depth_mm: float = float("nan")
 
 
 #: The arm joints of the arm figures (PA-aligned on these six alone).
@@ -175,6 +178,42 @@ def flip_accuracy(run: MonoRun, truth_in_camera: FloatArray) -> tuple[float, Flo
     right = counted & (np.sign(dz_true) == np.sign(dz_est))
     per_link = right.sum(axis=0) / np.maximum(counted.sum(axis=0), 1)
     return float(right.sum() / max(int(counted.sum()), 1)), per_link
+
+
+def depth_error(
+    run: MonoRun, truth_in_camera: FloatArray, joints: Sequence[str]
+) -> tuple[float, float]:
+    """How much of the world error is the placement along the camera's rays.
+
+    Parameters
+    ----------
+    run : MonoRun
+    truth_in_camera : (T, K, 3) float
+        True stick joints in the camera frame, frames aligned with ``run.frames``.
+    joints : sequence of str
+        The joints measured (those of the stick among them).
+
+    Returns
+    -------
+    neck_depth_error_mm : float
+        Median over the posed frames of the answer's neck depth minus the truth's (mm;
+        positive: placed too far).
+    mpjpe_at_true_depth_mm : float
+        MPJPE over ``joints`` with each posed frame's answer scaled about the camera to
+        the truth's neck depth (its image unchanged): the world error no placement can
+        remove (NaN without a posed frame).
+    """
+    names = list(run.model.joint_names)
+    idx = [names.index(n) for n in joints if n in names]
+    neck = names.index("neck")
+    est = run.frames.joints_in_camera
+    posed = np.isfinite(est[:, idx]).all(axis=(1, 2)) & (est[:, neck, 2] > 0)
+    if not posed.any():
+        return float("nan"), float("nan")
+    e, t = est[posed], truth_in_camera[posed]
+    dz = float(np.median(e[:, neck, 2] - t[:, neck, 2]))
+    placed = e[:, idx] * (t[:, neck, 2] / e[:, neck, 2])[:, None, None]
+    return dz, float(np.linalg.norm(placed - t[:, idx], axis=-1).mean())
 
 
 def input_error(run: MonoRun, true_px: FloatArray) -> tuple[float, float, dict[str, float]]:
@@ -445,7 +484,13 @@ def mono_accuracy(
             if world_npz is not None
             else (np.nan, np.nan)
         )
-        flips, _ = flip_accuracy(run, truth_in_camera(s, cam, run.model))
+        true_cam = truth_in_camera(s, cam, run.model)
+        flips, _ = flip_accuracy(run, true_cam)
+        depth = (
+            depth_error(run, true_cam, measured)
+            if cfg.camera_model != "orthographic"  # the orthographic answer is not in mm
+            else (np.nan, np.nan)
+        )
         true_px = s.keypoints[cam].pixels[:, [names.index(n) for n in run.model.joint_names]]
         med, seen, by_joint = input_error(run, true_px)
         swaps = (0, 0)
@@ -475,6 +520,7 @@ def mono_accuracy(
             float(det3d[0]),
             float(det3d[1]),
             *swaps,
+            *depth,
         )
         say(format_rows([row]).splitlines()[-1])
         rows.append(row)
@@ -492,7 +538,7 @@ def format_rows(rows: Sequence[MonoClipAccuracy]) -> str:
     lines = [
         f"{'clip':<18}{'input':<15}{'PA mm':>8}{'MPJPE':>8}{'flips':>7}{'surv':>7}"
         f"{'cand':>7}{'pruned':>8}{'allpr':>6}{'res px':>8}{'cover':>7}{'in px':>7}{'seen':>7}"
-        f"{'arm PA':>8}{'det3D':>7}{'d3 arm':>8}{'swaps':>7}"
+        f"{'arm PA':>8}{'det3D':>7}{'d3 arm':>8}{'swaps':>7}{'dz mm':>7}{'@depth':>7}"
     ]
     for r in rows:
         what = f"{r.source} {r.costume}" if r.costume else r.source
@@ -503,6 +549,7 @@ def format_rows(rows: Sequence[MonoClipAccuracy]) -> str:
             f"{r.coverage:7.3f}{r.input_px_median:7.2f}{100 * r.input_seen:6.1f}%"
             f"{r.arm_pa_mpjpe_mm:8.1f}{r.detector3d_pa_mpjpe_mm:7.1f}{r.detector3d_arm_pa_mm:8.1f}"
             f"{f'{r.swaps_handled}/{r.swapped_frames}':>7}"
+            f"{r.neck_depth_error_mm:7.0f}{r.mpjpe_at_true_depth_mm:7.0f}"
         )
     return "\n".join(lines)
 

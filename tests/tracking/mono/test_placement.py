@@ -10,6 +10,7 @@ from mocapkit.tracking.mono.placement import (
     ANKLE_SHARE,
     FloorConfig,
     FloorDepth,
+    detector_ankle_lift_mm,
     floor_neck_depth,
 )
 
@@ -81,3 +82,25 @@ def test_the_floor_is_not_trusted_where_the_tracker_puts_the_foot_well_above_it(
         assert (got == pytest.approx(z_floor)) if trusted else np.isnan(got)
         assert floor.depth(0, z_floor + 1000.0) == pytest.approx(z_floor)
         assert np.isnan(floor.depth(1, true_z))  # no floor depth: the tracker's stays
+
+
+def test_a_detectors_raised_ankle_point_is_cut_with_a_raised_plane() -> None:
+    """The ankle point a detector marks ``lift`` above the joint: read at the joint's
+    height its ray meets the floor beyond the foot (the neck placed too far); with the
+    detector's lift, at the neck's depth again. The lift is the z of the ankles'
+    offsets in the shank's frame (z up at rest), their mean."""
+    offsets = {"left_ankle": (11.7, 8.0, 61.0), "right_ankle": (-11.7, 8.0, 63.0),
+               "left_wrist": (0.0, 5.0, 40.0)}  # fmt: skip
+    lift = detector_ankle_lift_mm(offsets)
+    assert lift == pytest.approx(62.0)
+    assert detector_ankle_lift_mm({"left_wrist": (0.0, 5.0, 40.0)}) == 0.0
+    cam = _camera()
+    foot = np.array([100.0, 400.0, ANKLE_SHARE * STATURE])
+    neck = foot + np.array([0.0, 0.0, 0.78 * STATURE])
+    px = cam.project(np.stack([neck, foot + np.array([0.0, 0.0, lift])]))
+    true_z = float(cam.to_camera(neck[None])[0, 2])
+    assert floor_neck_depth(cam, STATURE, px[0], px[1:]) > true_z + 100.0
+    assert floor_neck_depth(cam, STATURE, px[0], px[1:], lift) == pytest.approx(true_z)
+    floor = FloorDepth(cam, STATURE, FloorConfig(half_window=0), ankle_lift_mm=lift)
+    floor.push(px[0], px[1:])
+    assert floor.depth(0, true_z) == pytest.approx(true_z)

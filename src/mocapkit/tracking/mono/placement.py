@@ -20,10 +20,17 @@ depth of the same frame: at the tracker's depth the foot would stand
 where that exceeds `FloorConfig.gap_mm` the floor is not trusted and the tracker's depth
 stays. One-sided: a floor depth nearer than the tracker's (the foot would be below the
 floor) is kept. Where no floor depth is found the tracker's depth stays too.
+
+A detector marks the ankle where its training labels put it, not at the joint:
+MediaPipe's sits some 60 mm above it. Where the keypoints name their detector, its known
+offset (`mocapkit.tracking.multiview.detector_offsets`, read by the pipeline) raises the
+plane the ankle's ray is cut with (``ankle_lift_mm``, `detector_ankle_lift_mm`); without
+it MediaPipe's floor depths land 50-250 mm beyond the subject.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -61,12 +68,30 @@ class FloorConfig:
 
     on_floor: bool = True
     half_window: int = 15
-    percentile: float = 10.0
+    percentile: float = 25.0
     gap_mm: float = 200.0
 
 
+#: The joints whose image points stand on the floor.
+ANKLE_JOINTS = ("left_ankle", "right_ankle")
+
+
+def detector_ankle_lift_mm(offsets_mm: Mapping[str, Sequence[float]]) -> float:
+    """Height (mm) of a detector's ankle point above the ankle joint of a foot standing on
+    the floor, from its per-joint offsets (`mocapkit.tracking.multiview.detector_offsets`:
+    mm in the shank's frame, whose z is up at the rest pose, standing): the mean z of the
+    ankles' offsets; 0 where it has none. The offsets' small sideways and forward parts
+    are left out (the foot's point is only cut with a horizontal plane)."""
+    ups = [float(offsets_mm[n][2]) for n in ANKLE_JOINTS if n in offsets_mm]
+    return float(np.mean(ups)) if ups else 0.0
+
+
 def floor_neck_depth(
-    camera: Camera, stature_mm: float, neck_px: ArrayLike, ankles_px: ArrayLike
+    camera: Camera,
+    stature_mm: float,
+    neck_px: ArrayLike,
+    ankles_px: ArrayLike,
+    ankle_lift_mm: float = 0.0,
 ) -> float:
     """Depth (camera z, mm) of the neck above the foot standing on the floor; NaN where
     no ankle is seen, none meets the floor in front of the camera, or the neck so placed
@@ -80,6 +105,9 @@ def floor_neck_depth(
     neck_px : (2,) float
     ankles_px : (A, 2) float
         NaN where not seen.
+    ankle_lift_mm : float
+        Height of the ankle points above the ankle joint (a detector's offset,
+        `detector_ankle_lift_mm`; 0: the joint itself).
     """
     neck = np.asarray(neck_px, dtype=float).reshape(1, 2)
     ankles = np.asarray(ankles_px, dtype=float).reshape(-1, 2)
@@ -89,7 +117,7 @@ def floor_neck_depth(
     world_from_camera = np.linalg.inv(camera.camera_from_world)
     rot, centre = world_from_camera[:3, :3], world_from_camera[:3, 3]
     rays = np.c_[camera.undistort_pixels(ankles[seen]), np.ones(int(seen.sum()))] @ rot.T
-    height = ANKLE_SHARE * stature_mm
+    height = ANKLE_SHARE * stature_mm + ankle_lift_mm
     with np.errstate(divide="ignore", invalid="ignore"):
         t = (height - centre[2]) / rays[:, 2]
     t = np.where(np.isfinite(t) & (t > 0), t, np.inf)
@@ -118,16 +146,23 @@ class FloorDepth:
     camera : Camera
     stature_mm : float
     config : FloorConfig, optional
+    ankle_lift_mm : float
+        Height of the ankle points above the ankle joint (`floor_neck_depth`).
     """
 
     def __init__(
-        self, camera: Camera, stature_mm: float, config: FloorConfig | None = None
+        self,
+        camera: Camera,
+        stature_mm: float,
+        config: FloorConfig | None = None,
+        ankle_lift_mm: float = 0.0,
     ) -> None:
         self.camera = camera
         self.stature_mm = float(stature_mm)
         self.config = config or FloorConfig()
+        self.ankle_lift_mm = float(ankle_lift_mm)
         self._lift = float(np.linalg.inv(camera.camera_from_world)[2, 3]) - (
-            ANKLE_SHARE * self.stature_mm
+            ANKLE_SHARE * self.stature_mm + self.ankle_lift_mm
         )
         self._depth: dict[int, float] = {}
         self._n = 0
@@ -136,7 +171,9 @@ class FloorDepth:
 
     def push(self, neck_px: ArrayLike, ankles_px: ArrayLike) -> None:
         """The next frame's neck and ankles (px, NaN where unseen)."""
-        self._depth[self._n] = floor_neck_depth(self.camera, self.stature_mm, neck_px, ankles_px)
+        self._depth[self._n] = floor_neck_depth(
+            self.camera, self.stature_mm, neck_px, ankles_px, self.ankle_lift_mm
+        )
         self._n += 1
 
     def window_depth(self, frame: int) -> float:
