@@ -315,6 +315,14 @@ def detector_config(config: MonoConfig) -> MonoConfig:
     return replace(config, rebuilt_joints=REBUILT_JOINTS, girdle_cosine=GIRDLE_COSINE)
 
 
+def known_lengths_config(config: MonoConfig) -> MonoConfig:
+    """``config`` for link lengths that are known (the session's measured ones), not read
+    off the video: no trunk lean states (``trunk_lean_sines``), which stand for a trunk
+    longer than its video estimate; with its true length the search's own lean is right
+    (on the synthetic stick with exact lengths the lean states cost 8 -> 21 mm)."""
+    return replace(config, trunk_lean_sines=())
+
+
 def skin_keypoints(session: Session, camera: str, options: SkinOptions | None = None) -> Keypoints:
     """2-D joints of the stick from the camera's video by skin blobs (paper §3.3).
 
@@ -540,7 +548,7 @@ def online_mono_stream(
     model = stick_model(config.legs, config.limits)
     lengths = session_lengths(session, model)
     cam = session.camera(camera)
-    tracker = MonoTracker(lengths, cam, dt_s, config, model)
+    tracker = MonoTracker(lengths, cam, dt_s, known_lengths_config(config), model)
     floor = _floor(session, cam, config, ankles, placement, backend)
     return MonoStream(tracker, output_skeleton(model, lengths), cam, float("nan"), floor=floor)
 
@@ -695,6 +703,7 @@ def track_mono(
     dt = float(np.median(np.diff(t))) if t.shape[0] > 1 else 1.0 / 30.0
     ortho = cfg.camera_model == "orthographic"
     if use_session_lengths:
+        cfg = known_lengths_config(cfg)
         lengths = session_lengths(session, model)
         scale = float("nan")
         if ortho:
@@ -732,13 +741,15 @@ def track_mono(
     # reach tolerance too (in every pass it changed the refined lengths: 45.2 -> 46.4 mm), and
     # the clavicles' wider band for a rebuilt neck with it; the girdle cost of a rebuilt
     # neck stays (a rigid bone triangle, not a prior on the pose: without it in the length
-    # passes a detector's input lost flips; docs/design-notes/mono.md).
+    # passes a detector's input lost flips; docs/design-notes/mono.md). One neck depth a
+    # frame there (no trunk leans): the lengths come from the depth estimate's poses.
     paper_cfg = replace(
         cfg,
         clavicle_weight=0.0,
         arm_prior_weight=0.0,
         reach_tolerance=0.0,
         rebuilt_reach_tolerance=0.0,
+        trunk_lean_sines=(),
     )
     for _ in range(n_refine):
         pass_frames = _run(lengths, cam, dt, paper_cfg, model, t, px)

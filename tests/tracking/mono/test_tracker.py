@@ -8,6 +8,7 @@ import pytest
 from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
 from mocapkit.errors import ConfigError, ShapeError, UnknownNameError
 from mocapkit.eval.metrics import similarity_align
+from mocapkit.pipelines.mono import known_lengths_config
 from mocapkit.skeleton.kinematics import canonical_positions
 from mocapkit.skeleton.presets import load_preset
 from mocapkit.tracking.mono.pose_fit import fit_stick_pose
@@ -65,6 +66,8 @@ def _track(config: MonoConfig, n_frames: int = 60, initial_pose=None, layers=Non
     px = cam.project(world)
     truth_cam = cam.to_camera(world)
     lengths = np.linalg.norm(model.link_vectors(truth_cam[0]), axis=-1)
+    # the true lengths: known, as `track_mono` with the session's lengths (no trunk leans)
+    config = known_lengths_config(config)
     tracker = MonoTracker(lengths, cam, 1 / FPS, config, model, initial_pose=initial_pose)
     if layers is not None:
         _recorded(tracker, layers)
@@ -268,3 +271,80 @@ def test_a_detectors_depth_order_steers_the_flips_softly() -> None:
     mirrored_free, mirrored_forced = agree(-sines, 0.0), agree(-sines, 1e4)
     assert mirrored_free <= 0.1
     assert mirrored_forced >= mirrored_free + 0.3
+
+
+def test_trunk_lean_candidates_lie_on_the_pelvis_ray_at_the_given_sines() -> None:
+    """Each lean puts the pelvis on its viewing ray, the trunk from the neck at the sine s
+    from the plane normal to that ray, both ways, and only where the trunk's length does
+    not already lean it as far."""
+    model = stick_model()
+    cam = camera()
+    lengths = np.full(model.n_links, 300.0)
+    tracker = MonoTracker(lengths, cam, 1 / FPS, MonoConfig(trunk_lean_sines=(0.25, 0.5)), model)
+    obs = np.full((model.n_joints, 2), np.nan)
+    obs[0] = (0.01, -0.05)  # the neck's normalised image point
+    obs[model.child[0]] = (0.02, 0.05)  # the pelvis's
+    neck = 3000.0 * np.array([0.01, -0.05, 1.0])
+    ray = np.array([0.02, 0.05, 1.0]) / np.linalg.norm([0.02, 0.05, 1.0])
+    pelvises = tracker._lean_pelvises(obs, neck)
+    assert len(pelvises) == 4
+    sines = []
+    for p in pelvises:
+        np.testing.assert_allclose(p / p[2], [0.02, 0.05, 1.0], atol=1e-12)  # on the ray
+        v = p - neck
+        sines.append(float(v @ ray / np.linalg.norm(v)))
+    np.testing.assert_allclose(sorted(sines), [-0.5, -0.25, 0.25, 0.5], atol=1e-9)
+    # a trunk long enough to lean 0.3 within its length keeps only the 0.5 lean
+    d = np.linalg.norm(neck - (neck @ ray) * ray)
+    lengths[0] = d / np.sqrt(1 - 0.3**2) / (1 + MonoConfig().reach_tolerance)
+    tracker = MonoTracker(lengths, cam, 1 / FPS, MonoConfig(trunk_lean_sines=(0.25, 0.5)), model)
+    assert len(tracker._lean_pelvises(obs, neck)) == 2
+    off = MonoTracker(lengths, cam, 1 / FPS, MonoConfig(trunk_lean_sines=()), model)
+    assert off._lean_pelvises(obs, neck) == []
+    with pytest.raises(ConfigError, match=r"trunk_lean_sines: expected sines in \(0, 1\)"):
+        MonoConfig(trunk_lean_sines=(1.0,))
+
+
+def test_trunk_leans_put_a_short_trunks_true_lean_among_the_states() -> None:
+    """A camera looking down sees the upright trunk leave the image plane (its pelvis
+    farther than its neck). With the trunk's length estimated 10 % short the search alone
+    can lean it only as far as that length reaches; the lean candidates add states whose
+    trunk is as far out of the plane as the truth's, both ways, and the path stays on a
+    consistent lean (the motion cost)."""
+    joints, names, _ = stick_motion(40)
+    model = stick_model()
+    k = intrinsics_from_fov((640, 480), 62.0)
+    cam = Camera("mono", (640, 480), k, np.zeros(5), look_at((0, -2500, 2600), (0, 0, 1000)))
+    idx = [names.index(n) for n in model.joint_names]
+    px = cam.project(joints[:, idx])
+    truth = cam.to_camera(joints[:, idx])
+    lengths = np.linalg.norm(model.link_vectors(truth[0]), axis=-1)
+    lengths[0] *= 0.9
+    v = model.link_vectors(truth)[:, 0]
+    true_sine = v[:, 2] / np.linalg.norm(v, axis=-1)
+    assert true_sine.min() > 0.4
+
+    def track(leans: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """Per frame: the nearest state's trunk sine error, and the chosen trunk sine."""
+        tracker = MonoTracker(lengths, cam, 1 / FPS, MonoConfig(trunk_lean_sines=leans), model)
+        layers: dict = {}
+        _recorded(tracker, layers)
+        out = []
+        for i in range(px.shape[0]):
+            out += tracker.push(i / FPS, px[i])
+        out += tracker.finish()
+        nearest = []
+        for f in sorted(layers):
+            e = model.link_vectors(layers[f].positions)[:, 0]
+            s = e[:, 2] / np.linalg.norm(e, axis=-1)
+            nearest.append(np.min(np.abs(s - true_sine[f])))
+        chosen = model.link_vectors(np.stack([f.joints_in_camera for f in out]))[:, 0]
+        return np.array(nearest), chosen[:, 2] / np.linalg.norm(chosen, axis=-1)
+
+    near_without, _ = track(())
+    near_with, chosen = track((0.5,))
+    assert np.median(near_without) > 0.2
+    assert np.median(near_with) < 0.1
+    assert np.all(near_with <= near_without + 1e-9)
+    # one lean throughout: the path does not hop between the states' leans
+    assert np.all(np.abs(np.diff(chosen)) < 0.05)

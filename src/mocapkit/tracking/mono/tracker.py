@@ -55,6 +55,15 @@ was within -37..+22 mm of the truth in the median, 134-185 mm at the 90th percen
 percentile, window and margin were picked on those two clips. The paper has no such step
 (its camera is orthographic).
 
+The trunk's lean (beyond the paper): the neck's depth is a bound at which the trunk just
+reaches the pelvis's ray, and the trunk's length comes from the video, where a detector's
+rebuilt pelvis and a trunk that leans throughout make it short; so a leaning trunk is
+drawn in the image plane with one candidate. Each frame therefore also offers the poses
+with the pelvis on its ray at the trunk sines ``trunk_lean_sines`` either way (the neck
+where the depth estimate puts it, the trunk longer than its estimate), and the path chooses
+the lean over time by the motion cost, the soft costs and, from a detector with its own
+3-D, its depth order. A frame then has up to 2^8 + 2 x 2^7 poses before pruning.
+
 Known initial pose (the paper's third assumption, §4: "The initial pose of the subject
 is also known"; optional, ``initial_pose``): the first frame with a pose keeps only the
 surviving candidate nearest to it (mean distance of the joints relative to the neck), so
@@ -182,6 +191,15 @@ class MonoConfig:
         (eq. 3 costs ~450 per frame): of 10-3000 the best on the five tuning clips from
         MediaPipe on the rendered video (62.8 -> 59.4 mm PA); report clips 55.8 -> 54.5
         (docs/design-notes/mono.md).
+    trunk_lean_sines : tuple of float
+        Perspective model: besides the search's poses, those with the pelvis on its ray
+        where the trunk leaves the plane normal to that ray by each of these sines, towards
+        and away from the camera, where the trunk's length does not already reach that far
+        (the trunk then longer than its estimate): the trunk's lean as states of the graph
+        (module docstring). Empty: the search's poses only. Default (0.25,): of single
+        sines 0.15-0.4 the best on the five tuning clips from MediaPipe on the rendered
+        video (59.4 -> 58.4 mm PA; a flat 58.4-58.9 over 0.15-0.35; two sines or a cost
+        towards the detector's own lean did no better; docs/design-notes/mono.md).
     arm_prior : ArmPrior or None
         The mixture the arm prior uses; None: the shipped table
         (`mocapkit.tracking.mono.arm_prior.default_arm_prior`).
@@ -210,6 +228,7 @@ class MonoConfig:
     girdle_weight: float = 100.0
     girdle_cosine: float = float("nan")
     depth_order_weight: float = 1000.0
+    trunk_lean_sines: tuple[float, ...] = (0.25,)
     arm_prior: ArmPrior | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -242,6 +261,11 @@ class MonoConfig:
                 raise ConfigError(
                     f"MonoConfig.{name}: expected a finite weight >= 0 (0: off), found {value}"
                 )
+        if not all(0.0 < x < 1.0 for x in self.trunk_lean_sines):
+            raise ConfigError(
+                "MonoConfig.trunk_lean_sines: expected sines in (0, 1), found "
+                f"{self.trunk_lean_sines}"
+            )
         if (
             self.depth_window < 1
             or self.max_pair_states < 1
@@ -352,6 +376,7 @@ class MonoTracker:
             )
         self._n_up = self.upper.n_joints
         self._reach = self._link_reach()
+        self._trunk = self.model.link_index("trunk")
         # the girdle cost where the neck is rebuilt (its clavicles mirror images in 2-D)
         self._girdle = (
             cfg.girdle_weight > 0
@@ -518,13 +543,72 @@ class MonoTracker:
         )
         return fp.codes, fp.positions, fp.n_candidates, fp.pruned_all
 
+    def _lean_pelvises(self, obs: FloatArray, root: FloatArray) -> list[FloatArray]:
+        """The pelvis on its ray where the trunk from the neck at ``root`` leaves the image
+        plane by each of ``trunk_lean_sines``, towards and away from the camera, where that
+        leans more than the trunk's length lets it (the trunk then longer than its
+        estimate)."""
+        cfg = self.config
+        if (
+            not cfg.trunk_lean_sines
+            or cfg.camera_model != "perspective"
+            or self.camera is None
+            or not np.isfinite(root).all()
+        ):
+            return []
+        pelvis = obs[self.model.child[self._trunk]]
+        if not np.isfinite(pelvis[:2]).all():
+            return []
+        c = np.array([pelvis[0], pelvis[1], 1.0])
+        c /= np.linalg.norm(c)
+        t0 = float(root @ c)
+        d = float(np.linalg.norm(root - t0 * c))
+        length = self.lengths[self._trunk] * (1.0 + self._reach[self._trunk])
+        base = math.sqrt(max(0.0, 1.0 - (d / length) ** 2))
+        out = []
+        for s in cfg.trunk_lean_sines:
+            if s <= base:
+                continue
+            dt = d * s / math.sqrt(1.0 - s * s)
+            out += [(t0 - dt) * c, (t0 + dt) * c]
+        return out
+
+    def _enumerate_leans(
+        self, obs: FloatArray, root: FloatArray
+    ) -> tuple[IntArray, FloatArray, int, bool]:
+        """Candidate upper-body poses: the search's, then those with the pelvis at each of
+        `_lean_pelvises`, in one set.
+
+        Poses that break a constraint are dropped in every set; only where all of them
+        do is the search's unpruned set kept (recipe M)."""
+        base = self._enumerate(self.upper, obs, root, None)
+        pelvises = self._lean_pelvises(obs, root)
+        if not pelvises:
+            return base
+        sets = [base] if not base[3] else []
+        n_cand = base[2]
+        pelvis = self.upper.child[self._trunk]
+        for p in pelvises:
+            fixed = np.full((self.upper.n_joints, 3), np.nan)
+            fixed[pelvis] = p
+            codes, positions, n, pruned = self._enumerate(self.upper, obs, root, fixed)
+            n_cand += n
+            if not pruned:
+                far = np.int64(1 << self._trunk) if p[2] > root[2] else np.int64(0)
+                sets.append((codes | far, positions, n, pruned))
+        if not sets:
+            return base[0], base[1], n_cand, True
+        codes = np.concatenate([x[0] for x in sets])
+        positions = np.concatenate([x[1] for x in sets])
+        return codes, positions, n_cand, False
+
     def _process(self) -> list[MonoFrame]:
         k = self._processed
         self._processed += 1
         time_s, raw, sines = self._pending.popleft()
         pts = self._smoother.smoothed(k)
         obs, root, depth = self._observation(pts)
-        codes, positions, n_cand, pruned_all = self._enumerate(self.upper, obs, root, None)
+        codes, positions, n_cand, pruned_all = self._enumerate_leans(obs, root)
         unary = self._unary(positions)
         if sines is not None and self.config.depth_order_weight > 0:
             cost = depth_order_cost(self.upper, positions, sines[: self.upper.n_links])
