@@ -7,12 +7,15 @@ import pytest
 
 from mocapkit.errors import ConfigError
 from mocapkit.pipelines.hybrid import hybrid_skeleton
-from mocapkit.skeleton import canonical_positions
+from mocapkit.skeleton import canonical_positions, load_preset
 from mocapkit.skeleton.model import CANONICAL_JOINTS
 from mocapkit.tracking.hybrid.posture import (
+    CROUCH_DEAD_BAND_MM,
     SEATED_HEAD_RATIO,
     SEATED_LEFT_OUT,
     SEATED_NECK_FLEXION_RAD,
+    STANDING_KNEE_FLEXION_RAD,
+    Crouch,
     check_posture,
     choose_posture,
     estimate_seat_height_mm,
@@ -143,3 +146,37 @@ def test_tracker_seated_fits_upper_body_and_leaves_legs_out():
         assert p.joints_mm[PELVIS, 2] == pytest.approx(seat, abs=1e-6)
         assert np.isfinite(p.joints_mm[CANONICAL_JOINTS.index("left_elbow")]).all()
     assert not any(e[2] == "replanted" for e in tracker.events)
+
+
+def test_crouch_lowers_the_hip_by_the_drop_over_the_ankle():
+    """`Crouch.lowered_rad`: the legs' hip and knee flexions put the hip ``drop`` mm nearer
+    the ankle than the straight leg, still over it; the knee never straighter than
+    `STANDING_KNEE_FLEXION_RAD`. `Crouch.flexion_rad` takes the highest head it is given as
+    standing and leaves the first `CROUCH_DEAD_BAND_MM` of a drop to the trunk."""
+    sk = hybrid_skeleton(1750.0)
+    crouch = Crouch.of(sk)
+    assert crouch is not None and crouch.dofs.size == 4
+    rest = np.clip(sk.zero_pose(), sk.lower, sk.upper)
+    hip, ankle = (CANONICAL_JOINTS.index(f"left_{j}") for j in ("hip", "ankle"))
+    straight = float(crouch.thigh_mm[0] + crouch.shank_mm[0])
+    for drop in (0.0, 50.0, 200.0, 400.0):
+        q = rest.copy()
+        q[crouch.dofs] = crouch.lowered_rad(drop)
+        assert np.all(q[crouch.dofs[1::2]] >= STANDING_KNEE_FLEXION_RAD - 1e-12)
+        p = canonical_positions(sk, q)
+        reach = np.linalg.norm(p[hip] - p[ankle])
+        if drop > 0:
+            assert reach == pytest.approx(straight - drop, abs=0.5)
+        assert abs(p[hip, 1] - p[ankle, 1]) < 0.05 * max(drop, 100.0)  # over the ankle
+    head = 1600.0
+    standing = crouch.lowered_rad(0.0)
+    np.testing.assert_allclose(crouch.flexion_rad(head), standing)
+    np.testing.assert_allclose(crouch.flexion_rad(head - 0.5 * CROUCH_DEAD_BAND_MM), standing)
+    np.testing.assert_allclose(
+        crouch.flexion_rad(head - 200.0 - CROUCH_DEAD_BAND_MM), crouch.lowered_rad(200.0)
+    )
+    crouch.flexion_rad(head + 30.0)  # a higher head is the standing height from now on
+    np.testing.assert_allclose(
+        crouch.flexion_rad(head - 200.0 - CROUCH_DEAD_BAND_MM), crouch.lowered_rad(230.0)
+    )
+    assert Crouch.of(load_preset("azad14")) is None  # no legs
