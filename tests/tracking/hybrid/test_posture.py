@@ -180,3 +180,27 @@ def test_crouch_lowers_the_hip_by_the_drop_over_the_ankle():
         crouch.flexion_rad(head - 200.0 - CROUCH_DEAD_BAND_MM), crouch.lowered_rad(230.0)
     )
     assert Crouch.of(load_preset("azad14")) is None  # no legs
+
+
+def test_tracker_relaxed_legs_follow_the_head_and_reset_forgets_its_height():
+    """The hybrid tracker's relaxed pose (its IK's null-space task) bends the knees when
+    the head set drops with the feet planted, straightens them back when it rises, and
+    `HybridTracker.reset` forgets the standing height."""
+    sk = load_preset("zhang21")
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False))
+    knees = [sk.dof_index(n) for n in ("l_knee_flexion", "r_knee_flexion")]
+    omega = tracker.solver.secondary.omega
+    np.testing.assert_allclose(omega[knees], STANDING_KNEE_FLEXION_RAD)
+    pts = _effector_points(sk, omega)[0]
+    sets = dict(zip(("head", "left_hand", "right_hand"), pts, strict=True))
+    down = {k: v - [0.0, 0.0, 200.0] for k, v in sets.items()}
+    tracker.update(HybridSample(0.0, sets))
+    tracker.update(HybridSample(0.02, down))
+    assert np.all(np.degrees(omega[knees]) > 40.0)  # 200 mm lower: a crouch
+    tracker.update(HybridSample(0.04, sets))
+    np.testing.assert_allclose(omega[knees], STANDING_KNEE_FLEXION_RAD)
+    tracker.update(HybridSample(0.06, down))
+    tracker.reset()
+    np.testing.assert_allclose(omega[knees], STANDING_KNEE_FLEXION_RAD)
+    tracker.update(HybridSample(0.0, down))  # the lower head is the standing height now
+    np.testing.assert_allclose(omega[knees], STANDING_KNEE_FLEXION_RAD)

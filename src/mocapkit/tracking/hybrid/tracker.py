@@ -1049,7 +1049,11 @@ class HybridTracker:
         }
 
     def reset(self) -> None:
-        """Forget the state (pose, feet, gaps, filter); the next sample initialises again."""
+        """Forget the state (pose, feet, gaps, filter, the crouch's standing height); the
+        next sample initialises again."""
+        if self._crouch is not None:
+            self._crouch.standing_mm = math.nan
+            self._relax_legs(self._crouch.lowered_rad(0.0))
         self._q = None
         self._out_q = None
         self._prev_elbows = None
