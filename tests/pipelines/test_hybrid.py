@@ -472,3 +472,43 @@ def test_session_config_keeps_the_session_offsets_under_a_given_config() -> None
     assert session_config(session, given, oriented_sets=()).member_offsets_mm == {}  # type: ignore[arg-type]
     own = HybridConfig(marker_offsets_mm={"head": (1.0, 2.0, 3.0)})
     assert session_config(session, own).marker_offsets_mm == {"head": (1.0, 2.0, 3.0)}  # type: ignore[arg-type]
+
+
+@pytest.fixture(scope="module")
+def squat_session(tmp_path_factory):
+    """The built-in squat down to its lowest (2.3 s), rendered small (mono, 160x120)."""
+    from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+
+    folder = tmp_path_factory.mktemp("squat") / "session"
+    options = SynthOptions(rig="mono", seconds=2.3, image_size=(160, 120), overwrite=True)
+    synthesize_session("builtin:squat", folder, options)
+    return folder
+
+
+def _knee_deg(joints_mm, names, side):
+    """Knee flexion (deg) from the canonical hip, knee and ankle (T, J, 3)."""
+    hip, knee, ankle = (
+        joints_mm[:, list(names).index(f"{side}_{j}")] for j in ("hip", "knee", "ankle")
+    )
+    u, v = hip - knee, ankle - knee
+    c = np.sum(u * v, axis=1) / np.linalg.norm(u, axis=1) / np.linalg.norm(v, axis=1)
+    return 180.0 - np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+def test_squat_from_head_and_hands_bends_the_knees(squat_session):
+    """Without leg markers the relaxed legs follow the head's drop over the planted feet
+    (`mocapkit.tracking.hybrid.posture.Crouch`): the squat bends the knees and lowers the
+    pelvis, where straight relaxed legs had made it a forward bend (knees at most 37 deg
+    against 100, the pelvis 260 mm high, the spine flexed 80 deg)."""
+    truth = np.load(squat_session / "truth.npz")
+    t_names = [str(n) for n in truth["joint_names"]]
+    motion = track_hybrid_session(squat_session, None, use_video=False)
+    pelvis = list(motion.joint_names).index("pelvis")
+    for side in ("left", "right"):
+        got = _knee_deg(motion.joints_mm, motion.joint_names, side)
+        want = _knee_deg(truth["joints_mm"], t_names, side)
+        assert want.max() > 90.0
+        assert abs(got.max() - want.max()) < 20.0, side
+        assert np.mean(np.abs(got - want)) < 12.0, side
+    lowest = truth["joints_mm"][:, t_names.index("pelvis"), 2].min()
+    assert abs(motion.joints_mm[:, pelvis, 2].min() - lowest) < 60.0

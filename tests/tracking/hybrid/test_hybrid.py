@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -62,7 +64,7 @@ def test_tracks_markers(truth, paper):
 
 def test_gap_bridged_then_released(truth):
     sk, t, _q, pos = truth
-    cfg = HybridConfig(use_video=False, gap_limit_s=0.1)
+    cfg = HybridConfig(use_video=False, gap_limit_s=0.1, rejoin_blend_s=0.2)
     tracker = HybridTracker(sk, config=cfg)
     seq = samples(t, pos)
     gap = range(20, 40)  # 0.4 s gap of the left hand
@@ -81,7 +83,8 @@ def test_gap_bridged_then_released(truth):
                 assert np.isnan(pose.residual_mm["left_hand"])
         elif i > 40:
             assert pose.released == ()
-            assert pose.residual_mm["left_hand"] <= cfg.smoothing_polish_tol_mm
+            if s.time_s >= t[40] + cfg.rejoin_blend_s:  # led back to the markers by then
+                assert pose.residual_mm["left_hand"] <= cfg.smoothing_polish_tol_mm
     kinds = [e[2] for e in tracker.events if e[1] == "left_hand"]
     assert kinds == ["bridging", "released", "recovered"]
 
@@ -552,3 +555,59 @@ def test_pelvis_and_foot_sets_drive_the_legs():
     assert np.all(np.abs(legs - truth) < np.abs(got[3][0] - truth))
     assert last.residual_mm["left_foot"] < 15.0 and last.residual_mm["pelvis"] < 15.0
     assert last.spine_lean_rad is None or not np.any(last.spine_lean_rad)
+
+
+def test_rejoining_hand_set_is_blended_back_over_rejoin_blend_s():
+    """A hand set released (unseen past the bridge) while the hand moves on: the arm holds
+    its last observed pose, and when the set is seen again its IK target goes from where
+    the held arm puts it to the marker linearly over `HybridConfig.rejoin_blend_s`: the fit
+    (against the marker) falls in equal shares and the hand moves in small steps; with 0
+    the arm snaps there."""
+    from mocapkit.skeleton.limbs import arm
+
+    sk = load_preset("zhang21")
+    probe = HybridTracker(sk, config=HybridConfig(use_video=False))
+    pos = probe.solver.effector_positions(probe.solver.secondary.omega)[:3]
+    dt, n, back = 0.02, 110, 60
+    gone = range(10, back)
+
+    def left(i):
+        return pos[1] + np.array([0.0, -250.0, 350.0]) * min(i / 40.0, 1.0)
+
+    samples = [
+        HybridSample(
+            dt * i,
+            {"head": pos[0], "right_hand": pos[2]} | ({} if i in gone else {"left_hand": left(i)}),
+        )
+        for i in range(n)
+    ]
+    hand = sk.joint_index("l_hand")
+    runs = {}
+    for blend_s in (HybridConfig().rejoin_blend_s, 0.0):
+        tracker = HybridTracker(sk, config=HybridConfig(use_video=False, rejoin_blend_s=blend_s))
+        poses = [tracker.update(s) for s in samples]
+        q = np.array([p.q for p in poses])
+        released = [i for i, p in enumerate(poses) if "left_hand" in p.released]
+        assert released and released[-1] == back - 1
+        dofs = arm(sk, "left").dofs
+        held = np.tile(q[released[0] - 1, dofs], (len(released), 1))
+        np.testing.assert_allclose(q[released][:, dofs], held)  # the arm holds its pose
+        fit = np.array([p.residual_mm["left_hand"] for p in poses])
+        steps = np.linalg.norm(np.diff(forward_kinematics(sk, q)[:, hand, :3, 3], axis=0), axis=1)
+        runs[blend_s] = fit, steps
+    blend_s = HybridConfig().rejoin_blend_s
+    fit, steps = runs[blend_s]
+    k = round(blend_s / dt)
+    jump = fit[back]  # the held arm's hand from the marker when the set is seen again
+    assert jump > 200.0
+    # the fit falls in equal shares (within the polish's tolerance of its moving target)
+    share = (1.0 - np.arange(k + 5) * dt / blend_s).clip(0.0)
+    np.testing.assert_allclose(
+        fit[back : back + k + 5], jump * share, atol=HybridConfig().smoothing_polish_tol_mm
+    )
+    assert steps[back - 1 : back + k].max() < 1.5 * jump * dt / blend_s  # no snap
+    fit0, steps0 = runs[0.0]
+    assert steps0[back - 1] > 0.8 * jump and fit0[back] < 5.0  # snapped
+    for bad in (-0.1, math.inf, math.nan):
+        with pytest.raises(ConfigError, match="rejoin_blend_s: expected a finite time >= 0 s"):
+            HybridConfig(rejoin_blend_s=bad)

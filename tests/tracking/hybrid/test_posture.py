@@ -7,12 +7,15 @@ import pytest
 
 from mocapkit.errors import ConfigError
 from mocapkit.pipelines.hybrid import hybrid_skeleton
-from mocapkit.skeleton import canonical_positions
+from mocapkit.skeleton import canonical_positions, load_preset
 from mocapkit.skeleton.model import CANONICAL_JOINTS
 from mocapkit.tracking.hybrid.posture import (
+    CROUCH_DEAD_BAND_MM,
     SEATED_HEAD_RATIO,
     SEATED_LEFT_OUT,
     SEATED_NECK_FLEXION_RAD,
+    STANDING_KNEE_FLEXION_RAD,
+    Crouch,
     check_posture,
     choose_posture,
     estimate_seat_height_mm,
@@ -143,3 +146,61 @@ def test_tracker_seated_fits_upper_body_and_leaves_legs_out():
         assert p.joints_mm[PELVIS, 2] == pytest.approx(seat, abs=1e-6)
         assert np.isfinite(p.joints_mm[CANONICAL_JOINTS.index("left_elbow")]).all()
     assert not any(e[2] == "replanted" for e in tracker.events)
+
+
+def test_crouch_lowers_the_hip_by_the_drop_over_the_ankle():
+    """`Crouch.lowered_rad`: the legs' hip and knee flexions put the hip ``drop`` mm nearer
+    the ankle than the straight leg, still over it; the knee never straighter than
+    `STANDING_KNEE_FLEXION_RAD`. `Crouch.flexion_rad` takes the highest head it is given as
+    standing and leaves the first `CROUCH_DEAD_BAND_MM` of a drop to the trunk."""
+    sk = hybrid_skeleton(1750.0)
+    crouch = Crouch.of(sk)
+    assert crouch is not None and crouch.dofs.size == 4
+    rest = np.clip(sk.zero_pose(), sk.lower, sk.upper)
+    hip, ankle = (CANONICAL_JOINTS.index(f"left_{j}") for j in ("hip", "ankle"))
+    straight = float(crouch.thigh_mm[0] + crouch.shank_mm[0])
+    for drop in (0.0, 50.0, 200.0, 400.0):
+        q = rest.copy()
+        q[crouch.dofs] = crouch.lowered_rad(drop)
+        assert np.all(q[crouch.dofs[1::2]] >= STANDING_KNEE_FLEXION_RAD - 1e-12)
+        p = canonical_positions(sk, q)
+        reach = np.linalg.norm(p[hip] - p[ankle])
+        if drop > 0:
+            assert reach == pytest.approx(straight - drop, abs=0.5)
+        assert abs(p[hip, 1] - p[ankle, 1]) < 0.05 * max(drop, 100.0)  # over the ankle
+    head = 1600.0
+    standing = crouch.lowered_rad(0.0)
+    np.testing.assert_allclose(crouch.flexion_rad(head), standing)
+    np.testing.assert_allclose(crouch.flexion_rad(head - 0.5 * CROUCH_DEAD_BAND_MM), standing)
+    np.testing.assert_allclose(
+        crouch.flexion_rad(head - 200.0 - CROUCH_DEAD_BAND_MM), crouch.lowered_rad(200.0)
+    )
+    crouch.flexion_rad(head + 30.0)  # a higher head is the standing height from now on
+    np.testing.assert_allclose(
+        crouch.flexion_rad(head - 200.0 - CROUCH_DEAD_BAND_MM), crouch.lowered_rad(230.0)
+    )
+    assert Crouch.of(load_preset("azad14")) is None  # no legs
+
+
+def test_tracker_relaxed_legs_follow_the_head_and_reset_forgets_its_height():
+    """The hybrid tracker's relaxed pose (its IK's null-space task) bends the knees when
+    the head set drops with the feet planted, straightens them back when it rises, and
+    `HybridTracker.reset` forgets the standing height."""
+    sk = load_preset("zhang21")
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False))
+    knees = [sk.dof_index(n) for n in ("l_knee_flexion", "r_knee_flexion")]
+    omega = tracker.solver.secondary.omega
+    np.testing.assert_allclose(omega[knees], STANDING_KNEE_FLEXION_RAD)
+    pts = _effector_points(sk, omega)[0]
+    sets = dict(zip(("head", "left_hand", "right_hand"), pts, strict=True))
+    down = {k: v - [0.0, 0.0, 200.0] for k, v in sets.items()}
+    tracker.update(HybridSample(0.0, sets))
+    tracker.update(HybridSample(0.02, down))
+    assert np.all(np.degrees(omega[knees]) > 40.0)  # 200 mm lower: a crouch
+    tracker.update(HybridSample(0.04, sets))
+    np.testing.assert_allclose(omega[knees], STANDING_KNEE_FLEXION_RAD)
+    tracker.update(HybridSample(0.06, down))
+    tracker.reset()
+    np.testing.assert_allclose(omega[knees], STANDING_KNEE_FLEXION_RAD)
+    tracker.update(HybridSample(0.0, down))  # the lower head is the standing height now
+    np.testing.assert_allclose(omega[knees], STANDING_KNEE_FLEXION_RAD)

@@ -24,6 +24,11 @@ What is estimated from the markers, and how:
 * **Posture** (`choose_posture`): seated when the head set's upright height above the
   floor is below `SEATED_HEAD_RATIO` of the stature (standing, the head point sits at
   0.97 of it; seated on a chair or a wheelchair, at 0.7-0.8).
+
+A standing subject without leg markers (`Crouch`): the relaxed pose's legs follow the
+head's height over the planted feet, so a head that drops is taken by the knees and hips
+(the pelvis as low as the head allows with the trunk upright) rather than by a forward
+bend on straight legs.
 """
 
 from __future__ import annotations
@@ -219,6 +224,110 @@ def seat_skeleton(skeleton: Skeleton, seat_height_mm: float) -> Skeleton:
     return skeleton.replace(lower=lower, upper=upper)
 
 
+#: Knee flexion (rad) of the standing relaxed pose: slightly bent, off the straight limit
+#: where the IK locks a DoF (a locked knee takes no relaxed-pose step and stays straight).
+STANDING_KNEE_FLEXION_RAD = math.radians(5.0)
+
+#: The head's drop below its standing height that `Crouch` leaves to the neck and trunk:
+#: a nod lowers the head point by a few mm (0.2 rad, 100-150 mm above the neck: 2-3 mm),
+#: and near the straight leg a few mm take tens of degrees of knee (3 mm: 10 deg), which
+#: turned a nodding take's positions-only head 14 mm off its members' true offsets.
+CROUCH_DEAD_BAND_MM = 10.0
+
+
+@dataclass
+class Crouch:
+    """The relaxed legs of a standing subject, from the head's height over the feet.
+
+    Head and hands do not say whether a head that drops is a squat or a forward bend on
+    straight legs; the IK's relaxed pose (its null-space task) decides. With straight
+    relaxed legs it bends the trunk (the squat's knees 4-19 deg against the truth's 100).
+    Here each leg's relaxed hip and knee flexion lower the pelvis by as much as the head
+    is below its standing height over the planted feet, with the hip kept over the
+    ankle (the trunk upright above the base of support): the thigh, the shank and the
+    hip-to-ankle distance make a triangle, whose angles give the flexions
+    (`flexion_rad`). The standing height is the highest the head target has been over
+    the feet so far (a marker set's place on the head, and the subject's stature against
+    the model's, are not known exactly). The knee stays at least
+    `STANDING_KNEE_FLEXION_RAD`, and the first `CROUCH_DEAD_BAND_MM` of a drop are left
+    to the neck and trunk.
+
+    Attributes
+    ----------
+    dofs : ndarray of int, shape (2L,)
+        Per leg its hip and knee flexion DoFs (``<l|r>_hip_flexion``,
+        ``<l|r>_knee_flexion`` of ``zhang21``, as `sitting_pose`).
+    thigh_mm, shank_mm : ndarray, shape (L,)
+        Hip-to-knee and knee-to-ankle lengths.
+    standing_mm : float
+        The head's standing height over the feet: the highest seen (NaN before any).
+    """
+
+    dofs: NDArray[np.int64]
+    thigh_mm: FloatArray
+    shank_mm: FloatArray
+    standing_mm: float = math.nan
+
+    @classmethod
+    def of(cls, skeleton: Skeleton) -> Crouch | None:
+        """The crouch of ``skeleton``; None where it has no legs with hip and knee flexions."""
+        dofs: list[int] = []
+        thigh, shank = [], []
+        joints = canonical_positions(
+            skeleton, np.clip(skeleton.zero_pose(), skeleton.lower, skeleton.upper)
+        )
+        for side, prefix in (("left", "l"), ("right", "r")):
+            names = (f"{prefix}_hip_flexion", f"{prefix}_knee_flexion")
+            if not all(n in skeleton.dof_names for n in names):
+                continue
+            dofs += [skeleton.dof_index(n) for n in names]
+            hip, knee, ankle = (
+                joints[CANONICAL_JOINTS.index(f"{side}_{j}")] for j in ("hip", "knee", "ankle")
+            )
+            thigh.append(float(np.linalg.norm(knee - hip)))
+            shank.append(float(np.linalg.norm(ankle - knee)))
+        if not dofs:
+            return None
+        return cls(np.asarray(dofs, dtype=np.int64), np.asarray(thigh), np.asarray(shank))
+
+    def flexion_rad(self, head_above_feet_mm: float) -> FloatArray:
+        """Hip and knee flexion (rad) of each leg (in `dofs` order) for the head at this
+        height over the mean ankle: the pelvis lowered by the head's drop below
+        `standing_mm` (raised to this height where it is higher), the hip over the ankle."""
+        h = float(head_above_feet_mm)
+        if not h <= self.standing_mm:
+            self.standing_mm = h
+        return self.lowered_rad(self.standing_mm - h - CROUCH_DEAD_BAND_MM)
+
+    def lowered_rad(self, drop_mm: float) -> FloatArray:
+        """Hip and knee flexion (rad) of each leg (in `dofs` order) that lower the hip by
+        ``drop_mm`` (>= 0) from the straight leg, the hip kept over the ankle."""
+        drop = max(0.0, float(drop_mm))
+        out = np.empty(self.dofs.size)
+        for k, (a, b) in enumerate(zip(self.thigh_mm, self.shank_mm, strict=True)):
+            reach = min(max(a + b - drop, abs(a - b) + 1e-6), a + b)
+            # the triangle thigh a, shank b, hip-to-ankle ``reach``: the hip's angle from
+            # the vertical and the knee's bend from straight
+            inner = (a * a + b * b - reach * reach) / (2.0 * a * b)
+            knee = math.pi - math.acos(max(-1.0, min(1.0, inner)))
+            hip = math.acos(min(1.0, (a * a + reach * reach - b * b) / (2.0 * a * reach)))
+            if knee < STANDING_KNEE_FLEXION_RAD:
+                knee = STANDING_KNEE_FLEXION_RAD
+                hip = knee * b / (a + b)  # the same bend, the hip over the ankle
+            out[2 * k], out[2 * k + 1] = hip, knee
+        return out
+
+
+def standing_relaxed_pose(skeleton: Skeleton, omega: ArrayLike) -> FloatArray:
+    """``omega`` (the IK's relaxed pose) with the legs of `Crouch` at full height: knees
+    bent `STANDING_KNEE_FLEXION_RAD`, hips over the ankles; clipped into the limits."""
+    out = np.array(omega, dtype=float, copy=True)
+    crouch = Crouch.of(skeleton)
+    if crouch is not None:
+        out[crouch.dofs] = crouch.lowered_rad(0.0)
+    return np.clip(out, skeleton.lower, skeleton.upper)
+
+
 @dataclass(frozen=True)
 class PostureChoice:
     """The posture used, and why (printed by the CLI)."""
@@ -260,10 +369,13 @@ def choose_posture(
 
 
 __all__ = [
+    "CROUCH_DEAD_BAND_MM",
     "POSTURES",
     "SEATED_HEAD_RATIO",
     "SEATED_LEFT_OUT",
     "SEATED_NECK_FLEXION_RAD",
+    "STANDING_KNEE_FLEXION_RAD",
+    "Crouch",
     "PostureChoice",
     "check_posture",
     "choose_posture",
@@ -272,5 +384,6 @@ __all__ = [
     "pelvis_to_head_mm",
     "seat_skeleton",
     "sitting_pose",
+    "standing_relaxed_pose",
     "stature_from_reach_mm",
 ]

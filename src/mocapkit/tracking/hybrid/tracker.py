@@ -63,7 +63,7 @@ from mocapkit.tracking.hybrid.balance import (
     restore_ik_config,
     support_points,
 )
-from mocapkit.tracking.hybrid.posture import SEATED_LEFT_OUT
+from mocapkit.tracking.hybrid.posture import SEATED_LEFT_OUT, Crouch, standing_relaxed_pose
 
 FloatArray = NDArray[np.float64]
 
@@ -260,6 +260,12 @@ class HybridConfig:
         (`mocapkit.tracking.hybrid.posture.seat_skeleton`: pelvis held at the seat's height,
         legs held bent); ``auto`` is resolved before the tracker
         (`mocapkit.tracking.hybrid.posture.choose_posture`).
+    rejoin_blend_s : float
+        A hand set released after a long gap holds its arm's last observed pose (relative
+        to the shoulder's parent); when the set is seen again its IK targets (the set and
+        its members) go from where the held arm puts them to the markers, linearly over
+        this time, instead of the arm snapping there in one frame (0: snap). The fit
+        (``residual_mm``) is measured against the markers throughout.
     """
 
     ik: IKConfig = field(default_factory=lambda: TRACKING_IK)
@@ -280,6 +286,7 @@ class HybridConfig:
     start_upright: bool = True
     posture: str = "standing"
     reseed_arm_mm: float = 0.0
+    rejoin_blend_s: float = 0.5
 
     def __post_init__(self) -> None:
         if self.posture not in ("standing", "seated"):
@@ -290,6 +297,11 @@ class HybridConfig:
         if not self.reseed_arm_mm >= 0:
             raise ConfigError(
                 f"HybridConfig.reseed_arm_mm: expected >= 0 mm, found {self.reseed_arm_mm}"
+            )
+        if not (self.rejoin_blend_s >= 0 and math.isfinite(self.rejoin_blend_s)):
+            raise ConfigError(
+                f"HybridConfig.rejoin_blend_s: expected a finite time >= 0 s, found "
+                f"{self.rejoin_blend_s}"
             )
         if not self.gap_limit_s >= 0:
             raise ConfigError(
@@ -449,6 +461,14 @@ class _Track:
     p: list[FloatArray] = field(default_factory=list)
     released: bool = False
     gap_start_s: float | None = None
+    #: The set is seen again after a release (this sample); its blend starts.
+    rejoined: bool = False
+    #: The arm's DoF values of the last frame the set was seen or bridged (hand sets).
+    held_q: FloatArray | None = None
+    #: Rejoin blend: its start time and, per target row (the set, its members), the
+    #: offset (mm) from the marker to where the held pose put the effector.
+    blend_start_s: float = math.nan
+    blend_offsets: dict[int, FloatArray] = field(default_factory=dict)
 
 
 class HybridTracker:
@@ -564,6 +584,20 @@ class HybridTracker:
             else _CountedSolver(skeleton, effectors, restore_ik)
         )
         self._arms = {side: arm(skeleton, side) for side in SIDES}
+        #: The relaxed legs follow the head's height over the feet (`Crouch`): a standing
+        #: subject with planted feet and no leg sets, outside paper mode.
+        self._crouch: Crouch | None = None
+        if (
+            self.config.feet_planted
+            and not self.config.paper
+            and "head" in self.marker_sets
+            and not self.foot_sets
+            and "pelvis" not in self.marker_sets
+        ):
+            self._crouch = Crouch.of(skeleton)
+            if self._crouch is not None:
+                omega = standing_relaxed_pose(skeleton, self.solver.secondary.omega)
+                self._relax_legs(omega[self._crouch.dofs])
         self._timer: StageTimer = NULL_TIMER
         self.timer = timer
         #: Per side, what the last video refinement did (when the refiner is `refine_arms`).
@@ -595,6 +629,8 @@ class HybridTracker:
         )
         self._initial_q = None if initial_q is None else np.asarray(initial_q, dtype=float)
         self._q: FloatArray | None = None
+        #: The pose last returned (`_blend_rejoined` starts from it).
+        self._out_q: FloatArray | None = None
         self._prev_elbows: dict[str, FloatArray] | None = None
         self._prev_time_s = 0.0
         self._feet: FloatArray | None = None
@@ -675,6 +711,7 @@ class HybridTracker:
             if p is not None and not stale and np.all(np.isfinite(p)):
                 if tr.released or tr.gap_start_s is not None:
                     self.events.append((t_m, name, "recovered"))
+                tr.rejoined = tr.released
                 tr.released, tr.gap_start_s = False, None
                 if not tr.t or t_m > tr.t[-1]:
                     tr.t, tr.p = [*tr.t, t_m][-2:], [*tr.p, p][-2:]
@@ -825,6 +862,79 @@ class HybridTracker:
         q, extra = self._hold_feet(res.q, targets)
         return q, res_free.iterations + res.iterations + extra
 
+    def _arm_dofs(self, name: str) -> NDArray[np.int64] | None:
+        """The DoFs of the arm a hand set (``<side>_hand``) places; None for other sets."""
+        side = name.removesuffix("_hand")
+        return self._arms[side].dofs if side in SIDES and side != name else None
+
+    def _hold_released_arms(self, q: FloatArray, released: Sequence[str]) -> None:
+        """Put each released hand set's arm at its last observed values (in place)."""
+        for name in released:
+            dofs, held = self._arm_dofs(name), self._tracks[name].held_q
+            if dofs is not None and held is not None:
+                q[dofs] = held
+
+    def _remember_arms(self, q: FloatArray, released: Sequence[str]) -> None:
+        """Keep the arm DoFs of the hand sets observed (seen or bridged) in ``q``."""
+        for name in self.marker_sets:
+            dofs = self._arm_dofs(name)
+            if dofs is not None and name not in released:
+                self._tracks[name].held_q = q[dofs].copy()
+
+    def _blend_rejoined(self, targets: FloatArray, time_s: float, unseen: Sequence[str]) -> None:
+        """Rejoin blend (`HybridConfig.rejoin_blend_s`), targets in place.
+
+        On the sample where a released set is seen again, the offsets from its markers
+        (the set's and its members') to the effectors of the previous pose, whose arm
+        holds its last observed pose, are kept; over the blend the targets are the
+        markers plus the offsets times ``1 - (t - t0) / rejoin_blend_s``. A member not seen
+        on that sample is left out until the blend ends; a set bridged or released again
+        ends it. The previous pose is the one returned (after the balance step and the
+        smoothing), as the user saw it.
+        """
+        blend_s = self.config.rejoin_blend_s
+        n = len(self.marker_sets)
+        now: FloatArray | None = None
+        for i, name in enumerate(self.marker_sets):
+            tr = self._tracks[name]
+            rows = [i] + [n + 2 + k for k, (s, _) in enumerate(self.members) if s == name]
+            if tr.rejoined and blend_s > 0 and self._out_q is not None:
+                if now is None:
+                    now = self.solver.effector_positions(self._out_q)
+                tr.blend_start_s = float(time_s)
+                tr.blend_offsets = {
+                    r: now[r] - targets[r] for r in rows if np.all(np.isfinite(targets[r]))
+                }
+            tr.rejoined = False
+            if not tr.blend_offsets:
+                continue
+            w = (float(time_s) - tr.blend_start_s) / blend_s
+            if name in unseen or not w < 1.0:
+                tr.blend_offsets = {}
+                continue
+            for r in rows:
+                off = tr.blend_offsets.get(r)
+                targets[r] = np.nan if off is None else targets[r] + (1.0 - w) * off
+
+    def _relax_legs(self, flexion_rad: FloatArray) -> None:
+        """Set the relaxed pose's leg flexions (`Crouch.dofs`) in every solver's
+        relaxed-pose task (in place: the compiled solve reads the same array)."""
+        assert self._crouch is not None
+        for solver in {
+            id(s): s for s in (self.solver, self._polish, self._restore, self._restore_relaxed)
+        }.values():
+            solver.secondary.omega[self._crouch.dofs] = flexion_rad
+
+    def _crouch_to_head(self, targets: FloatArray) -> None:
+        """The relaxed legs for this sample's head target over the planted feet
+        (`Crouch`); kept from the last sample while the head set is released."""
+        if self._crouch is None:
+            return
+        assert self._feet is not None
+        head = targets[self.marker_sets.index("head")]
+        if np.all(np.isfinite(head)):
+            self._relax_legs(self._crouch.flexion_rad(float(head[2] - self._feet[:, 2].mean())))
+
     def _put_marked_feet(self, targets: FloatArray, sample: HybridSample) -> None:
         """Targets of the feet whose marker set (`foot_sets`) is seen: the markers, which
         also become the plant that holds the foot while they are unseen."""
@@ -941,8 +1051,13 @@ class HybridTracker:
         }
 
     def reset(self) -> None:
-        """Forget the state (pose, feet, gaps, filter); the next sample initialises again."""
+        """Forget the state (pose, feet, gaps, filter, the crouch's standing height); the
+        next sample initialises again."""
+        if self._crouch is not None:
+            self._crouch.standing_mm = math.nan
+            self._relax_legs(self._crouch.lowered_rad(0.0))
         self._q = None
+        self._out_q = None
         self._prev_elbows = None
         self._feet = None
         self._filter = None
@@ -958,6 +1073,9 @@ class HybridTracker:
         sk = self.skeleton
         timer = self._timer
         targets, bridged, released = self._targets(sample)
+        # the fit is measured against the markers, also while a rejoin blend moves the
+        # IK's targets (`_blend_rejoined`)
+        observed = targets
         n = len(self.marker_sets)
         if self._q is None and not np.any(np.isfinite(targets[:n])):
             # nothing observed yet (the video starts before the markers): no pose, and
@@ -977,6 +1095,7 @@ class HybridTracker:
                 self._floor_z_mm = float(min(feet[:, 2].min(), standing[n : n + 2, 2].min()))
                 targets[n : n + 2] = feet if self.config.feet_planted else np.nan
                 self._put_marked_feet(targets, sample)
+                self._crouch_to_head(targets)
                 for _ in range(max(self.config.init_iterations, 1)):
                     res = self.solver.solve(q, targets)
                     q = res.q
@@ -987,6 +1106,9 @@ class HybridTracker:
                 assert self._feet is not None
                 targets[n : n + 2] = self._feet if self.config.feet_planted else np.nan
                 self._put_marked_feet(targets, sample)
+                self._crouch_to_head(targets)
+                observed = targets.copy()
+                self._blend_rejoined(targets, sample.time_s, (*bridged, *released))
                 res = self.solver.solve(self._q, targets)
                 q = res.q
                 iterations += res.iterations
@@ -1001,6 +1123,7 @@ class HybridTracker:
                 if self.config.reseed_arm_mm > 0:
                     q, extra = self._reseed_lost_arms(q, targets)
                     iterations += extra
+            self._hold_released_arms(q, released)
         refined = False
         edge_fit: dict[str, float] = {}
         ref = (
@@ -1083,7 +1206,10 @@ class HybridTracker:
                 res = self._polish.solve(q, targets)
                 q = res.q
                 iterations += res.iterations
-        resid_arr = np.linalg.norm(self.solver.effector_positions(q) - targets, axis=1)
+        self._hold_released_arms(q, released)
+        self._remember_arms(q, released)
+        self._out_q = q.copy()
+        resid_arr = np.linalg.norm(self.solver.effector_positions(q) - observed, axis=1)
         names = self.marker_sets + FEET + tuple(m for _, m in self.members)
         residual = {nm: float(r) for nm, r in zip(names, resid_arr, strict=True)}
         joints = canonical_positions(sk, q)
