@@ -145,6 +145,7 @@ TRACKING_BALANCE = BalanceConfig(
     restore_without_lean=False,
     guided_bisection=True,
     restore_stall_iterations=3,
+    restores_per_frame=2,
 )
 
 
