@@ -98,7 +98,6 @@ def _per_joint(result: Path, session_dir: Path, factor: float) -> None:
     # a joint's step is shown by the keypoints when some camera's keypoint moves at least
     # 1 / factor of the joint's projected step on the same frame (or the step is < 10 px)
     shown = np.zeros(out_speed.shape, dtype=bool)
-    steps = []
     for cam, kp in sorted(session.keypoints.items()):
         px = session.camera(cam).project(joints)
         out_px = np.linalg.norm(np.diff(px, axis=0), axis=2)
@@ -108,7 +107,6 @@ def _per_joint(result: Path, session_dir: Path, factor: float) -> None:
             if n in kp.joint_names:
                 p_k = kp.pixels[rows, kp.joint_names.index(n)]
                 kp_px[:, k] = np.linalg.norm(np.diff(p_k, axis=0), axis=1)
-        steps.append(np.nanmax(np.stack([out_px, kp_px]), axis=0))
         with np.errstate(invalid="ignore"):
             shown |= (out_px < 10.0) | (kp_px * factor >= out_px) | ~np.isfinite(out_px)
     step_mm = out_speed * np.diff(t)[:, None]
