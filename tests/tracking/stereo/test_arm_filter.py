@@ -229,27 +229,30 @@ def test_yaw_matrix_turns_the_right_axis():
     np.testing.assert_allclose(yaw_matrix(math.pi / 2)[:, 0], (0.0, 1.0, 0.0), atol=1e-12)
 
 
-def test_mode_estimate_stays_on_one_of_two_elbow_modes():
-    """Two equally weighted clusters on the elbow circle: the plain mean lies between them,
-    the mode estimate on the better one."""
+def _elbow_circle_clusters(how="mode"):
+    """A filter whose particles sit in two clusters on one hand's elbow circle, the best
+    particle in the first; the model, the views and the two elbows (world)."""
     from mocapkit.ik.arm_analytic import arm_ik, make_problem
 
     cams = _cameras(2)
     model = _model(np.full(3, np.nan))
     views = view_stack(cams, _render_outlines(_points(TRUE_X, model), cams))
     hand = _points(TRUE_X, model)[3]
-    s = model.shoulder_base_mm
-    q, elbows = arm_ik(make_problem(np.eye(3), s, hand, A, B), [-2.5, -0.5])
-    parts = np.zeros((150, 7))
-    parts[:75, :4] = q[0]
-    parts[75:, :4] = q[1]
-    weights = np.ones(150)
-    weights[0] = 1.5  # the best particle sits in the first cluster
+    q, elbows = arm_ik(make_problem(np.eye(3), model.shoulder_base_mm, hand, A, B), [-2.5, -0.5])
+    f = ArmParticleFilter("left", ArmFilterConfig(estimate=how), np.random.default_rng(0))
+    f.particles = np.zeros((150, 7))
+    f.particles[:75, :4] = q[0]
+    f.particles[75:, :4] = q[1]
+    _favour(f, 0)
+    return f, model, views, elbows
+
+
+def test_mode_estimate_stays_on_one_of_two_elbow_modes():
+    """Two equally weighted clusters on the elbow circle: the plain mean lies between them,
+    the mode estimate on the better one."""
     results = {}
     for how in ("mode", "mean"):
-        f = ArmParticleFilter("left", ArmFilterConfig(estimate=how), np.random.default_rng(0))
-        f.particles = parts.copy()
-        f.weights = weights.copy()
+        f, model, views, elbows = _elbow_circle_clusters(how)
         results[how] = f._estimate(model, views).points_mm[1]
     assert np.linalg.norm(results["mode"] - elbows[0]) < 1e-6
     gap = np.linalg.norm(elbows[0] - elbows[1])
@@ -258,25 +261,11 @@ def test_mode_estimate_stays_on_one_of_two_elbow_modes():
 
 
 def _two_elbow_modes():
-    """A filter whose particles sit in two clusters on one hand's elbow circle, its last
-    estimate in the first; the model, the views and the two elbows (relative to the
-    shoulder)."""
-    from mocapkit.ik.arm_analytic import arm_ik, make_problem
-
-    cams = _cameras(2)
-    model = _model(np.full(3, np.nan))
-    views = view_stack(cams, _render_outlines(_points(TRUE_X, model), cams))
-    hand = _points(TRUE_X, model)[3]
-    s = model.shoulder_base_mm
-    q, elbows = arm_ik(make_problem(np.eye(3), s, hand, A, B), [-2.5, -0.5])
-    f = ArmParticleFilter("left", ArmFilterConfig(), np.random.default_rng(0))
-    f.particles = np.zeros((150, 7))
-    f.particles[:75, :4] = q[0]
-    f.particles[75:, :4] = q[1]
-    f.weights = np.ones(150)
-    f.weights[0] = 1.5
-    f._estimate(model, views)  # the last estimate: the first mode
-    return f, model, views, elbows - s
+    """`_elbow_circle_clusters` with its last estimate in the first mode; the elbows
+    relative to the shoulder."""
+    f, model, views, elbows = _elbow_circle_clusters()
+    f._estimate(model, views)
+    return f, model, views, elbows - model.shoulder_base_mm
 
 
 def _favour(f, mode):
