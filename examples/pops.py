@@ -13,6 +13,10 @@ Usage::
 
 ``--markers`` is the marker file the result was tracked from (a session's ``markers.csv``
 or a raw C3D); ``--names`` restricts the input speeds to the markers the tracker used.
+``--session`` is the session folder the result was tracked from (markerless input): per
+canonical joint of ``joints.csv``, its peak speed against the truth's (``truth.npz``, a
+synthetic session) and, per camera, its image speed (the joint projected) against the 2-D
+keypoints' own (the detections' motion, px/s).
 """
 
 from __future__ import annotations
@@ -24,6 +28,7 @@ import numpy as np
 
 from mocapkit.eval.continuity import peak, roll_steps_deg, speeds_mm_s
 from mocapkit.io.bvh import read_bvh
+from mocapkit.io.joints_csv import read_joints_csv
 from mocapkit.io.marker_files import read_markers
 from mocapkit.io.motion_npz import load_motion_npz
 from mocapkit.skeleton.kinematics import forward_kinematics
@@ -53,11 +58,77 @@ def _picture(path: Path, joints: np.ndarray, parents: np.ndarray, frame: int, ti
     plt.close(fig)
 
 
+def _peaks(values: np.ndarray) -> np.ndarray:
+    """Per column, the largest finite value (NaN where a column has none)."""
+    v = np.where(np.isfinite(values), values, -np.inf)
+    out = v.max(axis=0)
+    return np.where(np.isfinite(out), out, np.nan)
+
+
+def _per_joint(result: Path, session_dir: Path, factor: float) -> None:
+    """Per canonical joint: the result's peak speed against the truth's (frames faster
+    than ``factor`` times the truth's peak + 0.3 m/s counted), and the frames whose step
+    no camera's keypoints show."""
+    from mocapkit.io.session import load_session
+
+    t, names, joints = read_joints_csv(result / "joints.csv")
+    out_speed = speeds_mm_s(t, joints)
+    out_peak = _peaks(out_speed)
+    session = load_session(session_dir)
+    truth = session.truth
+    if truth is not None:
+        cols = [truth.joint_names.index(n) if n in truth.joint_names else -1 for n in names]
+        tr = speeds_mm_s(truth.time_s, truth.joints_mm)
+        tr_peak = np.array([_peaks(tr)[c] if c >= 0 else np.nan for c in cols])
+        print(
+            "  per joint, peak speed (m/s): result / truth, frames over "
+            f"{factor:g} x the truth's peak + 0.3 m/s"
+        )
+        for k, n in enumerate(names):
+            if not np.isfinite(out_peak[k]):
+                continue
+            pops = int(np.sum(out_speed[:, k] > factor * tr_peak[k] + 300.0))
+            i = int(np.nanargmax(out_speed[:, k]))
+            print(
+                f"    {n:16s} {out_peak[k] / 1000:6.2f} at {t[i + 1]:5.2f} s / "
+                f"{tr_peak[k] / 1000:5.2f}   {pops:3d}"
+            )
+    if not session.keypoints:
+        return
+    # a joint's step is shown by the keypoints when some camera's keypoint moves at least
+    # 1 / factor of the joint's projected step on the same frame (or the step is < 10 px)
+    shown = np.zeros(out_speed.shape, dtype=bool)
+    for cam, kp in sorted(session.keypoints.items()):
+        px = session.camera(cam).project(joints)
+        out_px = np.linalg.norm(np.diff(px, axis=0), axis=2)
+        rows = np.clip(np.searchsorted(kp.time_s, t - 1e-6), 0, kp.time_s.shape[0] - 1)
+        kp_px = np.full(out_px.shape, np.nan)
+        for k, n in enumerate(names):
+            if n in kp.joint_names:
+                p_k = kp.pixels[rows, kp.joint_names.index(n)]
+                kp_px[:, k] = np.linalg.norm(np.diff(p_k, axis=0), axis=1)
+        with np.errstate(invalid="ignore"):
+            shown |= (out_px < 10.0) | (kp_px * factor >= out_px) | ~np.isfinite(out_px)
+    step_mm = out_speed * np.diff(t)[:, None]
+    fast = np.isfinite(out_speed) & ~shown
+    print(f"  per joint, frames whose step no camera's keypoints show (within {factor:g} x):")
+    for k, n in enumerate(names):
+        if fast[:, k].any():
+            i = np.flatnonzero(fast[:, k])
+            worst = i[int(np.argmax(step_mm[i, k]))]
+            print(
+                f"    {n:16s} {i.size:3d} frames, largest {step_mm[worst, k]:.0f} mm "
+                f"({out_speed[worst, k] / 1000:.2f} m/s) at {t[worst + 1]:.2f} s"
+            )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("result", type=Path)
     ap.add_argument("--markers", type=Path)
     ap.add_argument("--names", default="")
+    ap.add_argument("--session", type=Path)
+    ap.add_argument("--factor", type=float, default=1.5)
     ap.add_argument("--pictures", type=Path)
     ap.add_argument("--label", default="")
     args = ap.parse_args()
@@ -95,6 +166,8 @@ def main() -> None:
         print(
             f"  largest bone roll a frame, {what}: {r.value:.1f} deg ({r.name}, {t[r.frame]:.2f} s)"
         )
+    if args.session is not None:
+        _per_joint(args.result, args.session, args.factor)
     over = np.nanmax(speed, axis=1) > 5000.0
     print(f"  frames with a joint faster than 5 m/s: {int(over.sum())}")
     if args.pictures is not None:

@@ -229,29 +229,72 @@ def test_yaw_matrix_turns_the_right_axis():
     np.testing.assert_allclose(yaw_matrix(math.pi / 2)[:, 0], (0.0, 1.0, 0.0), atol=1e-12)
 
 
-def test_mode_estimate_stays_on_one_of_two_elbow_modes():
-    """Two equally weighted clusters on the elbow circle: the plain mean lies between them,
-    the mode estimate on the better one."""
+def _elbow_circle_clusters(how="mode"):
+    """A filter whose particles sit in two clusters on one hand's elbow circle, the best
+    particle in the first; the model, the views and the two elbows (world)."""
     from mocapkit.ik.arm_analytic import arm_ik, make_problem
 
     cams = _cameras(2)
     model = _model(np.full(3, np.nan))
     views = view_stack(cams, _render_outlines(_points(TRUE_X, model), cams))
     hand = _points(TRUE_X, model)[3]
-    s = model.shoulder_base_mm
-    q, elbows = arm_ik(make_problem(np.eye(3), s, hand, A, B), [-2.5, -0.5])
-    parts = np.zeros((150, 7))
-    parts[:75, :4] = q[0]
-    parts[75:, :4] = q[1]
-    weights = np.ones(150)
-    weights[0] = 1.5  # the best particle sits in the first cluster
+    q, elbows = arm_ik(make_problem(np.eye(3), model.shoulder_base_mm, hand, A, B), [-2.5, -0.5])
+    f = ArmParticleFilter("left", ArmFilterConfig(estimate=how), np.random.default_rng(0))
+    f.particles = np.zeros((150, 7))
+    f.particles[:75, :4] = q[0]
+    f.particles[75:, :4] = q[1]
+    _favour(f, 0)
+    return f, model, views, elbows
+
+
+def test_mode_estimate_stays_on_one_of_two_elbow_modes():
+    """Two equally weighted clusters on the elbow circle: the plain mean lies between them,
+    the mode estimate on the better one."""
     results = {}
     for how in ("mode", "mean"):
-        f = ArmParticleFilter("left", ArmFilterConfig(estimate=how), np.random.default_rng(0))
-        f.particles = parts.copy()
-        f.weights = weights.copy()
+        f, model, views, elbows = _elbow_circle_clusters(how)
         results[how] = f._estimate(model, views).points_mm[1]
     assert np.linalg.norm(results["mode"] - elbows[0]) < 1e-6
     gap = np.linalg.norm(elbows[0] - elbows[1])
     assert np.linalg.norm(results["mean"] - elbows[0]) > 0.2 * gap
     assert np.linalg.norm(results["mean"] - elbows[1]) > 0.2 * gap
+
+
+def _two_elbow_modes():
+    """`_elbow_circle_clusters` with its last estimate in the first mode; the elbows
+    relative to the shoulder."""
+    f, model, views, elbows = _elbow_circle_clusters()
+    f._estimate(model, views)
+    return f, model, views, elbows - model.shoulder_base_mm
+
+
+def _favour(f, mode):
+    """The heaviest particle in cluster ``mode`` (0 or 1)."""
+    f.weights = np.ones(150)
+    f.weights[75 * mode] = 1.5
+
+
+def test_a_single_frame_elbow_jump_is_held_and_a_lasting_one_taken_a_frame_late():
+    """The cues favour the other side of the elbow circle (a step of about 300 mm, over
+    the 200 mm the elbow may move in a frame): on one frame only, the estimate stays;
+    on two running, it moves on the second, as it moves at once without the limit."""
+    f, model, views, rel = _two_elbow_modes()
+    step_mm = float(np.linalg.norm(rel[1] - rel[0]))
+    assert step_mm > 250.0
+    limit = 200.0
+
+    def elbow():
+        return f._estimate(model, views, limit).points_mm[1] - model.shoulder_base_mm
+
+    _favour(f, 1)
+    assert np.linalg.norm(elbow() - rel[0]) < 1e-6  # one frame: held
+    _favour(f, 0)
+    assert np.linalg.norm(elbow() - rel[0]) < 1e-6  # and back: no jump reached the output
+    _favour(f, 1)
+    assert np.linalg.norm(elbow() - rel[0]) < 1e-6
+    _favour(f, 1)
+    assert np.linalg.norm(elbow() - rel[1]) < 1e-6  # the second frame running: taken
+    g, model, views, rel = _two_elbow_modes()
+    _favour(g, 1)
+    free = g._estimate(model, views).points_mm[1] - model.shoulder_base_mm
+    assert np.linalg.norm(free - rel[1]) < 1e-6

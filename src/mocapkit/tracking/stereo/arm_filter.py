@@ -444,6 +444,10 @@ class ArmParticleFilter:
         self._w = np.empty(n)
         self._eg = np.empty(n)
         self._d2 = np.empty(n)
+        #: the last estimate's elbow relative to its shoulder (mm); None before the first
+        self._elbow_rel: FloatArray | None = None
+        #: a jump of the estimate's mode held back last frame: its elbow (mm), else None
+        self._held_jump: FloatArray | None = None
 
     def _noise_scale(self) -> tuple[float, float]:
         c = self.config
@@ -482,8 +486,17 @@ class ArmParticleFilter:
         s = w.sum()
         return float((eg * w).sum() / s) if s > 0 else 1.0
 
-    def step(self, model: ArmModel, views: ViewStack) -> ArmEstimate:
-        """One frame: ``n_runs`` runs, the first with IK samples; returns the estimate."""
+    def step(
+        self, model: ArmModel, views: ViewStack, max_elbow_step_mm: float = math.inf
+    ) -> ArmEstimate:
+        """One frame: ``n_runs`` runs, the first with IK samples; returns the estimate.
+
+        ``max_elbow_step_mm``: with the ``mode`` estimate, the farthest the elbow may move
+        relative to its shoulder since the last estimate before a jump of the mode must
+        be confirmed: a heaviest particle beyond it is taken only when the next frame's
+        heaviest lies there again; until then the estimate stays in the mode within
+        reach (the cues at times favour the other side of the elbow circle for a
+        single frame)."""
         c = self.config
         n = c.n_particles
         have_hand = bool(np.all(np.isfinite(model.hand_mm)))
@@ -502,7 +515,7 @@ class ArmParticleFilter:
             self.particles = p
             self.weights = self._w.copy()
             self.edge_error = self._fused_edge()
-        return self._estimate(model, views)
+        return self._estimate(model, views, max_elbow_step_mm)
 
     def estimate_offset(self) -> FloatArray:
         """Weighted mean shoulder offset of the current particles (mm, torso frame)."""
@@ -523,7 +536,28 @@ class ArmParticleFilter:
         out[:, 4:] = d_prev
         return out
 
-    def _estimate(self, model: ArmModel, views: ViewStack) -> ArmEstimate:
+    def _mode_particle(self, w: FloatArray, elbow_rel: FloatArray, max_step_mm: float) -> int:
+        """The particle whose mode is the estimate: the heaviest, unless its elbow lies
+        beyond ``max_step_mm`` of the last estimate's and no held jump confirms it; then
+        the heaviest within reach (`step`)."""
+        best = int(np.argmax(w))
+        held, self._held_jump = self._held_jump, None
+        last = self._elbow_rel
+        if last is None or not math.isfinite(max_step_mm):
+            return best
+        if float(np.linalg.norm(elbow_rel[best] - last)) <= max_step_mm:
+            return best
+        if held is not None and float(np.linalg.norm(elbow_rel[best] - held)) <= max_step_mm:
+            return best  # the far mode won twice running: a real move
+        within = np.linalg.norm(elbow_rel - last, axis=1) <= max_step_mm
+        if not within.any():
+            return best
+        self._held_jump = elbow_rel[best].copy()
+        return int(np.flatnonzero(within)[np.argmax(w[within])])
+
+    def _estimate(
+        self, model: ArmModel, views: ViewStack, max_elbow_step_mm: float = math.inf
+    ) -> ArmEstimate:
         w = self.weights / max(self.weights.sum(), 1e-300)
         p = self.particles
         if self.config.estimate == "mode":
@@ -531,7 +565,8 @@ class ArmParticleFilter:
             # elbow circle often leaves two modes, whose mean would be neither
             elbows = np.empty((p.shape[0], 3))
             _elbows_nb(p, model, elbows)
-            best = int(np.argmax(w))
+            elbow_rel = elbows - model.shoulder_base_mm
+            best = self._mode_particle(w, elbow_rel, max_elbow_step_mm)
             near = np.linalg.norm(elbows - elbows[best], axis=1) < self.config.mode_radius_mm
             w = np.where(near, w, 0.0)
             w /= w.sum()
@@ -556,6 +591,7 @@ class ArmParticleFilter:
             self.prev_dist_sq = float(d2[0])  # errata A10: the raw error of the estimate
         pts = np.empty((4, 3))
         arm_points_nb(state, model, pts)
+        self._elbow_rel = pts[1] - model.shoulder_base_mm
         return ArmEstimate(
             state,
             pts,

@@ -132,11 +132,13 @@ class StereoConfig:
         Longest gap (s) in a measured point that its status calls ``bridged``; longer
         gaps are ``released`` (the hybrid tracker's default, 0.25 s).
     elbow_jump_mm_per_s : float
-        An elbow moving faster than this relative to its shoulder from one frame to the
-        next is flagged as a jump (``<side>_elbow_jump`` in fit.csv): the arm filter's
-        cues at times favour the other side of the elbow circle for a frame (the elbow
-        above the head while the hand is right). About twice the fastest true elbow of
-        the tuning clips (3.2 m/s at 30 Hz).
+        The fastest an elbow may move relative to its shoulder from one frame to the
+        next: the arm filter's cues at times favour the other side of the elbow circle
+        for a single frame (the elbow above the head while the hand is right), so a
+        faster move of the estimate is held back a frame and taken only when the next
+        frame's cues favour it again (`ArmParticleFilter.step`); a move taken is
+        flagged as a jump (``<side>_elbow_jump`` in fit.csv). About twice the fastest
+        true elbow of the tuning clips (3.2 m/s at 30 Hz).
     seed : int
     """
 
@@ -558,6 +560,9 @@ class StereoTracker:
                     float(cfg.arm.oriented_edges),
                 ]
             )
+            max_step_mm = math.inf  # the elbow's reach in a frame (jumps held one frame)
+            if self._prev_elbows is not None and sample.time_s > self._prev_elbows[0]:
+                max_step_mm = cfg.elbow_jump_mm_per_s * (sample.time_s - self._prev_elbows[0])
             for s in SIDES:
                 a, b = self.lengths[s]
                 model = ArmModel(
@@ -568,7 +573,7 @@ class StereoTracker:
                     np.asarray(hands[s], dtype=float),
                     sampling,
                 )
-                ests[s] = self.filters[s].step(model, views)
+                ests[s] = self.filters[s].step(model, views, max_step_mm)
         # ---------------------------------------------------------- torso yaw
         if cfg.yaw_gain > 0 and cfg.torso == "shoulders":
             right = ests["right"].points_mm[0] - ests["left"].points_mm[0]
