@@ -15,6 +15,7 @@ import math
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,8 @@ from mocapkit.errors import SessionError, unknown_name
 from mocapkit.io.markers import true_runs
 from mocapkit.io.motion import Motion
 from mocapkit.pipelines.run import run_tracker, write_run_folder
+from mocapkit.skeleton.model import Skeleton
+from mocapkit.skeleton.smoothing import filter_poses
 from mocapkit.tracking.base import FrameResult
 from mocapkit.tracking.multiview.config import (
     SMOOTHING,
@@ -54,15 +57,18 @@ class MultiviewRun:
     out_dir: Path | None = None
 
 
-def _smooth_q(q: FloatArray, time_s: FloatArray, run: MultiviewRunConfig) -> FloatArray:
-    """Poses (T, D) smoothed per DoF over each stretch of frames with a pose."""
+def _smooth_q(
+    sk: Skeleton, q: FloatArray, time_s: FloatArray, run: MultiviewRunConfig
+) -> FloatArray:
+    """Poses (T, D) smoothed over each stretch of frames with a pose: each joint's Euler
+    triple as a rotation, every other DoF as it is (`mocapkit.skeleton.smoothing`), so
+    the fit's moving from one triple to its equivalent is not drawn as a swing."""
     if run.smoothing == "none" or q.shape[0] < 2:
         return q
     out = q.copy()
     ok = np.isfinite(q).all(axis=1)
     dt = float(np.median(np.diff(time_s))) if time_s.shape[0] > 1 else 1.0 / 30.0
     for a, b in true_runs(ok):
-        seg = q[a:b]
         if run.smoothing == "butterworth":
             from scipy.signal import butter, filtfilt
 
@@ -70,14 +76,18 @@ def _smooth_q(q: FloatArray, time_s: FloatArray, run: MultiviewRunConfig) -> Flo
             if b - a <= 15 or run.cutoff_hz >= nyq:
                 continue
             bb, aa = butter(4, run.cutoff_hz / nyq)
-            out[a:b] = filtfilt(bb, aa, seg, axis=0)
+            out[a:b] = filter_poses(sk, q[a:b], partial(filtfilt, bb, aa, axis=0))
         else:
-            from mocapkit.tracking.hybrid.tracker import OneEuroFilter
-
-            f = OneEuroFilter(run.cutoff_hz, run.one_euro_beta)
-            for i in range(a, b):
-                out[i] = f(float(time_s[i]), q[i])
+            out[a:b] = filter_poses(sk, q[a:b], partial(_one_euro, time_s[a:b], run))
     return out
+
+
+def _one_euro(time_s: FloatArray, run: MultiviewRunConfig, x: FloatArray) -> FloatArray:
+    """``x`` (T, K) through a fresh one-euro filter, frame by frame (online)."""
+    from mocapkit.tracking.hybrid.tracker import OneEuroFilter
+
+    f = OneEuroFilter(run.cutoff_hz, run.one_euro_beta)
+    return np.array([f(float(t), row) for t, row in zip(time_s, x, strict=True)])
 
 
 def far_spans(
@@ -213,7 +223,7 @@ def track_multiview_session(
         label=f"track stereo {Path(session_dir).name}",
         source=f"multi-view fit (cameras {','.join(names)}) on {session.path}",
     )
-    q = _smooth_q(run.motion.q, run.motion.time_s, run_cfg)
+    q = _smooth_q(sk, run.motion.q, run.motion.time_s, run_cfg)
     motion = Motion.from_q(sk, run.motion.time_s, q, source=run.motion.source)
     seconds = time.process_time() - t0
     far = far_spans(run.results, tracker.names)
