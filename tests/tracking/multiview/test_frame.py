@@ -140,6 +140,24 @@ def test_figures_are_the_projections_and_the_canonical_joints(rng: np.random.Gen
     np.testing.assert_allclose(joints, canonical_positions(sk, q), atol=1e-9)
 
 
+def _fit_from_previous(
+    tr: MultiviewTracker, q: np.ndarray, obs: np.ndarray, gate: bool, ref_ok: np.ndarray
+) -> tuple[np.ndarray, FitTargets]:
+    """`fit_rejecting_nb` from pose ``q``, the previous frame's pose and points the same."""
+    start = q.copy()
+    tg = FitTargets(
+        obs,
+        np.zeros(obs.shape[:2]),
+        tr._scale(q),
+        q.copy(),
+        tr._prior,
+        tr._points(q),
+        np.zeros(len(tr.names)),
+    )
+    fit_rejecting_nb(tr._model, tr._settings, start, tg, 40, np.empty(obs.shape[:2]), gate, ref_ok)
+    return start, tg
+
+
 def test_a_wild_detection_of_a_joint_seen_twice_is_dropped_by_its_jump(
     rng: np.random.Generator,
 ) -> None:
@@ -152,18 +170,8 @@ def test_a_wild_detection_of_a_joint_seen_twice_is_dropped_by_its_jump(
     obs[1, wrist] += 0.15  # one of them wild, about 400 mm off
     wrist_err = {}
     for gate, kept in ((True, 0.0), (False, 1.0)):
-        start = q.copy()
-        tg = FitTargets(
-            obs,
-            np.zeros(obs.shape[:2]),
-            tr._scale(q),
-            q.copy(),
-            tr._prior,
-            pts.copy(),  # the previous frame's points: here the same pose
-            np.zeros(len(tr.names)),
-        )
-        ok = np.zeros(len(tr.names), dtype=bool)  # the two-view gate needs no confirmation
-        fit_rejecting_nb(tr._model, tr._settings, start, tg, 40, np.empty(obs.shape[:2]), gate, ok)
+        # the two-view gate needs no confirmation of the previous points
+        start, tg = _fit_from_previous(tr, q, obs, gate, np.zeros(len(tr.names), dtype=bool))
         assert tg.weight[1, wrist] == kept
         assert tg.weight[0, wrist] == 1.0
         wrist_err[gate] = np.linalg.norm(model_points_nb(tr._model, start)[wrist] - pts[wrist])
@@ -187,18 +195,7 @@ def test_views_in_conflict_are_settled_by_a_confirmed_previous_point(
     obs[3, wrist] = np.nan
     wrist_err = {}
     for confirmed in (True, False):
-        start = q.copy()
-        tg = FitTargets(
-            obs,
-            np.zeros(obs.shape[:2]),
-            tr._scale(q),
-            q.copy(),
-            tr._prior,
-            pts.copy(),
-            np.zeros(len(tr.names)),
-        )
-        ok = np.full(len(tr.names), confirmed)
-        fit_rejecting_nb(tr._model, tr._settings, start, tg, 40, np.empty(obs.shape[:2]), True, ok)
+        start, tg = _fit_from_previous(tr, q, obs, True, np.full(len(tr.names), confirmed))
         want = [1.0, 0.0, 0.0] if confirmed else [1.0, 1.0, 1.0]
         assert tg.weight[:3, wrist].tolist() == want
         wrist_err[confirmed] = np.linalg.norm(model_points_nb(tr._model, start)[wrist] - pts[wrist])
