@@ -118,7 +118,8 @@ def test_fit_drops_a_wild_detection_and_keeps_the_rest(rng: np.random.Generator)
         np.full((len(tr.names), 3), np.nan),
         np.zeros(len(tr.names)),
     )
-    fit_rejecting_nb(tr._model, tr._settings, start, tg, 40, np.empty(obs.shape[:2]), False)
+    ok = np.zeros(len(tr.names), dtype=bool)
+    fit_rejecting_nb(tr._model, tr._settings, start, tg, 40, np.empty(obs.shape[:2]), False, ok)
     assert tg.weight[2, wrist] == 0.0
     assert (tg.weight > 0).sum() == obs.shape[0] * obs.shape[1] - 1
     err = np.linalg.norm(model_points_nb(tr._model, start) - tr._points(q), axis=1)
@@ -139,6 +140,24 @@ def test_figures_are_the_projections_and_the_canonical_joints(rng: np.random.Gen
     np.testing.assert_allclose(joints, canonical_positions(sk, q), atol=1e-9)
 
 
+def _fit_from_previous(
+    tr: MultiviewTracker, q: np.ndarray, obs: np.ndarray, gate: bool, ref_ok: np.ndarray
+) -> tuple[np.ndarray, FitTargets]:
+    """`fit_rejecting_nb` from pose ``q``, the previous frame's pose and points the same."""
+    start = q.copy()
+    tg = FitTargets(
+        obs,
+        np.zeros(obs.shape[:2]),
+        tr._scale(q),
+        q.copy(),
+        tr._prior,
+        tr._points(q),
+        np.zeros(len(tr.names)),
+    )
+    fit_rejecting_nb(tr._model, tr._settings, start, tg, 40, np.empty(obs.shape[:2]), gate, ref_ok)
+    return start, tg
+
+
 def test_a_wild_detection_of_a_joint_seen_twice_is_dropped_by_its_jump(
     rng: np.random.Generator,
 ) -> None:
@@ -151,22 +170,37 @@ def test_a_wild_detection_of_a_joint_seen_twice_is_dropped_by_its_jump(
     obs[1, wrist] += 0.15  # one of them wild, about 400 mm off
     wrist_err = {}
     for gate, kept in ((True, 0.0), (False, 1.0)):
-        start = q.copy()
-        tg = FitTargets(
-            obs,
-            np.zeros(obs.shape[:2]),
-            tr._scale(q),
-            q.copy(),
-            tr._prior,
-            pts.copy(),  # the previous frame's points: here the same pose
-            np.zeros(len(tr.names)),
-        )
-        fit_rejecting_nb(tr._model, tr._settings, start, tg, 40, np.empty(obs.shape[:2]), gate)
+        # the two-view gate needs no confirmation of the previous points
+        start, tg = _fit_from_previous(tr, q, obs, gate, np.zeros(len(tr.names), dtype=bool))
         assert tg.weight[1, wrist] == kept
         assert tg.weight[0, wrist] == 1.0
         wrist_err[gate] = np.linalg.norm(model_points_nb(tr._model, start)[wrist] - pts[wrist])
     assert wrist_err[True] < 1.0
     assert wrist_err[False] > 20.0  # without the gate the wild view pulls the wrist
+
+
+def test_views_in_conflict_are_settled_by_a_confirmed_previous_point(
+    rng: np.random.Generator,
+) -> None:
+    """Three views of a wrist, two agreeing on a place 500 mm off: the fit cannot reach
+    it (the forearm holds the wrist), no view is outvoted; the previous frame's point,
+    when two views confirmed it, drops the two."""
+    _sk, tr, cams, q = _setup(rng)
+    pts = tr._points(q)
+    obs = _normalised(cams, pts)
+    wrist = tr.names.index("right_wrist")
+    wrong = pts.copy()
+    wrong[wrist] += np.array([0.0, 300.0, 400.0])
+    obs[1:3, wrist] = _normalised(cams, wrong)[1:3, wrist]
+    obs[3, wrist] = np.nan
+    wrist_err = {}
+    for confirmed in (True, False):
+        start, tg = _fit_from_previous(tr, q, obs, True, np.full(len(tr.names), confirmed))
+        want = [1.0, 0.0, 0.0] if confirmed else [1.0, 1.0, 1.0]
+        assert tg.weight[:3, wrist].tolist() == want
+        wrist_err[confirmed] = np.linalg.norm(model_points_nb(tr._model, start)[wrist] - pts[wrist])
+    assert wrist_err[True] < 1.0
+    assert wrist_err[False] > 50.0  # unsettled, the two views pull the wrist
 
 
 def test_cholesky_step_solves_and_refuses_an_indefinite_matrix(rng: np.random.Generator) -> None:

@@ -66,7 +66,9 @@ class MultiviewConfig:
         A joint detected in two views has no majority to outvote a wild detection: a
         detection further than this from the joint's place in the previous frame is
         dropped when the other view's is within ``reject_mm`` of it (a per-frame jump;
-        `mocapkit.tracking.multiview.frame.fit_rejecting_nb`).
+        `mocapkit.tracking.multiview.frame.fit_rejecting_nb`). The same rule settles a
+        joint seen by more views whose kept views all stay further than ``reject_mm``
+        from the fit, when two views confirmed its place in the previous frame.
     """
 
     delta_mm: float = 25.0

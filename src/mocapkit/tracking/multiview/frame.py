@@ -237,6 +237,26 @@ def column_median_nb(values: FloatArray, keep: BoolArray, out: FloatArray) -> No
 
 
 @numba.njit(cache=True)
+def jump_gate_nb(st: FrameSettings, w: FloatArray, jump: FloatArray, k: int) -> bool:
+    """Drop (weight 0 in ``w`` (V, K)) joint ``k``'s detections further than ``jump_mm``
+    from the previous frame's point (``jump`` (V, K): each detection's distance from it)
+    when another of its kept detections is within ``reject_mm`` of it. Returns whether
+    one was dropped."""
+    agree = False
+    for v in range(w.shape[0]):
+        if w[v, k] > 0.0 and jump[v, k] <= st.reject_mm:
+            agree = True
+    if not agree:
+        return False
+    dropped = False
+    for v in range(w.shape[0]):
+        if w[v, k] > 0.0 and not (jump[v, k] <= st.jump_mm):
+            w[v, k] = 0.0
+            dropped = True
+    return dropped
+
+
+@numba.njit(cache=True)
 def fit_rejecting_nb(
     m: FrameModel,
     st: FrameSettings,
@@ -245,6 +265,7 @@ def fit_rejecting_nb(
     iters: int,
     norms: FloatArray,
     gate: bool,
+    ref_ok: BoolArray,
 ) -> None:
     """Fit (in place on ``q``), drop the detections far from the fit, fit again; at most
     three fits. ``tg.weight`` (V, K) is set from the detections and ends with the ones
@@ -256,7 +277,12 @@ def fit_rejecting_nb(
     majority (neither residual can be twice their median), so with ``gate`` (a track
     going on) a joint detected in two views or one drops, before the fit, a detection
     further than ``jump_mm`` from the previous frame's point (``tg.point_ref_mm``) when
-    another of its detections is within ``reject_mm`` of it.
+    another of its detections is within ``reject_mm`` of it (`jump_gate_nb`). The same
+    gate settles a joint whose kept views all stay further than ``reject_mm`` from the
+    fit (views in conflict, none outvoted: two views agreeing on a wrong place against a
+    third, often when a view is missing), where its previous point was held by two kept
+    views (``ref_ok`` (K,), set by `finish_frame_nb`); a previous point the views did
+    not confirm is not trusted to outvote them.
     """
     n_views, n_pts = tg.weight.shape
     w = tg.weight
@@ -264,21 +290,17 @@ def fit_rejecting_nb(
         for k in range(n_pts):
             seen = np.isfinite(tg.observed[v, k, 0]) and np.isfinite(tg.observed[v, k, 1])
             w[v, k] = m.base_weight[k] if seen else 0.0
-    if gate and st.jump_mm > 0.0:
-        residual_norms_nb(m, tg.point_ref_mm, tg.observed, tg.scale_mm, norms)
+    gate = gate and st.jump_mm > 0.0
+    jump = np.full((n_views, n_pts), np.nan)
+    if gate:
+        residual_norms_nb(m, tg.point_ref_mm, tg.observed, tg.scale_mm, jump)
         for k in range(n_pts):
-            agree = False
             n_seen = 0
             for v in range(n_views):
                 if w[v, k] > 0.0:
                     n_seen += 1
-                    if norms[v, k] <= st.reject_mm:
-                        agree = True
-            if not agree or n_seen > 2:
-                continue
-            for v in range(n_views):
-                if w[v, k] > 0.0 and not (norms[v, k] <= st.jump_mm):
-                    w[v, k] = 0.0
+            if n_seen <= 2:
+                jump_gate_nb(st, w, jump, k)
     med = np.empty(n_pts)
     for _ in range(3):
         fit_pose_nb(
@@ -302,6 +324,14 @@ def fit_rejecting_nb(
                 # NaN residuals count as far (not within either bound)
                 if w[v, k] > 0.0 and not (r <= st.reject_mm) and not (r <= 2.0 * med[k]):
                     w[v, k] = 0.0
+                    far = True
+        if gate:
+            for k in range(n_pts):
+                near = False
+                for v in range(n_views):
+                    if w[v, k] > 0.0 and norms[v, k] <= st.reject_mm:
+                        near = True
+                if not near and ref_ok[k] and jump_gate_nb(st, w, jump, k):
                     far = True
         if not far:
             break
@@ -339,6 +369,7 @@ def begin_frame_nb(
     point_ref: FloatArray,
     iters: int,
     scale: FloatArray,
+    ref_ok: BoolArray,
 ) -> tuple[FitTargets, BoolArray, BoolArray, float]:
     """A frame's first fit from the previous pose ``q`` (in place) and its detections
     ``norm`` (V, K, 2, undistorted normalised); ``scale`` (V,) is the depth of the
@@ -347,7 +378,8 @@ def begin_frame_nb(
     The views' labels are tested against the previous pose (`swap_test_nb`, not on the
     ``first`` frame of a track), the point prior is weighted (`point_weights_nb`) and
     held at the previous pose's points (``point_ref``, updated in place), and the frame
-    fitted with outlier rejection (`fit_rejecting_nb`). Returns the fit's targets (their
+    fitted with outlier rejection (`fit_rejecting_nb`, with the previous frame's
+    ``ref_ok``). Returns the fit's targets (their
     ``q_ref`` the previous pose), the views swapped, the limbs to start again (a joint
     of the limb further than ``restart_mm`` from its kept detections, median over the
     views) and the fit's cost.
@@ -366,7 +398,7 @@ def begin_frame_nb(
         point_prior = point_weights_nb(m, st, pts, obs)
         point_ref[:, :] = pts
     tg = FitTargets(obs, np.zeros((n_views, n_pts)), scale, q.copy(), prior, point_ref, point_prior)
-    fit_rejecting_nb(m, st, q, tg, iters, norms, not first)
+    fit_rejecting_nb(m, st, q, tg, iters, norms, not first, ref_ok)
     base = cost_nb(m, st, q, tg, norms)
     n_limbs = m.limb_rows.shape[0]
     restart = np.zeros(n_limbs, dtype=np.bool_)
@@ -459,16 +491,19 @@ def finish_frame_nb(
     moved: bool,
     iters: int,
     first: bool,
+    ref_ok: BoolArray,
 ) -> tuple[FitTargets, bool]:
     """The rest of a frame's fit after `begin_frame_nb` (and restarts, ``moved``): fitted
     again when a limb was started again; the views' labels tested again against the fit
     (which catches the first frame and a wrong previous pose; ``swapped`` updated in
     place) and the frame fitted again if a view changed. Returns the final targets and
-    whether the track is lost (fewer than half the usable detections kept)."""
+    whether the track is lost (fewer than half the usable detections kept). ``ref_ok``
+    (K,) is set in place: the joints two kept views place within ``reject_mm`` of the
+    fit (`fit_rejecting_nb` trusts these points in the next frame)."""
     n_views, n_pts = norm.shape[0], norm.shape[1]
     norms = np.empty((n_views, n_pts))
     if moved:
-        fit_rejecting_nb(m, st, q, tg, iters, norms, not first)
+        fit_rejecting_nb(m, st, q, tg, iters, norms, not first, ref_ok)
     again = swap_test_nb(m, st, model_points_nb(m, q), tg.observed, tg.scale_mm, norms)
     if again.any():
         for v in range(n_views):
@@ -482,7 +517,14 @@ def finish_frame_nb(
             tg.point_ref_mm,
             tg.point_prior,
         )
-        fit_rejecting_nb(m, st, q, tg, iters, norms, not first)
+        fit_rejecting_nb(m, st, q, tg, iters, norms, not first, ref_ok)
+    residual_norms_nb(m, model_points_nb(m, q), tg.observed, tg.scale_mm, norms)
+    for k in range(n_pts):
+        n_near = 0
+        for v in range(n_views):
+            if tg.weight[v, k] > 0.0 and norms[v, k] <= st.reject_mm:
+                n_near += 1
+        ref_ok[k] = n_near >= 2
     usable = 0
     kept = 0
     for v in range(n_views):
@@ -533,6 +575,7 @@ __all__ = [
     "finish_frame_nb",
     "fit_rejecting_nb",
     "frame_figures_nb",
+    "jump_gate_nb",
     "model_points_nb",
     "point_weights_nb",
     "residual_norms_nb",

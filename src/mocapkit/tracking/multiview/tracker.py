@@ -17,8 +17,10 @@ view's 2-D detections each frame.
    subject), a prior towards the previous frame, joint limits; warm-started from the
    previous frame. Detections further than ``reject_mm`` from the fit are dropped per
    joint and view and the frame is fitted again; a joint seen by two views (no
-   majority) drops a detection further than ``jump_mm`` from the joint's place in the
-   previous frame when the other is near it.
+   majority), or whose views all stay far from the fit (in conflict, none outvoted),
+   drops a detection further than ``jump_mm`` from the joint's place in the previous
+   frame when another is near it (in conflict: only where two views confirmed that
+   place).
 4. **Status** per body part (head, arms, legs) by the detections kept: ``seen`` when
    its end joint is kept in two views (or one view with the middle joint in two),
    ``bridged`` over gaps up to ``gap_limit_s``, then ``released``
@@ -202,6 +204,7 @@ class MultiviewTracker:
         self._swapped_keys = [f"{c.name}_swapped" for c in self.cameras]
         self._rng = np.random.default_rng(0)
         self._point_ref = np.full((len(self.names), 3), np.nan)
+        self._ref_ok = np.zeros(len(self.names), dtype=bool)
         self._q: FloatArray | None = None
         self._last_seen: dict[str, float] = {}
         self._ever_seen: set[str] = set()
@@ -311,7 +314,7 @@ class MultiviewTracker:
         iters = cfg.first_iter if first else cfg.max_iter
         m, st = self._model, self._settings
         tg, swapped, restart, base = begin_frame_nb(
-            m, st, q, norm, first, prior, self._point_ref, iters, self._scale(q)
+            m, st, q, norm, first, prior, self._point_ref, iters, self._scale(q), self._ref_ok
         )
         moved = False
         for i in np.flatnonzero(restart):
@@ -322,7 +325,7 @@ class MultiviewTracker:
             cost = restart_limb_nb(m, st, q, tg, dofs, seeds, base, cfg.max_iter)
             moved |= cost < base
             base = cost
-        tg, lost = finish_frame_nb(m, st, q, norm, tg, swapped, moved, iters, first)
+        tg, lost = finish_frame_nb(m, st, q, norm, tg, swapped, moved, iters, first, self._ref_ok)
         # lost: start again from the next frame's triangulation
         self._q = None if lost else q
         self.swapped = swapped
