@@ -853,7 +853,8 @@ class HybridTracker:
         free = targets.copy()
         free[n : n + 2][~self._marked_feet] = np.nan
         res_free = self.solver.solve(q, free)
-        q_free, extra = self._bound_relaxation(q, free, res_free.q, dt_s)
+        reached = not worst > self.config.replant_mm  # a carried frame: q holds the markers
+        q_free, extra = self._bound_relaxation(q, free, res_free.q, dt_s, reached)
         feet = self.solver.effector_positions(q_free)[n : n + 2]
         if self.config.start_upright:
             np.maximum(feet[:, 2], self._floor_z_mm, out=feet[:, 2])
@@ -880,7 +881,12 @@ class HybridTracker:
         return max(speeds, default=0.0)
 
     def _bound_relaxation(
-        self, q: FloatArray, free: FloatArray, q_free: FloatArray, dt_s: float | None
+        self,
+        q: FloatArray,
+        free: FloatArray,
+        q_free: FloatArray,
+        dt_s: float | None,
+        reached: bool,
     ) -> tuple[FloatArray, int]:
         """Bound the part of a re-plant's feet-free pose that head and hands do not ask for.
 
@@ -894,7 +900,10 @@ class HybridTracker:
         solve without the pull (what head and hands ask for, kept whole, however far)
         towards ``q_free``; the following frames re-plant again from there, for as many
         frames as the whole move takes at the bound (``_relax_frames``), so the correction
-        is spread, not dropped. Returns the pose and the extra iterations.
+        is spread, not dropped. Where the feet-held pose ``q`` already holds head and
+        hands (``reached``: a frame re-planted only to go on with a cut relaxation), it is
+        what they ask for, and the solve without the pull is skipped. Returns the pose and
+        the extra iterations.
         """
         left, self._relax_frames = self._relax_frames, 0
         if self._q is None or dt_s is None or not dt_s > 0:
@@ -912,8 +921,11 @@ class HybridTracker:
 
         if move_mm(q_free) <= bound_mm:
             return q_free, 0
-        res = self._unpulled.solve(q, free)
-        q_head = res.q
+        if reached:
+            q_head, iterations = q, 0
+        else:
+            res = self._unpulled.solve(q, free)
+            q_head, iterations = res.q, res.iterations
         limit_mm = max(bound_mm, move_mm(q_head))
         lo, hi = 0.0, 1.0
         for _ in range(_RELAX_BISECTION_STEPS):
@@ -925,7 +937,7 @@ class HybridTracker:
         # spread over the frames the whole move takes at the bound, counted from its start
         self._relax_frames = left - 1 if left > 0 else math.ceil(move_mm(q_free) / limit_mm) - 1
         q_out = np.clip(q_head + lo * (q_free - q_head), sk.lower, sk.upper)
-        return q_out, res.iterations
+        return q_out, iterations
 
     def _put_marked_feet(self, targets: FloatArray, sample: HybridSample) -> None:
         """Targets of the feet whose marker set (`foot_sets`) is seen: the markers, which
