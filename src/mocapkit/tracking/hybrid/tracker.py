@@ -572,6 +572,13 @@ class HybridTracker:
         self._unpulled = _CountedSolver(
             skeleton, effectors, replace(self.config.ik, secondary_gain=0.0)
         )
+        #: DoFs of the root, trunk and legs (all but the arms'): those a re-plant's
+        #: relaxation holds back (`_bound_relaxation`); the arms take it whole.
+        arm_dofs = [np.zeros(0, np.int64)] + [
+            np.concatenate([lmb.dofs, lmb.translation_dofs])
+            for lmb in limbs_present(skeleton, "arm")
+        ]
+        self._lower_dofs = np.setdiff1d(np.arange(skeleton.n_dofs), np.concatenate(arm_dofs))
         #: Joints of the pelvis and legs, whose move a re-plant's relaxation bounds.
         self._lower_joints = np.unique(
             np.concatenate(
@@ -896,14 +903,15 @@ class HybridTracker:
         switch in the solve's null space, which head and hands do not see). Where the
         pelvis and legs (`_lower_joints`) would move further than the previous frame's
         pose allows at ``replant_speed_factor`` times the head set's speed plus
-        ``replant_min_speed_mm_s``, the pose is taken that share of the way from the same
-        solve without the pull (what head and hands ask for, kept whole, however far)
-        towards ``q_free``; the following frames re-plant again from there, for as many
-        frames as the whole move takes at the bound (``_relax_frames``), so the correction
-        is spread, not dropped. Where the feet-held pose ``q`` already holds head and
-        hands (``reached``: a frame re-planted only to go on with a cut relaxation), it is
-        what they ask for, and the solve without the pull is skipped. Returns the pose and
-        the extra iterations.
+        ``replant_min_speed_mm_s``, the DoFs of the root, trunk and legs (`_lower_dofs`)
+        are taken that share of the way from the same solve without the pull (what head
+        and hands ask for, kept whole, however far) towards ``q_free``, the arms' are
+        ``q_free``'s (the hands' sets place them, whatever the pelvis does); the following
+        frames re-plant again from there, for as many frames as the whole move takes at
+        the bound (``_relax_frames``), so the correction is spread, not dropped. Where the
+        feet-held pose ``q`` already holds head and hands (``reached``: a frame re-planted
+        only to go on with a cut relaxation), it is what they ask for, and the solve
+        without the pull is skipped. Returns the pose and the extra iterations.
         """
         left, self._relax_frames = self._relax_frames, 0
         if self._q is None or dt_s is None or not dt_s > 0:
@@ -927,16 +935,24 @@ class HybridTracker:
             res = self._unpulled.solve(q, free)
             q_head, iterations = res.q, res.iterations
         limit_mm = max(bound_mm, move_mm(q_head))
+        dofs = self._lower_dofs
+
+        def share(w: float) -> FloatArray:
+            # the pull taken whole on the arms, in part on the root, trunk and legs
+            out = q_free.copy()
+            out[dofs] = q_head[dofs] + w * (q_free[dofs] - q_head[dofs])
+            return out
+
         lo, hi = 0.0, 1.0
         for _ in range(_RELAX_BISECTION_STEPS):
             mid = 0.5 * (lo + hi)
-            if move_mm(q_head + mid * (q_free - q_head)) <= limit_mm:
+            if move_mm(share(mid)) <= limit_mm:
                 lo = mid
             else:
                 hi = mid
         # spread over the frames the whole move takes at the bound, counted from its start
         self._relax_frames = left - 1 if left > 0 else math.ceil(move_mm(q_free) / limit_mm) - 1
-        q_out = np.clip(q_head + lo * (q_free - q_head), sk.lower, sk.upper)
+        q_out = np.clip(share(lo), sk.lower, sk.upper)
         return q_out, iterations
 
     def _put_marked_feet(self, targets: FloatArray, sample: HybridSample) -> None:
