@@ -33,6 +33,9 @@ from mocapkit.io.marker_files import read_markers
 from mocapkit.io.motion_npz import load_motion_npz
 from mocapkit.skeleton.kinematics import forward_kinematics
 
+#: Bones of a leg (after the side prefix, ``l_`` or ``r_``).
+LEG_BONES = ("hip", "femur", "tibia", "foot", "foot_end")
+
 
 def _picture(path: Path, joints: np.ndarray, parents: np.ndarray, frame: int, title: str) -> None:
     import matplotlib
@@ -162,6 +165,9 @@ def main() -> None:
         f"  largest joint speed {fast.value / 1000:.2f} m/s ({fast.name} at {t[fast.frame]:.2f} s, "
         f"{np.linalg.norm(pos[fast.frame] - pos[fast.frame - 1], axis=1).max():.0f} mm in a frame)"
     )
+    legs = [j for j, nm in enumerate(names) if nm == "root" or nm[2:] in LEG_BONES]
+    low = peak(speed[:, legs], tuple(names[j] for j in legs))
+    print(f"  pelvis and legs: {low.value / 1000:.2f} m/s ({low.name} at {t[low.frame]:.2f} s)")
     for what, r in (("pose", r_q), ("BVH", r_bvh)):
         print(
             f"  largest bone roll a frame, {what}: {r.value:.1f} deg ({r.name}, {t[r.frame]:.2f} s)"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -230,6 +231,43 @@ def test_replanted_feet_step_up_onto_a_box_but_never_below_the_floor(truth):
     # solve reach (about 500 mm lower); the solve may pull them a little below it when
     # head and hands are out of reach, as here
     assert ankles.min() >= ankles[0].min() - 60.0
+
+
+#: The canonical joints of the pelvis and legs.
+LOWER = ("pelvis", "left_hip", "left_knee", "left_ankle", "right_hip", "right_knee", "right_ankle")
+
+
+def test_replant_relaxation_is_spread_over_frames_not_a_pop(truth):
+    """Head and hands go 500 mm forward and 100 mm down in 0.2 s and stay: the planted
+    feet hold the body bent and it is re-planted. The feet-free solve's relaxed-pose pull
+    would swing the pelvis and legs under the head in one frame (many times the head's
+    speed, while the markers stand still); bounded, they move at most about the head's
+    pace, and head and hands still reach their markers."""
+    sk, t, _q, pos = truth
+    bent = pos.copy()
+    ramp = np.minimum(np.arange(40), 10)[:, None] / 10.0
+    bent[20:, :, 1] += ramp * 500.0
+    bent[20:, :, 2] -= ramp * 100.0
+    head_peak_mm_s = float(np.max(np.linalg.norm(np.diff(bent[:, 0], axis=0), axis=1)) * RATE)
+    rows = [sk.canonical_names.index(j) for j in LOWER]
+    cfg = HybridConfig(use_video=False)
+    bound_mm_s = cfg.replant_speed_factor * head_peak_mm_s + cfg.replant_min_speed_mm_s
+    peaks, ends = {}, {}
+    for min_speed in (cfg.replant_min_speed_mm_s, 1e12):  # 1e12: no bound
+        tracker = HybridTracker(sk, config=replace(cfg, replant_min_speed_mm_s=min_speed))
+        poses = [tracker.update(s) for s in samples(t, bent)]
+        assert [e for e in tracker.events if e[1] == "feet"]
+        lower = np.array([p.joints_mm[rows] for p in poses])
+        speed = np.linalg.norm(np.diff(lower, axis=0), axis=2).max(axis=1) * RATE
+        peaks[min_speed] = float(speed[15:].max())  # after the first pose settles
+        ends[min_speed] = max(
+            p.residual_mm[n] for p in poses[-5:] for n in ("head", "left_hand", "right_hand")
+        )
+    assert peaks[1e12] > 2.0 * bound_mm_s  # the pop: 15.6 m/s against a head at 2.5
+    # the bound, plus what the balance and smoothing steps add after it
+    assert peaks[cfg.replant_min_speed_mm_s] < 1.25 * bound_mm_s
+    # spread, not dropped: head and hands end on their markers as well as with the pop
+    assert ends[cfg.replant_min_speed_mm_s] <= ends[1e12] + 1.0
 
 
 #: Three markers on the glasses and on each hand-held object (mm from the effector point).

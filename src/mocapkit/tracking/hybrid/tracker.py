@@ -128,6 +128,9 @@ def foot_effectors(skeleton: Skeleton) -> list[Effector]:
 #: configurations is within 0.3 mm of dgesdd's or better (docs/design-notes/hybrid.md,
 #: Speed).
 TRACKING_IK = IKConfig(max_iterations=30, term_clamp_scale=3.0, relax_substeps=3, svd="gesvd")
+#: Bisection steps of the share of a re-plant's relaxation taken in a frame
+#: (`HybridTracker._bound_relaxation`): within 1/64 of the bound.
+_RELAX_BISECTION_STEPS = 6
 #: Bisection steps of the balance lean (`BalanceConfig.bisection_steps`) in ``"solve"`` mode.
 TRACKING_BISECTION_STEPS = 6
 #: The tracker's balance step (without paper mode): the lean bisected in
@@ -249,6 +252,12 @@ class HybridConfig:
         and 42.3 mm at 5, 8 and 11 mm, 44.5 mm at 15 mm, 52.4 mm at 15 mm with the
         feet held at their first height. Raw marker files use 15 mm
         (`mocapkit.pipelines.hybrid.RAW_MARKERS_REPLANT_MM`).
+    replant_speed_factor, replant_min_speed_mm_s : float
+        Speed bound of a re-plant's relaxation (`HybridTracker._replant_if_stepped`):
+        the pelvis and legs move at most ``replant_speed_factor`` times the head set's
+        speed plus ``replant_min_speed_mm_s`` (mm/s) in that part of the re-plant that
+        head and hands do not ask for (the relaxed-pose pull of the feet-free solve);
+        the rest is carried into the next frames.
     plant_feet : bool
         Hold the feet at their initial positions (the paper's assumption). Set False
         for takes where the subject walks; the feet are then free (no foot effector)
@@ -283,6 +292,8 @@ class HybridConfig:
     smoothing_polish_tol_mm: float = 5.0
     smoothing_polish_stall_iterations: int = 3
     replant_mm: float = 8.0
+    replant_speed_factor: float = 1.5
+    replant_min_speed_mm_s: float = 1000.0
     member_offsets_mm: Mapping[str, Mapping[str, Sequence[float]]] = field(default_factory=dict)
     start_upright: bool = True
     posture: str = "standing"
@@ -303,6 +314,12 @@ class HybridConfig:
             raise ConfigError(
                 f"HybridConfig.rejoin_blend_s: expected a finite time >= 0 s, found "
                 f"{self.rejoin_blend_s}"
+            )
+        if not (self.replant_speed_factor >= 0 and self.replant_min_speed_mm_s > 0):
+            raise ConfigError(
+                "HybridConfig: expected replant_speed_factor >= 0 and "
+                f"replant_min_speed_mm_s > 0 mm/s, found {self.replant_speed_factor}, "
+                f"{self.replant_min_speed_mm_s}"
             )
         if not self.gap_limit_s >= 0:
             raise ConfigError(
@@ -571,6 +588,27 @@ class HybridTracker:
             stall_fraction=0.01,
         )
         self._polish = _CountedSolver(skeleton, effectors, polish_cfg)
+        #: The re-plant's feet-free solve without the relaxed-pose pull: only what head
+        #: and hands ask for (`_replant_if_stepped`).
+        self._unpulled = _CountedSolver(
+            skeleton, effectors, replace(self.config.ik, secondary_gain=0.0)
+        )
+        #: DoFs of the root, trunk and legs (all but the arms'): those a re-plant's
+        #: relaxation holds back (`_bound_relaxation`); the arms take it whole.
+        arm_dofs = [np.zeros(0, np.int64)] + [
+            np.concatenate([lmb.dofs, lmb.translation_dofs])
+            for lmb in limbs_present(skeleton, "arm")
+        ]
+        self._lower_dofs = np.setdiff1d(np.arange(skeleton.n_dofs), np.concatenate(arm_dofs))
+        #: Joints of the pelvis and legs, whose move a re-plant's relaxation bounds.
+        self._lower_joints = np.unique(
+            np.concatenate(
+                [
+                    [lmb.parent, *lmb.chain, *([lmb.tip] if lmb.tip >= 0 else [])]
+                    for lmb in limbs_present(skeleton, "leg")
+                ]
+            ).astype(np.int64)
+        )
         # After the video refinement, the balance step's restore of head and hands must
         # not run the relaxed-pose task: it would pull the refined arms back to the IK's
         # swivel (the paper: "each process modifies only a specific part of the pose").
@@ -639,6 +677,10 @@ class HybridTracker:
         self._marked_feet = np.zeros(2, dtype=bool)
         self._support: FloatArray | None = None
         self._root_z0 = 0.0
+        #: Frames left in which a re-plant's relaxation, cut short by its speed bound,
+        #: goes on (`_bound_relaxation`), and the time of the last frame the re-plant saw.
+        self._relax_frames = 0
+        self._replant_time_s: float | None = None
         #: Lowest height (mm) a re-planted foot effector may take: the lower of the
         #: feet's heights in the first pose and the model's ankle height standing on z = 0
         #: (the lab floor), so a subject who starts on a box may later step down from it.
@@ -664,7 +706,13 @@ class HybridTracker:
     @timer.setter
     def timer(self, value: StageTimer) -> None:
         self._timer = value
-        for solver in (self.solver, self._polish, self._restore, self._restore_relaxed):
+        for solver in (
+            self.solver,
+            self._polish,
+            self._restore,
+            self._restore_relaxed,
+            self._unpulled,
+        ):
             solver.timer = value
 
     def refiner(self) -> Refiner:
@@ -839,29 +887,113 @@ class HybridTracker:
         known (``start_upright=False``: the lab floor, z = 0) they stay on it, since the
         free pose's straight legs would put the feet of a subject who jumps or reaches
         up far above where they are (a tennis serve: 440 mm against the ankle markers'
-        165 mm). Returns the pose and the extra iterations.
+        165 mm). The free solve's pull on the pelvis and legs is spread over frames at
+        the head's pace (`_bound_relaxation`). Returns the pose and the extra iterations.
         """
         assert self._feet is not None
         n = len(self.marker_sets)
+        dt_s = None if self._replant_time_s is None else sample.time_s - self._replant_time_s
+        self._replant_time_s = float(sample.time_s)
         worst = np.nanmax(marker_residual_mm) if np.any(np.isfinite(marker_residual_mm)) else 0.0
-        if not worst > self.config.replant_mm:
+        if not worst > self.config.replant_mm and not self._relax_frames > 0:
             return q, 0
         free = targets.copy()
         free[n : n + 2][~self._marked_feet] = np.nan
         res_free = self.solver.solve(q, free)
-        feet = self.solver.effector_positions(res_free.q)[n : n + 2]
+        reached = not worst > self.config.replant_mm  # a carried frame: q holds the markers
+        q_free, extra = self._bound_relaxation(q, free, res_free.q, dt_s, reached)
+        feet = self.solver.effector_positions(q_free)[n : n + 2]
         if self.config.start_upright:
             np.maximum(feet[:, 2], self._floor_z_mm, out=feet[:, 2])
         else:
             feet[:, 2] = self._feet[:, 2]  # the lab floor is known: stay on it
         feet[self._marked_feet] = targets[n : n + 2][self._marked_feet]  # the markers' place
         self._feet = feet
-        self._support = support_points(self.skeleton, res_free.q)
+        self._support = support_points(self.skeleton, q_free)
         targets[n : n + 2] = feet
-        res = self.solver.solve(res_free.q, targets)
+        res = self.solver.solve(q_free, targets)
         self.events.append((sample.time_s, "feet", "replanted"))
-        q, extra = self._hold_feet(res.q, targets)
-        return q, res_free.iterations + res.iterations + extra
+        q, held = self._hold_feet(res.q, targets)
+        return q, res_free.iterations + extra + res.iterations + held
+
+    def _head_speed_mm_s(self) -> float:
+        """The head set's speed over its last two observations (mm/s); the fastest set's
+        without a head set, 0 before two observations."""
+        names = ["head"] if "head" in self._tracks else list(self._tracks)
+        speeds = [
+            float(np.linalg.norm(tr.p[-1] - tr.p[0]) / (tr.t[-1] - tr.t[0]))
+            for tr in (self._tracks[nm] for nm in names)
+            if len(tr.t) == 2 and tr.t[-1] > tr.t[0]
+        ]
+        return max(speeds, default=0.0)
+
+    def _bound_relaxation(
+        self,
+        q: FloatArray,
+        free: FloatArray,
+        q_free: FloatArray,
+        dt_s: float | None,
+        reached: bool,
+    ) -> tuple[FloatArray, int]:
+        """Bound the part of a re-plant's feet-free pose that head and hands do not ask for.
+
+        The feet-free solve's relaxed-pose pull moves the pelvis and legs under the body,
+        which keeps them plausible, but in one frame: a body bent at the hips with its
+        feet held can swing its hips forward and its trunk back by half a metre (a branch
+        switch in the solve's null space, which head and hands do not see). Where the
+        pelvis and legs (`_lower_joints`) would move further than the previous frame's
+        pose allows at ``replant_speed_factor`` times the head set's speed plus
+        ``replant_min_speed_mm_s``, the DoFs of the root, trunk and legs (`_lower_dofs`)
+        are taken that share of the way from the same solve without the pull (what head
+        and hands ask for, kept whole, however far) towards ``q_free``, the arms' are
+        ``q_free``'s (the hands' sets place them, whatever the pelvis does); the following
+        frames re-plant again from there, for as many frames as the whole move takes at
+        the bound (``_relax_frames``), so the correction is spread, not dropped. Where the
+        feet-held pose ``q`` already holds head and hands (``reached``: a frame re-planted
+        only to go on with a cut relaxation), it is what they ask for, and the solve
+        without the pull is skipped. Returns the pose and the extra iterations.
+        """
+        left, self._relax_frames = self._relax_frames, 0
+        if self._q is None or dt_s is None or not dt_s > 0:
+            return q_free, 0
+        cfg = self.config
+        bound_mm = (
+            cfg.replant_speed_factor * self._head_speed_mm_s() + cfg.replant_min_speed_mm_s
+        ) * dt_s
+        sk, lower = self.skeleton, self._lower_joints
+        before = forward_kinematics(sk, self._q)[lower, :3, 3]
+
+        def move_mm(qq: FloatArray) -> float:
+            now = forward_kinematics(sk, qq)[lower, :3, 3]
+            return float(np.max(np.linalg.norm(now - before, axis=1)))
+
+        if move_mm(q_free) <= bound_mm:
+            return q_free, 0
+        if reached:
+            q_head, iterations = q, 0
+        else:
+            res = self._unpulled.solve(q, free)
+            q_head, iterations = res.q, res.iterations
+        limit_mm = max(bound_mm, move_mm(q_head))
+        dofs = self._lower_dofs
+
+        def share(w: float) -> FloatArray:
+            # the pull taken whole on the arms, in part on the root, trunk and legs
+            out = q_free.copy()
+            out[dofs] = q_head[dofs] + w * (q_free[dofs] - q_head[dofs])
+            return out
+
+        lo, hi = 0.0, 1.0
+        for _ in range(_RELAX_BISECTION_STEPS):
+            mid = 0.5 * (lo + hi)
+            if move_mm(share(mid)) <= limit_mm:
+                lo = mid
+            else:
+                hi = mid
+        # spread over the frames the whole move takes at the bound, counted from its start
+        self._relax_frames = left - 1 if left > 0 else math.ceil(move_mm(q_free) / limit_mm) - 1
+        q_out = np.clip(share(lo), sk.lower, sk.upper)
+        return q_out, iterations
 
     def _arm_dofs(self, name: str) -> NDArray[np.int64] | None:
         """The DoFs of the arm a hand set (``<side>_hand``) places; None for other sets."""
@@ -1064,6 +1196,8 @@ class HybridTracker:
         self._filter = None
         self._balance_slope = None
         self._balance_lean = None
+        self._relax_frames = 0
+        self._replant_time_s = None
         self._tracks = {n: _Track() for n in self.marker_sets}
         self.events = []
 
