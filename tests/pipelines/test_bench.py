@@ -56,3 +56,16 @@ def test_hybrid_bench_refuses_zero_repeats():
 
     with pytest.raises(ConfigError, match="bench_hybrid: expected repeats >= 1, found 0"):
         bench_hybrid(repeats=0)
+
+
+def test_hybrid_bench_says_when_it_falls_back_to_the_builtin_motions(tmp_path):
+    from mocapkit.errors import InputWarning
+    from mocapkit.pipelines.bench import BUILTIN_BENCH_CLIPS, bench_sessions
+
+    for spec, (start, seconds) in BUILTIN_BENCH_CLIPS.items():  # cached: nothing rendered
+        folder = tmp_path / f"{spec.split(':')[-1]}_{start:g}+{seconds:g}s_640x480"
+        folder.mkdir()
+        (folder / "session.json").write_text("{}")
+    with pytest.warns(InputWarning, match=r"no-mocap: expected the clips 13_26\.bvh.*built-in"):
+        sessions = bench_sessions(tmp_path, mocap_dir=tmp_path / "no-mocap")
+    assert [s.name for s in sessions] == ["table-tennis_0+4s_640x480", "wave_0+4s_640x480"]

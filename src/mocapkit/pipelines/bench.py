@@ -134,6 +134,18 @@ def bench_sessions(
     if mocap_dir is not None and all((Path(mocap_dir) / c).is_file() for c in BENCH_CLIPS):
         clips = {str(Path(mocap_dir) / c): v for c, v in BENCH_CLIPS.items()}
     else:
+        import warnings
+
+        from mocapkit.errors import InputWarning
+
+        where = f"{mocap_dir}" if mocap_dir is not None else "shared/data/mocap (not found)"
+        warnings.warn(
+            f"{where}: expected the clips {', '.join(BENCH_CLIPS)}; benchmarking the "
+            f"built-in motions {', '.join(BUILTIN_BENCH_CLIPS)} instead (figures not "
+            "comparable with the shared clips')",
+            InputWarning,
+            stacklevel=2,
+        )
         clips = dict(BUILTIN_BENCH_CLIPS)
     out = []
     for spec, (start, seconds) in clips.items():
