@@ -520,7 +520,7 @@ def test_lost_arm_is_started_again_from_the_relaxed_pose():
     hand = tracker.marker_sets.index("right_hand")
     before = np.linalg.norm(tracker.solver.effector_positions(folded)[hand] - targets[hand])
     assert before > 300.0
-    q, iterations = tracker._reseed_lost_arms(folded, targets)
+    q, iterations = tracker._reseed_lost_arms(folded, targets, None)
     assert iterations > 0
     assert np.linalg.norm(tracker.solver.effector_positions(q)[hand] - targets[hand]) < 5.0
     # the frame is solved whole: head and the other hand stay on their sets
@@ -529,11 +529,47 @@ def test_lost_arm_is_started_again_from_the_relaxed_pose():
     near = tracker.solver.effector_positions(folded)
     near[hand] += [0.0, 0.0, 40.0]
     near[3:5] = np.nan
-    same, none = tracker._reseed_lost_arms(folded, near)
+    same, none = tracker._reseed_lost_arms(folded, near, None)
     assert none == 0
     np.testing.assert_array_equal(same, folded)
     with pytest.raises(ConfigError, match="reseed_arm_mm: expected >= 0 mm"):
         HybridConfig(reseed_arm_mm=-1.0)
+
+
+def test_reseeded_arm_does_not_swing_the_pelvis_faster_than_the_bound():
+    """The re-seed's whole-body solve moves the pelvis and legs no further from the
+    previous frame's pose than the re-plant's bound allows (``replant_min_speed_mm_s``
+    over the frame without a head speed), and still brings the hand set closer."""
+    from mocapkit.pipelines.hybrid import hybrid_skeleton
+
+    sk = hybrid_skeleton(1750.0, forearm_rotation=True)
+    cfg = HybridConfig(use_video=False, reseed_arm_mm=50.0)
+    tracker = HybridTracker(sk, config=cfg)
+    omega = tracker.solver.secondary.omega
+    folded = omega.copy()
+    for name, deg in (
+        ("r_shoulder_flexion", -60.0),
+        ("r_shoulder_rotation", -90.0),
+        ("r_elbow_flexion", 150.0),
+    ):
+        folded[sk.dof_index(name)] = np.radians(deg)
+    goal = omega.copy()
+    goal[sk.dof_index("r_shoulder_flexion")] = np.radians(90.0)
+    goal[sk.dof_index("root_tx")] += 150.0  # head and hands ask the body 150 mm aside
+    targets = tracker.solver.effector_positions(goal)
+    targets[3:5] = np.nan
+    hand = tracker.marker_sets.index("right_hand")
+    before = np.linalg.norm(tracker.solver.effector_positions(folded)[hand] - targets[hand])
+    free, _ = tracker._reseed_lost_arms(folded, targets, None)
+    tracker._q = folded  # the previous frame's pose
+    dt_s = 0.02
+    bound_mm = cfg.replant_min_speed_mm_s * dt_s
+    assert tracker._lower_move_mm(free) > 3.0 * bound_mm  # unbounded, it swings
+    q, iterations = tracker._reseed_lost_arms(folded, targets, dt_s)
+    assert iterations > 0
+    assert tracker._lower_move_mm(q) <= bound_mm + 1e-6
+    after = np.linalg.norm(tracker.solver.effector_positions(q)[hand] - targets[hand])
+    assert after < 0.5 * before
 
 
 def test_pelvis_and_foot_sets_drive_the_legs():

@@ -681,6 +681,8 @@ class HybridTracker:
         #: goes on (`_bound_relaxation`), and the time of the last frame the re-plant saw.
         self._relax_frames = 0
         self._replant_time_s: float | None = None
+        #: The time of the last sample solved (the arm re-seed's bound, `_reseed_lost_arms`).
+        self._solved_time_s: float | None = None
         #: Lowest height (mm) a re-planted foot effector may take: the lower of the
         #: feet's heights in the first pose and the model's ankle height standing on z = 0
         #: (the lab floor), so a subject who starts on a box may later step down from it.
@@ -956,29 +958,45 @@ class HybridTracker:
         left, self._relax_frames = self._relax_frames, 0
         if self._q is None or dt_s is None or not dt_s > 0:
             return q_free, 0
-        cfg = self.config
-        bound_mm = (
-            cfg.replant_speed_factor * self._head_speed_mm_s() + cfg.replant_min_speed_mm_s
-        ) * dt_s
-        sk, lower = self.skeleton, self._lower_joints
-        before = forward_kinematics(sk, self._q)[lower, :3, 3]
-
-        def move_mm(qq: FloatArray) -> float:
-            now = forward_kinematics(sk, qq)[lower, :3, 3]
-            return float(np.max(np.linalg.norm(now - before, axis=1)))
-
-        if move_mm(q_free) <= bound_mm:
+        bound_mm = self._lower_bound_mm(dt_s)
+        if self._lower_move_mm(q_free) <= bound_mm:
             return q_free, 0
         if reached:
             q_head, iterations = q, 0
         else:
             res = self._unpulled.solve(q, free)
             q_head, iterations = res.q, res.iterations
-        limit_mm = max(bound_mm, move_mm(q_head))
+        limit_mm = max(bound_mm, self._lower_move_mm(q_head))
+        # spread over the frames the whole move takes at the bound, counted from its start
+        self._relax_frames = (
+            left - 1 if left > 0 else math.ceil(self._lower_move_mm(q_free) / limit_mm) - 1
+        )
+        return self._share_lower(q_head, q_free, limit_mm), iterations
+
+    def _lower_bound_mm(self, dt_s: float) -> float:
+        """How far the pelvis and legs may move in ``dt_s`` (mm): ``replant_speed_factor``
+        times the head set's speed plus ``replant_min_speed_mm_s``."""
+        cfg = self.config
+        return (
+            cfg.replant_speed_factor * self._head_speed_mm_s() + cfg.replant_min_speed_mm_s
+        ) * dt_s
+
+    def _lower_move_mm(self, q: FloatArray) -> float:
+        """The largest move of the pelvis and legs (`_lower_joints`) from the previous
+        frame's pose to ``q`` (mm)."""
+        assert self._q is not None
+        fk = forward_kinematics
+        lower = self._lower_joints
+        move = fk(self.skeleton, q)[lower, :3, 3] - fk(self.skeleton, self._q)[lower, :3, 3]
+        return float(np.max(np.linalg.norm(move, axis=1)))
+
+    def _share_lower(self, q_head: FloatArray, q_free: FloatArray, limit_mm: float) -> FloatArray:
+        """``q_free`` with the root, trunk and leg DoFs (`_lower_dofs`) taken the largest
+        share of the way from ``q_head`` that keeps the pelvis and legs within ``limit_mm``
+        of the previous frame's pose (bisection); the arms' are ``q_free``'s."""
         dofs = self._lower_dofs
 
         def share(w: float) -> FloatArray:
-            # the pull taken whole on the arms, in part on the root, trunk and legs
             out = q_free.copy()
             out[dofs] = q_head[dofs] + w * (q_free[dofs] - q_head[dofs])
             return out
@@ -986,14 +1004,11 @@ class HybridTracker:
         lo, hi = 0.0, 1.0
         for _ in range(_RELAX_BISECTION_STEPS):
             mid = 0.5 * (lo + hi)
-            if move_mm(share(mid)) <= limit_mm:
+            if self._lower_move_mm(share(mid)) <= limit_mm:
                 lo = mid
             else:
                 hi = mid
-        # spread over the frames the whole move takes at the bound, counted from its start
-        self._relax_frames = left - 1 if left > 0 else math.ceil(move_mm(q_free) / limit_mm) - 1
-        q_out = np.clip(share(lo), sk.lower, sk.upper)
-        return q_out, iterations
+        return np.clip(share(lo), self.skeleton.lower, self.skeleton.upper)
 
     def _arm_dofs(self, name: str) -> NDArray[np.int64] | None:
         """The DoFs of the arm a hand set (``<side>_hand``) places; None for other sets."""
@@ -1089,7 +1104,9 @@ class HybridTracker:
                 self._feet[k] = p
                 self._marked_feet[k] = True
 
-    def _reseed_lost_arms(self, q: FloatArray, targets: FloatArray) -> tuple[FloatArray, int]:
+    def _reseed_lost_arms(
+        self, q: FloatArray, targets: FloatArray, dt_s: float | None
+    ) -> tuple[FloatArray, int]:
         """Start an arm again from the relaxed pose where its hand set is lost.
 
         The IK is local and warm-started: an arm driven into its joint limits (a tennis
@@ -1097,8 +1114,11 @@ class HybridTracker:
         can stay folded there, its hand set hundreds of mm off, for seconds. Where a hand
         set is further than ``reseed_arm_mm`` from the model after the solve, the frame
         is solved again with that arm's DoFs set to the relaxed pose (the secondary
-        task's ``omega``), and that solve is kept if it brings the hand set closer.
-        Returns the pose and the extra iterations.
+        task's ``omega``), and that solve is kept if it brings the hand set closer. The
+        whole-body solve may swing the pelvis and legs along with the arm (200 mm in one
+        frame on a tennis serve's racket drop): their move is bounded as the re-plant's
+        is (`_share_lower`, at the head's pace over ``dt_s``, the time since the previous
+        sample); the arm is the re-seeded one. Returns the pose and the extra iterations.
         """
         now = self.solver.effector_positions(q)
         extra = 0
@@ -1114,9 +1134,21 @@ class HybridTracker:
             seed[dofs] = self.solver.secondary.omega[dofs]
             res = self.solver.solve(seed, targets)
             extra += res.iterations
-            if float(res.residual_mm[i]) < off:
-                q = res.q
-                now = self.solver.effector_positions(q)
+            q_new = res.q
+            if self._q is not None and dt_s is not None and dt_s > 0:
+                limit_mm = max(self._lower_bound_mm(dt_s), self._lower_move_mm(q))
+                if self._lower_move_mm(q_new) > limit_mm:
+                    # the arm solved again over the pelvis and trunk the bound allows
+                    frozen = np.zeros(self.skeleton.n_dofs, dtype=bool)
+                    frozen[self._lower_dofs] = True
+                    bounded = self.solver.solve(
+                        self._share_lower(q, q_new, limit_mm), targets, frozen=frozen
+                    )
+                    q_new = bounded.q
+                    extra += bounded.iterations
+            now_new = self.solver.effector_positions(q_new)
+            if float(np.linalg.norm(now_new[i] - targets[i])) < off:
+                q, now = q_new, now_new
         return q, extra
 
     def _hold_feet(self, q: FloatArray, targets: FloatArray) -> tuple[FloatArray, int]:
@@ -1198,6 +1230,7 @@ class HybridTracker:
         self._balance_lean = None
         self._relax_frames = 0
         self._replant_time_s = None
+        self._solved_time_s = None
         self._tracks = {n: _Track() for n in self.marker_sets}
         self.events = []
 
@@ -1256,9 +1289,12 @@ class HybridTracker:
                     q, extra = self._replant_if_stepped(q, targets, res.residual_mm[:n], sample)
                     iterations += extra
                 if self.config.reseed_arm_mm > 0:
-                    q, extra = self._reseed_lost_arms(q, targets)
+                    last = self._solved_time_s
+                    dt_s = None if last is None else float(sample.time_s) - last
+                    q, extra = self._reseed_lost_arms(q, targets, dt_s)
                     iterations += extra
             self._hold_released_arms(q, released)
+            self._solved_time_s = float(sample.time_s)
         refined = False
         edge_fit: dict[str, float] = {}
         ref = (
