@@ -1116,7 +1116,7 @@ class HybridTracker:
         is solved again with that arm's DoFs set to the relaxed pose (the secondary
         task's ``omega``), and that solve is kept if it brings the hand set closer. The
         whole-body solve may swing the pelvis and legs along with the arm (200 mm in one
-        frame on a tennis serve's racket drop): their move is bounded as the re-plant's
+        frame on a real take): their move is bounded as the re-plant's
         is (`_share_lower`, at the head's pace over ``dt_s``, the time since the previous
         sample); the arm is the re-seeded one. Returns the pose and the extra iterations.
         """
