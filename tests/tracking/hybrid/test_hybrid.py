@@ -564,10 +564,11 @@ def test_reseeded_arm_does_not_swing_the_pelvis_faster_than_the_bound():
     tracker._q = folded  # the previous frame's pose
     dt_s = 0.02
     bound_mm = cfg.replant_min_speed_mm_s * dt_s
-    assert tracker._lower_move_mm(free) > 3.0 * bound_mm  # unbounded, it swings
+    prev_mm = tracker._lower_points_mm(folded)
+    assert tracker._lower_move_mm(free, prev_mm) > 3.0 * bound_mm  # unbounded, it swings
     q, iterations = tracker._reseed_lost_arms(folded, targets, dt_s)
     assert iterations > 0
-    assert tracker._lower_move_mm(q) <= bound_mm + 1e-6
+    assert tracker._lower_move_mm(q, prev_mm) <= bound_mm + 1e-6
     after = np.linalg.norm(tracker.solver.effector_positions(q)[hand] - targets[hand])
     assert after < 0.5 * before
 

@@ -959,19 +959,20 @@ class HybridTracker:
         if self._q is None or dt_s is None or not dt_s > 0:
             return q_free, 0
         bound_mm = self._lower_bound_mm(dt_s)
-        if self._lower_move_mm(q_free) <= bound_mm:
+        before = self._lower_points_mm(self._q)
+        if self._lower_move_mm(q_free, before) <= bound_mm:
             return q_free, 0
         if reached:
             q_head, iterations = q, 0
         else:
             res = self._unpulled.solve(q, free)
             q_head, iterations = res.q, res.iterations
-        limit_mm = max(bound_mm, self._lower_move_mm(q_head))
+        limit_mm = max(bound_mm, self._lower_move_mm(q_head, before))
         # spread over the frames the whole move takes at the bound, counted from its start
         self._relax_frames = (
-            left - 1 if left > 0 else math.ceil(self._lower_move_mm(q_free) / limit_mm) - 1
+            left - 1 if left > 0 else math.ceil(self._lower_move_mm(q_free, before) / limit_mm) - 1
         )
-        return self._share_lower(q_head, q_free, limit_mm), iterations
+        return self._share_lower(q_head, q_free, limit_mm, before), iterations
 
     def _lower_bound_mm(self, dt_s: float) -> float:
         """How far the pelvis and legs may move in ``dt_s`` (mm): ``replant_speed_factor``
@@ -981,19 +982,22 @@ class HybridTracker:
             cfg.replant_speed_factor * self._head_speed_mm_s() + cfg.replant_min_speed_mm_s
         ) * dt_s
 
-    def _lower_move_mm(self, q: FloatArray) -> float:
-        """The largest move of the pelvis and legs (`_lower_joints`) from the previous
-        frame's pose to ``q`` (mm)."""
-        assert self._q is not None
-        fk = forward_kinematics
-        lower = self._lower_joints
-        move = fk(self.skeleton, q)[lower, :3, 3] - fk(self.skeleton, self._q)[lower, :3, 3]
+    def _lower_points_mm(self, q: FloatArray) -> FloatArray:
+        """The pelvis and legs (`_lower_joints`) of pose ``q``: positions (L, 3) in mm."""
+        return forward_kinematics(self.skeleton, q)[self._lower_joints, :3, 3]
+
+    def _lower_move_mm(self, q: FloatArray, before: FloatArray) -> float:
+        """The largest move of the pelvis and legs from ``before`` (`_lower_points_mm` of
+        the previous frame's pose) to pose ``q`` (mm)."""
+        move = self._lower_points_mm(q) - before
         return float(np.max(np.linalg.norm(move, axis=1)))
 
-    def _share_lower(self, q_head: FloatArray, q_free: FloatArray, limit_mm: float) -> FloatArray:
+    def _share_lower(
+        self, q_head: FloatArray, q_free: FloatArray, limit_mm: float, before: FloatArray
+    ) -> FloatArray:
         """``q_free`` with the root, trunk and leg DoFs (`_lower_dofs`) taken the largest
         share of the way from ``q_head`` that keeps the pelvis and legs within ``limit_mm``
-        of the previous frame's pose (bisection); the arms' are ``q_free``'s."""
+        of ``before`` (the previous frame's, bisection); the arms' are ``q_free``'s."""
         dofs = self._lower_dofs
 
         def share(w: float) -> FloatArray:
@@ -1004,7 +1008,7 @@ class HybridTracker:
         lo, hi = 0.0, 1.0
         for _ in range(_RELAX_BISECTION_STEPS):
             mid = 0.5 * (lo + hi)
-            if self._lower_move_mm(share(mid)) <= limit_mm:
+            if self._lower_move_mm(share(mid), before) <= limit_mm:
                 lo = mid
             else:
                 hi = mid
@@ -1136,13 +1140,14 @@ class HybridTracker:
             extra += res.iterations
             q_new = res.q
             if self._q is not None and dt_s is not None and dt_s > 0:
-                limit_mm = max(self._lower_bound_mm(dt_s), self._lower_move_mm(q))
-                if self._lower_move_mm(q_new) > limit_mm:
+                before = self._lower_points_mm(self._q)
+                limit_mm = max(self._lower_bound_mm(dt_s), self._lower_move_mm(q, before))
+                if self._lower_move_mm(q_new, before) > limit_mm:
                     # the arm solved again over the pelvis and trunk the bound allows
                     frozen = np.zeros(self.skeleton.n_dofs, dtype=bool)
                     frozen[self._lower_dofs] = True
                     bounded = self.solver.solve(
-                        self._share_lower(q, q_new, limit_mm), targets, frozen=frozen
+                        self._share_lower(q, q_new, limit_mm, before), targets, frozen=frozen
                     )
                     q_new = bounded.q
                     extra += bounded.iterations
