@@ -488,6 +488,12 @@ class _Track:
     blend_start_s: float = math.nan
     blend_offsets: dict[int, FloatArray] = field(default_factory=dict)
 
+    def velocity_mm_s(self) -> FloatArray:
+        """The set's velocity over its last two observations (mm/s); zero before two."""
+        if len(self.t) == 2 and self.t[-1] > self.t[0]:
+            return (self.p[-1] - self.p[0]) / (self.t[-1] - self.t[0])
+        return np.zeros(3)
+
 
 class HybridTracker:
     """Streaming tracker: ``update(sample) -> HybridPose``.
@@ -775,12 +781,7 @@ class HybridTracker:
             if tr.t and not tr.released and gap <= self.config.gap_limit_s:
                 if new_gap:
                     self.events.append((t_m, name, "bridging"))
-                v = (
-                    (tr.p[-1] - tr.p[0]) / (tr.t[-1] - tr.t[0])
-                    if len(tr.t) == 2 and tr.t[-1] > tr.t[0]
-                    else np.zeros(3)
-                )
-                targets[i] = tr.p[-1] + v * (t_m - tr.t[-1])
+                targets[i] = tr.p[-1] + tr.velocity_mm_s() * (t_m - tr.t[-1])
                 bridged.append(name)
             else:
                 if not tr.released:
@@ -922,11 +923,7 @@ class HybridTracker:
         """The head set's speed over its last two observations (mm/s); the fastest set's
         without a head set, 0 before two observations."""
         names = ["head"] if "head" in self._tracks else list(self._tracks)
-        speeds = [
-            float(np.linalg.norm(tr.p[-1] - tr.p[0]) / (tr.t[-1] - tr.t[0]))
-            for tr in (self._tracks[nm] for nm in names)
-            if len(tr.t) == 2 and tr.t[-1] > tr.t[0]
-        ]
+        speeds = [float(np.linalg.norm(self._tracks[nm].velocity_mm_s())) for nm in names]
         return max(speeds, default=0.0)
 
     def _bound_relaxation(
