@@ -11,7 +11,7 @@ the elbow's plausible move in a frame (mm, along its circle) into that window, a
 
 Angles are measured with IVT's signed ``Angle`` (`mocapkit.geometry.rotations.signed_angle_nb`):
 about the shoulder-hand axis, after projecting both elbows onto the plane across it.
-Bringing a particle into the window turns its whole arm about its own shoulder-hand axis:
+Bringing a pose into the window turns its whole arm about its own shoulder-hand axis:
 the hand point and the elbow angle stay where they are.
 """
 
@@ -33,7 +33,7 @@ from mocapkit.geometry.rotations import (
 FloatArray = NDArray[np.float64]
 
 #: Elbows nearer than this to the shoulder-hand axis (mm) have no swivel to bound: the arm
-#: is straight, and a turn about the axis moves the elbow by less than a few mm.
+#: is straight, and even half a turn about the axis moves the elbow under 20 mm.
 MIN_SWIVEL_RADIUS_MM = 10.0
 
 
