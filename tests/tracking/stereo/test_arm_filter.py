@@ -274,10 +274,11 @@ def _favour(f, mode):
     f.weights[75 * mode] = 1.5
 
 
-def test_a_single_frame_elbow_jump_is_held_and_a_lasting_one_taken_a_frame_late():
+def test_a_single_frame_elbow_jump_is_held_and_a_lasting_one_drawn_over_from_a_frame_late():
     """The cues favour the other side of the elbow circle (a step of about 300 mm, over
     the 200 mm the elbow may move in a frame): on one frame only, the estimate stays;
-    on two running, it moves on the second, as it moves at once without the limit."""
+    on two running, it turns towards it on the second by the frame's step along the
+    circle, and reaches it on the third; without the limit it moves at once."""
     f, model, views, rel = _two_elbow_modes()
     step_mm = float(np.linalg.norm(rel[1] - rel[0]))
     assert step_mm > 250.0
@@ -293,8 +294,96 @@ def test_a_single_frame_elbow_jump_is_held_and_a_lasting_one_taken_a_frame_late(
     _favour(f, 1)
     assert np.linalg.norm(elbow() - rel[0]) < 1e-6
     _favour(f, 1)
-    assert np.linalg.norm(elbow() - rel[1]) < 1e-6  # the second frame running: taken
+    turned = elbow()  # the second frame running: drawn over by the step, not a jump
+    assert 0.8 * limit < np.linalg.norm(turned - rel[0]) <= limit
+    assert np.linalg.norm(turned - rel[1]) < step_mm - 0.5 * limit
+    _favour(f, 1)
+    assert np.linalg.norm(elbow() - rel[1]) < 1e-6  # the third: there
     g, model, views, rel = _two_elbow_modes()
     _favour(g, 1)
     free = g._estimate(model, views).points_mm[1] - model.shoulder_base_mm
     assert np.linalg.norm(free - rel[1]) < 1e-6
+
+
+def _other_side_poses():
+    """Two arm poses with one hand: the elbow on either side of its circle (about 300 mm
+    apart), the model with that hand measured, and each pose's outlines as views."""
+    from mocapkit.ik.arm_analytic import arm_ik, make_problem
+
+    cams = _cameras(2)
+    model0 = _model(np.full(3, np.nan))
+    hand = _points(TRUE_X, model0)[3]
+    q, elbows = arm_ik(make_problem(np.eye(3), model0.shoulder_base_mm, hand, A, B), [-2.5, -0.5])
+    model = _model(hand)
+    poses = [np.concatenate([qi, np.zeros(3)]) for qi in q]
+    views = [view_stack(cams, _render_outlines(_points(x, model), cams)) for x in poses]
+    return model, views, elbows
+
+
+def _elbow_track(limit_mm, seed):
+    """Elbows (T, 3) of a filter that sees the first pose 6 frames, the other side of the
+    elbow circle 3 frames, then the first again 4 frames."""
+    model, views, elbows = _other_side_poses()
+    f = ArmParticleFilter("left", ArmFilterConfig(), np.random.default_rng(seed))
+    seen = [0] * 6 + [1] * 3 + [0] * 4
+    return np.array([f.step(model, views[k], limit_mm).points_mm[1] for k in seen]), elbows
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_cue_that_favours_the_other_side_for_three_frames_draws_the_elbow_over_no_jump(seed):
+    """The swivel bound: the elbow moves about the frame's limit along its circle while
+    the cues favour the other side, where the unbounded filter jumps there in a frame
+    (the bound is on the swivel: the perturbed elbow angle and hand axis add a little,
+    hence the 1.25)."""
+    limit = 100.0
+    free, elbows = _elbow_track(math.inf, seed)
+    gap = float(np.linalg.norm(elbows[1] - elbows[0]))
+    assert gap > 250.0
+    assert np.linalg.norm(free[5] - elbows[0]) < 40.0  # settled on the first pose
+    assert np.linalg.norm(np.diff(free, axis=0), axis=1).max() > 0.7 * gap  # a jump
+    bounded, _ = _elbow_track(limit, seed)
+    assert np.linalg.norm(bounded[5] - elbows[0]) < 40.0
+    steps = np.linalg.norm(np.diff(bounded, axis=0), axis=1)
+    assert steps.max() <= 1.25 * limit
+    assert np.linalg.norm(bounded[8] - elbows[0]) > limit  # drawn over, not held
+
+
+def test_the_swivel_bound_turns_a_particle_about_its_own_shoulder_hand_axis():
+    """Particles beyond the window come back to its edge with the hand point and the
+    elbow angle where they were; those within it are untouched."""
+    from mocapkit.geometry.rotations import signed_angle_nb
+    from mocapkit.tracking.stereo.swivel import bound_swivel_nb
+
+    rng = np.random.default_rng(4)
+    model = _model(np.full(3, np.nan))
+    x = np.zeros((200, 7))
+    x[:, :3] = rng.normal(0.0, 1.0, (200, 3))
+    x[:, 3] = rng.uniform(-2.8, -0.3, 200)
+    ref = _points(TRUE_X, model)[1] - model.shoulder_base_mm
+    before = x.copy()
+    window = 0.4
+    n_turned = bound_swivel_nb(x, A, B, ref, window)
+    assert 50 < n_turned < 200
+    np.testing.assert_array_equal(x[:, 3], before[:, 3])
+    moved = 0
+    for i in range(200):
+        p0, p1 = _points(before[i], model), _points(x[i], model)
+        np.testing.assert_allclose(p1[3], p0[3], atol=1e-6)  # the hand point stays
+        axis = p1[3] - p1[0]
+        delta = signed_angle_nb(ref, p1[1] - p1[0], axis)
+        delta0 = signed_angle_nb(ref, p0[1] - p0[0], axis)
+        if abs(delta0) <= window:
+            np.testing.assert_array_equal(x[i], before[i])
+        else:
+            assert abs(abs(delta) - window) < 1e-6 and delta * delta0 > 0
+            moved += 1
+    assert moved == n_turned
+
+
+def test_swivel_window_known_values():
+    from mocapkit.tracking.stereo.swivel import swivel_window_rad
+
+    assert swivel_window_rad(100.0, 200.0) == pytest.approx(0.5)
+    assert swivel_window_rad(700.0, 200.0) == math.inf  # past half the circle: no bound
+    assert swivel_window_rad(100.0, 5.0) == math.inf  # a straight arm: no swivel
+    assert swivel_window_rad(math.inf, 200.0) == math.inf

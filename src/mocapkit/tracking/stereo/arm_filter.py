@@ -55,6 +55,7 @@ from mocapkit.geometry.cones import cone_contour_generators_nb
 from mocapkit.geometry.rotations import matrix_rotvec_nb, rotvec_matrix_nb
 from mocapkit.ik.arm_analytic import ALPHA_RANGE_RAD, arm_ik, make_problem
 from mocapkit.tracking.stereo.fusion import FusionParams, default_fusion, fused_weight_nb
+from mocapkit.tracking.stereo.swivel import bound_swivel_nb, swivel_radius_mm, swivel_window_rad
 
 FloatArray = NDArray[np.float64]
 Float32Array = NDArray[np.float32]
@@ -448,6 +449,10 @@ class ArmParticleFilter:
         self._elbow_rel: FloatArray | None = None
         #: a jump of the estimate's mode held back last frame: its elbow (mm), else None
         self._held_jump: FloatArray | None = None
+        #: the last estimate's elbow relative to its shoulder, torso frame (mm), and its
+        #: distance from the shoulder-hand axis (the swivel bound's reference)
+        self._elbow_torso: FloatArray | None = None
+        self._swivel_radius_mm = 0.0
 
     def _noise_scale(self) -> tuple[float, float]:
         c = self.config
@@ -492,11 +497,16 @@ class ArmParticleFilter:
         """One frame: ``n_runs`` runs, the first with IK samples; returns the estimate.
 
         ``max_elbow_step_mm``: with the ``mode`` estimate, the farthest the elbow may move
-        relative to its shoulder since the last estimate before a jump of the mode must
-        be confirmed: a heaviest particle beyond it is taken only when the next frame's
-        heaviest lies there again; until then the estimate stays in the mode within
-        reach (the cues at times favour the other side of the elbow circle for a
-        single frame)."""
+        in this frame relative to its shoulder. The estimate's swivel (the elbow's angle
+        about its shoulder-hand axis) turns at most that far along the elbow's circle
+        from the last estimate's (`mocapkit.tracking.stereo.swivel`): where the cues
+        favour the other side of the circle for a few frames, the elbow is drawn over at
+        that speed and back, never in one jump, while the particles keep sampling the
+        whole circle (the paper's IK sampling, which finds the right side again after a
+        wrong one). A heaviest particle whose elbow lies beyond the step (the
+        other side of the circle, or a move of the hand axis) is taken only when the next
+        frame's heaviest lies there again; until then the estimate stays in the mode
+        within reach."""
         c = self.config
         n = c.n_particles
         have_hand = bool(np.all(np.isfinite(model.hand_mm)))
@@ -560,6 +570,7 @@ class ArmParticleFilter:
     ) -> ArmEstimate:
         w = self.weights / max(self.weights.sum(), 1e-300)
         p = self.particles
+        window = math.inf
         if self.config.estimate == "mode":
             # the weighted mean of the particles whose elbow lies near the best one's: the
             # elbow circle often leaves two modes, whose mean would be neither
@@ -567,6 +578,8 @@ class ArmParticleFilter:
             _elbows_nb(p, model, elbows)
             elbow_rel = elbows - model.shoulder_base_mm
             best = self._mode_particle(w, elbow_rel, max_elbow_step_mm)
+            if self._elbow_torso is not None:
+                window = swivel_window_rad(max_elbow_step_mm, self._swivel_radius_mm)
             near = np.linalg.norm(elbows - elbows[best], axis=1) < self.config.mode_radius_mm
             w = np.where(near, w, 0.0)
             w /= w.sum()
@@ -584,6 +597,9 @@ class ArmParticleFilter:
         state[:3] = rv
         state[3] = float(w @ p[:, 3])
         state[4:] = w @ p[:, 4:]
+        if math.isfinite(window):
+            a, b, o = (float(v) for v in model.lengths_mm)
+            bound_swivel_nb(state[None, :], a, b + o, np.asarray(self._elbow_torso), window)
         one = state[None, :].copy()
         wt, eg, d2 = np.empty(1), np.empty(1), np.empty(1)
         arm_weights_nb(one, model, views, self.config.fusion, self.prev_dist_sq, wt, eg, d2)
@@ -592,6 +608,9 @@ class ArmParticleFilter:
         pts = np.empty((4, 3))
         arm_points_nb(state, model, pts)
         self._elbow_rel = pts[1] - model.shoulder_base_mm
+        rb_t = model.base_rotation.T
+        self._elbow_torso = rb_t @ (pts[1] - pts[0])
+        self._swivel_radius_mm = swivel_radius_mm(self._elbow_torso, rb_t @ (pts[3] - pts[0]))
         return ArmEstimate(
             state,
             pts,

@@ -134,11 +134,14 @@ class StereoConfig:
     elbow_jump_mm_per_s : float
         The fastest an elbow may move relative to its shoulder from one frame to the
         next: the arm filter's cues at times favour the other side of the elbow circle
-        for a single frame (the elbow above the head while the hand is right), so a
-        faster move of the estimate is held back a frame and taken only when the next
-        frame's cues favour it again (`ArmParticleFilter.step`); a move taken is
-        flagged as a jump (``<side>_elbow_jump`` in fit.csv). About twice the fastest
-        true elbow of the tuning clips (3.2 m/s at 30 Hz).
+        for a frame or a few (the elbow above the head while the hand is right). The
+        estimate's swivel about the shoulder-hand axis turns at most this fast along
+        the elbow's circle, and a faster move of the estimate is held back a frame and
+        taken only when the next frame's cues favour it again
+        (`ArmParticleFilter.step`); a move faster than this (the hand's) is flagged as
+        a jump (``<side>_elbow_jump`` in fit.csv). About twice the fastest true elbow
+        of the tuning clips (3.2 m/s at 30 Hz; their fastest swivel along the circle
+        2.8-3.6 m/s).
     seed : int
     """
 
