@@ -50,8 +50,8 @@ def register_method(methods: Any) -> None:
             default=None,
             help="fit: the full-body model fitted to the keypoints; filter: the paper's arm "
             "particle filters with head and hands from the keypoints; skin: the paper's skin "
-            "blobs; auto: fit when every camera has keypoints, else skin (default "
-            "%(stated_default)s)",
+            "blobs; auto: with keypoints for every camera the fit, or filter on a narrow "
+            "pair; without them skin (default %(stated_default)s)",
         ),
         "mocapkit.pipelines.multiview:resolve_stereo_method.method",
     )
