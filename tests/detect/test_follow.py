@@ -1,4 +1,5 @@
-"""Person following: the chosen person kept by position and size, bystanders never taken."""
+"""Following during detection: the chosen person kept through a crossing, the region of a
+one-person backend searched, only the followed person written."""
 
 from __future__ import annotations
 
@@ -7,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from mocapkit.cues.follow import PersonFollower
 from mocapkit.detect.backend import N_BODY_25, PersonPose
-from mocapkit.detect.follow import PersonFollower, person_box
 from mocapkit.detect.run import detect_frames, detect_video, video_source
 from mocapkit.io.openpose import read_openpose_frame
 
@@ -72,15 +73,6 @@ def _x(pose: PersonPose | None) -> float:
     return float(pose.keypoints[:, 0].mean())
 
 
-def test_person_box_needs_two_confident_points() -> None:
-    kp = np.zeros((N_BODY_25, 3))
-    kp[0] = [10, 20, 0.9]
-    assert person_box(kp) is None
-    kp[1] = [30, 60, 0.9]
-    kp[2] = [500, 500, 0.1]  # below the confidence floor
-    assert person_box(kp) == (10.0, 20.0, 30.0, 60.0)
-
-
 @pytest.mark.parametrize("start_px", [(100.0, 240.0), None])
 def test_the_chosen_person_is_kept_through_a_crossing(
     rng: np.random.Generator, start_px: tuple[float, float] | None
@@ -101,19 +93,6 @@ def test_single_person_backend_searches_the_followed_region(rng: np.random.Gener
     np.testing.assert_allclose([_x(p) for p, _ in out], [100 + 4 * t for t in range(40)],
                                atol=200 / 6)  # fmt: skip
     assert all(roi for _, roi in out)  # the whole frame always gave the bystander
-
-
-def test_a_bystander_far_off_is_never_taken(rng: np.random.Generator) -> None:
-    follower = PersonFollower()
-    assert follower.choose(0, [_person(100, 240, 200, rng)]) == 0
-    # the subject leaves; a person elsewhere appears: nobody, not the bystander
-    assert follower.choose(1, [_person(500, 240, 200, rng)]) is None
-    assert follower.choose(2, [_person(108, 240, 200, rng)]) == 0
-    # right place, but twice the size: someone else (nearer the camera)
-    assert follower.choose(3, [_person(110, 240, 420, rng)]) is None
-    # the subject leaves the image; long after, someone enters far away: not them
-    assert follower.choose(60, [_person(600, 240, 200, rng)]) is None
-    assert follower.choose(61, [_person(150, 240, 200, rng)]) == 0
 
 
 def test_detect_video_writes_the_followed_person_only(

@@ -15,7 +15,6 @@ from mocapkit.io.openpose import (
     NECK_FRACTION,
     PELVIS_ABOVE_HIPS,
     PELVIS_FRACTION,
-    follow_person,
     openpose_from_canonical,
     place_trunk_joints,
     read_openpose_folder,
@@ -97,14 +96,6 @@ def test_follows_the_largest_person_through_crossings_and_gaps(tmp_path: Path) -
     # asking for the other person by an image point follows them instead
     kp2 = read_openpose_folder(tmp_path / "op", np.arange(n) / 30.0, start_px=(420, 250))
     np.testing.assert_allclose(kp2.pixels[0, wrist], other[0][wrist], atol=1e-3)
-
-
-def test_follow_person_rejects_a_far_jump() -> None:
-    rng = np.random.default_rng(62)
-    a = _person(rng, (200, 240), 200)
-    b = _person(rng, (600, 240), 200)
-    out = follow_person([a[None], b[None], a[None]], max_jump=0.2)
-    assert np.isnan(out[1]).all() and np.isfinite(out[2]).all()
 
 
 def test_bad_files_are_refused(tmp_path: Path) -> None:
@@ -217,21 +208,48 @@ def test_a_folder_gets_its_take_s_own_neck_and_pelvis(tmp_path: Path) -> None:
     )
 
 
-def test_follow_person_keeps_a_subject_seen_only_in_part() -> None:
+def test_a_subject_seen_only_in_part_is_followed(tmp_path: Path) -> None:
     """A subject leaving the image down to one arm is still followed (the size is the
     whole body's, not that of the points seen in the frame)."""
     rng = np.random.default_rng(66)
     subject = _person(rng, (300, 240), 200)
     other = _person(rng, (520, 240), 120)
     step = np.array([4.0, 0.0])
-    frames = []
+    frames, want = [], []
     for t in range(6):
         s = subject + t * step
         if t >= 2:
             keep = ["left_elbow", "left_wrist"] if t < 4 else ["left_wrist"]
             s = np.where(np.isin(MAPPED_JOINTS, keep)[:, None], s, np.nan)
-        frames.append(np.stack([other, s]))
-    out = follow_person(frames)
+        want.append(s)
+        frames.append([openpose_from_canonical(p[None], MAPPED_JOINTS)[0] for p in (other, s)])
+    _write_frames(tmp_path / "op", frames, "BODY_25")
+    kp = read_openpose_folder(tmp_path / "op", np.arange(6) / 30.0)
     wrist = MAPPED_JOINTS.index("left_wrist")
     for t in range(6):
-        np.testing.assert_allclose(out[t, wrist], subject[wrist] + t * step)
+        np.testing.assert_allclose(kp.pixels[t, wrist], subject[wrist] + t * step)
+    assert np.isnan(kp.pixels[4:, MAPPED_JOINTS.index("left_elbow")]).all()
+
+
+def test_a_folder_written_by_the_detection_keeps_every_frame_it_wrote(tmp_path: Path) -> None:
+    """The folder's reader follows by the detection's own rule on the same points: each
+    frame that `mocapkit detect` wrote (the person it followed, or nobody) is kept."""
+    from mocapkit.cues.follow import PersonFollower, seen_points
+
+    rng = np.random.default_rng(67)
+    n = 40
+    follower = PersonFollower()
+    frames = []
+    for t in range(n):
+        # a person who jumps about at random, at times further than the rule allows
+        p = _person(rng, (300 + rng.normal(scale=30), 240 + rng.normal(scale=30)), 200)
+        if t % 9 == 4:
+            p = p[None] * 0.0 + [600.0, 100.0] + rng.normal(scale=60, size=p.shape)
+            p = p[0]
+        det = openpose_from_canonical(p[None], MAPPED_JOINTS)[0]
+        frames.append([det] if follower.choose(t, [seen_points(det)]) is not None else [])
+    written = np.array([bool(f) for f in frames])
+    assert 0 < written.sum() < n  # the detection dropped some frames
+    _write_frames(tmp_path / "op", frames, "BODY_25")
+    kp = read_openpose_folder(tmp_path / "op", np.arange(n) / 30.0)
+    np.testing.assert_array_equal(np.isfinite(kp.pixels).any(axis=(1, 2)), written)

@@ -36,10 +36,29 @@ def ring_session(tmp_path_factory) -> Path:
     return folder
 
 
-def test_fit_is_the_default_with_keypoints(ring_session, tmp_path, capsys) -> None:
+def _count_loads(monkeypatch) -> list[Path]:
+    """The folders of every `Session` built from now on (each one reads the whole folder)."""
+    from mocapkit.io.session import Session
+
+    loads: list[Path] = []
+    init = Session.__init__
+
+    def counted(self, path) -> None:  # type: ignore[no-untyped-def]
+        loads.append(Path(path))
+        init(self, path)
+
+    monkeypatch.setattr(Session, "__init__", counted)
+    return loads
+
+
+def test_fit_is_the_default_with_keypoints(ring_session, tmp_path, capsys, monkeypatch) -> None:
     assert resolve_stereo_method(ring_session) == "fit"
     out = tmp_path / "result"
+    loads = _count_loads(monkeypatch)
     assert main(["track", "stereo", str(ring_session), "--out", str(out)]) == 0
+    # the session is read once for the choice of method and the fit (the evaluation
+    # against the truth reads it once more)
+    assert loads == [ring_session] * 2
     said = capsys.readouterr().out
     assert "fitted 31 frames" in said and "smoothing butterworth" in said
     rep = evaluate_result(out, ring_session, joints=ARMS_LEGS)
@@ -85,7 +104,9 @@ def test_without_keypoints_or_detector_auto_is_skin(ring_session, tmp_path, monk
     assert resolve_stereo_method(bare) == "skin"
     assert resolve_stereo_method(bare, "filter") == "filter"
     out = tmp_path / "r"
+    loads = _count_loads(monkeypatch)
     track_stereo_auto(ring_session, out)
+    assert loads == [ring_session]  # once, for the choice of method and the tracker
     assert far_spans_in_folder(out) == []
     assert (out / "fit.csv").is_file()
 

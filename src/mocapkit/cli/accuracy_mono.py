@@ -81,7 +81,9 @@ def add_mono_accuracy_parser(methods: Any) -> None:
         help="track the legs too (track mono --legs) and measure the whole body instead of "
         "the upper body",
     )
-    m.add_argument("--lag", type=int, default=None, help="online fixed lag (frames)")
+    m.add_argument(
+        "--lag", type=int, default=None, help="online fixed lag (frames; default: offline, exact)"
+    )
     shows_default(
         m.add_argument("--cost", choices=COSTS, help="edge weight (default %(stated_default)s)"),
         f"{MONO}.cost",

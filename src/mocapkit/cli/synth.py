@@ -102,7 +102,10 @@ def register(subparsers: argparse._SubParsersAction[argparse.ArgumentParser]) ->
         field = flag[2:].replace("-", "_")
         shows_default(p.add_argument(flag, default=None, **kwargs), f"{_SYNTH}.{field}")
     p.add_argument(
-        "--height-mm", type=float, default=None, help="scale the skeleton to this stature"
+        "--height-mm",
+        type=float,
+        default=None,
+        help="scale the skeleton to this stature (default: the motion's own)",
     )
     p.add_argument("--asf", default=None, help="ASF skeleton of an AMC motion")
     stated = {

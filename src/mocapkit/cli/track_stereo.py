@@ -8,10 +8,13 @@ from __future__ import annotations
 
 import argparse
 import json
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from mocapkit.cli.args import given, output_folder, shows_default
 from mocapkit.tracking.multiview.config import SMOOTHING, STEREO_METHODS, MultiviewRunConfig
+
+if TYPE_CHECKING:
+    from mocapkit.io.session import Session
 
 #: The stereo tracker's settings (the paper's tracker: heavy to import, read by --help only)
 _STEREO = "mocapkit.tracking.stereo.tracker:StereoConfig"
@@ -47,8 +50,8 @@ def register_method(methods: Any) -> None:
             default=None,
             help="fit: the full-body model fitted to the keypoints; filter: the paper's arm "
             "particle filters with head and hands from the keypoints; skin: the paper's skin "
-            "blobs; auto: fit when every camera has keypoints, else skin (default "
-            "%(stated_default)s)",
+            "blobs; auto: with keypoints for every camera the fit, or filter on a narrow "
+            "pair; without them skin (default %(stated_default)s)",
         ),
         "mocapkit.pipelines.multiview:resolve_stereo_method.method",
     )
@@ -124,6 +127,7 @@ def _run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from mocapkit.errors import ConfigError
+    from mocapkit.io.session import load_session
     from mocapkit.pipelines.multiview import resolve_stereo_method
     from mocapkit.pipelines.run import find_gaps
     from mocapkit.pipelines.stereo import evaluate_stereo, track_stereo_session
@@ -143,9 +147,10 @@ def _run(args: argparse.Namespace) -> int:
     )
     if args.method == "auto" and paper_options:
         args.method = "skin"  # the paper's tracker's options: the paper's tracker
-    method = resolve_stereo_method(args.session, args.method, args.cameras)
+    session = load_session(args.session)  # read once, for the choice and the tracker
+    method = resolve_stereo_method(session, args.method, args.cameras)
     if method == "fit":
-        return _run_fit(args)
+        return _run_fit(args, session)
     if method == "filter" and args.method == "auto":
         print(
             "the views are a narrow pair (optical axes less than 20 deg apart): the paper's "
@@ -169,7 +174,7 @@ def _run(args: argparse.Namespace) -> int:
     if args.fixed_shoulders:
         cfg = replace(cfg, arm=replace(cfg.arm, adaptive_shoulder=False))
     run = track_stereo_session(
-        args.session,
+        session,
         args.out,
         cameras=args.cameras,
         use_keypoints=args.keypoints,
@@ -197,7 +202,7 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_fit(args: argparse.Namespace) -> int:
+def _run_fit(args: argparse.Namespace, session: Session) -> int:
     """``--method fit``: the full-body model fitted to the keypoints."""
     from dataclasses import replace
     from pathlib import Path
@@ -216,7 +221,7 @@ def _run_fit(args: argparse.Namespace) -> int:
         if value != default:
             raise ConfigError(f"{flag} belongs to --method filter or skin, not to the fit")
     cfg = replace(MultiviewRunConfig(), smoothing=args.smooth, cutoff_hz=args.cutoff_hz)
-    run = track_multiview_session(args.session, args.out, cameras=args.cameras, config=cfg)
+    run = track_multiview_session(session, args.out, cameras=args.cameras, config=cfg)
     for gap in find_gaps(run.results):
         print(f"gap: {gap}")
     for joint, t0, t1, n in run.far:

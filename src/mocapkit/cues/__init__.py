@@ -1,1 +1,2 @@
-"""Image cues: edges and their distance transform, skin colour, blobs."""
+"""Image cues: edges and their distance transform, skin colour, blobs; the person followed
+among 2-D detections."""

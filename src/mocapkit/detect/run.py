@@ -1,7 +1,8 @@
 """Run a detector over a video or a session: OpenPose JSON per frame, keypoints CSV, 3-D.
 
 `detect_frames` runs a `Detector` frame by frame and follows one person
-(`mocapkit.detect.follow.PersonFollower`); a backend that finds one person per call
+(`mocapkit.cues.follow.PersonFollower`, on the keypoints seen with confidence
+`mocapkit.cues.follow.MIN_CONFIDENCE` or more); a backend that finds one person per call
 (MediaPipe) is asked again on the region round the followed person's last box whenever
 the whole frame gives someone else or nobody. Only the followed person enters the
 result; bystanders never do.
@@ -38,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from mocapkit.cues.follow import PersonFollower, seen_points
 from mocapkit.detect.backend import (
     N_BODY_25,
     Detector,
@@ -48,7 +50,6 @@ from mocapkit.detect.backend import (
     install_hint,
     make_detector,
 )
-from mocapkit.detect.follow import PersonFollower
 from mocapkit.errors import ConfigError, SessionError, ShapeError
 from mocapkit.io.atomic import atomic_folder, atomic_save_npz, atomic_write
 from mocapkit.io.openpose import (
@@ -112,11 +113,11 @@ def detect_frames(
         region = None if detector.multi_person else follower.search_region(img.shape)
         roi_used = region is not None and detector.roi_first
         people = _detect(detector, img, region if roi_used else None)
-        pick = follower.choose(t, people)
+        pick = follower.choose(t, [seen_points(p.keypoints) for p in people])
         if pick is None and region is not None:
             roi_used = not roi_used
             people = _detect(detector, img, region if roi_used else None)
-            pick = follower.choose(t, people)
+            pick = follower.choose(t, [seen_points(p.keypoints) for p in people])
         yield (people[pick] if pick is not None else None), roi_used
 
 

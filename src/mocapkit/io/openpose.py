@@ -41,18 +41,13 @@ Mapping onto canonical joints (`CANONICAL_JOINTS`):
   pelvis, keeps the fixed pair ``NECK_FRACTION`` 0.81 and ``PELVIS_FRACTION`` 0.25 (the
   clips' medians), which `to_canonical` also uses frame by frame (for following).
 
-Several people: one person is followed through the video (`follow_person`). In the first
-frame with anyone seen, the person with the largest bounding box of confident points
-(nearest the camera, usually the subject) is chosen, or the one nearest a given image
-point. In each later frame, the person whose points lie closest (mean distance over the
-joints seen in both) to the followed person's last seen points is taken, if that distance
-is within ``max_jump`` times the followed person's size times the frames since they were
-last seen; otherwise the frame has no one (NaN) and the last seen points are kept for the
-next frame. The size is the bounding-box diagonal of every joint at its last seen place,
-so a partial view (one arm at the image's edge) does not shrink it (with the size of the
-points seen in the frame alone, a person down to an elbow and a wrist got a jump limit of
-a forearm, and one down to a wrist none: one clip lost 9 such frames).
-Everyone else is ignored.
+Several people: one person is followed through the video by the rule `mocapkit detect`
+follows them with (`mocapkit.cues.follow.PersonFollower`), on the file's own keypoints
+seen with at least ``min_confidence``: the largest person of the first frame with anyone
+seen, or the one at a given image point; then in each frame the person nearest the
+followed one's last seen points, if near enough and of a like size; otherwise nobody
+(NaN). Everyone else is ignored. On a folder `mocapkit detect` wrote (the person it
+followed, or nobody, per frame) this keeps every frame it wrote.
 """
 
 from __future__ import annotations
@@ -67,6 +62,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from mocapkit.cues.follow import MIN_CONFIDENCE, PersonFollower, seen_points
 from mocapkit.errors import ConfigError, FormatError, SessionError, ShapeError
 from mocapkit.io.files import read_text
 from mocapkit.io.frame_files import in_frame_order
@@ -204,7 +200,7 @@ LAYOUTS_BY_NAME: dict[str, tuple[str, ...]] = {name: kps for name, kps in LAYOUT
 def to_canonical(
     people: ArrayLike,
     layout: str,
-    min_confidence: float = 0.3,
+    min_confidence: float = MIN_CONFIDENCE,
     fractions: tuple[float, float] = (NECK_FRACTION, PELVIS_FRACTION),
 ) -> FloatArray:
     """Map detector keypoints (P, J, 3) onto canonical joints (P, len(MAPPED_JOINTS), 2).
@@ -348,80 +344,11 @@ def _quiet_nanmean() -> Iterator[None]:
         yield
 
 
-def _size(points: FloatArray) -> float:
-    ok = np.isfinite(points).all(axis=-1)
-    if ok.sum() < 2:
-        return 0.0
-    span = points[ok].max(axis=0) - points[ok].min(axis=0)
-    return float(np.hypot(span[0], span[1]))
-
-
-def follow_person(
-    frames: Sequence[FloatArray],
-    max_jump: float = 0.2,
-    start_px: ArrayLike | None = None,
-) -> FloatArray:
-    """Follow one person through per-frame candidates; see the module docstring.
-
-    Parameters
-    ----------
-    frames : sequence of (P_t, K, 2) float
-        Canonical keypoints of every person in each frame (NaN where missing).
-    max_jump : float
-        Largest accepted mean displacement per frame, in units of the person's size.
-    start_px : (2,) float, optional
-        Choose at the start the person whose points' mean is nearest this image point
-        instead of the largest one.
-
-    Returns
-    -------
-    (T, K, 2) float
-        The followed person's keypoints; NaN in frames where they are not found.
-    """
-    if not frames:
-        return np.zeros((0, 0, 2))
-    k = max(f.shape[1] for f in frames if f.ndim == 3) if frames else 0
-    out = np.full((len(frames), k, 2), np.nan)
-    last: FloatArray | None = None
-    last_size = 0.0
-    last_t = 0
-    for t, cands in enumerate(frames):
-        if cands.shape[0] == 0:
-            continue
-        if last is None:
-            if start_px is not None:
-                centre = np.asarray(start_px, dtype=float)
-                with _quiet_nanmean():
-                    d = [np.linalg.norm(np.nanmean(c, axis=0) - centre) for c in cands]
-                pick = int(np.nanargmin(np.where(np.isfinite(d), d, np.inf)))
-            else:
-                pick = int(np.argmax([_size(c) for c in cands]))
-            if _size(cands[pick]) == 0.0:
-                continue
-        else:
-            seen_last: NDArray[np.bool_] = np.asarray(np.isfinite(last).all(axis=-1), dtype=bool)
-            both = np.isfinite(cands).all(axis=-1) & seen_last[None, :]
-            dist = np.full(cands.shape[0], np.inf)
-            for i in range(cands.shape[0]):
-                if both[i].any():
-                    dist[i] = np.linalg.norm(cands[i][both[i]] - last[both[i]], axis=-1).mean()
-            pick = int(np.argmin(dist))
-            if not dist[pick] <= max_jump * last_size * (t - last_t):
-                continue
-        out[t] = cands[pick]
-        seen = np.isfinite(cands[pick]).all(axis=-1)
-        last = out[t].copy() if last is None else np.where(seen[:, None], out[t], last)
-        last_size = max(_size(last), 1e-9)
-        last_t = t
-    return out
-
-
 def read_openpose_folder(
     folder: str | os.PathLike[str],
     time_s: ArrayLike,
-    min_confidence: float = 0.3,
-    max_jump: float = 0.2,
-    start_px: ArrayLike | None = None,
+    min_confidence: float = MIN_CONFIDENCE,
+    start_px: tuple[float, float] | None = None,
     fractions: tuple[float, float] | None = None,
 ) -> Keypoints:
     """Canonical keypoints of the followed person in an OpenPose JSON folder.
@@ -434,8 +361,9 @@ def read_openpose_folder(
         Frame times (the video's); T must equal the number of files.
     min_confidence : float
         Points below this confidence are missing.
-    max_jump, start_px
-        See `follow_person`.
+    start_px : (x, y), optional
+        Follow the person at this image point of the first frame with anyone (default:
+        the largest; `mocapkit.cues.follow.PersonFollower`).
     fractions : (f_n, f_p), optional
         Places of the neck and pelvis on the hip-to-shoulder midpoint line; default: the
         followed person's own over the take (`trunk_fractions`).
@@ -447,26 +375,25 @@ def read_openpose_folder(
             f"{folder}: expected one JSON file per video frame ({t.shape[0]} frames), found "
             f"{len(files)} files"
         )
-    frames: list[FloatArray] = []
+    follower = PersonFollower(start_px=start_px)
+    px = np.full((len(files), len(MAPPED_JOINTS), 2), np.nan)
     layout_seen = ""
-    for f in files:
+    people_seen = 0
+    for i, f in enumerate(files):
         layout, people = read_openpose_frame(f)
         if layout and layout_seen and layout != layout_seen:
             raise FormatError(f"{f}: {layout} keypoints in a folder of {layout_seen} files")
         layout_seen = layout_seen or layout
-        frames.append(
-            to_canonical(people, layout, min_confidence)
-            if layout
-            else np.zeros((0, len(MAPPED_JOINTS), 2))
-        )
-    px = follow_person(frames, max_jump=max_jump, start_px=start_px)
+        people_seen += people.shape[0]
+        pick = follower.choose(i, [seen_points(p, min_confidence) for p in people])
+        if pick is not None:
+            px[i] = to_canonical(people[pick : pick + 1], layout, min_confidence)[0]
     if not np.isfinite(px).any():
-        people = sum(f.shape[0] for f in frames)
         raise SessionError(
             f"{folder}: expected a person's keypoints, found "
             + (
                 f"nobody detected in any of its {len(files)} OpenPose files"
-                if people == 0
+                if people_seen == 0
                 else f"no confident keypoints (confidence >= {min_confidence:g}) in any of its "
                 f"{len(files)} OpenPose files"
             )

@@ -634,9 +634,13 @@ def _refuse_non_folder(path: Path) -> None:
         raise SessionError(f"{path}: expected a folder, found a file")
 
 
-def load_session(path: str | os.PathLike[str]) -> Session:
-    """Load and validate a session folder; errors name the file, what was expected and found."""
-    return Session(path)
+def load_session(path: str | os.PathLike[str] | Session) -> Session:
+    """Load and validate a session folder; errors name the file, what was expected and found.
+
+    A `Session` already loaded is returned as it is (so that a caller that loaded it to
+    decide something passes it on instead of the folder being read again).
+    """
+    return path if isinstance(path, Session) else Session(path)
 
 
 def _vector3(value: Any) -> FloatArray | None:

@@ -350,7 +350,10 @@ def _run(
         "after an untimed warm-up that compiles the Numba kernels."
     )
     tell(MONO_NOTE)
-    tell(f"open {rows['hybrid'].result_dir / 'motion.bvh'} in Blender (File > Import > BVH).")
+    tell(
+        f"open {rows['hybrid'].result_dir / 'motion.bvh'} in Blender (File > Import > Motion "
+        "Capture (.bvh), with Update Scene FPS and Update Scene Duration ticked)."
+    )
     if not all(np.isfinite(row.report.elbow_mm) for row in rows.values()):
         say("warning: a tracker produced no comparable pose")
     for jump in elbow_jumps_in_folder(rows["stereo"].result_dir):

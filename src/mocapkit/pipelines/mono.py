@@ -36,6 +36,7 @@ from mocapkit.io.session import Session, load_session
 from mocapkit.io.session_csv import Keypoints, read_keypoints_csv
 from mocapkit.pipelines.camera_check import check_session_cameras, warn_placed_subject
 from mocapkit.pipelines.mono_frames import MonoFrames, camera_joints
+from mocapkit.pipelines.result_table import ResultTable
 from mocapkit.pipelines.run import check_result_folder, run_tracker
 from mocapkit.progress import Progress
 from mocapkit.tracking.base import FrameResult
@@ -140,9 +141,8 @@ class MonoRun:
     model : StickModel
     px_per_mm : float
         Image scale used to turn orthographic px into mm (NaN for the other models).
-    results : sequence of FrameResult
-        The last pass's per-frame results, as written to ``fit.csv``
-        (`mocapkit.pipelines.result_table.ResultTable`).
+    results : ResultTable
+        The last pass's per-frame results, as written to ``fit.csv``.
     input_px : (T, K, 2) float
         The 2-D joints of ``model`` the tracker was given (px), NaN where unseen.
     """
@@ -152,7 +152,7 @@ class MonoRun:
     lengths: FloatArray
     model: StickModel
     px_per_mm: float
-    results: Sequence[FrameResult] = field(default_factory=list)
+    results: ResultTable = field(default_factory=ResultTable)
     input_px: FloatArray = field(default_factory=lambda: np.zeros((0, 0, 2)))
 
     def summary(self) -> dict[str, float]:
@@ -174,8 +174,8 @@ class MonoRun:
             "residual_px_mean": float(np.nanmean(f.residual_px[posed].tolist()))
             if any_posed
             else float("nan"),
-            "on_floor_share": float(np.mean([r.fit["on_floor"] for r in self.results]))
-            if self.results
+            "on_floor_share": float(np.mean(self.results.fit_column("on_floor")))
+            if len(self.results)
             else float("nan"),
         }
 
@@ -785,7 +785,8 @@ def track_mono(
     )
     recorded.frames.sort()
     warn_placed_subject(session, cam_name, run.motion.joints_mm, run.motion.joint_names)
-    return MonoRun(run.motion, recorded.frames, lengths, model, scale, run.frames, px)
+    assert run.table is not None  # kept as a table (keep_results False)
+    return MonoRun(run.motion, recorded.frames, lengths, model, scale, run.table, px)
 
 
 class _FrameRecorder:

@@ -17,7 +17,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -36,6 +36,9 @@ from mocapkit.tracking.multiview.config import (
     MultiviewRunConfig,
 )
 from mocapkit.tracking.multiview.tracker import MultiviewTracker, multiview_skeleton
+
+if TYPE_CHECKING:
+    from mocapkit.io.session import Session
 
 FloatArray = NDArray[np.float64]
 
@@ -117,7 +120,7 @@ def far_spans(
 
 
 def track_multiview_session(
-    session_dir: str | os.PathLike[str],
+    session_dir: str | os.PathLike[str] | Session,
     out_dir: str | os.PathLike[str] | None = None,
     cameras: str | Sequence[str] | None = None,
     config: MultiviewRunConfig | None = None,
@@ -128,7 +131,7 @@ def track_multiview_session(
 
     Parameters
     ----------
-    session_dir : path
+    session_dir : path or Session
         Session with two or more cameras and ``keypoints/<camera>.csv`` for each.
     out_dir : path, optional
         Result folder (``motion.npz``, ``joints.csv``, ``motion.bvh``, ``fit.csv``).
@@ -202,7 +205,7 @@ def track_multiview_session(
         cams, joint_names, pixels, reject_mm=run_cfg.reject_mm, good_mm=run_cfg.good_mm
     )
     if point_offsets_mm is None:
-        point_offsets_mm = detector_offsets(detected_backend(session_dir, names))
+        point_offsets_mm = detector_offsets(detected_backend(session.path, names))
     lengths, vectors = offset_segments(
         multiview_skeleton(), lengths, vectors, dict(point_offsets_mm)
     )
@@ -220,7 +223,7 @@ def track_multiview_session(
         samples,
         n,
         None,
-        label=f"track stereo {Path(session_dir).name}",
+        label=f"track stereo {session.path.name}",
         source=f"multi-view fit (cameras {','.join(names)}) on {session.path}",
     )
     q = _smooth_q(sk, run.motion.q, run.motion.time_s, run_cfg)
@@ -331,14 +334,15 @@ FIT_MIN_VIEW_ANGLE_RAD = math.radians(20.0)
 
 
 def resolve_stereo_method(
-    session_dir: str | os.PathLike[str], method: str = "auto", cameras: str | None = None
+    session_dir: str | os.PathLike[str] | Session, method: str = "auto", cameras: str | None = None
 ) -> str:
     """``fit``, ``filter`` or ``skin`` for a session: ``auto`` takes the fit when every
     camera used has keypoints and the views span at least `FIT_MIN_VIEW_ANGLE_RAD`, the
     paper's tracker on the keypoints (``filter``) for a narrower rig. Keypoints missing
     for a camera with video are detected first where a 2-D detector is installed
     (`mocapkit.detect.run.ensure_keypoints`, said on stderr); skin colour where there is
-    none."""
+    none. Give the loaded `Session` when the chosen tracker is to run on it: it is read
+    once."""
     from mocapkit.camera.triangulation import widest_view_angle_rad
     from mocapkit.detect.backend import default_backend
     from mocapkit.detect.run import ensure_keypoints
@@ -374,12 +378,14 @@ def track_stereo_auto(
     keypoints for every camera (`track_multiview_session`), the paper's skin-colour
     tracker otherwise (`mocapkit.pipelines.stereo.track_stereo_session`), or as
     ``method`` says (`STEREO_METHODS`)."""
+    from mocapkit.io.session import load_session
     from mocapkit.pipelines.stereo import track_stereo_session
 
-    chosen = resolve_stereo_method(session_dir, method)
+    session = load_session(session_dir)
+    chosen = resolve_stereo_method(session, method)
     if chosen == "fit":
-        return track_multiview_session(session_dir, out_dir)
-    return track_stereo_session(session_dir, out_dir, use_keypoints=chosen == "filter")
+        return track_multiview_session(session, out_dir)
+    return track_stereo_session(session, out_dir, use_keypoints=chosen == "filter")
 
 
 __all__ = [

@@ -5,7 +5,8 @@
 numpy columns, about 0.7 kB a frame for the mono tracker against 2.7 kB for the objects
 with their dicts. It is a sequence of `FrameResult`: indexing it builds that frame's
 result (a plain `FrameResult`, without a tracker's own fields), so `find_gaps`,
-`write_fit_csv` and the rest of `mocapkit.pipelines.run` read it as a list.
+`write_fit_csv` and the rest of `mocapkit.pipelines.run` read it as a list; a figure over
+all frames is read as one column (`ResultTable.fit_column`).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from typing import overload
 import numpy as np
 from numpy.typing import NDArray
 
-from mocapkit.errors import ShapeError
+from mocapkit.errors import ShapeError, unknown_name
 from mocapkit.tracking.base import FrameResult
 
 FloatArray = NDArray[np.float64]
@@ -145,6 +146,19 @@ class ResultTable(Sequence[FrameResult]):
         if self._joints is None:
             return np.zeros((0, 0, 3))
         return self._joints[: self._n]
+
+    def fit_column(self, name: str) -> FloatArray:
+        """(T,): each frame's fit figure ``name`` (NaN in frames without it).
+
+        Raises
+        ------
+        UnknownNameError
+            No frame has a figure of that name (lists those there are).
+        """
+        if name not in self.fit_names:
+            raise unknown_name("fit figure", name, self.fit_names, "the run's results")
+        k = self.fit_names.index(name)
+        return np.where(self._has_fit[: self._n, k], self._fit[: self._n, k], np.nan)
 
     def __len__(self) -> int:
         return self._n

@@ -139,7 +139,9 @@ def parse_cameras(text: str | None, available: Sequence[str]) -> list[str]:
 
 
 def _open_session(
-    session_dir: str | os.PathLike[str], cameras: str | Sequence[str] | None, cfg: StereoConfig
+    session_dir: str | os.PathLike[str] | Session,
+    cameras: str | Sequence[str] | None,
+    cfg: StereoConfig,
 ) -> tuple[Session, list[str], StereoTracker]:
     """The session, its camera names (``--cameras``) and a `StereoTracker` on them, fitted
     to the subject; refuses keypoint mode without every camera's keypoints."""
@@ -184,7 +186,7 @@ def _samples(session: Session, names: Sequence[str], n: int) -> Iterator[StereoS
 
 
 def track_stereo_session(
-    session_dir: str | os.PathLike[str],
+    session_dir: str | os.PathLike[str] | Session,
     out_dir: str | os.PathLike[str] | None = None,
     cameras: str | Sequence[str] | None = None,
     use_keypoints: bool = False,
@@ -196,7 +198,7 @@ def track_stereo_session(
 
     Parameters
     ----------
-    session_dir : path
+    session_dir : path or Session
         Session folder with two or more cameras with video (`mocapkit.io.session`).
     out_dir : path, optional
         Result folder (``motion.npz``, ``joints.csv``, ``motion.bvh``, ``fit.csv``), written
@@ -230,7 +232,7 @@ def track_stereo_session(
         samples,
         n,
         out_dir,
-        label=f"track stereo {Path(session_dir).name}",
+        label=f"track stereo {session.path.name}",
         source=f"stereo tracker ({mode}, cameras {','.join(names)}) on {session.path}",
         timer=timer,
     )
