@@ -17,10 +17,19 @@ from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
 from mocapkit.geometry.transforms import transform_points
+from mocapkit.skeleton import limbs
+from mocapkit.skeleton.kinematics import canonical_positions
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
 from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments
-from mocapkit.tracking.base import BRIDGE_S, FrameResult, observation_status, unobserved_part
+from mocapkit.tracking.base import (
+    BRIDGE_S,
+    REJOIN_BLEND_S,
+    UNOBSERVED,
+    FrameResult,
+    observation_status,
+    unobserved_part,
+)
 from mocapkit.tracking.mono.placement import FloorDepth
 from mocapkit.tracking.mono.pose_fit import fit_stick_pose
 from mocapkit.tracking.mono.stick import StickModel
@@ -149,6 +158,12 @@ class MonoStream:
         unchanged) to the neck depth of the feet on the floor where that is found and
         agrees with the tracker's depth (`mocapkit.tracking.mono.placement`); None: the
         tracker's depth.
+    rejoin_blend_s : float
+        A limb ``released`` holds the joint angles it had when last observed (its pose
+        relative to its parent, in ``q``: ``motion.npz`` and the BVH); when it is
+        observed again its angles, and its joints with them, go from the held ones to the
+        tracked ones linearly over this time instead of snapping there, as the hybrid's
+        hand sets do (`mocapkit.tracking.base.REJOIN_BLEND_S`); 0: snap.
     """
 
     def __init__(
@@ -159,8 +174,10 @@ class MonoStream:
         px_per_mm: float,
         bridge_s: float = BRIDGE_S,
         floor: FloorDepth | None = None,
+        rejoin_blend_s: float = REJOIN_BLEND_S,
     ) -> None:
         self.tracker = tracker
+        self.rejoin_blend_s = rejoin_blend_s
         self.floor = floor
         self.skeleton = skeleton
         self.camera = camera
@@ -183,6 +200,16 @@ class MonoStream:
         self._unseen: dict[int, dict[str, float]] = {}
         self._pushed = 0
         self._posed: set[str] = set()
+        # per limb: the DoFs that pose it, its last observed values, and (time, values)
+        # of its last held frame while it is released or blended back
+        self._limb_dofs: dict[str, NDArray[np.int64]] = {}
+        for name in self._limbs:
+            if name == "head":
+                self._limb_dofs[name] = limbs.head_dofs(skeleton)
+            elif limbs.has_limb(skeleton, name):
+                self._limb_dofs[name] = limbs.limb(skeleton, name).dofs
+        self._held: dict[str, FloatArray] = {}
+        self._rejoin: dict[str, tuple[float, FloatArray]] = {}
 
     def push(self, sample: MonoSample) -> list[FrameResult]:
         """Track one frame; returns the results it makes final."""
@@ -228,6 +255,12 @@ class MonoStream:
                 status[limb] = observation_status(unseen[limb], True, self.bridge_s)
             else:
                 status[limb] = "released" if limb in self._posed else "missing"
+        for name in self._hold_and_blend(f.time_s, q, status):
+            part = unobserved_part(name)
+            joints_of = [j for j in (part[1] if part else ()) if j in self.joint_names]
+            canonical[[CANONICAL_JOINTS.index(j) for j in joints_of]] = canonical_positions(
+                self.skeleton, q, joints_of
+            )
         fit = {
             "residual_px": f.residual_px,
             "candidates": float(f.n_candidates),
@@ -238,3 +271,33 @@ class MonoStream:
             "on_floor": on_floor,
         }
         return MonoResult(f.time_s, q, canonical, status, fit, "", frame=f)
+
+    def _hold_and_blend(self, time_s: float, q: FloatArray, status: dict[str, str]) -> list[str]:
+        """A released limb's DoFs of ``q`` set to their last observed values; a limb
+        observed again within ``rejoin_blend_s`` of its last held frame moved that share
+        of the way from the held values to the tracked ones (in place). Returns the limbs
+        blended on this frame (their joints follow ``q``)."""
+        blended: list[str] = []
+        if not np.isfinite(q).any():
+            return blended  # no pose this frame
+        for name, dofs in self._limb_dofs.items():
+            if name not in status:
+                continue
+            if status[name] in UNOBSERVED:
+                held = self._held.get(name)
+                if held is not None:
+                    q[dofs] = held
+                    self._rejoin[name] = (time_s, held)
+                continue
+            if not np.isfinite(q[dofs]).all():
+                continue
+            start = self._rejoin.get(name)
+            if start is not None:
+                w = (time_s - start[0]) / self.rejoin_blend_s if self.rejoin_blend_s > 0 else 1.0
+                if w < 1.0:
+                    q[dofs] = start[1] + w * (q[dofs] - start[1])
+                    blended.append(name)
+                else:
+                    del self._rejoin[name]
+            self._held[name] = q[dofs].copy()
+        return blended
