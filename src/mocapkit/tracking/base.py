@@ -34,14 +34,6 @@ UNOBSERVED: tuple[str, ...] = ("released", "missing")
 #: default (status ``bridged``); longer gaps are ``released``.
 BRIDGE_S = 0.25
 
-#: A body point's plausible speed against what its input shows (a marker set's speed, a
-#: joint's image speed at its depth): this factor times that speed, plus
-#: `PLAUSIBLE_MIN_SPEED_MM_S` for motion the input cannot show (depth from one camera,
-#: parts no marker carries). The hybrid's re-plant bound and the mono tracker's
-#: transition weight.
-PLAUSIBLE_SPEED_FACTOR = 1.5
-PLAUSIBLE_MIN_SPEED_MM_S = 1000.0
-
 #: Time (s) over which a part released after a long gap goes from its held pose back to
 #: the tracked one when it is observed again, rather than snapping there: the hybrid's
 #: hand sets (their IK targets) and the mono tracker's limbs (their joint angles).
@@ -221,8 +213,6 @@ def fit_summary(distances_mm: Mapping[str, float]) -> tuple[dict[str, float], st
 
 __all__ = [
     "BRIDGE_S",
-    "PLAUSIBLE_MIN_SPEED_MM_S",
-    "PLAUSIBLE_SPEED_FACTOR",
     "REJOIN_BLEND_S",
     "STATUSES",
     "UNOBSERVED",

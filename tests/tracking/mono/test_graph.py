@@ -6,9 +6,7 @@ import numpy as np
 import pytest
 
 from mocapkit.errors import ConfigError, ShapeError
-from mocapkit.tracking.mono.graph import PoseGraph
 from mocapkit.tracking.mono.motion_cost import (
-    SpeedBound,
     acceleration_cost,
     acceleration_min,
     angular_velocity,
@@ -16,9 +14,7 @@ from mocapkit.tracking.mono.motion_cost import (
     joint_acceleration_cost,
     pair_omegas,
     rotation_cost,
-    speed_excess_cost,
 )
-from mocapkit.tracking.mono.stick import StickModel, stick_model
 from mocapkit.tracking.mono.viterbi import Decoder, pair_viterbi, viterbi
 
 
@@ -266,92 +262,3 @@ def test_online_decisions_are_those_of_the_full_backtrack(lag: int) -> None:
                 assert decided == [(k - lag, int(best[k - lag]))]
             else:
                 assert decided == []
-
-
-# ------------------------------------------------------------------ speed bound
-
-
-def test_speed_excess_known_values() -> None:
-    dt = 1 / 30
-    length = np.array([0.0, 250.0])  # the root is not weighed
-    a = np.array([[[0.0, 0.0, 3000.0], [100.0, 0.0, 3000.0]]])
-    depth = a + np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 200.0]])
-    # 200 mm along the ray in a frame, nothing across it: (200 - 1000 dt) / dt / L / dt
-    c = speed_excess_cost(a, depth, length, dt, 1.5, 1000.0, rays=False)
-    assert c[0, 0] == pytest.approx((200.0 - 1000.0 * dt) / dt / 250.0 / dt)
-    # 100 mm across the ray: within 1.5 x the image's step
-    across = a + np.array([[0.0, 0.0, 0.0], [0.0, 100.0, 0.0]])
-    assert speed_excess_cost(a, across, length, dt, 1.5, 1000.0, rays=False)[0, 0] == 0.0
-    # perspective: along the joint's own ray (a step through the camera's centre)
-    ray = a[0, 1] / np.linalg.norm(a[0, 1])
-    along = a + np.array([[0.0, 0.0, 0.0], 200.0 * ray])
-    c = speed_excess_cost(a, along, length, dt, 1.5, 1000.0, rays=True)
-    assert c[0, 0] == pytest.approx((200.0 - 1000.0 * dt) / dt / 250.0 / dt)
-    unseen = np.array(across)
-    unseen[0, 1] = np.nan
-    assert speed_excess_cost(a, unseen, length, dt, 1.5, 1000.0)[0, 0] == 0.0
-    with pytest.raises(ShapeError, match="expected 2 link lengths"):
-        speed_excess_cost(a, a, np.ones(3), dt, 1.5, 1000.0)
-
-
-def _forearm_layers(angles: np.ndarray) -> tuple[StickModel, np.ndarray, float]:
-    """Per frame, the upper stick with the left forearm at ``angles`` (rad) out of the
-    image plane towards (candidate 0) and away from the camera (candidate 1), the rest
-    still; returns the model, (T, 2, K, 3) positions and the forearm's length."""
-    model = stick_model()
-    k = model.n_joints
-    rng = np.random.default_rng(3)
-    still = np.array([0.0, 0.0, 3000.0]) + rng.uniform(-300, 300, size=(k, 3)) * [1, 1, 0]
-    fore = model.link_index("left_forearm")
-    elbow, wrist = model.parent[fore], model.child[fore]
-    length = 200.0
-    pos = np.repeat(still[None, None], angles.shape[0], axis=0).repeat(2, axis=1)
-    for side, sign in enumerate((-1.0, 1.0)):  # -z: towards the camera
-        off = length * np.stack(
-            [np.cos(angles), np.zeros_like(angles), sign * np.abs(np.sin(angles))], axis=1
-        )
-        pos[:, side, wrist] = still[elbow] + off
-    return model, pos, length
-
-
-def _decode(model: StickModel, pos: np.ndarray, unary: np.ndarray, weight: float) -> np.ndarray:
-    dt = 1 / 30
-    lengths = np.zeros(model.n_joints)
-    lengths[model.child] = 200.0
-    speed = SpeedBound(weight, lengths, 1.5, 1000.0, rays=False) if weight > 0 else None
-    graph = PoseGraph(model, "acceleration", dt, None, 300, 96, speed)
-    out = []
-    for t in range(pos.shape[0]):
-        out += graph.add(t * dt, np.arange(2), pos[t], unary[t])
-    out += graph.finish()
-    return np.array([s for _, s in out])
-
-
-def test_speed_bound_keeps_a_flip_out_of_the_plane_that_nothing_in_the_image_shows() -> None:
-    # the forearm held 0.5 rad towards the camera; a soft cost (a detector's depth
-    # order, say) prefers it for 10 frames, then its mirror image: without the bound the
-    # path flips it (the wrist jumps 190 mm in depth in one frame while the image stays
-    # put)
-    model, pos, _ = _forearm_layers(np.full(20, 0.5))
-    unary = np.zeros((20, 2))
-    unary[:10, 1] = 300.0
-    unary[10:, 0] = 215.0
-    np.testing.assert_array_equal(_decode(model, pos, unary, 0.0), np.arange(20) >= 10)
-    np.testing.assert_array_equal(_decode(model, pos, unary, 1.0), np.zeros(20))
-    # costly, not forbidden: a cost that asks for it strongly enough gets it
-    unary[10:, 0] = 400.0
-    np.testing.assert_array_equal(_decode(model, pos, unary, 1.0), np.arange(20) >= 10)
-
-
-@pytest.mark.parametrize("rad_s", [1.2, 12.0])
-def test_speed_bound_still_follows_a_real_turn_through_the_image_plane(rad_s: float) -> None:
-    # the forearm turns from 0.6 rad towards the camera to 0.6 rad away from it; at
-    # 12 rad/s the wrist crosses the plane at 2.4 m/s in depth, beyond the allowance
-    dt = 1 / 30
-    n = int(np.ceil(1.22 / (rad_s * dt))) + 1
-    angles = 0.62 - rad_s * dt * np.arange(n)  # never in the plane itself
-    model, pos, _ = _forearm_layers(angles)
-    truth = (angles < 0).astype(int)
-    path = _decode(model, pos, np.zeros((n, 2)), 1.0)
-    # the turn or its mirror image (nothing here tells them apart): one flip, at the plane
-    assert np.array_equal(path, truth) or np.array_equal(path, 1 - truth)

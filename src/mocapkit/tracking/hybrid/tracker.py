@@ -49,8 +49,6 @@ from mocapkit.skeleton.model import CANONICAL_JOINTS, PRISMATIC, Skeleton
 from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.base import (
     BRIDGE_S,
-    PLAUSIBLE_MIN_SPEED_MM_S,
-    PLAUSIBLE_SPEED_FACTOR,
     REJOIN_BLEND_S,
     FrameResult,
     canonical_joints_mm,
@@ -295,8 +293,8 @@ class HybridConfig:
     smoothing_polish_tol_mm: float = 5.0
     smoothing_polish_stall_iterations: int = 3
     replant_mm: float = 8.0
-    replant_speed_factor: float = PLAUSIBLE_SPEED_FACTOR
-    replant_min_speed_mm_s: float = PLAUSIBLE_MIN_SPEED_MM_S
+    replant_speed_factor: float = 1.5
+    replant_min_speed_mm_s: float = 1000.0
     member_offsets_mm: Mapping[str, Mapping[str, Sequence[float]]] = field(default_factory=dict)
     start_upright: bool = True
     posture: str = "standing"

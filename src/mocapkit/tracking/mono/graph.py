@@ -22,7 +22,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.tracking.mono.motion_cost import (
-    SpeedBound,
     acceleration_min,
     joint_acceleration_cost,
     pair_omegas_and_rotation,
@@ -82,10 +81,6 @@ class PoseGraph:
         Offline: most frames a frame stays undecided (`Decoder`'s ``window``).
     max_pair_states : int
         Beam cap of pair-state decoding.
-    speed : SpeedBound or None
-        A pairwise weight on the joints' speed beyond what the image shows
-        (`mocapkit.tracking.mono.motion_cost.speed_excess_cost`), added to every edge
-        (and to the beam's first-order pass); None: none.
     """
 
     def __init__(
@@ -96,10 +91,8 @@ class PoseGraph:
         lag: int | None,
         window: int,
         max_pair_states: int,
-        speed: SpeedBound | None = None,
     ) -> None:
         self.model = model
-        self.speed = speed
         self.cost = cost
         self.dt_s = float(dt_s)
         self.max_pair_states = max_pair_states
@@ -123,22 +116,18 @@ class PoseGraph:
         k = self._n
         vectors = self.model.link_vectors(positions)
         prev = self._layers.get(k - 1)
-        w_full = r_full = s_full = None
-        first_order = None  # the beam's weight
+        w_full = r_full = None
         if prev is not None:
-            dt = self._dt(prev.time_s, time_s)
-            w_full, r_full = pair_omegas_and_rotation(prev.vectors, vectors, dt)
-            first_order = r_full
-            if self.speed is not None:
-                s_full = self.speed.cost(prev.positions, positions, dt)
-                first_order = r_full + s_full
-        keep = self._beam_select(unary, first_order)
+            w_full, r_full = pair_omegas_and_rotation(
+                prev.vectors, vectors, self._dt(prev.time_s, time_s)
+            )
+        keep = self._beam_select(unary, r_full)
         if only is not None:
             keep = np.array([only], dtype=np.int64)
         layer = Layer(k, float(time_s), codes, positions, vectors, unary, keep, info)
         self._layers[k] = layer
         self._n += 1
-        decided = self._push(layer, w_full, r_full, s_full)
+        decided = self._push(layer, w_full, r_full)
         self._compact(k - 2)
         return self._answer(decided)
 
@@ -195,11 +184,7 @@ class PoseGraph:
         return np.sort(np.argsort(cost, kind="stable")[: self.max_pair_states])
 
     def _push(
-        self,
-        layer: Layer,
-        w_full: FloatArray | None,
-        r_full: FloatArray | None,
-        s_full: FloatArray | None,
+        self, layer: Layer, w_full: FloatArray | None, r_full: FloatArray | None
     ) -> list[tuple[int, int]]:
         sel = layer.keep
         u = layer.unary[sel]
@@ -207,9 +192,9 @@ class PoseGraph:
             return self.decoder.push(u)
         prev = self._layers[layer.index - 1]
         pick = np.ix_(prev.keep, sel)
-        pair = np.zeros((prev.keep.shape[0], sel.shape[0])) if s_full is None else s_full[pick]
+        pair = np.zeros((prev.keep.shape[0], sel.shape[0]))
         if self.cost == "rotation":
-            return self.decoder.push(u, r_full[pick] + pair)
+            return self.decoder.push(u, r_full[pick])
         w_b = w_full[pick]
         older = self._layers.get(layer.index - 2)
         if older is None:

@@ -15,16 +15,9 @@ Mamania et al. (2004, §4.3.2) weigh transitions by the links' angular accelerat
 
 A first-order weight for plain Viterbi is the summed rotation angle of the links per
 second (`rotation_cost`), the magnitude of the corrected omega.
-
-Beyond the paper, `speed_excess_cost` weighs a transition by how much faster its joints
-move in 3-D than the image shows: a flip of a link out of the image plane moves its
-child (and all below it) in depth by up to twice its length in one frame while the image
-stays put, which eq. 3 charges only as one link's acceleration.
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
@@ -174,123 +167,6 @@ def rotation_cost(omegas: ArrayLike) -> FloatArray:
     """First-order weight (Na, Nb): summed |omega| over links (rad/s) from `pair_omegas`."""
     w = np.asarray(omegas, dtype=float)
     return np.asarray(np.sqrt((w * w).sum(axis=-1)).sum(axis=-1))
-
-
-@nb.njit(cache=True)
-def _speed_excess(
-    pa: FloatArray,
-    pb: FloatArray,
-    inv_len: FloatArray,
-    rays: bool,
-    factor: float,
-    allow_mm: float,
-    inv_dt: float,
-) -> FloatArray:
-    na, nbs, nk = pa.shape[0], pb.shape[0], pa.shape[1]
-    out = np.zeros((na, nbs))
-    for i in range(na):
-        for j in range(nbs):
-            acc = 0.0
-            for k in range(nk):
-                if inv_len[k] == 0.0:
-                    continue
-                bx, by, bz = pb[j, k, 0], pb[j, k, 1], pb[j, k, 2]
-                dx, dy, dz = bx - pa[i, k, 0], by - pa[i, k, 1], bz - pa[i, k, 2]
-                step2 = dx * dx + dy * dy + dz * dz
-                if np.isnan(step2):
-                    continue  # an unseen joint adds nothing
-                along = dz
-                if rays:
-                    nb_ = np.sqrt(bx * bx + by * by + bz * bz)
-                    along = (dx * bx + dy * by + dz * bz) / nb_ if nb_ > 0.0 else dz
-                lateral = np.sqrt(max(step2 - along * along, 0.0))
-                excess = np.sqrt(step2) - factor * lateral - allow_mm
-                if excess > 0.0:
-                    acc += excess * inv_len[k]
-            out[i, j] = acc * inv_dt * inv_dt
-    return out
-
-
-def speed_excess_cost(
-    positions_a: ArrayLike,
-    positions_b: ArrayLike,
-    joint_link_mm: ArrayLike,
-    dt_s: float,
-    factor: float,
-    min_speed_mm_s: float,
-    rays: bool = True,
-) -> FloatArray:
-    """Weight (Na, Nb) of each transition's joint speeds beyond what the image shows.
-
-    A joint's step between two poses has a part across its viewing ray (what the image
-    shows, at the pose's depth) and a part along it. A step is plausible up to ``factor``
-    times its part across the ray plus ``min_speed_mm_s`` (a depth-speed allowance);
-    the excess speed of each joint, over the length of the link that ends in it, is the
-    angular velocity that link would gain in one frame: summed over the joints and
-    divided by ``dt_s``, it is in eq. 3's unit (rad/s^2). Zero for a transition within
-    the bound; a flip of a link near the image plane costs little, one far out of it
-    (the child jumping in depth) a lot, so a real turn (through the plane) stays cheap.
-
-    Parameters
-    ----------
-    positions_a, positions_b : (Na, K, 3), (Nb, K, 3) float
-        Candidate joint positions of frames k and k + 1 (camera frame, mm; NaN joints
-        add nothing).
-    joint_link_mm : (K,) float
-        Length of the link ending in each joint; 0 for the root (not weighed).
-    dt_s : float
-    factor, min_speed_mm_s : float
-        The bound's share of the image speed and its depth allowance.
-    rays : bool
-        Viewing rays through the camera's centre (perspective); False: along z
-        (orthographic or weak perspective).
-    """
-    a = np.ascontiguousarray(positions_a, dtype=float)
-    b = np.ascontiguousarray(positions_b, dtype=float)
-    lengths = np.asarray(joint_link_mm, dtype=float)
-    if a.ndim != 3 or b.ndim != 3 or a.shape[1:] != b.shape[1:] or a.shape[2] != 3:
-        raise ShapeError(
-            f"speed_excess_cost: expected (Na, K, 3) and (Nb, K, 3), found {a.shape}, {b.shape}"
-        )
-    if lengths.shape != (a.shape[1],):
-        raise ShapeError(
-            f"speed_excess_cost: expected {a.shape[1]} link lengths, found {lengths.shape}"
-        )
-    with np.errstate(divide="ignore"):
-        inv_len = np.where(lengths > 0, 1.0 / lengths, 0.0)
-    return np.asarray(_speed_excess(a, b, inv_len, rays, factor, min_speed_mm_s * dt_s, 1.0 / dt_s))
-
-
-@dataclass(frozen=True)
-class SpeedBound:
-    """`speed_excess_cost` as a pose graph's pairwise weight: ``weight`` times it.
-
-    Attributes
-    ----------
-    weight : float
-    joint_link_mm : (K,) float
-    factor, min_speed_mm_s : float
-    rays : bool
-    """
-
-    weight: float
-    joint_link_mm: FloatArray
-    factor: float
-    min_speed_mm_s: float
-    rays: bool = True
-
-    def cost(self, positions_a: ArrayLike, positions_b: ArrayLike, dt_s: float) -> FloatArray:
-        """The weighted cost (Na, Nb) between two frames' candidates."""
-        c = speed_excess_cost(
-            positions_a,
-            positions_b,
-            self.joint_link_mm,
-            dt_s,
-            self.factor,
-            self.min_speed_mm_s,
-            self.rays,
-        )
-        return self.weight * c
 
 
 @nb.njit(cache=True)

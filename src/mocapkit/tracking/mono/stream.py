@@ -18,7 +18,6 @@ from numpy.typing import NDArray
 from mocapkit.camera.pinhole import Camera
 from mocapkit.geometry.transforms import transform_points
 from mocapkit.skeleton import limbs
-from mocapkit.skeleton.kinematics import canonical_positions
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
 from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments
@@ -161,9 +160,10 @@ class MonoStream:
     rejoin_blend_s : float
         A limb ``released`` holds the joint angles it had when last observed (its pose
         relative to its parent, in ``q``: ``motion.npz`` and the BVH); when it is
-        observed again its angles, and its joints with them, go from the held ones to the
-        tracked ones linearly over this time instead of snapping there, as the hybrid's
-        hand sets do (`mocapkit.tracking.base.REJOIN_BLEND_S`); 0: snap.
+        observed again its angles go from the held ones to the tracked ones linearly over
+        this time instead of snapping there, as the hybrid's hand sets do
+        (`mocapkit.tracking.base.REJOIN_BLEND_S`); 0: snap. The joints
+        (``joints.csv``) stay those tracked: NaN while released, observed after.
     """
 
     def __init__(
@@ -255,12 +255,7 @@ class MonoStream:
                 status[limb] = observation_status(unseen[limb], True, self.bridge_s)
             else:
                 status[limb] = "released" if limb in self._posed else "missing"
-        for name in self._hold_and_blend(f.time_s, q, status):
-            part = unobserved_part(name)
-            joints_of = [j for j in (part[1] if part else ()) if j in self.joint_names]
-            canonical[[CANONICAL_JOINTS.index(j) for j in joints_of]] = canonical_positions(
-                self.skeleton, q, joints_of
-            )
+        self._hold_and_blend(f.time_s, q, status)
         fit = {
             "residual_px": f.residual_px,
             "candidates": float(f.n_candidates),
@@ -272,14 +267,12 @@ class MonoStream:
         }
         return MonoResult(f.time_s, q, canonical, status, fit, "", frame=f)
 
-    def _hold_and_blend(self, time_s: float, q: FloatArray, status: dict[str, str]) -> list[str]:
+    def _hold_and_blend(self, time_s: float, q: FloatArray, status: dict[str, str]) -> None:
         """A released limb's DoFs of ``q`` set to their last observed values; a limb
         observed again within ``rejoin_blend_s`` of its last held frame moved that share
-        of the way from the held values to the tracked ones (in place). Returns the limbs
-        blended on this frame (their joints follow ``q``)."""
-        blended: list[str] = []
+        of the way from the held values to the tracked ones (in place)."""
         if not np.isfinite(q).any():
-            return blended  # no pose this frame
+            return  # no pose this frame
         for name, dofs in self._limb_dofs.items():
             if name not in status:
                 continue
@@ -296,8 +289,6 @@ class MonoStream:
                 w = (time_s - start[0]) / self.rejoin_blend_s if self.rejoin_blend_s > 0 else 1.0
                 if w < 1.0:
                     q[dofs] = start[1] + w * (q[dofs] - start[1])
-                    blended.append(name)
                 else:
                     del self._rejoin[name]
             self._held[name] = q[dofs].copy()
-        return blended

@@ -89,11 +89,9 @@ from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import ConfigError, ShapeError, unknown_name
-from mocapkit.tracking.base import PLAUSIBLE_MIN_SPEED_MM_S, PLAUSIBLE_SPEED_FACTOR
 from mocapkit.tracking.mono.arm_prior import ArmPrior, default_arm_prior
 from mocapkit.tracking.mono.flips import enumerate_poses
 from mocapkit.tracking.mono.graph import Layer, PoseGraph
-from mocapkit.tracking.mono.motion_cost import SpeedBound
 from mocapkit.tracking.mono.priors import (
     clavicle_forward_cost,
     depth_order_cost,
@@ -202,15 +200,6 @@ class MonoConfig:
         sines 0.15-0.4 the best on the five tuning clips from MediaPipe on the rendered
         video (59.4 -> 58.4 mm PA; a flat 58.4-58.9 over 0.15-0.35; two sines or a cost
         towards the detector's own lean did no better; docs/design-notes/mono.md).
-    speed_weight : float
-        Perspective and weak models: weight of the joints' 3-D speed beyond what the
-        image shows on each transition (`mocapkit.tracking.mono.motion_cost.speed_excess_cost`,
-        in eq. 3's rad/s^2: a joint's excess over its link's length, per frame), with a
-        joint's step plausible up to `mocapkit.tracking.base.PLAUSIBLE_SPEED_FACTOR`
-        times its step across the viewing ray plus `PLAUSIBLE_MIN_SPEED_MM_S` (the
-        hybrid re-plant's bound): a flip change far out of the image plane, where the
-        image stays put, is costly but not forbidden; 0: off. Default 1 (the unit
-        itself; docs/design-notes/mono.md).
     arm_prior : ArmPrior or None
         The mixture the arm prior uses; None: the shipped table
         (`mocapkit.tracking.mono.arm_prior.default_arm_prior`).
@@ -240,7 +229,6 @@ class MonoConfig:
     girdle_cosine: float = float("nan")
     depth_order_weight: float = 1000.0
     trunk_lean_sines: tuple[float, ...] = (0.25,)
-    speed_weight: float = 1.0
     arm_prior: ArmPrior | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -266,13 +254,7 @@ class MonoConfig:
                 "MonoConfig.rebuilt_reach_tolerance: expected [0, 1), found "
                 f"{self.rebuilt_reach_tolerance}"
             )
-        for name in (
-            "clavicle_weight",
-            "arm_prior_weight",
-            "girdle_weight",
-            "depth_order_weight",
-            "speed_weight",
-        ):
+        for name in ("clavicle_weight", "arm_prior_weight", "girdle_weight", "depth_order_weight"):
             # a negative weight rewards what the cost penalises; NaN poisons every path
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
@@ -413,19 +395,7 @@ class MonoTracker:
         )
 
         def graph(model: StickModel) -> PoseGraph:
-            speed = None
-            if cfg.speed_weight > 0 and cfg.camera_model != "orthographic":
-                # per joint, the length of the link that ends in it (0: the root)
-                joint_link = np.zeros(model.n_joints)
-                joint_link[model.child] = self.lengths[: model.n_links]
-                speed = SpeedBound(
-                    cfg.speed_weight,
-                    joint_link,
-                    PLAUSIBLE_SPEED_FACTOR,
-                    PLAUSIBLE_MIN_SPEED_MM_S,
-                    rays=cfg.camera_model == "perspective",
-                )
-            return PoseGraph(model, cfg.cost, dt_s, cfg.lag, cfg.window, cfg.max_pair_states, speed)
+            return PoseGraph(model, cfg.cost, dt_s, cfg.lag, cfg.window, cfg.max_pair_states)
 
         self._graph = graph(self.upper)
         self._leg_graph = graph(self.model) if self._legs else None
