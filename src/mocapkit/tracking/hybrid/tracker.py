@@ -50,6 +50,7 @@ from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.base import (
     BRIDGE_S,
     REJOIN_BLEND_S,
+    UNSEEN_SPEED_MM_S,
     FrameResult,
     canonical_joints_mm,
     fit_summary,
@@ -294,7 +295,7 @@ class HybridConfig:
     smoothing_polish_stall_iterations: int = 3
     replant_mm: float = 8.0
     replant_speed_factor: float = 1.5
-    replant_min_speed_mm_s: float = 1000.0
+    replant_min_speed_mm_s: float = UNSEEN_SPEED_MM_S
     member_offsets_mm: Mapping[str, Mapping[str, Sequence[float]]] = field(default_factory=dict)
     start_upright: bool = True
     posture: str = "standing"

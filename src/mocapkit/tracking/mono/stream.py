@@ -29,7 +29,7 @@ from mocapkit.tracking.base import (
     observation_status,
     unobserved_part,
 )
-from mocapkit.tracking.mono.placement import FloorDepth
+from mocapkit.tracking.mono.placement import DepthRate, FloorDepth
 from mocapkit.tracking.mono.pose_fit import fit_stick_pose
 from mocapkit.tracking.mono.stick import StickModel
 from mocapkit.tracking.mono.tracker import MonoConfig, MonoFrame, MonoTracker
@@ -155,8 +155,10 @@ class MonoStream:
     floor : FloorDepth or None
         Perspective model: each pose is scaled about the camera's centre (its image
         unchanged) to the neck depth of the feet on the floor where that is found and
-        agrees with the tracker's depth (`mocapkit.tracking.mono.placement`); None: the
-        tracker's depth.
+        agrees with the tracker's depth (`mocapkit.tracking.mono.placement`), the placed
+        depth changing beyond the tracker's own depth motion at most at
+        `mocapkit.tracking.base.UNSEEN_SPEED_MM_S` (`DepthRate`); None: the tracker's
+        depth.
     rejoin_blend_s : float
         A limb ``released`` holds the joint angles it had when last observed (its pose
         relative to its parent, in ``q``: ``motion.npz`` and the BVH); when it is
@@ -209,6 +211,7 @@ class MonoStream:
             elif limbs.has_limb(skeleton, name):
                 self._limb_dofs[name] = limbs.limb(skeleton, name).dofs
         self._held: dict[str, FloatArray] = {}
+        self._depth_rate = DepthRate()
         self._rejoin: dict[str, tuple[float, FloatArray]] = {}
 
     def push(self, sample: MonoSample) -> list[FrameResult]:
@@ -240,9 +243,9 @@ class MonoStream:
         on_floor = 0.0
         if self.floor is not None and f.code >= 0 and np.isfinite(f.depth_mm) and f.depth_mm > 0:
             z = self.floor.depth(f.index, f.depth_mm)
-            if np.isfinite(z):
-                f = replace(f, joints_in_camera=f.joints_in_camera * (z / f.depth_mm), depth_mm=z)
-                on_floor = 1.0
+            on_floor = float(np.isfinite(z))
+            z = self._depth_rate.place(f.time_s, z if on_floor else f.depth_mm, f.depth_mm)
+            f = replace(f, joints_in_camera=f.joints_in_camera * (z / f.depth_mm), depth_mm=z)
         world = to_world([f], t.model, self.camera, t.config, self.px_per_mm)[0]
         joints = world[self._order]
         q = fit_stick_pose(self.skeleton, self.joint_names, joints[None])[0]
