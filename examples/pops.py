@@ -31,6 +31,7 @@ from mocapkit.io.bvh import read_bvh
 from mocapkit.io.joints_csv import read_joints_csv
 from mocapkit.io.marker_files import read_markers
 from mocapkit.io.motion_npz import load_motion_npz
+from mocapkit.pipelines.run import FIT_FILE, read_fit_csv
 from mocapkit.skeleton.kinematics import forward_kinematics
 
 #: Bones of a leg (after the side prefix, ``l_`` or ``r_``).
@@ -176,6 +177,12 @@ def main() -> None:
         _per_joint(args.result, args.session, args.factor)
     over = np.nanmax(speed, axis=1) > 5000.0
     print(f"  frames with a joint faster than 5 m/s: {int(over.sum())}")
+    fit = args.result / FIT_FILE
+    if fit.is_file():
+        _, columns = read_fit_csv(fit)
+        if "flips" in columns:  # the mono tracker's chosen flip code per frame
+            code = columns["flips"][columns["flips"] >= 0]
+            print(f"  flip-set changes: {int(np.sum(code[1:] != code[:-1]))} in {code.size} frames")
     if args.pictures is not None:
         args.pictures.mkdir(parents=True, exist_ok=True)
         out = args.pictures / f"{label}_frame{fast.frame}.png"

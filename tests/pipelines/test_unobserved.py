@@ -211,6 +211,67 @@ def test_mono_limb_unseen_past_the_bridge_is_released_with_nan_joints(tmp_path, 
     assert len(gap) == 1 and f"({released.sum()} frames)" in gap[0]
 
 
+def test_mono_released_arm_holds_its_pose_then_blends_back(tmp_path) -> None:
+    """Mono, the left elbow's 2-D point missing for 0.5 s: while the arm is released its
+    joint angles hold those of its last observed frame; when it is seen again they go
+    from the held ones to the tracked ones linearly over ``rejoin_blend_s``, where with 0
+    they snap; the rest of the pose and the joints are the same either way."""
+    from mocapkit.io.session import load_session
+    from mocapkit.pipelines.mono import online_mono_stream, stick_pixels
+    from mocapkit.skeleton.kinematics import canonical_positions
+    from mocapkit.tracking.base import REJOIN_BLEND_S
+    from mocapkit.tracking.mono.stream import MonoSample
+    from mocapkit.tracking.mono.tracker import MonoConfig
+
+    folder, _ = _mono_session_with_a_hidden_elbow(tmp_path / "s")
+    session = load_session(folder)
+    kp = session.keypoints["mono"]
+    runs = []
+    for blend_s in (REJOIN_BLEND_S, 0.0):
+        stream = online_mono_stream(session, "mono", MonoConfig(lag=10), 1 / 30)
+        assert stream.rejoin_blend_s == REJOIN_BLEND_S
+        stream.rejoin_blend_s = blend_s
+        px = stick_pixels(kp, stream.tracker.model)
+        out = []
+        for ti, p in zip(kp.time_s, px):
+            out += stream.push(MonoSample(float(ti), p))
+        out += stream.finish()
+        runs.append(out)
+    blended, snapped = runs
+    dofs = arm(stream.skeleton, "left").dofs
+    q = np.stack([r.q for r in blended])
+    q0 = np.stack([r.q for r in snapped])
+    st = [r.status["left_arm"] for r in blended]
+    assert st == [r.status["left_arm"] for r in snapped]
+    released = np.flatnonzero(np.array(st) == "released")
+    assert released.size >= 5
+    first, last = released[0], released[-1]
+    tt = np.array([r.time_s for r in blended])
+    held = q[first - 1, dofs]
+    np.testing.assert_array_equal(q[released][:, dofs], np.tile(held, (released.size, 1)))
+    np.testing.assert_array_equal(q0[released][:, dofs], np.tile(held, (released.size, 1)))
+    back = np.flatnonzero((tt > tt[last]) & (tt < tt[last] + REJOIN_BLEND_S))
+    assert back.size >= 5
+    w = (tt[back] - tt[last]) / REJOIN_BLEND_S
+    np.testing.assert_allclose(
+        q[back][:, dofs], held + w[:, None] * (q0[back][:, dofs] - held), atol=1e-9
+    )
+    after = tt >= tt[last] + REJOIN_BLEND_S
+    np.testing.assert_array_equal(q[after], q0[after])
+    others = np.setdiff1d(np.arange(q.shape[1]), dofs)
+    np.testing.assert_array_equal(q[:, others], q0[:, others])
+    # the joints stay those tracked
+    for a, b in zip(blended, snapped):
+        np.testing.assert_array_equal(a.joints_mm, b.joints_mm)
+    # the snap without the blend, spread over the blend's frames with it
+    wrist = canonical_positions(stream.skeleton, q, ["left_wrist"])[:, 0]
+    wrist0 = canonical_positions(stream.skeleton, q0, ["left_wrist"])[:, 0]
+    step = np.linalg.norm(wrist[last + 1] - wrist[last])
+    step0 = np.linalg.norm(wrist0[last + 1] - wrist0[last])
+    assert step0 > 20.0
+    assert step < 0.2 * step0
+
+
 def test_hybrid_hand_blanked_for_one_second_is_held_then_blended_back_in_the_bvh(
     tmp_path,
 ) -> None:

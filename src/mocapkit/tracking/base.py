@@ -34,6 +34,17 @@ UNOBSERVED: tuple[str, ...] = ("released", "missing")
 #: default (status ``bridged``); longer gaps are ``released``.
 BRIDGE_S = 0.25
 
+#: Speed (mm/s) allowed for what an input cannot show: the hybrid re-plant's allowance
+#: beyond the head set's speed (`HybridConfig.replant_min_speed_mm_s`), and the most the
+#: mono placement's depth estimate may change in a second beyond the tracker's own depth
+#: motion (`mocapkit.tracking.mono.placement.DepthRate`).
+UNSEEN_SPEED_MM_S = 1000.0
+
+#: Time (s) over which a part released after a long gap goes from its held pose back to
+#: the tracked one when it is observed again, rather than snapping there: the hybrid's
+#: hand sets (their IK targets) and the mono tracker's limbs (their joint angles).
+REJOIN_BLEND_S = 0.5
+
 
 def unobserved_part(name: str) -> tuple[str, tuple[str, ...]] | None:
     """The body part an effector or limb status ``name`` stands for, and the canonical
@@ -208,8 +219,10 @@ def fit_summary(distances_mm: Mapping[str, float]) -> tuple[dict[str, float], st
 
 __all__ = [
     "BRIDGE_S",
+    "REJOIN_BLEND_S",
     "STATUSES",
     "UNOBSERVED",
+    "UNSEEN_SPEED_MM_S",
     "DelayedTracker",
     "FrameResult",
     "Tracker",

@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 
 from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
+from mocapkit.tracking.base import UNSEEN_SPEED_MM_S
 from mocapkit.tracking.mono.placement import (
     ANKLE_SHARE,
+    DepthRate,
     FloorConfig,
     FloorDepth,
     detector_ankle_lift_mm,
@@ -104,3 +106,20 @@ def test_a_detectors_raised_ankle_point_is_cut_with_a_raised_plane() -> None:
     floor = FloorDepth(cam, STATURE, FloorConfig(half_window=0), ankle_lift_mm=lift)
     floor.push(px[0], px[1:])
     assert floor.depth(0, true_z) == pytest.approx(true_z)
+
+
+def test_depth_rate_passes_the_trackers_motion_and_bounds_a_change_of_estimate() -> None:
+    dt = 1 / 30
+    rate = DepthRate()
+    assert rate.speed_mm_s == UNSEEN_SPEED_MM_S
+    assert rate.place(0.0, 3000.0, 2900.0) == 3000.0  # the first frame: the target
+    # the tracker's own depth moves 300 mm in a frame (the subject walks): passed whole
+    assert rate.place(dt, 3300.0, 3200.0) == pytest.approx(3300.0)
+    # the estimate switches (floor refused: the tracker's depth, 100 mm nearer) with the
+    # tracker's depth still: the placed depth goes there at the bound, not in one frame
+    placed = [rate.place((2 + k) * dt, 3200.0, 3200.0) for k in range(5)]
+    step = UNSEEN_SPEED_MM_S * dt
+    np.testing.assert_allclose(placed[:3], 3300.0 - step * np.arange(1, 4))
+    np.testing.assert_allclose(placed[3:], 3200.0)
+    # both at once: the own motion whole plus the bounded share of the rest
+    assert rate.place(7 * dt, 3500.0, 3250.0) == pytest.approx(3200.0 + 50.0 + step)

@@ -49,6 +49,8 @@ from mocapkit.skeleton.model import CANONICAL_JOINTS, PRISMATIC, Skeleton
 from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.base import (
     BRIDGE_S,
+    REJOIN_BLEND_S,
+    UNSEEN_SPEED_MM_S,
     FrameResult,
     canonical_joints_mm,
     fit_summary,
@@ -293,12 +295,12 @@ class HybridConfig:
     smoothing_polish_stall_iterations: int = 3
     replant_mm: float = 8.0
     replant_speed_factor: float = 1.5
-    replant_min_speed_mm_s: float = 1000.0
+    replant_min_speed_mm_s: float = UNSEEN_SPEED_MM_S
     member_offsets_mm: Mapping[str, Mapping[str, Sequence[float]]] = field(default_factory=dict)
     start_upright: bool = True
     posture: str = "standing"
     reseed_arm_mm: float = 0.0
-    rejoin_blend_s: float = 0.5
+    rejoin_blend_s: float = REJOIN_BLEND_S
 
     def __post_init__(self) -> None:
         if self.posture not in ("standing", "seated"):

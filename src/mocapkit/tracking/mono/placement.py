@@ -26,6 +26,12 @@ MediaPipe's sits some 60 mm above it. Where the keypoints name their detector, i
 offset (`mocapkit.tracking.multiview.detector_offsets`, read by the pipeline) raises the
 plane the ankle's ray is cut with (``ankle_lift_mm``, `detector_ankle_lift_mm`); without
 it MediaPipe's floor depths land 50-250 mm beyond the subject.
+
+The depth placed is the floor's on some frames and the tracker's on others, and the
+floor's window changes as frames enter and leave it: each switch moved the whole body
+along the camera's rays by 100-300 mm in one frame. `DepthRate` passes the tracker's own
+depth motion whole and lets the rest of a change (a change of estimate, not of the
+subject's motion) through at `mocapkit.tracking.base.UNSEEN_SPEED_MM_S` at most.
 """
 
 from __future__ import annotations
@@ -37,6 +43,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.camera.pinhole import Camera
+from mocapkit.tracking.base import UNSEEN_SPEED_MM_S
 
 FloatArray = NDArray[np.float64]
 
@@ -197,4 +204,32 @@ class FloorDepth:
                 self.rejected += 1
                 return float("nan")
         self.trusted += 1
+        return z
+
+
+class DepthRate:
+    """The placed depth, moving with the tracker's own depth and otherwise at most
+    ``speed_mm_s`` (module docstring).
+
+    Parameters
+    ----------
+    speed_mm_s : float
+        Fastest change of the estimate beyond the tracker's own depth motion.
+    """
+
+    def __init__(self, speed_mm_s: float = UNSEEN_SPEED_MM_S) -> None:
+        self.speed_mm_s = speed_mm_s
+        self._last: tuple[float, float, float] | None = None  # time, placed, own depth
+
+    def place(self, time_s: float, target_mm: float, own_depth_mm: float) -> float:
+        """The depth to place a frame at: ``target_mm`` (the floor's or the tracker's
+        depth) where the previous frame's placed depth plus the tracker's own change
+        since lies within the bound of it, else the bound's edge towards it."""
+        z = target_mm
+        if self._last is not None:
+            t0, z0, own0 = self._last
+            base = z0 + (own_depth_mm - own0)
+            step = self.speed_mm_s * max(time_s - t0, 0.0)
+            z = min(max(target_mm, base - step), base + step)
+        self._last = (time_s, z, own_depth_mm)
         return z

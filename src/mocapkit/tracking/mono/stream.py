@@ -17,11 +17,19 @@ from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
 from mocapkit.geometry.transforms import transform_points
+from mocapkit.skeleton import limbs
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
 from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments
-from mocapkit.tracking.base import BRIDGE_S, FrameResult, observation_status, unobserved_part
-from mocapkit.tracking.mono.placement import FloorDepth
+from mocapkit.tracking.base import (
+    BRIDGE_S,
+    REJOIN_BLEND_S,
+    UNOBSERVED,
+    FrameResult,
+    observation_status,
+    unobserved_part,
+)
+from mocapkit.tracking.mono.placement import DepthRate, FloorDepth
 from mocapkit.tracking.mono.pose_fit import fit_stick_pose
 from mocapkit.tracking.mono.stick import StickModel
 from mocapkit.tracking.mono.tracker import MonoConfig, MonoFrame, MonoTracker
@@ -147,8 +155,17 @@ class MonoStream:
     floor : FloorDepth or None
         Perspective model: each pose is scaled about the camera's centre (its image
         unchanged) to the neck depth of the feet on the floor where that is found and
-        agrees with the tracker's depth (`mocapkit.tracking.mono.placement`); None: the
-        tracker's depth.
+        agrees with the tracker's depth (`mocapkit.tracking.mono.placement`), the placed
+        depth changing beyond the tracker's own depth motion at most at
+        `mocapkit.tracking.base.UNSEEN_SPEED_MM_S` (`DepthRate`); None: the tracker's
+        depth.
+    rejoin_blend_s : float
+        A limb ``released`` holds the joint angles it had when last observed (its pose
+        relative to its parent, in ``q``: ``motion.npz`` and the BVH); when it is
+        observed again its angles go from the held ones to the tracked ones linearly over
+        this time instead of snapping there, as the hybrid's hand sets do
+        (`mocapkit.tracking.base.REJOIN_BLEND_S`); 0: snap. The joints
+        (``joints.csv``) stay those tracked: NaN while released, observed after.
     """
 
     def __init__(
@@ -159,8 +176,10 @@ class MonoStream:
         px_per_mm: float,
         bridge_s: float = BRIDGE_S,
         floor: FloorDepth | None = None,
+        rejoin_blend_s: float = REJOIN_BLEND_S,
     ) -> None:
         self.tracker = tracker
+        self.rejoin_blend_s = rejoin_blend_s
         self.floor = floor
         self.skeleton = skeleton
         self.camera = camera
@@ -183,6 +202,17 @@ class MonoStream:
         self._unseen: dict[int, dict[str, float]] = {}
         self._pushed = 0
         self._posed: set[str] = set()
+        # per limb: the DoFs that pose it, its last observed values, and (time, values)
+        # of its last held frame while it is released or blended back
+        self._limb_dofs: dict[str, NDArray[np.int64]] = {}
+        for name in self._limbs:
+            if name == "head":
+                self._limb_dofs[name] = limbs.head_dofs(skeleton)
+            elif limbs.has_limb(skeleton, name):
+                self._limb_dofs[name] = limbs.limb(skeleton, name).dofs
+        self._held: dict[str, FloatArray] = {}
+        self._depth_rate = DepthRate()
+        self._rejoin: dict[str, tuple[float, FloatArray]] = {}
 
     def push(self, sample: MonoSample) -> list[FrameResult]:
         """Track one frame; returns the results it makes final."""
@@ -213,9 +243,9 @@ class MonoStream:
         on_floor = 0.0
         if self.floor is not None and f.code >= 0 and np.isfinite(f.depth_mm) and f.depth_mm > 0:
             z = self.floor.depth(f.index, f.depth_mm)
-            if np.isfinite(z):
-                f = replace(f, joints_in_camera=f.joints_in_camera * (z / f.depth_mm), depth_mm=z)
-                on_floor = 1.0
+            on_floor = float(np.isfinite(z))
+            z = self._depth_rate.place(f.time_s, z if on_floor else f.depth_mm, f.depth_mm)
+            f = replace(f, joints_in_camera=f.joints_in_camera * (z / f.depth_mm), depth_mm=z)
         world = to_world([f], t.model, self.camera, t.config, self.px_per_mm)[0]
         joints = world[self._order]
         q = fit_stick_pose(self.skeleton, self.joint_names, joints[None])[0]
@@ -228,6 +258,7 @@ class MonoStream:
                 status[limb] = observation_status(unseen[limb], True, self.bridge_s)
             else:
                 status[limb] = "released" if limb in self._posed else "missing"
+        self._hold_and_blend(f.time_s, q, status)
         fit = {
             "residual_px": f.residual_px,
             "candidates": float(f.n_candidates),
@@ -238,3 +269,29 @@ class MonoStream:
             "on_floor": on_floor,
         }
         return MonoResult(f.time_s, q, canonical, status, fit, "", frame=f)
+
+    def _hold_and_blend(self, time_s: float, q: FloatArray, status: dict[str, str]) -> None:
+        """A released limb's DoFs of ``q`` set to their last observed values; a limb
+        observed again within ``rejoin_blend_s`` of its last held frame moved that share
+        of the way from the held values to the tracked ones (in place)."""
+        if not np.isfinite(q).any():
+            return  # no pose this frame
+        for name, dofs in self._limb_dofs.items():
+            if name not in status:
+                continue
+            if status[name] in UNOBSERVED:
+                held = self._held.get(name)
+                if held is not None:
+                    q[dofs] = held
+                    self._rejoin[name] = (time_s, held)
+                continue
+            if not np.isfinite(q[dofs]).all():
+                continue
+            start = self._rejoin.get(name)
+            if start is not None:
+                w = (time_s - start[0]) / self.rejoin_blend_s if self.rejoin_blend_s > 0 else 1.0
+                if w < 1.0:
+                    q[dofs] = start[1] + w * (q[dofs] - start[1])
+                else:
+                    del self._rejoin[name]
+            self._held[name] = q[dofs].copy()
