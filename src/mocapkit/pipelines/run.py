@@ -41,6 +41,7 @@ from mocapkit.skeleton.limbs import has_limb, head_dofs, limb
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
 from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.base import (
+    REJOIN_BLEND_S,
     UNOBSERVED,
     DelayedTracker,
     FrameResult,
@@ -268,8 +269,11 @@ def _part_dofs(skeleton: Skeleton, part: str) -> NDArray[np.int64]:
 
 
 #: Time over which a part held through a gap in the BVH is blended back to the tracked
-#: pose once it is observed again (`motion_for_bvh`), rather than snapped there.
-GAP_BLEND_S = 0.2
+#: pose once it is observed again (`motion_for_bvh`), rather than snapped there: the
+#: trackers' own rejoin time (`mocapkit.tracking.base.REJOIN_BLEND_S`), so a tracker that
+#: already blends (the hybrid, mono) ends both blends together instead of a shorter one
+#: stepping onto its longer one.
+GAP_BLEND_S = REJOIN_BLEND_S
 
 
 def _blend_back(
