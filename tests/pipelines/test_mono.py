@@ -507,6 +507,42 @@ def test_the_ankle_points_of_a_named_detector_are_lifted_by_its_offsets(tmp_path
     assert plain.floor is not None and plain.floor.ankle_lift_mm == 0.0
 
 
+def test_a_named_detectors_offsets_are_taken_out_of_the_limbs_video_lengths() -> None:
+    """Lengths read between MediaPipe's points (its known offsets added to each joint at
+    the body model's rest pose) come back as the joints' lengths on the limbs, to first
+    order; the links from the neck keep what the points show; unknown origin: unchanged."""
+    from mocapkit.pipelines.mono import detector_corrected_lengths
+    from mocapkit.skeleton.kinematics import canonical_positions
+    from mocapkit.skeleton.model import CANONICAL_SEGMENTS
+    from mocapkit.tracking.multiview.detector_offsets import MIDPOINTS, detector_offsets
+    from mocapkit.tracking.multiview.tracker import multiview_skeleton
+
+    sk = multiview_skeleton()
+    names = list(sk.canonical_names)
+    rest = canonical_positions(sk, sk.zero_pose())
+    off = {k: np.asarray(v) for k, v in detector_offsets("mediapipe").items()}
+    for mid, (a, b) in MIDPOINTS.items():
+        off[mid] = 0.5 * (off[a] + off[b])
+    model = stick_model(legs=True)
+
+    def length(seg: str, shifted: bool) -> float:
+        a, b = CANONICAL_SEGMENTS[seg]
+        oa, ob = (off.get(a, np.zeros(3)), off.get(b, np.zeros(3))) if shifted else (0.0, 0.0)
+        return float(np.linalg.norm(rest[names.index(b)] + ob - rest[names.index(a)] - oa))
+
+    true = np.array([length(s, False) for s in model.segments])
+    seen = np.array([length(s, True) for s in model.segments])
+    i = {s: model.segments.index(s) for s in ("left_upper_arm", "right_forearm", "trunk")}
+    assert seen[i["left_upper_arm"]] < true[i["left_upper_arm"]] - 20.0  # its elbow point is up
+    assert seen[i["right_forearm"]] > true[i["right_forearm"]] + 20.0
+    got = detector_corrected_lengths(seen, model, "mediapipe")
+    from_neck = model.parent == 0
+    np.testing.assert_array_equal(got[from_neck], seen[from_neck])
+    np.testing.assert_allclose(got[~from_neck], true[~from_neck], atol=1.0)
+    assert seen[i["trunk"]] < true[i["trunk"]] - 10.0  # kept as seen: the depth's bound
+    np.testing.assert_array_equal(detector_corrected_lengths(seen, model, None), seen)
+
+
 def test_detector_3d_on_canonical_joints_is_measured_like_the_tracker(tmp_path: Path) -> None:
     """A detector's 3-D that is the truth turned, scaled and moved scores 0 mm after the
     per-frame alignment; the neck and pelvis follow the girdle rule in 3-D."""

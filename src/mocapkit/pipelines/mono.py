@@ -62,7 +62,7 @@ from mocapkit.tracking.mono.stream import (
     output_skeleton,
 )
 from mocapkit.tracking.mono.tracker import MonoConfig, MonoFrame, MonoTracker
-from mocapkit.tracking.multiview.detector_offsets import detector_offsets
+from mocapkit.tracking.multiview.detector_offsets import detector_offsets, offset_segments
 
 FloatArray = NDArray[np.float64]
 
@@ -571,6 +571,31 @@ def _floor(
     return FloorDepth(cam, session.height_mm or DEFAULT_HEIGHT_MM, place, lift)
 
 
+def detector_corrected_lengths(
+    lengths_mm: FloatArray, model: StickModel, backend: str | None
+) -> FloatArray:
+    """Video link lengths (mm) with ``backend``'s known keypoint offsets taken out of the
+    limbs (`mocapkit.tracking.multiview.detector_offsets.offset_segments`, the multi-view
+    fit's table: a link from ``a`` to ``b`` reads its true length plus ``o_b - o_a``
+    along it; MediaPipe's elbow point lies some 26 mm up the upper arm, so its upper arms
+    read short and its forearms long). The links from the neck keep the lengths their 2-D
+    points show: the tracker's depth is the bound at which they reach their children's
+    rays (`mocapkit.tracking.mono.tracker`), and where the feet do not place the subject
+    a longer trunk put it too far. Unchanged for keypoints of unknown origin."""
+    offsets = detector_offsets(backend)
+    if not offsets:
+        return lengths_mm
+    from mocapkit.tracking.multiview.tracker import multiview_skeleton  # a detector's only
+
+    fixed, _ = offset_segments(
+        multiview_skeleton(), dict(zip(model.segments, map(float, lengths_mm))), {}, offsets
+    )
+    out = np.array([fixed[s] for s in model.segments], dtype=float)
+    from_neck = model.parent == 0
+    out[from_neck] = lengths_mm[from_neck]
+    return out
+
+
 def refined_lengths(
     frames: Sequence[MonoFrame],
     model: StickModel,
@@ -660,7 +685,8 @@ def track_mono(
     length_passes : int
         With video lengths and the perspective model: track this many times, each pass
         measuring the lengths again from the previous pass's poses (`refined_lengths`,
-        with ``config.short_link_weight``).
+        with ``config.short_link_weight``); the first lengths have the detector's known
+        offsets taken out of the limbs (`detector_corrected_lengths`).
         Every pass but the last runs without the soft priors of `MonoConfig`
         (`mocapkit.tracking.mono.priors`) and without its ``reach_tolerance`` (M5
         exactly; with it there too the five accuracy clips got worse, 45.2 -> 46.4 mm,
@@ -714,6 +740,9 @@ def track_mono(
             lengths = lengths * scale
     else:
         lengths, scale = video_lengths(px, model, cam, cfg, dt, session.height_mm)
+    backend = None if skin else keypoints_backend(session, cam_name, keypoints)
+    if not use_session_lengths and not ortho:  # once (after the passes too: worse)
+        lengths = detector_corrected_lengths(lengths, model, backend)
     seen = np.isfinite(px[:, [0, model.child[model.link_index("trunk")]]]).all(axis=(1, 2))
     if not seen.any():
         raise SessionError(
@@ -761,7 +790,6 @@ def track_mono(
     feet = ankles_px
     if feet is None and set(ANKLES) <= set(kp.joint_names):
         feet = kp.pixels[:, [kp.joint_names.index(n) for n in ANKLES]]
-    backend = None if skin else keypoints_backend(session, cam_name, keypoints)
     floor = _floor(session, cam, cfg, feet is not None, placement, backend)
     stream = MonoStream(tracker, skeleton, cam, scale, floor=floor)
     if feet is None:
