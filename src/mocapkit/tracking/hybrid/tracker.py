@@ -214,11 +214,7 @@ class HybridConfig:
         `RefineConfig` whose penalty is on, the refiner is also given the previous
         frame's elbows and the time since (``previous_elbows_mm``, ``elapsed_s``).
     init_iterations : int
-        Cold-start solves (of ``ik.max_iterations`` each) on the first sample. One
-        reaches the markers from the relaxed pose placed under the head set (the largest
-        error 856 -> 5 mm on a bench session); the relaxed-pose pull that more solves
-        would add goes on in the next samples' warm-started solves, and the first
-        sample costs one solve (about 3 ms) instead of three.
+        Cold-start solves (of ``ik.max_iterations`` each) on the first sample.
     smoothing_polish_tol_mm : float
         After smoothing, effectors further than this from their markers are put back
         by IK. A tolerance near the marker noise keeps the smoothing (a tight one would
@@ -291,7 +287,7 @@ class HybridConfig:
     smoothing_beta: float = 0.5
     marker_offsets_mm: Mapping[str, Sequence[float]] = field(default_factory=dict)
     refine_config: Any = None
-    init_iterations: int = 1
+    init_iterations: int = 3
     plant_feet: bool = True
     smoothing_polish_tol_mm: float = 5.0
     smoothing_polish_stall_iterations: int = 3
