@@ -4,9 +4,9 @@
 (time, ``q``, ``joints_mm``, status per effector or limb, fit figures, ``worst``) in
 numpy columns, about 0.7 kB a frame for the mono tracker against 2.7 kB for the objects
 with their dicts. It is a sequence of `FrameResult`: indexing it builds that frame's
-result (a plain `FrameResult`, without a tracker's own fields), so `find_gaps`,
-`write_fit_csv` and the rest of `mocapkit.pipelines.run` read it as a list; a figure over
-all frames is read as one column (`ResultTable.fit_column`).
+result (a plain `FrameResult`, without a tracker's own fields), so `write_fit_csv` and
+the rest of `mocapkit.pipelines.run` read it as a list; a figure or a status over all
+frames is read as one column (`ResultTable.fit_column`, `ResultTable.status_column`).
 """
 
 from __future__ import annotations
@@ -159,6 +159,20 @@ class ResultTable(Sequence[FrameResult]):
             raise unknown_name("fit figure", name, self.fit_names, "the run's results")
         k = self.fit_names.index(name)
         return np.where(self._has_fit[: self._n, k], self._fit[: self._n, k], np.nan)
+
+    def status_column(self, name: str) -> list[str | None]:
+        """Each frame's status of the effector or limb ``name`` (None in frames without it).
+
+        Raises
+        ------
+        UnknownNameError
+            No frame has a status of that name (lists those there are).
+        """
+        if name not in self.status_names:
+            raise unknown_name("status", name, self.status_names, "the run's results")
+        k = self.status_names.index(name)
+        values: list[str | None] = [None, *self._status_values]
+        return [values[c] for c in self._status[: self._n, k].tolist()]
 
     def __len__(self) -> int:
         return self._n

@@ -370,20 +370,32 @@ class Gap:
 
 def find_gaps(results: Sequence[FrameResult]) -> list[Gap]:
     """The runs of frames whose status is ``released`` or ``missing``, per effector, in
-    time order (what a run's summary lists; fit.csv has the per-frame status)."""
+    time order (what a run's summary lists; fit.csv has the per-frame status). A
+    `ResultTable` is read by its columns, without building each frame's result."""
     gaps: list[Gap] = []
-    names: dict[str, None] = {}
-    for r in results:
-        names.update(dict.fromkeys(r.status))
+    if isinstance(results, ResultTable):
+        names = list(results.status_names)
+        times = results.time_s.tolist()
+        column = results.status_column
+    else:
+        found: dict[str, None] = {}
+        for r in results:
+            found.update(dict.fromkeys(r.status))
+        names = list(found)
+        times = [r.time_s for r in results]
+
+        def column(name: str) -> list[str | None]:
+            return [r.status.get(name) for r in results]
+
     for name in names:
+        statuses = column(name)
         start, current = 0, None
-        for i in range(len(results) + 1):
-            st = results[i].status.get(name) if i < len(results) else None
+        for i in range(len(statuses) + 1):
+            st = statuses[i] if i < len(statuses) else None
             if st == current:
                 continue
             if current in ("released", "missing"):
-                end = results[i - 1].time_s
-                gaps.append(Gap(name, str(current), results[start].time_s, end, i - start))
+                gaps.append(Gap(name, str(current), times[start], times[i - 1], i - start))
             start, current = i, st
     return sorted(gaps, key=lambda g: (g.start_s, g.name))
 
