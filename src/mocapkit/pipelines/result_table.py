@@ -155,9 +155,7 @@ class ResultTable(Sequence[FrameResult]):
         UnknownNameError
             No frame has a figure of that name (lists those there are).
         """
-        if name not in self.fit_names:
-            raise unknown_name("fit figure", name, self.fit_names, "the run's results")
-        k = self.fit_names.index(name)
+        k = _index("fit figure", name, self.fit_names)
         return np.where(self._has_fit[: self._n, k], self._fit[: self._n, k], np.nan)
 
     def status_column(self, name: str) -> list[str | None]:
@@ -168,9 +166,7 @@ class ResultTable(Sequence[FrameResult]):
         UnknownNameError
             No frame has a status of that name (lists those there are).
         """
-        if name not in self.status_names:
-            raise unknown_name("status", name, self.status_names, "the run's results")
-        k = self.status_names.index(name)
+        k = _index("status", name, self.status_names)
         values: list[str | None] = [None, *self._status_values]
         return [values[c] for c in self._status[: self._n, k].tolist()]
 
@@ -217,3 +213,10 @@ class ResultTable(Sequence[FrameResult]):
 
 
 __all__ = ["ResultTable"]
+
+
+def _index(kind: str, name: str, names: list[str]) -> int:
+    """The column of ``name`` among ``names``; `UnknownNameError` (listing them) if absent."""
+    if name not in names:
+        raise unknown_name(kind, name, names, "the run's results")
+    return names.index(name)
