@@ -212,11 +212,11 @@ class ResultTable(Sequence[FrameResult]):
             yield self[i]
 
 
-__all__ = ["ResultTable"]
-
-
 def _index(kind: str, name: str, names: list[str]) -> int:
     """The column of ``name`` among ``names``; `UnknownNameError` (listing them) if absent."""
     if name not in names:
         raise unknown_name(kind, name, names, "the run's results")
     return names.index(name)
+
+
+__all__ = ["ResultTable"]

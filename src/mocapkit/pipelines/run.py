@@ -378,10 +378,7 @@ def find_gaps(results: Sequence[FrameResult]) -> list[Gap]:
         times = results.time_s.tolist()
         column = results.status_column
     else:
-        found: dict[str, None] = {}
-        for r in results:
-            found.update(dict.fromkeys(r.status))
-        names = list(found)
+        names = _columns(results)[0]
         times = [r.time_s for r in results]
 
         def column(name: str) -> list[str | None]:
