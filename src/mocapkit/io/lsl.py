@@ -21,16 +21,20 @@ session clock it was replayed from (`ReplayClock`), so that a consumer tracks it
 session's own time line at any replay speed.
 
 liblsl reads its settings from ``lsl_api.cfg`` or the file named by ``LSLAPICFG``
-(`LOOPBACK_CONFIG` keeps discovery on this machine, as the tests do).
+(`LOOPBACK_CONFIG` keeps discovery on this machine, as the tests do). Where the user
+has no such file, mocapkit gives liblsl `QUIET_CONFIG` (its defaults, with its log at
+warnings), so that its start-up INFO lines do not fill the terminal.
 """
 
 from __future__ import annotations
 
 import math
+import os
 import re
 import xml.etree.ElementTree as ET
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from types import ModuleType
 from typing import Any
 
@@ -53,6 +57,12 @@ KnownPeers = {127.0.0.1}
 level = -3
 """
 
+#: liblsl's defaults with its log at warnings and above: used only where the user has no
+#: ``lsl_api.cfg`` of their own (`user_config_files`).
+QUIET_CONFIG = """[log]
+level = -1
+"""
+
 #: Channel units accepted for positions, and their scale to mm.
 LENGTH_UNITS: dict[str, float] = {
     "mm": 1.0,
@@ -66,8 +76,29 @@ LENGTH_UNITS: dict[str, float] = {
 _AXIS_LABEL = re.compile(r"^(?P<name>.+?)[_ .:-]?(?P<axis>[xyzXYZ])$")
 
 
+def user_config_files() -> list[Path]:
+    """The ``lsl_api.cfg`` files liblsl would read, in its order of search, that exist:
+    the file named by ``LSLAPICFG``, then ``lsl_api.cfg`` in the working directory, in
+    ``~/lsl_api/`` and in ``/etc/lsl_api/``."""
+    named = os.environ.get("LSLAPICFG")
+    candidates = [Path(named)] if named else []
+    candidates += [
+        Path("lsl_api.cfg"),
+        Path.home() / "lsl_api" / "lsl_api.cfg",
+        Path("/etc/lsl_api/lsl_api.cfg"),
+    ]
+    return [path for path in candidates if path.is_file()]
+
+
+_quiet_config_set = False
+
+
 def pylsl() -> ModuleType:
-    """The ``pylsl`` module, or a `ConfigError` saying how to install it."""
+    """The ``pylsl`` module, or a `ConfigError` saying how to install it.
+
+    On its first load, where the user has no ``lsl_api.cfg`` (`user_config_files`),
+    liblsl is given `QUIET_CONFIG` before any stream exists."""
+    global _quiet_config_set
     try:
         import pylsl as module
     except ImportError as exc:
@@ -75,6 +106,11 @@ def pylsl() -> ModuleType:
             "live capture needs pylsl (Lab Streaming Layer); install it with "
             f"pip install 'mocapkit[live]' ({exc})"
         ) from None
+    if not _quiet_config_set:
+        _quiet_config_set = True
+        set_content = getattr(module.lib.lib, "lsl_set_config_content", None)
+        if set_content is not None and not user_config_files():
+            set_content(QUIET_CONFIG.encode())
     return module
 
 
@@ -339,6 +375,7 @@ __all__ = [
     "LENGTH_UNITS",
     "LOOPBACK_CONFIG",
     "MARKERS_TYPE",
+    "QUIET_CONFIG",
     "ReplayClock",
     "StreamLayout",
     "find_stream",
@@ -351,4 +388,5 @@ __all__ = [
     "parse_layout",
     "point_labels",
     "pylsl",
+    "user_config_files",
 ]
