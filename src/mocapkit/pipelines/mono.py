@@ -798,7 +798,7 @@ def track_mono(
     if keypoints3d is None and keypoints is None and not skin and own3d.is_file():
         keypoints3d = own3d
     sines: Sequence[FloatArray | None] = [None] * t.shape[0]
-    if keypoints3d is not None and cfg.depth_order_weight > 0:
+    if keypoints3d is not None and (cfg.depth_order_weight > 0 or cfg.depth_fusion_weight > 0):
         sines = list(detector_link_sines(keypoints3d, t, model))
     recorded = _FrameRecorder(stream)
     run = run_tracker(
