@@ -680,8 +680,10 @@ def track_mono(
     keypoints3d : path-like, optional
         A detector's own 3-D (``keypoints3d/<camera>.npz``, `detector_link_sines`) whose
         depth order softly costs each link's flip (``config.depth_order_weight``; the last
-        pass only). Default: the session's ``keypoints3d/<camera>.npz`` where the
-        session's own keypoints are tracked and it exists.
+        pass only) and whose depth offsets are blended into the placed poses'
+        (``config.depth_fusion_weight``, `mocapkit.tracking.mono.depth_fusion`). Default:
+        the session's ``keypoints3d/<camera>.npz`` where the session's own keypoints are
+        tracked and it exists.
     length_passes : int
         With video lengths and the perspective model: track this many times, each pass
         measuring the lengths again from the previous pass's poses (`refined_lengths`,

@@ -94,7 +94,8 @@ def world_points(camera: Camera, points_in_camera: FloatArray) -> FloatArray:
 class MonoSample:
     """One frame for `MonoStream`: the stick's joints (K, 2) px, NaN where unseen, and
     the ankles (2, 2) px where the stream places the subject on the floor, and a
-    detector's depth order per link (``link_sines``, `MonoTracker.push`) where it has one."""
+    detector's depth order per link (``link_sines``, `MonoTracker.push`) where it has one,
+    also blended into the placed pose's depth offsets (`MonoStream`)."""
 
     time_s: float
     points_px: FloatArray
@@ -159,7 +160,9 @@ class MonoStream:
         agrees with the tracker's depth (`mocapkit.tracking.mono.placement`), the placed
         depth changing beyond the tracker's own depth motion at most at
         `mocapkit.tracking.base.UNSEEN_SPEED_MM_S` (`DepthRate`); None: the tracker's
-        depth.
+        depth. A frame whose sample brings ``link_sines`` then has each link's depth
+        offset blended with the detector's (``config.depth_fusion_weight``,
+        `mocapkit.tracking.mono.depth_fusion.fuse_link_depths`; perspective model only).
     rejoin_blend_s : float
         A limb ``released`` holds the joint angles it had when last observed (its pose
         relative to its parent, in ``q``: ``motion.npz`` and the BVH); when it is
