@@ -195,9 +195,10 @@ class MonoConfig:
         Perspective model, where the frame comes with a detector's ``link_sines``: the
         share of the detector's depth offset in each link's, the chosen pose's joints
         moved along their rays (`mocapkit.tracking.mono.depth_fusion.fuse_link_depths`,
-        applied by `mocapkit.tracking.mono.stream.MonoStream`); 0: off. Default 0.4: the
-        best single weight of 0.25-0.5 on the five tuning clips from MediaPipe on the
-        rendered video (docs/design-notes/mono.md).
+        applied by `mocapkit.tracking.mono.stream.MonoStream` after the placement); 0: off.
+        Default 0.4: of 0.3-0.6 the best on the five tuning clips from MediaPipe on the
+        rendered video (53.5 -> 51.1 mm PA, a flat 51.1-51.2 over 0.3-0.5); report clips
+        48.3 -> 43.7 (docs/design-notes/mono.md).
     trunk_lean_sines : tuple of float
         Perspective model: besides the search's poses, those with the pelvis on its ray
         where the trunk leaves the plane normal to that ray by each of these sines, towards
