@@ -680,8 +680,10 @@ def track_mono(
     keypoints3d : path-like, optional
         A detector's own 3-D (``keypoints3d/<camera>.npz``, `detector_link_sines`) whose
         depth order softly costs each link's flip (``config.depth_order_weight``; the last
-        pass only). Default: the session's ``keypoints3d/<camera>.npz`` where the
-        session's own keypoints are tracked and it exists.
+        pass only) and whose depth offsets are blended into the placed poses'
+        (``config.depth_fusion_weight``, `mocapkit.tracking.mono.depth_fusion`). Default:
+        the session's ``keypoints3d/<camera>.npz`` where the session's own keypoints are
+        tracked and it exists.
     length_passes : int
         With video lengths and the perspective model: track this many times, each pass
         measuring the lengths again from the previous pass's poses (`refined_lengths`,
@@ -798,7 +800,7 @@ def track_mono(
     if keypoints3d is None and keypoints is None and not skin and own3d.is_file():
         keypoints3d = own3d
     sines: Sequence[FloatArray | None] = [None] * t.shape[0]
-    if keypoints3d is not None and cfg.depth_order_weight > 0:
+    if keypoints3d is not None and (cfg.depth_order_weight > 0 or cfg.depth_fusion_weight > 0):
         sines = list(detector_link_sines(keypoints3d, t, model))
     recorded = _FrameRecorder(stream)
     run = run_tracker(

@@ -29,6 +29,7 @@ from mocapkit.tracking.base import (
     observation_status,
     unobserved_part,
 )
+from mocapkit.tracking.mono.depth_fusion import fuse_link_depths
 from mocapkit.tracking.mono.placement import DepthRate, FloorDepth
 from mocapkit.tracking.mono.pose_fit import fit_stick_pose
 from mocapkit.tracking.mono.stick import StickModel
@@ -93,7 +94,8 @@ def world_points(camera: Camera, points_in_camera: FloatArray) -> FloatArray:
 class MonoSample:
     """One frame for `MonoStream`: the stick's joints (K, 2) px, NaN where unseen, and
     the ankles (2, 2) px where the stream places the subject on the floor, and a
-    detector's depth order per link (``link_sines``, `MonoTracker.push`) where it has one."""
+    detector's depth order per link (``link_sines``, `MonoTracker.push`) where it has one,
+    also blended into the placed pose's depth offsets (`MonoStream`)."""
 
     time_s: float
     points_px: FloatArray
@@ -158,7 +160,9 @@ class MonoStream:
         agrees with the tracker's depth (`mocapkit.tracking.mono.placement`), the placed
         depth changing beyond the tracker's own depth motion at most at
         `mocapkit.tracking.base.UNSEEN_SPEED_MM_S` (`DepthRate`); None: the tracker's
-        depth.
+        depth. A frame whose sample brings ``link_sines`` then has each link's depth
+        offset blended with the detector's (``config.depth_fusion_weight``,
+        `mocapkit.tracking.mono.depth_fusion.fuse_link_depths`; perspective model only).
     rejoin_blend_s : float
         A limb ``released`` holds the joint angles it had when last observed (its pose
         relative to its parent, in ``q``: ``motion.npz`` and the BVH); when it is
@@ -212,6 +216,12 @@ class MonoStream:
                 self._limb_dofs[name] = limbs.limb(skeleton, name).dofs
         self._held: dict[str, FloatArray] = {}
         self._depth_rate = DepthRate()
+        cfg = tracker.config
+        # the detector's link sines of the pending frames, where its depth is fused
+        self._fuse = (
+            cfg.depth_fusion_weight > 0 and cfg.camera_model == "perspective" and camera is not None
+        )
+        self._sines: dict[int, FloatArray] = {}
         self._rejoin: dict[str, tuple[float, FloatArray]] = {}
 
     def push(self, sample: MonoSample) -> list[FrameResult]:
@@ -224,6 +234,8 @@ class MonoStream:
                 self._last_seen[limb] = t
             unseen[limb] = t - self._last_seen.get(limb, -math.inf)
         self._unseen[self._pushed] = unseen
+        if self._fuse and sample.link_sines is not None:
+            self._sines[self._pushed] = np.asarray(sample.link_sines, dtype=float)
         self._pushed += 1
         if self.floor is not None:
             ankles = sample.ankles_px if sample.ankles_px is not None else np.full((2, 2), np.nan)
@@ -240,12 +252,17 @@ class MonoStream:
     def _result(self, f: MonoFrame) -> MonoResult:
         t = self.tracker
         unseen = self._unseen.pop(f.index)
+        sines = self._sines.pop(f.index, None)
         on_floor = 0.0
         if self.floor is not None and f.code >= 0 and np.isfinite(f.depth_mm) and f.depth_mm > 0:
             z = self.floor.depth(f.index, f.depth_mm)
             on_floor = float(np.isfinite(z))
             z = self._depth_rate.place(f.time_s, z if on_floor else f.depth_mm, f.depth_mm)
             f = replace(f, joints_in_camera=f.joints_in_camera * (z / f.depth_mm), depth_mm=z)
+        if sines is not None and f.code >= 0:  # placed: the lengths are the subject's mm
+            m, w = t.model, t.config.depth_fusion_weight
+            fused = fuse_link_depths(f.joints_in_camera, m.parent, m.child, t.lengths, sines, w)
+            f = replace(f, joints_in_camera=fused)
         world = to_world([f], t.model, self.camera, t.config, self.px_per_mm)[0]
         joints = world[self._order]
         q = fit_stick_pose(self.skeleton, self.joint_names, joints[None])[0]

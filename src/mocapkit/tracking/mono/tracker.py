@@ -191,6 +191,14 @@ class MonoConfig:
         (eq. 3 costs ~450 per frame): of 10-3000 the best on the five tuning clips from
         MediaPipe on the rendered video (62.8 -> 59.4 mm PA); report clips 55.8 -> 54.5
         (docs/design-notes/mono.md).
+    depth_fusion_weight : float
+        Perspective model, where the frame comes with a detector's ``link_sines``: the
+        share of the detector's depth offset in each link's, the chosen pose's joints
+        moved along their rays (`mocapkit.tracking.mono.depth_fusion.fuse_link_depths`,
+        applied by `mocapkit.tracking.mono.stream.MonoStream` after the placement); 0: off.
+        Default 0.4: of 0.3-0.6 the best on the five tuning clips from MediaPipe on the
+        rendered video (53.5 -> 51.1 mm PA, a flat 51.1-51.2 over 0.3-0.5); report clips
+        48.3 -> 43.7 (docs/design-notes/mono.md).
     trunk_lean_sines : tuple of float
         Perspective model: besides the search's poses, those with the pelvis on its ray
         where the trunk leaves the plane normal to that ray by each of these sines, towards
@@ -228,6 +236,7 @@ class MonoConfig:
     girdle_weight: float = 100.0
     girdle_cosine: float = float("nan")
     depth_order_weight: float = 1000.0
+    depth_fusion_weight: float = 0.4
     trunk_lean_sines: tuple[float, ...] = (0.25,)
     arm_prior: ArmPrior | None = field(default=None, compare=False, repr=False)
 
@@ -261,6 +270,11 @@ class MonoConfig:
                 raise ConfigError(
                     f"MonoConfig.{name}: expected a finite weight >= 0 (0: off), found {value}"
                 )
+        if not 0.0 <= self.depth_fusion_weight <= 1.0:
+            raise ConfigError(
+                "MonoConfig.depth_fusion_weight: expected [0, 1] (0: off), found "
+                f"{self.depth_fusion_weight}"
+            )
         if not all(0.0 < x < 1.0 for x in self.trunk_lean_sines):
             raise ConfigError(
                 "MonoConfig.trunk_lean_sines: expected sines in (0, 1), found "
