@@ -130,6 +130,10 @@ def test_bad_configuration_is_refused() -> None:
         MonoConfig(camera_model="fisheye")
     with pytest.raises(ConfigError, match="short_link_weight: expected \\[0, 1\\], found -0.1"):
         MonoConfig(short_link_weight=-0.1)
+    with pytest.raises(ConfigError, match="floor_leg_weight: expected a finite weight >= 0"):
+        MonoConfig(floor_leg_weight=-1.0)
+    with pytest.raises(ConfigError, match="planted_speed_mm_s: expected a finite speed > 0"):
+        MonoConfig(planted_speed_mm_s=0.0)
     with pytest.raises(ConfigError, match="needs a calibrated camera"):
         MonoTracker(np.ones(8), None, 1 / FPS, MonoConfig())
     tr = MonoTracker(np.ones(8), None, 1 / FPS, MonoConfig(camera_model="orthographic"))

@@ -30,7 +30,11 @@ links together gives up to 2^14 poses a frame and 2^28 edges between two frames 
 cause of gigabytes per clip and MemoryError); the two-chain search keeps both bounded,
 at the cost that the legs do not vote on the trunk's flip, and online a latency of
 ``smooth_lag + 2 lag`` frames for the legs. Memory stays flat with the recording's
-length: only open frames are kept.
+length: only open frames are kept. The legs' only soft cost is the floor's: with a
+calibrated camera and the floor known (``ankle_floor_mm``), in frames where both feet stand
+still each ankle lies where its ray meets the floor, and the difference of the two depths
+(free of the error of the subject's own depth) costs the legs' poses that put the other
+foot in front (``floor_leg_weight``, `mocapkit.tracking.mono.priors.planted_feet_cost`).
 
 Camera models (the paper assumes orthography, the camera 10 m away, §4):
 
@@ -282,6 +286,11 @@ class MonoConfig:
                 raise ConfigError(
                     f"MonoConfig.{name}: expected a finite weight >= 0 (0: off), found {value}"
                 )
+        if not (math.isfinite(self.planted_speed_mm_s) and self.planted_speed_mm_s > 0.0):
+            raise ConfigError(
+                "MonoConfig.planted_speed_mm_s: expected a finite speed > 0 (mm/s), found "
+                f"{self.planted_speed_mm_s}"
+            )
         if not all(0.0 < x < 1.0 for x in self.trunk_lean_sines):
             raise ConfigError(
                 "MonoConfig.trunk_lean_sines: expected sines in (0, 1), found "
