@@ -548,8 +548,15 @@ def online_mono_stream(
     model = stick_model(config.legs, config.limits)
     lengths = session_lengths(session, model)
     cam = session.camera(camera)
-    tracker = MonoTracker(lengths, cam, dt_s, known_lengths_config(config), model)
     floor = _floor(session, cam, config, ankles, placement, backend)
+    tracker = MonoTracker(
+        lengths,
+        cam,
+        dt_s,
+        known_lengths_config(config),
+        model,
+        ankle_floor_mm=None if floor is None else floor.ankle_height_mm,
+    )
     return MonoStream(tracker, output_skeleton(model, lengths), cam, float("nan"), floor=floor)
 
 
@@ -788,11 +795,19 @@ def track_mono(
         del pass_frames
     lengths_mm = lengths / scale if ortho else lengths
     skeleton = output_skeleton(model, lengths_mm)
-    tracker = MonoTracker(lengths, cam, dt, cfg, model, initial_pose=initial)
     feet = ankles_px
     if feet is None and set(ANKLES) <= set(kp.joint_names):
         feet = kp.pixels[:, [kp.joint_names.index(n) for n in ANKLES]]
     floor = _floor(session, cam, cfg, feet is not None, placement, backend)
+    tracker = MonoTracker(
+        lengths,
+        cam,
+        dt,
+        cfg,
+        model,
+        initial_pose=initial,
+        ankle_floor_mm=None if floor is None else floor.ankle_height_mm,
+    )
     stream = MonoStream(tracker, skeleton, cam, scale, floor=floor)
     if feet is None:
         feet = np.full((t.shape[0], 2, 2), np.nan)

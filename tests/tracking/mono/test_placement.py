@@ -14,6 +14,7 @@ from mocapkit.tracking.mono.placement import (
     FloorDepth,
     detector_ankle_lift_mm,
     floor_neck_depth,
+    floor_points,
 )
 
 STATURE = 1700.0
@@ -123,3 +124,16 @@ def test_depth_rate_passes_the_trackers_motion_and_bounds_a_change_of_estimate()
     np.testing.assert_allclose(placed[3:], 3200.0)
     # both at once: the own motion whole plus the bounded share of the rest
     assert rate.place(7 * dt, 3500.0, 3250.0) == pytest.approx(3200.0 + 50.0 + step)
+
+
+def test_floor_points_are_where_the_rays_meet_the_plane_and_nan_above_the_horizon() -> None:
+    cam = _camera()
+    world = np.array([[300.0, 500.0, 80.0], [-400.0, 1500.0, 80.0]])
+    n = cam.undistort_pixels(cam.project(world))
+    depth, met = floor_points(cam, n, 80.0)
+    np.testing.assert_allclose(met, world, atol=1e-6)
+    np.testing.assert_allclose(depth, cam.to_camera(world)[:, 2], rtol=1e-12)
+    # a point above the camera's height (its ray rises) and an unseen one: NaN
+    up = cam.undistort_pixels(cam.project(np.array([[0.0, 2000.0, 3000.0]])))
+    depth, met = floor_points(cam, np.vstack([up, [[np.nan, np.nan]]]), 80.0)
+    assert np.isnan(depth).all() and np.isnan(met).all()

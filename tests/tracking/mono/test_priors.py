@@ -8,6 +8,7 @@ from mocapkit.tracking.mono.priors import (
     clavicle_forward_cost,
     depth_order_cost,
     girdle_angle_cost,
+    planted_feet_cost,
 )
 from mocapkit.tracking.mono.stick import stick_model
 from tests.tracking.mono.conftest import random_pose
@@ -124,3 +125,23 @@ def test_depth_order_cost_is_the_out_of_plane_sine_of_each_disagreeing_link() ->
     assert depth_order_cost(model, np.full((1, model.n_joints, 3), np.nan), sines)[0] == 0.0
     with pytest.raises(ShapeError, match="depth_order_cost"):
         depth_order_cost(model, fwd, sines)
+
+
+def test_planted_feet_cost_is_the_error_of_the_feets_depth_difference_in_leg_lengths() -> None:
+    model = stick_model(True)
+    la, ra = model.joint_names.index("left_ankle"), model.joint_names.index("right_ankle")
+    poses = np.zeros((3, model.n_joints, 3))
+    poses[:, la, 2] = (3000.0, 3300.0, 3200.0)
+    poses[:, ra, 2] = (3400.0, 3100.0, 3600.0)
+    floor = np.array([2950.0, 3350.0])  # the left foot 400 mm nearer, whatever the depth
+    np.testing.assert_allclose(
+        planted_feet_cost(model, poses, (la, ra), floor, 800.0), [0.0, 600.0 / 800.0, 0.0]
+    )
+    # a foot not planted (NaN): no cost; a pose without ankles: no cost
+    np.testing.assert_allclose(
+        planted_feet_cost(model, poses, (la, ra), np.array([2950.0, np.nan]), 800.0), 0.0
+    )
+    nan = np.full((1, model.n_joints, 3), np.nan)
+    assert planted_feet_cost(model, nan, (la, ra), floor, 800.0)[0] == 0.0
+    with pytest.raises(ShapeError, match="planted_feet_cost: expected positions"):
+        planted_feet_cost(model, poses[0], (la, ra), floor, 800.0)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -128,6 +130,10 @@ def test_bad_configuration_is_refused() -> None:
         MonoConfig(camera_model="fisheye")
     with pytest.raises(ConfigError, match="short_link_weight: expected \\[0, 1\\], found -0.1"):
         MonoConfig(short_link_weight=-0.1)
+    with pytest.raises(ConfigError, match="floor_leg_weight: expected a finite weight >= 0"):
+        MonoConfig(floor_leg_weight=-1.0)
+    with pytest.raises(ConfigError, match="planted_speed_mm_s: expected a finite speed > 0"):
+        MonoConfig(planted_speed_mm_s=0.0)
     with pytest.raises(ConfigError, match="needs a calibrated camera"):
         MonoTracker(np.ones(8), None, 1 / FPS, MonoConfig())
     tr = MonoTracker(np.ones(8), None, 1 / FPS, MonoConfig(camera_model="orthographic"))
@@ -348,3 +354,58 @@ def test_trunk_leans_put_a_short_trunks_true_lean_among_the_states() -> None:
     assert np.all(near_with <= near_without + 1e-9)
     # one lean throughout: the path does not hop between the states' leans
     assert np.all(np.abs(np.diff(chosen)) < 0.05)
+
+
+def _split_stance_world() -> tuple[np.ndarray, tuple[str, ...]]:
+    """World joints (K, 3) of the stick with legs standing in a split stance on the floor
+    (z up): the left foot 300 mm towards the camera (at -y), the right 300 mm away."""
+    model = stick_model(True)
+    at = {
+        "neck": (0, 0, 1450), "pelvis": (0, 0, 950), "left_shoulder": (180, 0, 1420),
+        "right_shoulder": (-180, 0, 1420), "head": (0, 0, 1650), "left_elbow": (200, 0, 1150),
+        "left_wrist": (210, -60, 900), "right_elbow": (-200, 0, 1150),
+        "right_wrist": (-210, -60, 900), "left_hip": (90, 0, 900), "right_hip": (-90, 0, 900),
+        "left_knee": (90, -160, 500), "left_ankle": (90, -300, 80),
+        "right_knee": (-90, 160, 500), "right_ankle": (-90, 300, 80),
+    }  # fmt: skip
+    return np.array([at[n] for n in model.joint_names], dtype=float), model.joint_names
+
+
+def test_planted_feet_put_the_legs_depths_where_the_floor_does() -> None:
+    """Standing still (eq. 3 costs every flip the same), the floor's depths of the two
+    planted feet choose the legs' flips: the ankles' depths as the truth's; feet that slide
+    faster than ``planted_speed_mm_s`` count as not planted."""
+    world, _ = _split_stance_world()
+    model = stick_model(True)
+    cam = camera()
+    truth = cam.to_camera(world)
+    lengths = np.linalg.norm(model.link_vectors(truth), axis=-1)
+    ankles = [model.joint_names.index(n) for n in ("left_ankle", "right_ankle")]
+    cfg = known_lengths_config(MonoConfig(legs=True, floor_leg_weight=1000.0))
+    tracker = MonoTracker(lengths, cam, 1 / FPS, cfg, model, ankle_floor_mm=80.0)
+    px = cam.project(world)
+    out = []
+    for k in range(12):
+        out += tracker.push(k / FPS, px)
+    est = np.stack([f.joints_in_camera for f in out + tracker.finish()])
+    # the tracker's own depth errs a little (its bound); the feet's difference and the
+    # legs' flips are the truth's
+    gap = est[:, ankles[1], 2] - est[:, ankles[0], 2]
+    np.testing.assert_allclose(gap, truth[ankles[1], 2] - truth[ankles[0], 2], atol=10.0)
+    legs = [model.link_index(s) for s in ("left_thigh", "left_shank", "right_thigh", "right_shank")]
+    dz = est[:, model.child[legs], 2] - est[:, model.parent[legs], 2]
+    true_dz = truth[model.child[legs], 2] - truth[model.parent[legs], 2]
+    assert (np.sign(dz) == np.sign(true_dz)).all()
+    # the floor's depths of both feet, once the previous frame is known; none where they slide
+    sliding = MonoTracker(lengths, cam, 1 / FPS, cfg, model, ankle_floor_mm=80.0)
+    n = cam.undistort_pixels(px)
+    assert np.isnan(sliding._planted(0.0, n)).all()  # no previous frame
+    np.testing.assert_allclose(sliding._planted(1 / FPS, n), truth[ankles, 2], rtol=1e-9)
+    moved = cam.undistort_pixels(cam.project(world + np.array([20.0, 0.0, 0.0])))  # 600 mm/s
+    assert np.isnan(sliding._planted(2 / FPS, moved)).all()
+    # no floor given, or the weight 0: no floor depths
+    assert MonoTracker(lengths, cam, 1 / FPS, cfg, model)._planted(0.0, n) is None
+    off = replace(cfg, floor_leg_weight=0.0)
+    assert (
+        MonoTracker(lengths, cam, 1 / FPS, off, model, ankle_floor_mm=80.0)._planted(0.0, n) is None
+    )

@@ -93,6 +93,37 @@ def detector_ankle_lift_mm(offsets_mm: Mapping[str, Sequence[float]]) -> float:
     return float(np.mean(ups)) if ups else 0.0
 
 
+def floor_points(
+    camera: Camera, normalised: ArrayLike, height_mm: float
+) -> tuple[FloatArray, FloatArray]:
+    """Where viewing rays meet the horizontal plane ``z = height_mm`` of the world.
+
+    Parameters
+    ----------
+    camera : Camera
+        Calibrated, in a world frame whose floor is z = 0 (z up).
+    normalised : (A, 2) float
+        Undistorted normalised image points (x_n, y_n).
+    height_mm : float
+
+    Returns
+    -------
+    depth : (A,) float
+        Camera depth (z, mm) of each meeting point; NaN where the ray does not meet the
+        plane in front of the camera or the point is NaN.
+    world : (A, 3) float
+        The meeting points in the world frame (mm; NaN where ``depth`` is).
+    """
+    n = np.asarray(normalised, dtype=float).reshape(-1, 2)
+    world_from_camera = np.linalg.inv(camera.camera_from_world)
+    rot, centre = world_from_camera[:3, :3], world_from_camera[:3, 3]
+    rays = np.c_[n, np.ones(n.shape[0])] @ rot.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (height_mm - centre[2]) / rays[:, 2]
+    t = np.where(np.isfinite(t) & (t > 0), t, np.nan)  # a ray's camera z is 1: t is the depth
+    return t, centre + t[:, None] * rays
+
+
 def floor_neck_depth(
     camera: Camera,
     stature_mm: float,
@@ -123,15 +154,13 @@ def floor_neck_depth(
         return float("nan")
     world_from_camera = np.linalg.inv(camera.camera_from_world)
     rot, centre = world_from_camera[:3, :3], world_from_camera[:3, 3]
-    rays = np.c_[camera.undistort_pixels(ankles[seen]), np.ones(int(seen.sum()))] @ rot.T
     height = ANKLE_SHARE * stature_mm + ankle_lift_mm
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (height - centre[2]) / rays[:, 2]
-    t = np.where(np.isfinite(t) & (t > 0), t, np.inf)
+    t, feet = floor_points(camera, camera.undistort_pixels(ankles[seen]), height)
+    t = np.where(np.isfinite(t), t, np.inf)
     if not np.isfinite(t).any():
         return float("nan")
     i = int(np.argmin(t))  # the nearer foot: a raised one meets the plane beyond itself
-    foot = centre + t[i] * rays[i]
+    foot = feet[i]
     d = np.r_[camera.undistort_pixels(neck)[0], 1.0] @ rot.T
     plan = float(d[:2] @ d[:2])
     if plan <= 1e-12:
@@ -168,9 +197,9 @@ class FloorDepth:
         self.stature_mm = float(stature_mm)
         self.config = config or FloorConfig()
         self.ankle_lift_mm = float(ankle_lift_mm)
-        self._lift = float(np.linalg.inv(camera.camera_from_world)[2, 3]) - (
-            ANKLE_SHARE * self.stature_mm + self.ankle_lift_mm
-        )
+        #: height (mm) above the floor of the ankle points of a foot standing on it
+        self.ankle_height_mm = ANKLE_SHARE * self.stature_mm + self.ankle_lift_mm
+        self._lift = float(np.linalg.inv(camera.camera_from_world)[2, 3]) - self.ankle_height_mm
         self._depth: dict[int, float] = {}
         self._n = 0
         self.trusted = 0

@@ -16,6 +16,11 @@ plain cost; a weight of 0 leaves the tracker as the paper's.
 - `depth_order_cost` (unary, 0-L): a detector's own 3-D (MediaPipe's world landmarks)
   says which end of each link is nearer the camera; each link whose flip disagrees costs
   how far the detector has it out of the image plane (|dz| / L), never a hard choice.
+- `planted_feet_cost` (unary, leg lengths): a foot standing on the floor has its ankle
+  where its viewing ray meets the floor's plane (a calibrated camera knows it,
+  `mocapkit.tracking.mono.placement.floor_points`); with both feet down, the difference
+  of the two ankles' depths away from the floor's, over the leg's length, costs the legs'
+  flips that put one foot wrongly before the other.
 """
 
 from __future__ import annotations
@@ -149,3 +154,50 @@ def depth_order_cost(model: StickModel, positions: ArrayLike, sines: ArrayLike) 
     with np.errstate(invalid="ignore"):
         wrong = (np.sign(dz) * np.sign(s)) < 0
     return np.where(wrong & np.isfinite(s), np.abs(np.nan_to_num(s)), 0.0).sum(axis=1)
+
+
+def planted_feet_cost(
+    model: StickModel,
+    positions: ArrayLike,
+    ankles: tuple[int, int],
+    floor_depths_mm: ArrayLike,
+    leg_mm: float,
+) -> FloatArray:
+    """Disagreement of each pose's two ankles' depth difference with the floor's.
+
+    Where both feet stand on the floor, each ankle lies where its viewing ray meets the
+    floor's plane; the difference of the two depths tells which foot is nearer the
+    camera and by how much, whatever the error of the subject's depth (it shifts both).
+
+    Parameters
+    ----------
+    model : StickModel
+        With legs.
+    positions : (N, K, 3) float
+        Candidate poses in the camera frame (z away from the camera; mm).
+    ankles : (2,) int
+        Joint indices of the two ankles in ``model``.
+    floor_depths_mm : (2,) float
+        Camera depth at which each ankle's ray meets the floor's plane; NaN where a foot
+        is not planted (then no cost).
+    leg_mm : float
+        The leg's length (thigh and shank), the cost's unit.
+
+    Returns
+    -------
+    (N,) float
+        ``|(z_a - z_b) - (f_a - f_b)| / leg_mm``; 0 for a pose with NaN ankles and where
+        not both feet are planted.
+    """
+    pos = np.asarray(positions, dtype=float)
+    zf = np.asarray(floor_depths_mm, dtype=float)
+    if pos.ndim != 3 or pos.shape[1:] != (model.n_joints, 3) or zf.shape != (2,):
+        raise ShapeError(
+            f"planted_feet_cost: expected positions (N, {model.n_joints}, 3) and two floor "
+            f"depths, found {pos.shape} and {zf.shape}"
+        )
+    if not np.isfinite(zf).all():
+        return np.zeros(pos.shape[0])
+    a, b = ankles
+    d = (pos[:, a, 2] - pos[:, b, 2]) - (zf[0] - zf[1])
+    return np.nan_to_num(np.abs(d) / leg_mm)

@@ -30,7 +30,11 @@ links together gives up to 2^14 poses a frame and 2^28 edges between two frames 
 cause of gigabytes per clip and MemoryError); the two-chain search keeps both bounded,
 at the cost that the legs do not vote on the trunk's flip, and online a latency of
 ``smooth_lag + 2 lag`` frames for the legs. Memory stays flat with the recording's
-length: only open frames are kept.
+length: only open frames are kept. The legs' only soft cost is the floor's: with a
+calibrated camera and the floor known (``ankle_floor_mm``), in frames where both feet stand
+still each ankle lies where its ray meets the floor, and the difference of the two depths
+(free of the error of the subject's own depth) costs the legs' poses that put the other
+foot in front (``floor_leg_weight``, `mocapkit.tracking.mono.priors.planted_feet_cost`).
 
 Camera models (the paper assumes orthography, the camera 10 m away, §4):
 
@@ -92,10 +96,12 @@ from mocapkit.errors import ConfigError, ShapeError, unknown_name
 from mocapkit.tracking.mono.arm_prior import ArmPrior, default_arm_prior
 from mocapkit.tracking.mono.flips import enumerate_poses
 from mocapkit.tracking.mono.graph import Layer, PoseGraph
+from mocapkit.tracking.mono.placement import ANKLE_JOINTS, floor_points
 from mocapkit.tracking.mono.priors import (
     clavicle_forward_cost,
     depth_order_cost,
     girdle_angle_cost,
+    planted_feet_cost,
 )
 from mocapkit.tracking.mono.smoother import KeypointSmoother
 from mocapkit.tracking.mono.stick import UPPER_LINKS, LimitConfig, StickModel, stick_model
@@ -199,6 +205,17 @@ class MonoConfig:
         Default 0.4: of 0.3-0.6 the best on the five tuning clips from MediaPipe on the
         rendered video (53.5 -> 51.1 mm PA, a flat 51.1-51.2 over 0.3-0.5); report clips
         48.3 -> 43.7 (docs/design-notes/mono.md).
+    floor_leg_weight : float
+        With legs, a calibrated perspective camera and the floor known (`MonoTracker`'s
+        ``ankle_floor_mm``): unary cost per leg length of
+        `mocapkit.tracking.mono.priors.planted_feet_cost` in frames where both feet stand
+        on the floor; 0: off. Default 1000: of 300 / 1000 / 3000 the best on the five
+        tuning clips from MediaPipe (whole-body PA 72.1 -> 68.9 / 68.4 / 68.9 mm;
+        docs/design-notes/mono.md).
+    planted_speed_mm_s : float
+        A foot counts as standing on the floor where its ankle's floor point (its ray
+        met with the floor's plane) moves slower than this. Default 300 (150 / 600 gave
+        69.0 / 68.9 mm on the tuning clips at weight 1000).
     trunk_lean_sines : tuple of float
         Perspective model: besides the search's poses, those with the pelvis on its ray
         where the trunk leaves the plane normal to that ray by each of these sines, towards
@@ -238,6 +255,8 @@ class MonoConfig:
     depth_order_weight: float = 1000.0
     depth_fusion_weight: float = 0.4
     trunk_lean_sines: tuple[float, ...] = (0.25,)
+    floor_leg_weight: float = 1000.0
+    planted_speed_mm_s: float = 300.0
     arm_prior: ArmPrior | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -263,7 +282,13 @@ class MonoConfig:
                 "MonoConfig.rebuilt_reach_tolerance: expected [0, 1), found "
                 f"{self.rebuilt_reach_tolerance}"
             )
-        for name in ("clavicle_weight", "arm_prior_weight", "girdle_weight", "depth_order_weight"):
+        for name in (
+            "clavicle_weight",
+            "arm_prior_weight",
+            "girdle_weight",
+            "depth_order_weight",
+            "floor_leg_weight",
+        ):
             # a negative weight rewards what the cost penalises; NaN poisons every path
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0.0):
@@ -274,6 +299,11 @@ class MonoConfig:
             raise ConfigError(
                 "MonoConfig.depth_fusion_weight: expected [0, 1] (0: off), found "
                 f"{self.depth_fusion_weight}"
+            )
+        if not (math.isfinite(self.planted_speed_mm_s) and self.planted_speed_mm_s > 0.0):
+            raise ConfigError(
+                "MonoConfig.planted_speed_mm_s: expected a finite speed > 0 (mm/s), found "
+                f"{self.planted_speed_mm_s}"
             )
         if not all(0.0 < x < 1.0 for x in self.trunk_lean_sines):
             raise ConfigError(
@@ -339,6 +369,7 @@ class _FrameInfo:
     n_candidates: int
     n_survivors: int
     pruned_all: bool
+    floor_depth: FloatArray | None = None  # per ankle, where its foot is planted
 
 
 class MonoTracker:
@@ -364,6 +395,14 @@ class MonoTracker:
         model, whose depth is in px too), NaN where unknown; only positions relative to
         the neck are used, so its depth need not match the tracker's. That frame keeps
         only its surviving candidate nearest to it.
+    ankle_floor_mm : float, optional
+        With legs and the perspective model: the height above the world's floor (z = 0,
+        z up) of the ankles' image points when the foot stands on it (the placement's,
+        `mocapkit.tracking.mono.placement.FloorDepth`). Where both feet are planted (their
+        ankles' floor points moving slower than ``planted_speed_mm_s`` across the floor),
+        the legs' poses whose ankles' depth difference departs from the floor points'
+        are costed (``floor_leg_weight``, `mocapkit.tracking.mono.priors.planted_feet_cost`).
+        None: no such cost.
     """
 
     def __init__(
@@ -374,6 +413,7 @@ class MonoTracker:
         config: MonoConfig | None = None,
         model: StickModel | None = None,
         initial_pose: ArrayLike | None = None,
+        ankle_floor_mm: float | None = None,
     ) -> None:
         self.config = cfg = config or MonoConfig()
         self.model = model or stick_model(cfg.legs, cfg.limits)
@@ -389,6 +429,29 @@ class MonoTracker:
                 f"{self.upper.segments}, found {self.model.segments}"
             )
         self._n_up = self.upper.n_joints
+        self._ankles = (
+            (
+                self.model.joint_names.index(ANKLE_JOINTS[0]),
+                self.model.joint_names.index(ANKLE_JOINTS[1]),
+            )
+            if self._legs
+            else (0, 0)
+        )
+        self._ankle_floor_mm = (
+            ankle_floor_mm
+            if self._legs
+            and cfg.floor_leg_weight > 0
+            and cfg.camera_model == "perspective"
+            and camera is not None
+            else None
+        )
+        legs = [("left_thigh", "left_shank"), ("right_thigh", "right_shank")] if self._legs else []
+        self._leg_mm = float(
+            np.mean([sum(self.lengths[self.model.link_index(s)] for s in leg) for leg in legs])
+            if legs
+            else float("nan")
+        )
+        self._last_feet: tuple[float, FloatArray] | None = None  # time, floor points (A, 3)
         self._reach = self._link_reach()
         self._trunk = self.model.link_index("trunk")
         # the girdle cost where the neck is rebuilt (its clavicles mirror images in 2-D)
@@ -632,8 +695,25 @@ class MonoTracker:
             only = _nearest(positions, self._initial)
             self._initial = None  # only the first posed frame
         info = _FrameInfo(raw, obs, root, depth, n_cand, codes.shape[0], pruned_all)
+        info.floor_depth = self._planted(time_s, obs)
         decided = self._graph.add(time_s, codes, positions, unary, info, only)
         return self._legs_of(decided)
+
+    def _planted(self, time_s: float, obs: FloatArray) -> FloatArray | None:
+        """Per ankle, the depth of its ray's floor point where both feet are planted (both
+        floor points moving slower than ``planted_speed_mm_s`` across the floor since
+        the previous frame), else NaN; None without the floor (``ankle_floor_mm``)."""
+        if self._ankle_floor_mm is None or self.camera is None:
+            return None
+        depth, feet = floor_points(self.camera, obs[list(self._ankles)], self._ankle_floor_mm)
+        last, self._last_feet = self._last_feet, (time_s, feet)
+        out = np.full(depth.shape, np.nan)
+        if last is None or time_s <= last[0]:
+            return out
+        speed = np.linalg.norm((feet - last[1])[:, :2], axis=1) / (time_s - last[0])
+        if (speed < self.config.planted_speed_mm_s).all():
+            out[:] = depth
+        return out
 
     def _legs_of(self, decided: list[tuple[Layer, int]]) -> list[MonoFrame]:
         """The frames whose upper body is decided: final without legs; with legs, their
@@ -663,7 +743,11 @@ class MonoTracker:
                 info.n_survivors * codes.shape[0],
                 info.pruned_all or pruned,
             )
-            unary = np.zeros(codes.shape[0])  # the soft costs read the upper body only
+            unary = np.zeros(codes.shape[0])  # the upper body's soft costs are decided
+            if info.floor_depth is not None:
+                unary += self.config.floor_leg_weight * planted_feet_cost(
+                    self.model, positions, self._ankles, info.floor_depth, self._leg_mm
+                )
             done = self._leg_graph.add(layer.time_s, codes, positions, unary, whole, only)
             out += [self._frame(g, c) for g, c in done]
         return out
