@@ -152,3 +152,26 @@ def test_gesvd_frozen_dofs_do_not_move(skel, rng):
 def test_svd_setting_is_checked():
     with pytest.raises(ConfigError, match="IKConfig.svd"):
         IKConfig(svd="eigh")
+
+
+def test_dofs_without_range_are_held_as_frozen(skel, rng):
+    """DoFs whose limits leave no range (the hybrid model's root pitch and roll; here two
+    of the trunk's) stay at their value and the solve is the one with them frozen: they
+    never take a step that the limit clamp would turn into a lock."""
+    lower, upper = skel.lower.copy(), skel.upper.copy()
+    fixed = np.array([skel.dof_index("spine1_flexion"), skel.dof_index("neck_lateral")])
+    lower[fixed] = upper[fixed] = 0.0
+    skel = skel.replace(lower=lower, upper=upper)
+    solver = SDLSSolver(skel, config=IKConfig(svd="gesvd"))
+    frozen = np.zeros(skel.n_dofs, dtype=bool)
+    frozen[fixed] = True
+    for _ in range(5):
+        q_true = _pose(skel, rng, 0.4)
+        targets = solver.effector_positions(q_true)
+        start = np.clip(q_true + rng.normal(0.0, 0.3, skel.n_dofs), skel.lower, skel.upper)
+        res = solver.solve(start, targets)
+        assert np.all(res.q[fixed] == skel.lower[fixed])
+        np.testing.assert_array_equal(res.q, solver.solve(start, targets, frozen=frozen).q)
+        assert np.nanmax(res.residual_mm) < np.nanmax(
+            np.linalg.norm(solver.effector_positions(start) - targets, axis=1)
+        )

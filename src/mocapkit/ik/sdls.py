@@ -133,6 +133,11 @@ class SDLSSolver:
         self._eff_point = np.array([e.point_mm for e in self.effectors], dtype=float).reshape(-1, 3)
         self._lower = np.ascontiguousarray(skeleton.lower)
         self._upper = np.ascontiguousarray(skeleton.upper)
+        #: DoFs whose limits leave them no range (``zhang21``'s root pitch and roll): held
+        #: fixed in every solve, as if frozen. Left free, the first step moves them, the
+        #: clamp locks them, and a locked DoF sends every later iteration to the SVD with
+        #: U (`mocapkit.ik.solve`), which waits for a release that cannot come.
+        self._fixed = self._lower == self._upper
         sec = self.secondary
         self._weighting = IKWeighting(
             mu=self.mu,
@@ -253,6 +258,7 @@ class SDLSSolver:
         )  # kernel signature, whatever flags the caller's array has
         if frz.shape != (sk.n_dofs,):
             raise ShapeError(f"frozen: expected shape ({sk.n_dofs},), found {frz.shape}")
+        frz |= self._fixed
         idx = np.flatnonzero(act)
         cfg = self.config
         residual = np.full(len(idx), np.nan)

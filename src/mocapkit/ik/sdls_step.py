@@ -60,9 +60,10 @@ def sdls_nb(
     projector), ``N_i``, ``M_i`` into ``n_out[:r]``, ``m_out[:r]`` and the kept singular
     values into ``s_out[:r]``. Returns r.
     ``term_scale`` multiplies every per-term bound ``gamma_i`` (`IKConfig.term_clamp_scale`).
-    ``skip`` (D,) marks zero columns to leave out of the SVD (frozen DoFs; their
-    ``dpsi`` and ``vr`` entries are exactly 0). The SVD is LAPACK's dgesvd without U
-    (`thin_svd_v_nb`); ``u_i = J_w v_i / sigma_i`` gives ``alpha_i`` and ``N_i``.
+    ``skip`` (D,) marks zero columns to leave out of the SVD (frozen DoFs); columns
+    found to be zero are left out too. Their ``dpsi`` and ``vr`` entries are exactly 0.
+    The SVD is LAPACK's dgesvd without U (`thin_svd_v_nb`); ``u_i = J_w v_i / sigma_i``
+    gives ``alpha_i`` and ``N_i``.
     The outer clamp is left to the caller (it also covers the secondary task).
     """
     n_rows, n_cols = jw.shape
@@ -72,12 +73,19 @@ def sdls_nb(
     # the cut-off) and null vectors, so the SVD is taken of the others alone. Their
     # ``dpsi`` is then exactly 0; for a DoF locked at a joint limit that would keep it
     # locked for good, so `solve_ik_nb` takes `sdls_gesdd_nb` on such iterations
+    # Columns that are zero for another reason (the legs' DoFs in a solve with the feet
+    # free: no effector below the pelvis) are left out the same way: half the columns
+    # of a re-plant's feet-free solves, whose SVD then costs about half as much
     cols = np.empty(n_cols, dtype=np.int64)
     n_c = 0
     for j in range(n_cols):
-        if not skip[j]:
-            cols[n_c] = j
-            n_c += 1
+        if skip[j]:
+            continue
+        for r in range(n_rows):
+            if jw[r, j] != 0.0:
+                cols[n_c] = j
+                n_c += 1
+                break
     if n_c == 0 or n_rows == 0:
         return 0
     k = min(n_rows, n_c)

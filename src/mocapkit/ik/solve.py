@@ -133,7 +133,6 @@ class _Buffers(NamedTuple):
     n: FloatArray
     m: FloatArray
     s: FloatArray
-    jw_live: FloatArray
     dpsi_live: FloatArray
     vr_live: FloatArray
     mh: FloatArray
@@ -154,7 +153,6 @@ def _buffers_nb(k_eff: int, n_dofs: int, n_live: int) -> _Buffers:
         np.empty(n_sv),
         np.empty(n_sv),
         np.empty(n_sv),
-        np.empty((3 * k_eff, n_live)),
         np.empty(n_live),
         np.empty((max(min(3 * k_eff, n_live), 1), n_live)),
         np.empty(n_dofs),
@@ -181,7 +179,8 @@ def _sdls_step_nb(
 
     Frozen and locked DoFs get zero columns. The SVD routine is chosen by
     `IKSettings.thin_svd` and the locks (module doc of `mocapkit.ik.sdls`): dgesdd of the
-    whole ``J_w`` (of the columns not frozen, with ``thin_svd``) while a DoF is locked,
+    whole ``J_w`` (with ``thin_svd``: of its columns not frozen, less those that are zero
+    without a lock) while a DoF is locked,
     else dgesvd without U. Returns the rank; the kept right singular vectors are in
     ``bufs.vr``.
     """
@@ -198,26 +197,41 @@ def _sdls_step_nb(
     for d in range(n_dofs):
         if locked[d] and not frozen[d]:
             use_gesdd = True
-    if use_gesdd and settings.thin_svd and n_live < n_dofs:
+    if use_gesdd and settings.thin_svd:
         # the frozen DoFs' zero columns are left out here too (re-planting solves move
-        # the legs alone); the locked ones stay in
-        jw_live, dpsi_live, vr_live = bufs.jw_live, bufs.dpsi_live, bufs.vr_live
-        for r in range(n_rows):
-            for c in range(n_live):
-                jw_live[r, c] = jw[r, live[c]]
-        rank = sdls_gesdd_nb(
-            jw_live, e, gamma, soft, dpsi_live, vr_live, bufs.n, bufs.m, scale, bufs.s
-        )
-        for d in range(n_dofs):
-            dpsi[d] = 0.0
+        # the legs alone), and so are the columns that are zero without a lock (the
+        # legs where the feet are free); the locked ones stay in
+        cols = np.empty(n_live, dtype=np.int64)
+        n_use = 0
         for c in range(n_live):
-            dpsi[live[c]] = dpsi_live[c]
-        for i in range(rank):
+            d = live[c]
+            keep = locked[d]
+            for r in range(n_rows):
+                if keep:
+                    break
+                keep = jw[r, d] != 0.0
+            if keep:
+                cols[n_use] = d
+                n_use += 1
+        if n_use < n_dofs:
+            jw_live = np.empty((n_rows, n_use))
+            for r in range(n_rows):
+                for c in range(n_use):
+                    jw_live[r, c] = jw[r, cols[c]]
+            dpsi_live, vr_live = bufs.dpsi_live[:n_use], bufs.vr_live[:, :n_use]
+            rank = sdls_gesdd_nb(
+                jw_live, e, gamma, soft, dpsi_live, vr_live, bufs.n, bufs.m, scale, bufs.s
+            )
             for d in range(n_dofs):
-                vr[i, d] = 0.0
-            for c in range(n_live):
-                vr[i, live[c]] = vr_live[i, c]
-        return rank
+                dpsi[d] = 0.0
+            for c in range(n_use):
+                dpsi[cols[c]] = dpsi_live[c]
+            for i in range(rank):
+                for d in range(n_dofs):
+                    vr[i, d] = 0.0
+                for c in range(n_use):
+                    vr[i, cols[c]] = vr_live[i, c]
+            return rank
     if use_gesdd:
         return sdls_gesdd_nb(jw, e, gamma, soft, dpsi, vr, bufs.n, bufs.m, scale, bufs.s)
     return sdls_nb(jw, e, gamma, soft, dpsi, vr, bufs.n, bufs.m, scale, frozen, bufs.s)
