@@ -54,12 +54,16 @@ response to round-off, 10-20 % cheaper an iteration, and much cheaper where most
 are frozen (foot re-planting). With exact zeros a locked DoF would stay locked for the
 rest of the solve (measured: solves stall short of their targets); releasing it by the
 sign of ``J^T e`` (the gradient at the start of the step) let the scaled iteration
-cycle between release and clip (docs/design-notes/hybrid.md).
+cycle between release and clip (docs/design-notes/hybrid.md). With ``"gesvd"`` both
+SVDs are taken of fewer rows: the rows of the effectors fixed to one joint (a marker
+set and its members) reduced to six with the same singular values and V
+(`mocapkit.ik.rigid_rows`).
 
 The pieces, one concept a file: `mocapkit.ik.config` (`IKConfig`, `IKResult`),
 `mocapkit.ik.effectors` (named effector points), `mocapkit.ik.weights` (the weights
 ``mu``), `mocapkit.ik.sdls_step` (one SDLS step, steps 2-5 and 6's projector),
-`mocapkit.ik.solve` (the compiled loop of one frame), `mocapkit.ik.secondary` (the
+`mocapkit.ik.solve` (the compiled loop of one frame), `mocapkit.ik.rigid_rows` (the
+rigid sets' fewer rows), `mocapkit.ik.secondary` (the
 relaxed-pose task) and `mocapkit.ik.lapack` (dgesvd for compiled code); this module holds
 the solver object that binds them to a skeleton.
 """

@@ -8,6 +8,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from mocapkit.ik.rigid_rows import rigid_sets_nb
 from mocapkit.ik.sdls_step import (
     clamp_error_nb,
     project_nullspace_nb,
@@ -174,15 +175,18 @@ def _sdls_step_nb(
     live: NDArray[np.int64],
     n_live: int,
     bufs: _Buffers,
+    pts: FloatArray,
+    sets: tuple[NDArray[np.int64], NDArray[np.int64]],
 ) -> int:
     """Steps 3-5 of one iteration: the weighted Jacobian and its SDLS response ``bufs.dpsi``.
 
     Frozen and locked DoFs get zero columns. The SVD routine is chosen by
     `IKSettings.thin_svd` and the locks (module doc of `mocapkit.ik.sdls`): dgesdd of the
     whole ``J_w`` (with ``thin_svd``: of its columns not frozen, less those that are zero
-    without a lock) while a DoF is locked,
-    else dgesvd without U. Returns the rank; the kept right singular vectors are in
-    ``bufs.vr``.
+    without a lock) while a DoF is locked, else dgesvd without U. With ``thin_svd`` both
+    take the SVD of the rigid sets' fewer rows (``sets`` of `rigid_sets_nb`, ``pts`` the
+    effectors' positions; `mocapkit.ik.rigid_rows`). Returns the rank; the kept right
+    singular vectors are in ``bufs.vr``.
     """
     jw, dpsi, vr = bufs.jw, bufs.dpsi, bufs.vr
     n_rows, n_dofs = jw.shape
@@ -220,8 +224,9 @@ def _sdls_step_nb(
                     jw_live[r, c] = jw[r, cols[c]]
             dpsi_live, vr_live = bufs.dpsi_live[:n_use], bufs.vr_live[:, :n_use]
             rank = sdls_gesdd_nb(
-                jw_live, e, gamma, soft, dpsi_live, vr_live, bufs.n, bufs.m, scale, bufs.s
-            )
+                jw_live, e, gamma, soft, dpsi_live, vr_live, bufs.n, bufs.m, scale, bufs.s,
+                pts, sets,
+            )  # fmt: skip
             for d in range(n_dofs):
                 dpsi[d] = 0.0
             for c in range(n_use):
@@ -233,8 +238,12 @@ def _sdls_step_nb(
                     vr[i, cols[c]] = vr_live[i, c]
             return rank
     if use_gesdd:
-        return sdls_gesdd_nb(jw, e, gamma, soft, dpsi, vr, bufs.n, bufs.m, scale, bufs.s)
-    return sdls_nb(jw, e, gamma, soft, dpsi, vr, bufs.n, bufs.m, scale, frozen, bufs.s)
+        # the paper's solver (``svd="gesdd"``) takes every row, as before the rigid sets
+        every = (sets[0], np.zeros(1, dtype=np.int64)) if not settings.thin_svd else sets
+        return sdls_gesdd_nb(
+            jw, e, gamma, soft, dpsi, vr, bufs.n, bufs.m, scale, bufs.s, pts, every
+        )
+    return sdls_nb(jw, e, gamma, soft, dpsi, vr, bufs.n, bufs.m, scale, frozen, bufs.s, pts, sets)
 
 
 @numba.njit(cache=True)
@@ -387,6 +396,7 @@ def solve_ik_nb(
             live[n_live] = d
             n_live += 1
     bufs = _buffers_nb(k_eff, n_dofs, n_live)
+    sets = rigid_sets_nb(eff_joint)
     inv_mu = 1.0 / weighting.mu
     stats = np.empty(3)
 
@@ -413,7 +423,9 @@ def solve_ik_nb(
         if stall_iter > 0 and min(since_best, since_best_sum) >= stall_iter and it >= min_iter:
             break
         clamp_error_nb(pts, targets, settings.dmax, e)
-        rank = _sdls_step_nb(jac, inv_mu, frozen, locked, e, settings, live, n_live, bufs)
+        rank = _sdls_step_nb(
+            jac, inv_mu, frozen, locked, e, settings, live, n_live, bufs, pts, sets
+        )
         if settings.gain > 0.0:
             _relax_nb(q, kin, frames, weighting, settings, frozen, locked, rank, inv_mu, bufs)
         _take_step_nb(
