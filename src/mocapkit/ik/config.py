@@ -80,8 +80,9 @@ class IKConfig:
         DoF is locked at a joint limit, LAPACK's dgesvd without U over the columns of
         the DoFs not frozen (`sdls_nb`): the same response to round-off, cheaper (module
         doc); iterations with a locked DoF still take dgesdd, whose round-off releases
-        the lock. Trajectories differ from ``"gesdd"`` by round-off, which the chaotic
-        cases amplify (docs/design-notes/hybrid.md).
+        the lock. Both SVDs take six rows for each set of three or more effectors on
+        one joint (`mocapkit.ik.rigid_rows`). Trajectories differ from ``"gesdd"`` by
+        round-off, which the chaotic cases amplify (docs/design-notes/hybrid.md).
     """
 
     gamma_rad: float = DEFAULT_GAMMA_RAD

@@ -54,12 +54,16 @@ response to round-off, 10-20 % cheaper an iteration, and much cheaper where most
 are frozen (foot re-planting). With exact zeros a locked DoF would stay locked for the
 rest of the solve (measured: solves stall short of their targets); releasing it by the
 sign of ``J^T e`` (the gradient at the start of the step) let the scaled iteration
-cycle between release and clip (docs/design-notes/hybrid.md).
+cycle between release and clip (docs/design-notes/hybrid.md). With ``"gesvd"`` both
+SVDs are taken of fewer rows: the rows of the effectors fixed to one joint (a marker
+set and its members) reduced to six with the same singular values and V
+(`mocapkit.ik.rigid_rows`).
 
 The pieces, one concept a file: `mocapkit.ik.config` (`IKConfig`, `IKResult`),
 `mocapkit.ik.effectors` (named effector points), `mocapkit.ik.weights` (the weights
 ``mu``), `mocapkit.ik.sdls_step` (one SDLS step, steps 2-5 and 6's projector),
-`mocapkit.ik.solve` (the compiled loop of one frame), `mocapkit.ik.secondary` (the
+`mocapkit.ik.solve` (the compiled loop of one frame), `mocapkit.ik.rigid_rows` (the
+rigid sets' fewer rows), `mocapkit.ik.secondary` (the
 relaxed-pose task) and `mocapkit.ik.lapack` (dgesvd for compiled code); this module holds
 the solver object that binds them to a skeleton.
 """
@@ -133,6 +137,11 @@ class SDLSSolver:
         self._eff_point = np.array([e.point_mm for e in self.effectors], dtype=float).reshape(-1, 3)
         self._lower = np.ascontiguousarray(skeleton.lower)
         self._upper = np.ascontiguousarray(skeleton.upper)
+        #: DoFs whose limits leave them no range (``zhang21``'s root pitch and roll): held
+        #: fixed in every solve, as if frozen. Left free, the first step moves them, the
+        #: clamp locks them, and a locked DoF sends every later iteration to the SVD with
+        #: U (`mocapkit.ik.solve`), which waits for a release that cannot come.
+        self._fixed = self._lower == self._upper
         sec = self.secondary
         self._weighting = IKWeighting(
             mu=self.mu,
@@ -253,6 +262,7 @@ class SDLSSolver:
         )  # kernel signature, whatever flags the caller's array has
         if frz.shape != (sk.n_dofs,):
             raise ShapeError(f"frozen: expected shape ({sk.n_dofs},), found {frz.shape}")
+        frz |= self._fixed
         idx = np.flatnonzero(act)
         cfg = self.config
         residual = np.full(len(idx), np.nan)

@@ -12,6 +12,7 @@ from numpy.typing import ArrayLike, NDArray
 from mocapkit.errors import ShapeError
 from mocapkit.ik.config import DEFAULT_GAMMA_RAD
 from mocapkit.ik.lapack import thin_svd_v_nb
+from mocapkit.ik.rigid_rows import no_sets, rigid_rows_nb
 from mocapkit.ik.secondary import clamp_max_abs_nb
 
 FloatArray = NDArray[np.float64]
@@ -53,6 +54,8 @@ def sdls_nb(
     term_scale: float,
     skip: BoolArray,
     s_out: FloatArray,
+    pts: FloatArray,
+    sets: tuple[NDArray[np.int64], NDArray[np.int64]],
 ) -> int:
     """SDLS response ``dpsi`` (D,) of ``jw`` (3K, D) to the error ``e`` (3K,), per-term clamped.
 
@@ -60,9 +63,13 @@ def sdls_nb(
     projector), ``N_i``, ``M_i`` into ``n_out[:r]``, ``m_out[:r]`` and the kept singular
     values into ``s_out[:r]``. Returns r.
     ``term_scale`` multiplies every per-term bound ``gamma_i`` (`IKConfig.term_clamp_scale`).
-    ``skip`` (D,) marks zero columns to leave out of the SVD (frozen DoFs; their
-    ``dpsi`` and ``vr`` entries are exactly 0). The SVD is LAPACK's dgesvd without U
-    (`thin_svd_v_nb`); ``u_i = J_w v_i / sigma_i`` gives ``alpha_i`` and ``N_i``.
+    ``skip`` (D,) marks zero columns to leave out of the SVD (frozen DoFs); columns
+    found to be zero are left out too. Their ``dpsi`` and ``vr`` entries are exactly 0.
+    The SVD is LAPACK's dgesvd without U (`thin_svd_v_nb`) of the rows of
+    `mocapkit.ik.rigid_rows.rigid_rows_nb`: six a rigid set of effectors (``sets``:
+    ``order`` and ``bounds`` of `rigid_sets_nb`; ``pts`` (K, 3) the effectors'
+    positions), the same singular values and V. ``u_i = J_w v_i / sigma_i``, from the
+    whole ``J_w``, gives ``alpha_i`` and ``N_i``.
     The outer clamp is left to the caller (it also covers the secondary task).
     """
     n_rows, n_cols = jw.shape
@@ -71,23 +78,31 @@ def sdls_nb(
     # the columns ``skip`` (frozen DoFs: zero) add only zero singular values (below
     # the cut-off) and null vectors, so the SVD is taken of the others alone. Their
     # ``dpsi`` is then exactly 0; for a DoF locked at a joint limit that would keep it
-    # locked for good, so `solve_ik_nb` takes `sdls_gesdd_nb` on such iterations
+    # locked for good, so `solve_ik_nb` takes `sdls_gesdd_nb` on such iterations.
+    # Columns that are zero for another reason (the legs' DoFs in a solve with the feet
+    # free: no effector below the pelvis) are left out the same way: half the columns
+    # of a re-plant's feet-free solves, whose SVD then costs about half as much
     cols = np.empty(n_cols, dtype=np.int64)
     n_c = 0
     for j in range(n_cols):
-        if not skip[j]:
-            cols[n_c] = j
-            n_c += 1
+        if skip[j]:
+            continue
+        for r in range(n_rows):
+            if jw[r, j] != 0.0:
+                cols[n_c] = j
+                n_c += 1
+                break
     if n_c == 0 or n_rows == 0:
         return 0
-    k = min(n_rows, n_c)
     jwc = np.empty((n_c, n_rows))  # the nonzero columns, column-major
     for r in range(n_rows):
         for c in range(n_c):
             jwc[c, r] = jw[r, cols[c]]
+    rows = rigid_rows_nb(jw, pts, sets[0], sets[1], cols[:n_c])
+    k = min(rows.shape[1], n_c)
     s = np.empty(k)
     vt = np.empty((n_c, k))
-    thin_svd_v_nb(jwc.copy(), s, vt)
+    thin_svd_v_nb(rows, s, vt)
     # sigma_i u_i = J_w v_i, as rows (the SVD's own U is not formed)
     sigma_u = np.dot(vt.T, jwc)
     return _sdls_terms_nb(
@@ -121,6 +136,8 @@ def sdls_gesdd_nb(
     m_out: FloatArray,
     term_scale: float,
     s_out: FloatArray,
+    pts: FloatArray,
+    sets: tuple[NDArray[np.int64], NDArray[np.int64]],
 ) -> int:
     """`sdls_nb` from numpy's SVD of the whole ``jw`` (LAPACK dgesdd, U formed).
 
@@ -129,6 +146,11 @@ def sdls_gesdd_nb(
     singular vectors, and their sign decides when the DoF is released (module doc).
     Its SVD and terms are e6e041f's `sdls_nb` (bit for bit), so the locks are released
     by the same rule.
+
+    Where ``sets`` (`mocapkit.ik.rigid_rows.rigid_sets_nb`; ``pts`` (K, 3) the effectors'
+    positions) has rigid sets of effectors, the SVD is that of their fewer rows
+    (`rigid_rows_nb`, every column: a locked DoF's zero column keeps its round-off) and
+    ``u_i = J_w v_i / sigma_i`` comes from the whole ``J_w``, as in `sdls_nb`.
 
     Writes the rows of ``V^T`` kept (rank r) into ``vr[:r]`` (for the null-space
     projector), ``N_i``, ``M_i`` into ``n_out[:r]``, ``m_out[:r]`` and the kept singular
@@ -139,8 +161,16 @@ def sdls_gesdd_nb(
     n_cols = jw.shape[1]
     for j in range(n_cols):
         dpsi[j] = 0.0
-    u, s, vt = np.linalg.svd(jw, full_matrices=False)
     every = np.arange(n_cols)
+    if sets[1].shape[0] > 1:
+        rows = rigid_rows_nb(jw, pts, sets[0], sets[1], every)
+        _, s, vt = np.linalg.svd(rows.T, full_matrices=False)
+        sigma_u = np.dot(vt, jw.T)  # row i: sigma_i u_i = J_w v_i
+        return _sdls_terms_nb(
+            jw, e, s, sigma_u, True, vt.T, every, gamma, soft, dpsi, vr, n_out, m_out,
+            term_scale, s_out,
+        )  # fmt: skip
+    u, s, vt = np.linalg.svd(jw, full_matrices=False)
     return _sdls_terms_nb(
         jw, e, s, u.T, False, vt.T, every, gamma, soft, dpsi, vr, n_out, m_out, term_scale, s_out
     )
@@ -339,8 +369,21 @@ def sdls_response(
     mb = np.empty(n_sv)
     sb = np.empty(n_sv)
     skip = ~np.any(a != 0.0, axis=0)  # zero columns (frozen DoFs)
+    n_eff = a.shape[0] // 3
     r = sdls_nb(
-        a, ev, float(gamma_rad), bool(soft), dpsi, vr, nb, mb, float(term_clamp_scale), skip, sb
+        a,
+        ev,
+        float(gamma_rad),
+        bool(soft),
+        dpsi,
+        vr,
+        nb,
+        mb,
+        float(term_clamp_scale),
+        skip,
+        sb,
+        np.zeros((n_eff, 3)),
+        no_sets(n_eff),
     )
     return SDLSStep(dpsi, vr[:r].copy(), nb[:r].copy(), mb[:r].copy())
 

@@ -8,6 +8,7 @@ import numba
 import numpy as np
 from numpy.typing import NDArray
 
+from mocapkit.ik.rigid_rows import rigid_sets_nb
 from mocapkit.ik.sdls_step import (
     clamp_error_nb,
     project_nullspace_nb,
@@ -133,7 +134,6 @@ class _Buffers(NamedTuple):
     n: FloatArray
     m: FloatArray
     s: FloatArray
-    jw_live: FloatArray
     dpsi_live: FloatArray
     vr_live: FloatArray
     mh: FloatArray
@@ -154,7 +154,6 @@ def _buffers_nb(k_eff: int, n_dofs: int, n_live: int) -> _Buffers:
         np.empty(n_sv),
         np.empty(n_sv),
         np.empty(n_sv),
-        np.empty((3 * k_eff, n_live)),
         np.empty(n_live),
         np.empty((max(min(3 * k_eff, n_live), 1), n_live)),
         np.empty(n_dofs),
@@ -176,14 +175,18 @@ def _sdls_step_nb(
     live: NDArray[np.int64],
     n_live: int,
     bufs: _Buffers,
+    pts: FloatArray,
+    sets: tuple[NDArray[np.int64], NDArray[np.int64]],
 ) -> int:
     """Steps 3-5 of one iteration: the weighted Jacobian and its SDLS response ``bufs.dpsi``.
 
     Frozen and locked DoFs get zero columns. The SVD routine is chosen by
     `IKSettings.thin_svd` and the locks (module doc of `mocapkit.ik.sdls`): dgesdd of the
-    whole ``J_w`` (of the columns not frozen, with ``thin_svd``) while a DoF is locked,
-    else dgesvd without U. Returns the rank; the kept right singular vectors are in
-    ``bufs.vr``.
+    whole ``J_w`` (with ``thin_svd``: of its columns not frozen, less those that are zero
+    without a lock) while a DoF is locked, else dgesvd without U. With ``thin_svd`` both
+    take the SVD of the rigid sets' fewer rows (``sets`` of `rigid_sets_nb`, ``pts`` the
+    effectors' positions; `mocapkit.ik.rigid_rows`). Returns the rank; the kept right
+    singular vectors are in ``bufs.vr``.
     """
     jw, dpsi, vr = bufs.jw, bufs.dpsi, bufs.vr
     n_rows, n_dofs = jw.shape
@@ -198,29 +201,49 @@ def _sdls_step_nb(
     for d in range(n_dofs):
         if locked[d] and not frozen[d]:
             use_gesdd = True
-    if use_gesdd and settings.thin_svd and n_live < n_dofs:
+    if use_gesdd and settings.thin_svd:
         # the frozen DoFs' zero columns are left out here too (re-planting solves move
-        # the legs alone); the locked ones stay in
-        jw_live, dpsi_live, vr_live = bufs.jw_live, bufs.dpsi_live, bufs.vr_live
-        for r in range(n_rows):
-            for c in range(n_live):
-                jw_live[r, c] = jw[r, live[c]]
-        rank = sdls_gesdd_nb(
-            jw_live, e, gamma, soft, dpsi_live, vr_live, bufs.n, bufs.m, scale, bufs.s
-        )
-        for d in range(n_dofs):
-            dpsi[d] = 0.0
+        # the legs alone), and so are the columns that are zero without a lock (the
+        # legs where the feet are free); the locked ones stay in
+        cols = np.empty(n_live, dtype=np.int64)
+        n_use = 0
         for c in range(n_live):
-            dpsi[live[c]] = dpsi_live[c]
-        for i in range(rank):
+            d = live[c]
+            keep = locked[d]
+            for r in range(n_rows):
+                if keep:
+                    break
+                keep = jw[r, d] != 0.0
+            if keep:
+                cols[n_use] = d
+                n_use += 1
+        if n_use < n_dofs:
+            jw_live = np.empty((n_rows, n_use))
+            for r in range(n_rows):
+                for c in range(n_use):
+                    jw_live[r, c] = jw[r, cols[c]]
+            dpsi_live, vr_live = bufs.dpsi_live[:n_use], bufs.vr_live[:, :n_use]
+            rank = sdls_gesdd_nb(
+                jw_live, e, gamma, soft, dpsi_live, vr_live, bufs.n, bufs.m, scale, bufs.s,
+                pts, sets,
+            )  # fmt: skip
             for d in range(n_dofs):
-                vr[i, d] = 0.0
-            for c in range(n_live):
-                vr[i, live[c]] = vr_live[i, c]
-        return rank
+                dpsi[d] = 0.0
+            for c in range(n_use):
+                dpsi[cols[c]] = dpsi_live[c]
+            for i in range(rank):
+                for d in range(n_dofs):
+                    vr[i, d] = 0.0
+                for c in range(n_use):
+                    vr[i, cols[c]] = vr_live[i, c]
+            return rank
     if use_gesdd:
-        return sdls_gesdd_nb(jw, e, gamma, soft, dpsi, vr, bufs.n, bufs.m, scale, bufs.s)
-    return sdls_nb(jw, e, gamma, soft, dpsi, vr, bufs.n, bufs.m, scale, frozen, bufs.s)
+        # the paper's solver (``svd="gesdd"``) takes every row, as before the rigid sets
+        every = (sets[0], np.zeros(1, dtype=np.int64)) if not settings.thin_svd else sets
+        return sdls_gesdd_nb(
+            jw, e, gamma, soft, dpsi, vr, bufs.n, bufs.m, scale, bufs.s, pts, every
+        )
+    return sdls_nb(jw, e, gamma, soft, dpsi, vr, bufs.n, bufs.m, scale, frozen, bufs.s, pts, sets)
 
 
 @numba.njit(cache=True)
@@ -373,6 +396,7 @@ def solve_ik_nb(
             live[n_live] = d
             n_live += 1
     bufs = _buffers_nb(k_eff, n_dofs, n_live)
+    sets = rigid_sets_nb(eff_joint)
     inv_mu = 1.0 / weighting.mu
     stats = np.empty(3)
 
@@ -399,7 +423,9 @@ def solve_ik_nb(
         if stall_iter > 0 and min(since_best, since_best_sum) >= stall_iter and it >= min_iter:
             break
         clamp_error_nb(pts, targets, settings.dmax, e)
-        rank = _sdls_step_nb(jac, inv_mu, frozen, locked, e, settings, live, n_live, bufs)
+        rank = _sdls_step_nb(
+            jac, inv_mu, frozen, locked, e, settings, live, n_live, bufs, pts, sets
+        )
         if settings.gain > 0.0:
             _relax_nb(q, kin, frames, weighting, settings, frozen, locked, rank, inv_mu, bufs)
         _take_step_nb(
