@@ -601,6 +601,18 @@ class HybridTracker:
         self._unpulled = _CountedSolver(
             skeleton, effectors, replace(self.config.ik, secondary_gain=0.0)
         )
+        n_sets = len(self.marker_sets)
+        #: Target rows of the hand sets (`_arm_dofs`) and their members: they place the
+        #: arms, and drive no re-plant's move of the pelvis and legs (`_bound_relaxation`).
+        self._hand_rows = [
+            row
+            for i, name in enumerate(self.marker_sets)
+            if name.removesuffix("_hand") in SIDES and name.endswith("_hand")
+            for row in (
+                i,
+                *(n_sets + 2 + k for k, (s, _) in enumerate(self.members) if s == name),
+            )
+        ]
         #: DoFs of the root, trunk and legs (all but the arms'): those a re-plant's
         #: relaxation holds back (`_bound_relaxation`); the arms take it whole.
         arm_dofs = [np.zeros(0, np.int64)] + [
@@ -945,9 +957,11 @@ class HybridTracker:
         pelvis and legs (`_lower_joints`) would move further than the previous frame's
         pose allows at ``replant_speed_factor`` times the head set's speed plus
         ``replant_min_speed_mm_s``, the DoFs of the root, trunk and legs (`_lower_dofs`)
-        are taken that share of the way from the same solve without the pull (what head
-        and hands ask for, kept whole, however far) towards ``q_free``, the arms' are
-        ``q_free``'s (the hands' sets place them, whatever the pelvis does); the following
+        are taken that share of the way from the same solve without the pull and without
+        the hand sets (what the head asks for, kept whole, however far) towards
+        ``q_free``, the arms' are ``q_free``'s (the hands' sets place them, whatever the
+        pelvis does: a hand set an arm held by its joint limits cannot reach would drag
+        the freed pelvis and legs after it, 150-300 mm in a frame); the following
         frames re-plant again from there, for as many frames as the whole move takes at
         the bound (``_relax_frames``), so the correction is spread, not dropped. Where the
         feet-held pose ``q`` already holds head and hands (``reached``: a frame re-planted
@@ -964,7 +978,9 @@ class HybridTracker:
         if reached:
             q_head, iterations = q, 0
         else:
-            res = self._unpulled.solve(q, free)
+            head = free.copy()
+            head[self._hand_rows] = np.nan
+            res = self._unpulled.solve(q, head)
             q_head, iterations = res.q, res.iterations
         limit_mm = max(bound_mm, self._lower_move_mm(q_head, before))
         # spread over the frames the whole move takes at the bound, counted from its start
