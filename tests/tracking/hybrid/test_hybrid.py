@@ -307,6 +307,36 @@ def test_replant_relaxation_is_not_dragged_by_a_hand_its_arm_cannot_reach():
     assert tracker._lower_move_mm(bounded, before) <= limit_mm + 1e-6
 
 
+def test_smoothing_polish_moves_the_pelvis_and_legs_no_further_than_the_bound(truth):
+    """Where the polish after the smoothing would carry the pelvis 200 mm in a frame that
+    the frame's own solve did not move it (it catches up on a set the solve had left far
+    off), the pelvis and legs move at most the bound from the pose last returned, and
+    the arms are put back on their hand sets over them; a move within the bound is kept
+    as it is."""
+    sk, t, _q, pos = truth
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False))
+    for s in samples(t[:20], pos[:20]):
+        tracker.update(s)
+    previous = tracker._out_q.copy()
+    targets, _, _ = tracker._targets(samples(t[20:21], pos[20:21])[0])
+    n = len(tracker.marker_sets)
+    targets[n : n + 2] = tracker._feet
+    before = tracker._lower_points_mm(previous)
+    bound_mm = tracker._lower_bound_mm(t[20] - t[19])
+    far = previous.copy()
+    far[sk.dof_names.index("root_ty")] += 200.0
+    out, extra = tracker._bound_polish(previous, previous, far, targets, float(t[20]))
+    assert extra > 0
+    assert tracker._lower_move_mm(far, before) > 4.0 * bound_mm  # the pop
+    assert tracker._lower_move_mm(out, before) <= bound_mm + 1e-6
+    hands = tracker.solver.effector_positions(out)[1:3] - targets[1:3]
+    assert np.linalg.norm(hands, axis=1).max() < 2.0 * tracker.config.smoothing_polish_tol_mm
+    near = previous.copy()
+    near[sk.dof_names.index("root_ty")] += 0.5 * bound_mm
+    kept, extra = tracker._bound_polish(previous, previous, near, targets, float(t[20]))
+    assert extra == 0 and np.array_equal(kept, near)
+
+
 #: Three markers on the glasses and on each hand-held object (mm from the effector point).
 MEMBERS = {
     "head": {

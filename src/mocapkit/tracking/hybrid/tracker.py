@@ -690,6 +690,8 @@ class HybridTracker:
         self._q: FloatArray | None = None
         #: The pose last returned (`_blend_rejoined` starts from it).
         self._out_q: FloatArray | None = None
+        #: Its time (the polish's bound, `_bound_polish`).
+        self._out_time_s: float | None = None
         self._prev_elbows: dict[str, FloatArray] | None = None
         self._prev_time_s = 0.0
         self._feet: FloatArray | None = None
@@ -1029,6 +1031,43 @@ class HybridTracker:
                 hi = mid
         return np.clip(share(lo), self.skeleton.lower, self.skeleton.upper)
 
+    def _bound_polish(
+        self,
+        solved: FloatArray,
+        smoothed: FloatArray,
+        polished: FloatArray,
+        targets: FloatArray,
+        time_s: float,
+    ) -> tuple[FloatArray, int]:
+        """The smoothing's polish, its move of the pelvis and legs bounded.
+
+        The polish puts the smoothed pose's effectors back on their markers; where the
+        frame's solve had left the pelvis and legs far from theirs (a pelvis set 150 mm
+        off for frames), the polish can take them there in one frame, further than the
+        solve itself went. From the pose last returned, the pelvis and legs move at most
+        as far as the frame's own solve (``solved``, before the filter) moved them, or
+        the re-plant's bound (`_lower_bound_mm`) where that is further; beyond it the
+        root, trunk and legs are taken that share of the way from ``smoothed`` to
+        ``polished`` (`_share_lower`) and the arms polished again over them. The next
+        frame starts from the solve, not from this pose, so nothing is dropped. Returns
+        the pose and the extra iterations.
+        """
+        if self._out_q is None or self._out_time_s is None or not time_s > self._out_time_s:
+            return polished, 0
+        before = self._lower_points_mm(self._out_q)
+        limit_mm = max(
+            self._lower_bound_mm(time_s - self._out_time_s), self._lower_move_mm(solved, before)
+        )
+        if self._lower_move_mm(polished, before) <= limit_mm:
+            return polished, 0
+        # the arms put back on their markers over the pelvis and trunk the bound allows
+        frozen = np.zeros(self.skeleton.n_dofs, dtype=bool)
+        frozen[self._lower_dofs] = True
+        res = self._polish.solve(
+            self._share_lower(smoothed, polished, limit_mm, before), targets, frozen=frozen
+        )
+        return res.q, res.iterations
+
     def _arm_dofs(self, name: str) -> NDArray[np.int64] | None:
         """The DoFs of the arm a hand set (``<side>_hand``) places; None for other sets."""
         side = name.removesuffix("_hand")
@@ -1243,6 +1282,7 @@ class HybridTracker:
             self._relax_legs(self._crouch.lowered_rad(0.0))
         self._q = None
         self._out_q = None
+        self._out_time_s = None
         self._prev_elbows = None
         self._feet = None
         self._filter = None
@@ -1392,14 +1432,16 @@ class HybridTracker:
                         self.config.smoothing_beta,
                     )
                     self._filter = OneEuroFilter(self.config.smoothing_min_cutoff_hz, beta)
+                solved = q
                 q = self._filter(sample.time_s, q)
                 # the filter smooths the redundant DoFs; put the effectors back on the markers
                 res = self._polish.solve(q, targets)
-                q = res.q
-                iterations += res.iterations
+                q, extra = self._bound_polish(solved, q, res.q, targets, float(sample.time_s))
+                iterations += res.iterations + extra
         self._hold_released_arms(q, released)
         self._remember_arms(q, released)
         self._out_q = q.copy()
+        self._out_time_s = float(sample.time_s)
         resid_arr = np.linalg.norm(self.solver.effector_positions(q) - observed, axis=1)
         names = self.marker_sets + FEET + tuple(m for _, m in self.members)
         residual = {nm: float(r) for nm, r in zip(names, resid_arr, strict=True)}
