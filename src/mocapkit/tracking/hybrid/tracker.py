@@ -620,6 +620,10 @@ class HybridTracker:
             for lmb in limbs_present(skeleton, "arm")
         ]
         self._lower_dofs = np.setdiff1d(np.arange(skeleton.n_dofs), np.concatenate(arm_dofs))
+        #: The same DoFs as a mask: frozen where the arms are solved again over a
+        #: bounded pelvis and trunk (`_reseed_lost_arms`, `_bound_polish`).
+        self._lower_frozen = np.zeros(skeleton.n_dofs, dtype=bool)
+        self._lower_frozen[self._lower_dofs] = True
         #: Joints of the pelvis and legs, whose move a re-plant's relaxation bounds.
         self._lower_joints = np.unique(
             np.concatenate(
@@ -1061,10 +1065,10 @@ class HybridTracker:
         if self._lower_move_mm(polished, before) <= limit_mm:
             return polished, 0
         # the arms put back on their markers over the pelvis and trunk the bound allows
-        frozen = np.zeros(self.skeleton.n_dofs, dtype=bool)
-        frozen[self._lower_dofs] = True
         res = self._polish.solve(
-            self._share_lower(smoothed, polished, limit_mm, before), targets, frozen=frozen
+            self._share_lower(smoothed, polished, limit_mm, before),
+            targets,
+            frozen=self._lower_frozen,
         )
         return res.q, res.iterations
 
@@ -1198,10 +1202,10 @@ class HybridTracker:
                 limit_mm = max(self._lower_bound_mm(dt_s), self._lower_move_mm(q, before))
                 if self._lower_move_mm(q_new, before) > limit_mm:
                     # the arm solved again over the pelvis and trunk the bound allows
-                    frozen = np.zeros(self.skeleton.n_dofs, dtype=bool)
-                    frozen[self._lower_dofs] = True
                     bounded = self.solver.solve(
-                        self._share_lower(q, q_new, limit_mm, before), targets, frozen=frozen
+                        self._share_lower(q, q_new, limit_mm, before),
+                        targets,
+                        frozen=self._lower_frozen,
                     )
                     q_new = bounded.q
                     extra += bounded.iterations
