@@ -696,6 +696,9 @@ class HybridTracker:
         self._out_q: FloatArray | None = None
         #: Its time (the polish's bound, `_bound_polish`).
         self._out_time_s: float | None = None
+        #: The pelvis and legs (`_lower_points_mm`) of the pose last returned, and its
+        #: time: the polish's bound computes them once (`_bound_polish`).
+        self._out_lower: tuple[float | None, FloatArray] = (None, np.zeros((0, 3)))
         self._prev_elbows: dict[str, FloatArray] | None = None
         self._prev_time_s = 0.0
         self._feet: FloatArray | None = None
@@ -1058,11 +1061,16 @@ class HybridTracker:
         """
         if self._out_q is None or self._out_time_s is None or not time_s > self._out_time_s:
             return polished, 0
-        before = self._lower_points_mm(self._out_q)
-        limit_mm = max(
-            self._lower_bound_mm(time_s - self._out_time_s), self._lower_move_mm(solved, before)
-        )
-        if self._lower_move_mm(polished, before) <= limit_mm:
+        last_s, before = self._out_lower
+        if last_s != self._out_time_s:
+            before = self._lower_points_mm(self._out_q)
+        after = self._lower_points_mm(polished)
+        move_mm = float(np.max(np.linalg.norm(after - before, axis=1)))
+        limit_mm = self._lower_bound_mm(time_s - self._out_time_s)
+        if move_mm > limit_mm:
+            limit_mm = max(limit_mm, self._lower_move_mm(solved, before))
+        if not move_mm > limit_mm:
+            self._out_lower = (time_s, after)  # the arms' holds leave them as they are
             return polished, 0
         # the arms put back on their markers over the pelvis and trunk the bound allows
         res = self._polish.solve(
@@ -1287,6 +1295,7 @@ class HybridTracker:
         self._q = None
         self._out_q = None
         self._out_time_s = None
+        self._out_lower = (None, np.zeros((0, 3)))
         self._prev_elbows = None
         self._feet = None
         self._filter = None
