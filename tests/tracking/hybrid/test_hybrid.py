@@ -11,6 +11,7 @@ import pytest
 from mocapkit.errors import ConfigError, ShapeError, UnknownNameError
 from mocapkit.ik.config import IKConfig
 from mocapkit.skeleton import canonical_positions, forward_kinematics, load_preset
+from mocapkit.skeleton.limbs import arm
 from mocapkit.tracking.hybrid.balance import BalanceConfig
 from mocapkit.tracking.hybrid.tracker import (
     HybridConfig,
@@ -268,6 +269,72 @@ def test_replant_relaxation_is_spread_over_frames_not_a_pop(truth):
     assert peaks[cfg.replant_min_speed_mm_s] < 1.25 * bound_mm_s
     # spread, not dropped: head and hands end on their markers as well as with the pop
     assert ends[cfg.replant_min_speed_mm_s] <= ends[1e12] + 1.0
+
+
+def test_replant_relaxation_is_not_dragged_by_a_hand_its_arm_cannot_reach():
+    """The left arm held by its joint limits (within 0.05 rad of the relaxed pose) and its
+    hand set 150 mm below where that arm can put it, head and right hand still: freed of
+    the feet, a solve with the hand sets drags the pelvis and legs after the unreachable
+    hand (many times the 1 m/s a still head allows). The re-plant's relaxation is taken
+    from what the head asks for, so it keeps them within the bound."""
+    sk0 = load_preset("zhang21")
+    relaxed = np.clip(HybridTracker(sk0).solver.secondary.omega, sk0.lower, sk0.upper)
+    dofs = arm(sk0, "left").dofs
+    lower, upper = sk0.lower.copy(), sk0.upper.copy()
+    lower[dofs] = np.maximum(lower[dofs], relaxed[dofs] - 0.05)
+    upper[dofs] = np.minimum(upper[dofs], relaxed[dofs] + 0.05)
+    sk = replace(sk0, lower=lower, upper=upper)
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False))
+    still = tracker.solver.effector_positions(relaxed)[:3]
+    for s in samples(np.arange(20) / RATE, np.repeat(still[None], 20, axis=0)):
+        tracker.update(s)
+    far = still.copy()
+    far[1, 2] -= 150.0
+    targets, _, _ = tracker._targets(samples([20 / RATE], far[None])[0])
+    n = len(tracker.marker_sets)
+    targets[n : n + 2] = tracker._feet
+    held = tracker.solver.solve(tracker._q, targets)
+    assert held.residual_mm[1] > 100.0  # the arm cannot reach its set
+    free = targets.copy()
+    free[n : n + 2] = np.nan
+    pulled = tracker.solver.solve(held.q, free)
+    before = tracker._lower_points_mm(tracker._q)
+    bound_mm = tracker._lower_bound_mm(1 / RATE)  # the head is still: 1 m/s
+    dragged = tracker._unpulled.solve(held.q, free)  # head and hands, no pull
+    assert tracker._lower_move_mm(dragged.q, before) > 2.0 * bound_mm
+    bounded, _ = tracker._bound_relaxation(held.q, free, pulled.q, 1 / RATE, False)
+    limit_mm = max(bound_mm, tracker._lower_move_mm(held.q, before))
+    assert tracker._lower_move_mm(bounded, before) <= limit_mm + 1e-6
+
+
+def test_smoothing_polish_moves_the_pelvis_and_legs_no_further_than_the_bound(truth):
+    """Where the polish after the smoothing would carry the pelvis 200 mm in a frame that
+    the frame's own solve did not move it (it catches up on a set the solve had left far
+    off), the pelvis and legs move at most the bound from the pose last returned, and
+    the arms are put back on their hand sets over them; a move within the bound is kept
+    as it is."""
+    sk, t, _q, pos = truth
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False))
+    for s in samples(t[:20], pos[:20]):
+        tracker.update(s)
+    previous = tracker._out_q.copy()
+    targets, _, _ = tracker._targets(samples(t[20:21], pos[20:21])[0])
+    n = len(tracker.marker_sets)
+    targets[n : n + 2] = tracker._feet
+    before = tracker._lower_points_mm(previous)
+    bound_mm = tracker._lower_bound_mm(t[20] - t[19])
+    far = previous.copy()
+    far[sk.dof_names.index("root_ty")] += 200.0
+    out, extra = tracker._bound_polish(previous, previous, far, targets, float(t[20]))
+    assert extra > 0
+    assert tracker._lower_move_mm(far, before) > 4.0 * bound_mm  # the pop
+    assert tracker._lower_move_mm(out, before) <= bound_mm + 1e-6
+    hands = tracker.solver.effector_positions(out)[1:3] - targets[1:3]
+    assert np.linalg.norm(hands, axis=1).max() < 2.0 * tracker.config.smoothing_polish_tol_mm
+    near = previous.copy()
+    near[sk.dof_names.index("root_ty")] += 0.5 * bound_mm
+    kept, extra = tracker._bound_polish(previous, previous, near, targets, float(t[20]))
+    assert extra == 0 and np.array_equal(kept, near)
 
 
 #: Three markers on the glasses and on each hand-held object (mm from the effector point).

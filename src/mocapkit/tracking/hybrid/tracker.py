@@ -601,6 +601,18 @@ class HybridTracker:
         self._unpulled = _CountedSolver(
             skeleton, effectors, replace(self.config.ik, secondary_gain=0.0)
         )
+        n_sets = len(self.marker_sets)
+        #: Target rows of the hand sets (`_arm_dofs`) and their members: they place the
+        #: arms, and drive no re-plant's move of the pelvis and legs (`_bound_relaxation`).
+        self._hand_rows = [
+            row
+            for i, name in enumerate(self.marker_sets)
+            if name.removesuffix("_hand") in SIDES and name.endswith("_hand")
+            for row in (
+                i,
+                *(n_sets + 2 + k for k, (s, _) in enumerate(self.members) if s == name),
+            )
+        ]
         #: DoFs of the root, trunk and legs (all but the arms'): those a re-plant's
         #: relaxation holds back (`_bound_relaxation`); the arms take it whole.
         arm_dofs = [np.zeros(0, np.int64)] + [
@@ -608,6 +620,10 @@ class HybridTracker:
             for lmb in limbs_present(skeleton, "arm")
         ]
         self._lower_dofs = np.setdiff1d(np.arange(skeleton.n_dofs), np.concatenate(arm_dofs))
+        #: The same DoFs as a mask: frozen where the arms are solved again over a
+        #: bounded pelvis and trunk (`_reseed_lost_arms`, `_bound_polish`).
+        self._lower_frozen = np.zeros(skeleton.n_dofs, dtype=bool)
+        self._lower_frozen[self._lower_dofs] = True
         #: Joints of the pelvis and legs, whose move a re-plant's relaxation bounds.
         self._lower_joints = np.unique(
             np.concatenate(
@@ -678,6 +694,11 @@ class HybridTracker:
         self._q: FloatArray | None = None
         #: The pose last returned (`_blend_rejoined` starts from it).
         self._out_q: FloatArray | None = None
+        #: Its time (the polish's bound, `_bound_polish`).
+        self._out_time_s: float | None = None
+        #: The pelvis and legs (`_lower_points_mm`) of the pose last returned, and its
+        #: time: the polish's bound computes them once (`_bound_polish`).
+        self._out_lower: tuple[float | None, FloatArray] = (None, np.zeros((0, 3)))
         self._prev_elbows: dict[str, FloatArray] | None = None
         self._prev_time_s = 0.0
         self._feet: FloatArray | None = None
@@ -945,9 +966,11 @@ class HybridTracker:
         pelvis and legs (`_lower_joints`) would move further than the previous frame's
         pose allows at ``replant_speed_factor`` times the head set's speed plus
         ``replant_min_speed_mm_s``, the DoFs of the root, trunk and legs (`_lower_dofs`)
-        are taken that share of the way from the same solve without the pull (what head
-        and hands ask for, kept whole, however far) towards ``q_free``, the arms' are
-        ``q_free``'s (the hands' sets place them, whatever the pelvis does); the following
+        are taken that share of the way from the same solve without the pull and without
+        the hand sets (what the head asks for, kept whole, however far) towards
+        ``q_free``, the arms' are ``q_free``'s (the hands' sets place them, whatever the
+        pelvis does: a hand set an arm held by its joint limits cannot reach would drag
+        the freed pelvis and legs after it, 150-300 mm in a frame); the following
         frames re-plant again from there, for as many frames as the whole move takes at
         the bound (``_relax_frames``), so the correction is spread, not dropped. Where the
         feet-held pose ``q`` already holds head and hands (``reached``: a frame re-planted
@@ -964,7 +987,9 @@ class HybridTracker:
         if reached:
             q_head, iterations = q, 0
         else:
-            res = self._unpulled.solve(q, free)
+            head = free.copy()
+            head[self._hand_rows] = np.nan
+            res = self._unpulled.solve(q, head)
             q_head, iterations = res.q, res.iterations
         limit_mm = max(bound_mm, self._lower_move_mm(q_head, before))
         # spread over the frames the whole move takes at the bound, counted from its start
@@ -1012,6 +1037,48 @@ class HybridTracker:
             else:
                 hi = mid
         return np.clip(share(lo), self.skeleton.lower, self.skeleton.upper)
+
+    def _bound_polish(
+        self,
+        solved: FloatArray,
+        smoothed: FloatArray,
+        polished: FloatArray,
+        targets: FloatArray,
+        time_s: float,
+    ) -> tuple[FloatArray, int]:
+        """The smoothing's polish, its move of the pelvis and legs bounded.
+
+        The polish puts the smoothed pose's effectors back on their markers; where the
+        frame's solve had left the pelvis and legs far from theirs (a pelvis set 150 mm
+        off for frames), the polish can take them there in one frame, further than the
+        solve itself went. From the pose last returned, the pelvis and legs move at most
+        as far as the frame's own solve (``solved``, before the filter) moved them, or
+        the re-plant's bound (`_lower_bound_mm`) where that is further; beyond it the
+        root, trunk and legs are taken that share of the way from ``smoothed`` to
+        ``polished`` (`_share_lower`) and the arms polished again over them. The next
+        frame starts from the solve, not from this pose, so nothing is dropped. Returns
+        the pose and the extra iterations.
+        """
+        if self._out_q is None or self._out_time_s is None or not time_s > self._out_time_s:
+            return polished, 0
+        last_s, before = self._out_lower
+        if last_s != self._out_time_s:
+            before = self._lower_points_mm(self._out_q)
+        after = self._lower_points_mm(polished)
+        move_mm = float(np.max(np.linalg.norm(after - before, axis=1)))
+        limit_mm = self._lower_bound_mm(time_s - self._out_time_s)
+        if move_mm > limit_mm:
+            limit_mm = max(limit_mm, self._lower_move_mm(solved, before))
+        if not move_mm > limit_mm:
+            self._out_lower = (time_s, after)  # the arms' holds leave them as they are
+            return polished, 0
+        # the arms put back on their markers over the pelvis and trunk the bound allows
+        res = self._polish.solve(
+            self._share_lower(smoothed, polished, limit_mm, before),
+            targets,
+            frozen=self._lower_frozen,
+        )
+        return res.q, res.iterations
 
     def _arm_dofs(self, name: str) -> NDArray[np.int64] | None:
         """The DoFs of the arm a hand set (``<side>_hand``) places; None for other sets."""
@@ -1143,10 +1210,10 @@ class HybridTracker:
                 limit_mm = max(self._lower_bound_mm(dt_s), self._lower_move_mm(q, before))
                 if self._lower_move_mm(q_new, before) > limit_mm:
                     # the arm solved again over the pelvis and trunk the bound allows
-                    frozen = np.zeros(self.skeleton.n_dofs, dtype=bool)
-                    frozen[self._lower_dofs] = True
                     bounded = self.solver.solve(
-                        self._share_lower(q, q_new, limit_mm, before), targets, frozen=frozen
+                        self._share_lower(q, q_new, limit_mm, before),
+                        targets,
+                        frozen=self._lower_frozen,
                     )
                     q_new = bounded.q
                     extra += bounded.iterations
@@ -1227,6 +1294,8 @@ class HybridTracker:
             self._relax_legs(self._crouch.lowered_rad(0.0))
         self._q = None
         self._out_q = None
+        self._out_time_s = None
+        self._out_lower = (None, np.zeros((0, 3)))
         self._prev_elbows = None
         self._feet = None
         self._filter = None
@@ -1376,14 +1445,16 @@ class HybridTracker:
                         self.config.smoothing_beta,
                     )
                     self._filter = OneEuroFilter(self.config.smoothing_min_cutoff_hz, beta)
+                solved = q
                 q = self._filter(sample.time_s, q)
                 # the filter smooths the redundant DoFs; put the effectors back on the markers
                 res = self._polish.solve(q, targets)
-                q = res.q
-                iterations += res.iterations
+                q, extra = self._bound_polish(solved, q, res.q, targets, float(sample.time_s))
+                iterations += res.iterations + extra
         self._hold_released_arms(q, released)
         self._remember_arms(q, released)
         self._out_q = q.copy()
+        self._out_time_s = float(sample.time_s)
         resid_arr = np.linalg.norm(self.solver.effector_positions(q) - observed, axis=1)
         names = self.marker_sets + FEET + tuple(m for _, m in self.members)
         residual = {nm: float(r) for nm, r in zip(names, resid_arr, strict=True)}
