@@ -11,6 +11,7 @@ the whole body's.
 
 from __future__ import annotations
 
+import weakref
 from typing import Any, NamedTuple
 
 import numba
@@ -60,28 +61,25 @@ def _readonly(a: ArrayLike, dtype: type) -> NDArray[Any]:
     return out
 
 
-def limb_chain(
-    skeleton: Skeleton,
-    q: ArrayLike,
-    joints: ArrayLike,
-    dofs: ArrayLike,
-    world: FloatArray | None = None,
-) -> LimbChain:
-    """The chain ``joints`` of ``skeleton`` at pose ``q`` (D,), searched over ``dofs``.
+class _ChainLayout(NamedTuple):
+    kin: KinematicArrays
+    chain_dofs: IntArray
+    x_slots: IntArray
 
-    Parameters
-    ----------
-    skeleton : Skeleton
-    q : array_like, shape (D,)
-    joints : array_like of int, shape (K,)
-        Each joint the parent of the next.
-    dofs : array_like of int, shape (N,)
-        Searched DoFs, all on ``joints``.
-    world : ndarray, shape (J, 4, 4), optional
-        ``forward_kinematics(skeleton, q)`` if already computed.
-    """
-    j = np.asarray(joints, dtype=np.int64)
-    d = np.asarray(dofs, dtype=np.int64)
+
+#: Per skeleton (held weakly): the layout of each chain asked for, by joints and DoFs.
+#: A tracker builds the same limb's chain every frame; only the pose part changes.
+_LAYOUTS: weakref.WeakKeyDictionary[Skeleton, dict[tuple[Any, ...], _ChainLayout]] = (
+    weakref.WeakKeyDictionary()
+)
+
+
+def _chain_layout(skeleton: Skeleton, j: IntArray, d: IntArray) -> _ChainLayout:
+    key = (j.shape, j.tobytes(), d.shape, d.tobytes())
+    found = _LAYOUTS.setdefault(skeleton, {})
+    layout = found.get(key)
+    if layout is not None:
+        return layout
     if j.ndim != 1 or j.size == 0 or np.any(skeleton.parents[j[1:]] != j[:-1]):
         raise ShapeError(
             f"skeleton {skeleton.name!r}: joints {j.tolist()} are not a chain (each the parent "
@@ -107,6 +105,35 @@ def limb_chain(
         dof_joint=_readonly(np.repeat(np.arange(n), counts), np.int64),
         ancestors=_readonly(np.triu(np.ones((n, n), dtype=bool)), np.bool_),
     )
+    layout = found[key] = _ChainLayout(
+        kin, _readonly(chain_dofs, np.int64), _readonly(np.searchsorted(chain_dofs, d), np.int64)
+    )
+    return layout
+
+
+def limb_chain(
+    skeleton: Skeleton,
+    q: ArrayLike,
+    joints: ArrayLike,
+    dofs: ArrayLike,
+    world: FloatArray | None = None,
+) -> LimbChain:
+    """The chain ``joints`` of ``skeleton`` at pose ``q`` (D,), searched over ``dofs``.
+
+    Parameters
+    ----------
+    skeleton : Skeleton
+    q : array_like, shape (D,)
+    joints : array_like of int, shape (K,)
+        Each joint the parent of the next.
+    dofs : array_like of int, shape (N,)
+        Searched DoFs, all on ``joints``.
+    world : ndarray, shape (J, 4, 4), optional
+        ``forward_kinematics(skeleton, q)`` if already computed.
+    """
+    j = np.asarray(joints, dtype=np.int64)
+    d = np.asarray(dofs, dtype=np.int64)
+    kin, chain_dofs, x_slots = _chain_layout(skeleton, j, d)
     qa = np.asarray(q, dtype=np.float64)
     if world is None:
         world = forward_kinematics(skeleton, qa)
@@ -115,7 +142,7 @@ def limb_chain(
     return LimbChain(
         kin=kin,
         q=np.ascontiguousarray(qa[chain_dofs]),
-        x_slots=np.searchsorted(chain_dofs, d).astype(np.int64),
+        x_slots=x_slots.copy(),  # the caller's own, as the pose's arrays
         parent_rotation=np.ascontiguousarray(pw[:3, :3]),
         parent_origin_mm=np.ascontiguousarray(pw[:3, 3]),
     )

@@ -9,6 +9,7 @@ and the kinematic tree. So the same code runs on ``zhang21``, ``azad14`` and
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 
 import numpy as np
@@ -93,8 +94,21 @@ def _path(parents: IntArray, top: int, bottom: int) -> IntArray:
     return np.asarray(out[::-1], dtype=np.int64)
 
 
+def _readonly_int(indices: NDArray[np.integer]) -> IntArray:
+    out = np.asarray(indices, dtype=np.int64)
+    out.setflags(write=False)
+    return out
+
+
+#: Limbs found so far, per skeleton (held weakly); their index arrays are read-only, as
+#: every caller shares them.
+_LIMBS: weakref.WeakKeyDictionary[Skeleton, dict[str, Limb]] = weakref.WeakKeyDictionary()
+
+
 def limb(skeleton: Skeleton, name: str) -> Limb:
     """The arm or leg ``name`` (``"left_arm"``, ``"right_leg"``, ...) of a skeleton.
+
+    Cached per skeleton (immutable): trackers ask for their limbs several times a frame.
 
     Raises
     ------
@@ -102,6 +116,14 @@ def limb(skeleton: Skeleton, name: str) -> Limb:
         For a name that is not ``{side}_{kind}``, or a skeleton whose canonical joints
         lack this limb (``upper_stick`` has no legs).
     """
+    found = _LIMBS.setdefault(skeleton, {})
+    cached = found.get(name)
+    if cached is None:
+        cached = found[name] = _find_limb(skeleton, name)
+    return cached
+
+
+def _find_limb(skeleton: Skeleton, name: str) -> Limb:
     valid = [f"{s}_{k}" for s in SIDES for k in LIMB_KINDS]
     if name not in valid:
         raise unknown_name("limb", name, valid)
@@ -129,9 +151,9 @@ def limb(skeleton: Skeleton, name: str) -> Limb:
         middle=middle,
         end=end,
         tip=int(children[0]) if children.size else -1,
-        dofs=np.flatnonzero(on_chain & ~prismatic).astype(np.int64),
-        translation_dofs=np.flatnonzero(on_chain & prismatic).astype(np.int64),
-        chain=chain,
+        dofs=_readonly_int(np.flatnonzero(on_chain & ~prismatic)),
+        translation_dofs=_readonly_int(np.flatnonzero(on_chain & prismatic)),
+        chain=_readonly_int(chain),
     )
 
 

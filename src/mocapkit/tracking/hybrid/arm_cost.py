@@ -28,6 +28,7 @@ far the elbow lies beyond ``elbow_free_mm`` from the previous frame's elbow (see
 from __future__ import annotations
 
 import math
+import weakref
 from typing import NamedTuple
 
 import numba
@@ -281,9 +282,48 @@ def arm_cost_many_nb(xs: FloatArray, model: ArmModel, maps: ChamferMaps) -> Floa
     return out
 
 
+class _ArmParts(NamedTuple):
+    """What `arm_limb` and `arm_shape` derive from the skeleton alone (cached per skeleton)."""
+
+    limb: Limb
+    shoulder: ShoulderDofs
+    bone_end_mm: FloatArray
+    radii_mm: FloatArray
+    hand_has_bone: bool
+
+
+#: Per skeleton (held weakly), per side: its checked arm. The refinement asks for it
+#: several times a refined frame; the skeleton is immutable.
+_ARM_PARTS: weakref.WeakKeyDictionary[Skeleton, dict[str, _ArmParts]] = weakref.WeakKeyDictionary()
+
+
+def _arm_parts(skeleton: Skeleton, side: str) -> _ArmParts:
+    found = _ARM_PARTS.setdefault(skeleton, {})
+    parts = found.get(side)
+    if parts is None:
+        limb = _checked_arm(skeleton, side)
+        joints = list(limb.joints)
+        try:
+            shoulder = shoulder_dofs(skeleton, limb.dofs[:3])
+        except ShapeError:  # no swivel for these axes: the scan is skipped
+            shoulder = ShoulderDofs(-1, np.zeros(3, dtype=np.int64), np.ones(3))
+        parts = found[side] = _ArmParts(
+            limb=limb,
+            shoulder=shoulder,
+            bone_end_mm=np.ascontiguousarray(skeleton.bone_end_mm[joints], dtype=np.float64),
+            radii_mm=np.ascontiguousarray(skeleton.radii_mm[joints], dtype=np.float64),
+            hand_has_bone=bool(np.any(skeleton.bone_end_mm[limb.end] != 0)),
+        )
+    return parts
+
+
 def arm_limb(skeleton: Skeleton, side: str) -> Limb:
     """The arm of ``side`` (`mocapkit.skeleton.limbs.arm`), checked for the refinement:
     a chain shoulder -> elbow -> wrist with 3 shoulder and 1 elbow rotational DoFs."""
+    return _arm_parts(skeleton, side).limb
+
+
+def _checked_arm(skeleton: Skeleton, side: str) -> Limb:
     if side not in SIDES:
         raise unknown_name("arm side", side, SIDES, "refine_arms")
     limb = arm(skeleton, side)
@@ -304,26 +344,22 @@ def arm_limb(skeleton: Skeleton, side: str) -> Limb:
 
 def arm_dofs(skeleton: Skeleton, side: str) -> IntArray:
     """Indices (4,) of an arm's shoulder (3 rotational) and elbow (1) DoFs."""
-    return np.asarray(arm_limb(skeleton, side).dofs, dtype=np.int64)
+    return np.array(arm_limb(skeleton, side).dofs, dtype=np.int64)
 
 
 def arm_shape(
     skeleton: Skeleton, side: str, effector_mm: ArrayLike, include_hand: bool = True
 ) -> ArmShape:
     """The `ArmShape` of one arm; a hand without a bone is never scored."""
-    limb = arm_limb(skeleton, side)
-    joints = list(limb.joints)
-    try:
-        shoulder = shoulder_dofs(skeleton, limb.dofs[:3])
-    except ShapeError:  # no swivel for these axes: the scan is skipped
-        shoulder = ShoulderDofs(-1, np.zeros(3, dtype=np.int64), np.ones(3))
-    hand_has_bone = bool(np.any(skeleton.bone_end_mm[limb.end] != 0))
+    parts = _arm_parts(skeleton, side)
+    sh = parts.shoulder
+    # copies: the kernels' arrays are the caller's own, the cached ones stay untouched
     return ArmShape(
-        bone_end_mm=np.ascontiguousarray(skeleton.bone_end_mm[joints], dtype=np.float64),
-        radii_mm=np.ascontiguousarray(skeleton.radii_mm[joints], dtype=np.float64),
-        n_segments=3 if include_hand and hand_has_bone else 2,
+        bone_end_mm=parts.bone_end_mm.copy(),
+        radii_mm=parts.radii_mm.copy(),
+        n_segments=3 if include_hand and parts.hand_has_bone else 2,
         effector_mm=np.array(effector_mm, dtype=np.float64),
-        shoulder=shoulder,
+        shoulder=ShoulderDofs(sh.kind, sh.basis.copy(), sh.signs.copy()),
     )
 
 
