@@ -363,10 +363,13 @@ def joint_positions(skeleton: Skeleton, q: ArrayLike) -> FloatArray:
 def _targets(
     skeleton: Skeleton, joints: Sequence[int | str] | ArrayLike, points_in_joint: ArrayLike | None
 ) -> tuple[IntArray, FloatArray]:
-    idx = np.array(
-        [skeleton.joint_index(j) if isinstance(j, str) else int(j) for j in np.ravel(joints)],
-        dtype=np.int64,
-    )
+    if isinstance(joints, np.ndarray) and joints.dtype.kind in "iu":
+        idx = np.array(joints.ravel(), dtype=np.int64)  # indices already: no per-item loop
+    else:
+        idx = np.array(
+            [skeleton.joint_index(j) if isinstance(j, str) else int(j) for j in np.ravel(joints)],
+            dtype=np.int64,
+        )
     if np.any(idx < 0) or np.any(idx >= skeleton.n_joints):
         raise ShapeError(f"joint indices must lie in [0, {skeleton.n_joints}), found {idx}")
     if points_in_joint is None:
@@ -430,20 +433,27 @@ def points_on_joints(
     q: ArrayLike,
     joints: Sequence[int | str] | ArrayLike,
     points_in_joint: ArrayLike | None = None,
+    world: FloatArray | None = None,
 ) -> FloatArray:
-    """World positions (..., K, 3) of points fixed in the given joints' frames."""
-    world = forward_kinematics(skeleton, q)
+    """World positions (..., K, 3) of points fixed in the given joints' frames; ``world``:
+    `forward_kinematics` of ``q`` if already computed."""
+    if world is None:
+        world = forward_kinematics(skeleton, q)
     idx, pts = _targets(skeleton, joints, points_in_joint)
     sel = world[..., idx, :, :]
     return np.einsum("...kij,kj->...ki", sel[..., :3, :3], pts) + sel[..., :3, 3]
 
 
 def canonical_positions(
-    skeleton: Skeleton, q: ArrayLike, names: Sequence[str] | None = None
+    skeleton: Skeleton,
+    q: ArrayLike,
+    names: Sequence[str] | None = None,
+    world: FloatArray | None = None,
 ) -> FloatArray:
-    """Positions (..., K, 3) of canonical joints (default: all the skeleton provides)."""
+    """Positions (..., K, 3) of canonical joints (default: all the skeleton provides);
+    ``world``: `forward_kinematics` of ``q`` if already computed."""
     idx, pts = skeleton.canonical_points(names)
-    return points_on_joints(skeleton, q, idx, pts)
+    return points_on_joints(skeleton, q, idx, pts, world)
 
 
 # ------------------------------------------------------------------ mass properties

@@ -36,7 +36,7 @@ from mocapkit.geometry.transforms import points_in_frame
 from mocapkit.ik.config import IKConfig, IKResult
 from mocapkit.ik.effectors import Effector
 from mocapkit.ik.sdls import SDLSSolver
-from mocapkit.skeleton.kinematics import canonical_positions, forward_kinematics
+from mocapkit.skeleton.kinematics import forward_kinematics, points_on_joints
 from mocapkit.skeleton.limbs import (
     SIDES,
     arm,
@@ -647,6 +647,9 @@ class HybridTracker:
             else _CountedSolver(skeleton, effectors, restore_ik)
         )
         self._arms = {side: arm(skeleton, side) for side in SIDES}
+        #: The canonical joints' joints and points (`Skeleton.canonical_points`), for the
+        #: output of every frame.
+        self._canonical_points = skeleton.canonical_points()
         #: The relaxed legs follow the head's height over the feet (`Crouch`): a standing
         #: subject with planted feet and no leg sets, outside paper mode.
         self._crouch: Crouch | None = None
@@ -765,6 +768,7 @@ class HybridTracker:
             t_m = float(sample.time_s)
         n = len(self.marker_sets)
         targets = np.full((n + 2 + len(self.members), 3), np.nan)
+        sets_seen: dict[str, bool] = {}
         for k, (set_name, member) in enumerate(self.members):
             raw = sample.members_mm.get(member)
             p = None if raw is None else np.asarray(raw, dtype=float).reshape(-1)
@@ -773,8 +777,11 @@ class HybridTracker:
                     f"sample.members_mm[{member!r}]: expected 3 coordinates (mm), "
                     f"found shape {p.shape}"
                 )
-            raw_set = sample.markers_mm.get(set_name)
-            set_seen = raw_set is not None and bool(np.all(np.isfinite(raw_set)))
+            set_seen = sets_seen.get(set_name)
+            if set_seen is None:
+                raw_set = sample.markers_mm.get(set_name)
+                set_seen = raw_set is not None and bool(np.all(np.isfinite(raw_set)))
+                sets_seen[set_name] = set_seen
             if p is not None and set_seen and not stale and np.all(np.isfinite(p)):
                 targets[n + 2 + k] = p
         bridged: list[str] = []
@@ -866,12 +873,8 @@ class HybridTracker:
         return np.clip(q, sk.lower, sk.upper)
 
     def _n_members_seen(self, targets: FloatArray, set_name: str) -> int:
-        n = len(self.marker_sets)
-        return sum(
-            1
-            for k, (s, _) in enumerate(self.members)
-            if s == set_name and np.all(np.isfinite(targets[n + 2 + k]))
-        )
+        seen = np.all(np.isfinite(targets[len(self.marker_sets) + 2 :]), axis=1)
+        return sum(1 for (s, _), ok in zip(self.members, seen, strict=True) if ok and s == set_name)
 
     def _member_turn_rad(self, q: FloatArray, targets: FloatArray, set_name: str) -> float | None:
         """The turn about the vertical that best aligns the model's member markers of one
@@ -1254,19 +1257,22 @@ class HybridTracker:
     # ------------------------------------------------------------------ update
 
     def _shoulder_parents_and_elbows(
-        self, q: FloatArray
+        self, q: FloatArray, world: FloatArray | None = None
     ) -> dict[str, tuple[FloatArray, FloatArray]]:
         """Per side: the world transform (4, 4) of the shoulder's parent (the trunk or
-        clavicle) and the elbow (3,) in the world, mm, under pose ``q``."""
-        sk = self.skeleton
-        world = forward_kinematics(sk, q)
+        clavicle) and the elbow (3,) in the world, mm, under pose ``q`` (``world``: its
+        `forward_kinematics`, if already computed)."""
+        if world is None:
+            world = forward_kinematics(self.skeleton, q)
         out = {}
         for side in SIDES:
             limb = self._arms[side]
             out[side] = (world[limb.parent], world[limb.middle, :3, 3])
         return out
 
-    def _elbows_in_shoulder_parents(self, q: FloatArray) -> dict[str, FloatArray]:
+    def _elbows_in_shoulder_parents(
+        self, q: FloatArray, world: FloatArray | None = None
+    ) -> dict[str, FloatArray]:
         """Each elbow in the frame of its shoulder's parent, mm.
 
         The elbow-jump penalty compares elbows in this frame, carried to the world by
@@ -1275,7 +1281,7 @@ class HybridTracker:
         """
         return {
             side: parent[:3, :3].T @ (elbow - parent[:3, 3])
-            for side, (parent, elbow) in self._shoulder_parents_and_elbows(q).items()
+            for side, (parent, elbow) in self._shoulder_parents_and_elbows(q, world).items()
         }
 
     def _previous_elbows_in_world(self, q: FloatArray) -> dict[str, FloatArray]:
@@ -1458,9 +1464,10 @@ class HybridTracker:
         resid_arr = np.linalg.norm(self.solver.effector_positions(q) - observed, axis=1)
         names = self.marker_sets + FEET + tuple(m for _, m in self.members)
         residual = {nm: float(r) for nm, r in zip(names, resid_arr, strict=True)}
-        joints = canonical_positions(sk, q)
+        world = forward_kinematics(sk, q)
+        joints = points_on_joints(sk, q, *self._canonical_points, world=world)
         if self._elbow_prior:
-            self._prev_elbows = self._elbows_in_shoulder_parents(q)
+            self._prev_elbows = self._elbows_in_shoulder_parents(q, world)
             self._prev_time_s = float(sample.time_s)
         fit, worst = fit_summary(residual)
         fit.update(edge_fit)
