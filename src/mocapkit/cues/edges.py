@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import cv2
 import numpy as np
@@ -312,6 +312,19 @@ def canny_edges(crop: UInt8Array, config: EdgeConfig, lut: UInt8Array | None) ->
     return np.asarray(cv2.Canny(g, config.canny_low, config.canny_high), dtype=np.uint8)
 
 
+def _nonzero(image: NDArray[Any]) -> tuple[NDArray[np.integer], NDArray[np.integer]]:
+    """Rows and columns of the non-zero pixels of a 2-D image; OpenCV's scan for an 8-bit
+    one (a quarter of `np.nonzero`'s time on an arm's crop), in the same row-major order."""
+    if image.dtype != np.uint8 or image.ndim != 2:
+        rows, cols = np.nonzero(image)
+        return rows, cols
+    found = cv2.findNonZero(image)
+    if found is None or found.size == 0:  # no edge pixel
+        return np.zeros(0, dtype=np.intp), np.zeros(0, dtype=np.intp)
+    xy = np.asarray(found, dtype=np.intp).reshape(-1, 2)
+    return xy[:, 1], xy[:, 0]
+
+
 def oriented_distance_maps(
     edges: ArrayLike,
     smoothed: ArrayLike,
@@ -362,7 +375,7 @@ def oriented_distance_maps(
         raise ConfigError(f"n_bins: expected 2-16, found {n_bins}")
     if mask not in _MASKS:
         raise ConfigError(f"mask: expected one of {sorted(_MASKS)}, found {mask!r}")
-    ys, xs = np.nonzero(e)
+    ys, xs = _nonzero(e)
     # 3x3 Sobel of the whole crop in 16-bit integers (cheap), read at the edge pixels
     gx = cv2.Sobel(g, cv2.CV_16S, 1, 0, ksize=3)[ys, xs].astype(np.float32)
     gy = cv2.Sobel(g, cv2.CV_16S, 0, 1, ksize=3)[ys, xs].astype(np.float32)
