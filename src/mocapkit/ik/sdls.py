@@ -251,7 +251,7 @@ class SDLSSolver:
                 f"targets_mm: expected shape ({n_eff}, 3) for effectors "
                 f"{list(self.effector_names)}, found {t.shape}"
             )
-        finite = np.all(np.isfinite(t), axis=1)
+        finite = np.isfinite(t).all(axis=1)
         act = finite if active is None else np.asarray(active, dtype=bool) & finite
         if act.shape != (n_eff,):
             raise ShapeError(f"active: expected shape ({n_eff},), found {act.shape}")
@@ -276,7 +276,7 @@ class SDLSSolver:
         n_it = solve_ik_nb(q, self._kin, task, self._weighting, self._settings, residual, trace)
         res_all = np.full(n_eff, np.nan)
         res_all[idx] = residual
-        converged = bool(len(idx) == 0 or np.all(residual < cfg.tol_mm))
+        converged = bool(len(idx) == 0 or (residual < cfg.tol_mm).all())
         return IKResult(
             q=q,
             iterations=int(n_it),

@@ -327,7 +327,7 @@ class Skeleton:
                 f"{what}: expected joint parameters of shape (..., {self.n_dofs}) for skeleton "
                 f"{self.name!r}, found {q.shape}"
             )
-        if not np.all(np.isfinite(q)):
+        if not np.isfinite(q).all():  # the method: every FK and solve checks its pose
             raise ShapeError(f"{what}: joint parameters contain NaN or inf")
 
     def replace(self, **changes: Any) -> Skeleton:
