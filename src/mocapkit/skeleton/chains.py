@@ -11,14 +11,14 @@ the whole body's.
 
 from __future__ import annotations
 
-import weakref
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numba
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.errors import ShapeError
+from mocapkit.skeleton.derived import PerSkeleton, readonly_copy
 from mocapkit.skeleton.kinematics import (
     KinematicArrays,
     fk_pose_nb,
@@ -54,32 +54,23 @@ class LimbChain(NamedTuple):
     parent_origin_mm: FloatArray
 
 
-def _readonly(a: ArrayLike, dtype: type) -> NDArray[Any]:
-    # read-only like `kinematic_arrays`, so `fk_pose_nb` is compiled for one layout
-    out: NDArray[Any] = np.array(a, dtype=dtype, order="C", copy=True)
-    out.setflags(write=False)
-    return out
-
-
 class _ChainLayout(NamedTuple):
     kin: KinematicArrays
     chain_dofs: IntArray
     x_slots: IntArray
 
 
-#: Per skeleton (held weakly): the layout of each chain asked for, by joints and DoFs.
-#: A tracker builds the same limb's chain every frame; only the pose part changes.
-_LAYOUTS: weakref.WeakKeyDictionary[Skeleton, dict[tuple[Any, ...], _ChainLayout]] = (
-    weakref.WeakKeyDictionary()
-)
+#: Per skeleton: the layout of each chain asked for, by joints and DoFs. A tracker builds
+#: the same limb's chain every frame; only the pose part changes.
+_LAYOUTS: PerSkeleton[_ChainLayout] = PerSkeleton()
 
 
 def _chain_layout(skeleton: Skeleton, j: IntArray, d: IntArray) -> _ChainLayout:
     key = (j.shape, j.tobytes(), d.shape, d.tobytes())
-    found = _LAYOUTS.setdefault(skeleton, {})
-    layout = found.get(key)
-    if layout is not None:
-        return layout
+    return _LAYOUTS.get(skeleton, key, _build_chain_layout, j, d)
+
+
+def _build_chain_layout(skeleton: Skeleton, j: IntArray, d: IntArray) -> _ChainLayout:
     if j.ndim != 1 or j.size == 0 or np.any(skeleton.parents[j[1:]] != j[:-1]):
         raise ShapeError(
             f"skeleton {skeleton.name!r}: joints {j.tolist()} are not a chain (each the parent "
@@ -96,19 +87,20 @@ def _chain_layout(skeleton: Skeleton, j: IntArray, d: IntArray) -> _ChainLayout:
     counts = full.dof_count[j]
     n = j.size
     kin = KinematicArrays(
-        parents=_readonly(np.arange(n) - 1, np.int64),
-        offsets=_readonly(full.offsets[j], np.float64),
-        dof_start=_readonly(np.concatenate([[0], np.cumsum(counts)[:-1]]), np.int64),
-        dof_count=_readonly(counts, np.int64),
-        dof_kind=_readonly(full.dof_kind[chain_dofs], np.int64),
-        dof_axis=_readonly(full.dof_axis[chain_dofs], np.float64),
-        dof_joint=_readonly(np.repeat(np.arange(n), counts), np.int64),
-        ancestors=_readonly(np.triu(np.ones((n, n), dtype=bool)), np.bool_),
+        parents=readonly_copy(np.arange(n) - 1, np.int64),
+        offsets=readonly_copy(full.offsets[j], np.float64),
+        dof_start=readonly_copy(np.concatenate([[0], np.cumsum(counts)[:-1]]), np.int64),
+        dof_count=readonly_copy(counts, np.int64),
+        dof_kind=readonly_copy(full.dof_kind[chain_dofs], np.int64),
+        dof_axis=readonly_copy(full.dof_axis[chain_dofs], np.float64),
+        dof_joint=readonly_copy(np.repeat(np.arange(n), counts), np.int64),
+        ancestors=readonly_copy(np.triu(np.ones((n, n), dtype=bool)), np.bool_),
     )
-    layout = found[key] = _ChainLayout(
-        kin, _readonly(chain_dofs, np.int64), _readonly(np.searchsorted(chain_dofs, d), np.int64)
+    return _ChainLayout(
+        kin,
+        readonly_copy(chain_dofs, np.int64),
+        readonly_copy(np.searchsorted(chain_dofs, d), np.int64),
     )
-    return layout
 
 
 def limb_chain(

@@ -14,9 +14,8 @@ unless the DoF's joint is the point's joint or one of its ancestors.
 
 from __future__ import annotations
 
-import weakref
 from collections.abc import Sequence
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -28,6 +27,7 @@ from mocapkit.geometry.rotations import (
     left_jacobian_so3_nb,
     rotvec_matrix_nb,
 )
+from mocapkit.skeleton.derived import PerSkeleton, readonly_copy
 from mocapkit.skeleton.model import BALL, PRISMATIC, REVOLUTE, Skeleton
 
 FloatArray = NDArray[np.float64]
@@ -74,27 +74,18 @@ class KinematicArrays(NamedTuple):
         counts = np.bincount(skeleton.dof_joint, minlength=skeleton.n_joints)
         starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
         return cls(
-            parents=_readonly(skeleton.parents, np.int64),
-            offsets=_readonly(skeleton.offsets_mm, np.float64),
-            dof_start=_readonly(starts, np.int64),
-            dof_count=_readonly(counts, np.int64),
-            dof_kind=_readonly(skeleton.dof_kind, np.int64),
-            dof_axis=_readonly(skeleton.dof_axis, np.float64),
-            dof_joint=_readonly(skeleton.dof_joint, np.int64),
-            ancestors=_readonly(skeleton.ancestors_mask(), np.bool_),
+            parents=readonly_copy(skeleton.parents, np.int64),
+            offsets=readonly_copy(skeleton.offsets_mm, np.float64),
+            dof_start=readonly_copy(starts, np.int64),
+            dof_count=readonly_copy(counts, np.int64),
+            dof_kind=readonly_copy(skeleton.dof_kind, np.int64),
+            dof_axis=readonly_copy(skeleton.dof_axis, np.float64),
+            dof_joint=readonly_copy(skeleton.dof_joint, np.int64),
+            ancestors=readonly_copy(skeleton.ancestors_mask(), np.bool_),
         )
 
 
-def _readonly(a: ArrayLike, dtype: type) -> NDArray[Any]:
-    """A C-contiguous read-only copy (the cached layout is shared by every caller)."""
-    out: NDArray[Any] = np.array(a, dtype=dtype, order="C", copy=True)
-    out.setflags(write=False)
-    return out
-
-
-_KINEMATIC_ARRAYS: weakref.WeakKeyDictionary[Skeleton, KinematicArrays] = (
-    weakref.WeakKeyDictionary()
-)
+_KINEMATIC_ARRAYS: PerSkeleton[KinematicArrays] = PerSkeleton()
 
 
 def kinematic_arrays(skeleton: Skeleton) -> KinematicArrays:
@@ -103,11 +94,7 @@ def kinematic_arrays(skeleton: Skeleton) -> KinematicArrays:
     The cache holds skeletons weakly, so a process that fits many subjects does not keep
     every model alive.
     """
-    arrays = _KINEMATIC_ARRAYS.get(skeleton)
-    if arrays is None:
-        arrays = KinematicArrays.from_skeleton(skeleton)
-        _KINEMATIC_ARRAYS[skeleton] = arrays
-    return arrays
+    return _KINEMATIC_ARRAYS.get(skeleton, None, KinematicArrays.from_skeleton)
 
 
 # ------------------------------------------------------------------ kernels

@@ -9,13 +9,13 @@ and the kinematic tree. So the same code runs on ``zhang21``, ``azad14`` and
 
 from __future__ import annotations
 
-import weakref
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.errors import UnknownNameError, unknown_name
+from mocapkit.skeleton.derived import PerSkeleton, readonly_copy
 from mocapkit.skeleton.model import PRISMATIC, REVOLUTE, Skeleton
 
 IntArray = NDArray[np.int64]
@@ -94,15 +94,9 @@ def _path(parents: IntArray, top: int, bottom: int) -> IntArray:
     return np.asarray(out[::-1], dtype=np.int64)
 
 
-def _readonly_int(indices: NDArray[np.integer]) -> IntArray:
-    out = np.asarray(indices, dtype=np.int64)
-    out.setflags(write=False)
-    return out
-
-
-#: Limbs found so far, per skeleton (held weakly); their index arrays are read-only, as
-#: every caller shares them.
-_LIMBS: weakref.WeakKeyDictionary[Skeleton, dict[str, Limb]] = weakref.WeakKeyDictionary()
+#: Limbs found so far, per skeleton; their index arrays are read-only, as every caller
+#: shares them.
+_LIMBS: PerSkeleton[Limb] = PerSkeleton()
 
 
 def limb(skeleton: Skeleton, name: str) -> Limb:
@@ -116,11 +110,7 @@ def limb(skeleton: Skeleton, name: str) -> Limb:
         For a name that is not ``{side}_{kind}``, or a skeleton whose canonical joints
         lack this limb (``upper_stick`` has no legs).
     """
-    found = _LIMBS.setdefault(skeleton, {})
-    cached = found.get(name)
-    if cached is None:
-        cached = found[name] = _find_limb(skeleton, name)
-    return cached
+    return _LIMBS.get(skeleton, name, _find_limb, name)
 
 
 def _find_limb(skeleton: Skeleton, name: str) -> Limb:
@@ -151,9 +141,9 @@ def _find_limb(skeleton: Skeleton, name: str) -> Limb:
         middle=middle,
         end=end,
         tip=int(children[0]) if children.size else -1,
-        dofs=_readonly_int(np.flatnonzero(on_chain & ~prismatic)),
-        translation_dofs=_readonly_int(np.flatnonzero(on_chain & prismatic)),
-        chain=_readonly_int(chain),
+        dofs=readonly_copy(np.flatnonzero(on_chain & ~prismatic), np.int64),
+        translation_dofs=readonly_copy(np.flatnonzero(on_chain & prismatic), np.int64),
+        chain=readonly_copy(chain, np.int64),
     )
 
 

@@ -28,7 +28,6 @@ far the elbow lies beyond ``elbow_free_mm`` from the previous frame's elbow (see
 from __future__ import annotations
 
 import math
-import weakref
 from typing import NamedTuple
 
 import numba
@@ -46,6 +45,7 @@ from mocapkit.errors import ShapeError, unknown_name
 from mocapkit.geometry.cones import cone_contour_generators_nb
 from mocapkit.ik.swivel import ShoulderDofs, shoulder_dofs, shoulder_params_nb, swivel_local_nb
 from mocapkit.skeleton.chains import LimbChain, chain_frames_nb
+from mocapkit.skeleton.derived import PerSkeleton
 from mocapkit.skeleton.limbs import SIDES, Limb, arm
 from mocapkit.skeleton.model import Skeleton
 
@@ -292,29 +292,29 @@ class _ArmParts(NamedTuple):
     hand_has_bone: bool
 
 
-#: Per skeleton (held weakly), per side: its checked arm. The refinement asks for it
-#: several times a refined frame; the skeleton is immutable.
-_ARM_PARTS: weakref.WeakKeyDictionary[Skeleton, dict[str, _ArmParts]] = weakref.WeakKeyDictionary()
+#: Per skeleton, per side: its checked arm. The refinement asks for it several times a
+#: refined frame; the skeleton is immutable.
+_ARM_PARTS: PerSkeleton[_ArmParts] = PerSkeleton()
 
 
 def _arm_parts(skeleton: Skeleton, side: str) -> _ArmParts:
-    found = _ARM_PARTS.setdefault(skeleton, {})
-    parts = found.get(side)
-    if parts is None:
-        limb = _checked_arm(skeleton, side)
-        joints = list(limb.joints)
-        try:
-            shoulder = shoulder_dofs(skeleton, limb.dofs[:3])
-        except ShapeError:  # no swivel for these axes: the scan is skipped
-            shoulder = ShoulderDofs(-1, np.zeros(3, dtype=np.int64), np.ones(3))
-        parts = found[side] = _ArmParts(
-            limb=limb,
-            shoulder=shoulder,
-            bone_end_mm=np.ascontiguousarray(skeleton.bone_end_mm[joints], dtype=np.float64),
-            radii_mm=np.ascontiguousarray(skeleton.radii_mm[joints], dtype=np.float64),
-            hand_has_bone=bool(np.any(skeleton.bone_end_mm[limb.end] != 0)),
-        )
-    return parts
+    return _ARM_PARTS.get(skeleton, side, _build_arm_parts, side)
+
+
+def _build_arm_parts(skeleton: Skeleton, side: str) -> _ArmParts:
+    limb = _checked_arm(skeleton, side)
+    joints = list(limb.joints)
+    try:
+        shoulder = shoulder_dofs(skeleton, limb.dofs[:3])
+    except ShapeError:  # no swivel for these axes: the scan is skipped
+        shoulder = ShoulderDofs(-1, np.zeros(3, dtype=np.int64), np.ones(3))
+    return _ArmParts(
+        limb=limb,
+        shoulder=shoulder,
+        bone_end_mm=np.ascontiguousarray(skeleton.bone_end_mm[joints], dtype=np.float64),
+        radii_mm=np.ascontiguousarray(skeleton.radii_mm[joints], dtype=np.float64),
+        hand_has_bone=bool(np.any(skeleton.bone_end_mm[limb.end] != 0)),
+    )
 
 
 def arm_limb(skeleton: Skeleton, side: str) -> Limb:
