@@ -431,6 +431,15 @@ def points_on_joints(
     return np.einsum("...kij,kj->...ki", sel[..., :3, :3], pts) + sel[..., :3, 3]
 
 
+def _all_canonical_points(skeleton: Skeleton) -> tuple[IntArray, FloatArray]:
+    idx, pts = skeleton.canonical_points()
+    return readonly_copy(idx, np.int64), readonly_copy(pts, np.float64)
+
+
+#: `Skeleton.canonical_points` of all the canonical joints, per skeleton.
+_ALL_CANONICAL_POINTS: PerSkeleton[tuple[IntArray, FloatArray]] = PerSkeleton()
+
+
 def canonical_positions(
     skeleton: Skeleton,
     q: ArrayLike,
@@ -439,7 +448,10 @@ def canonical_positions(
 ) -> FloatArray:
     """Positions (..., K, 3) of canonical joints (default: all the skeleton provides);
     ``world``: `forward_kinematics` of ``q`` if already computed."""
-    idx, pts = skeleton.canonical_points(names)
+    if names is None:  # every frame's output: the lookup kept per skeleton
+        idx, pts = _ALL_CANONICAL_POINTS.get(skeleton, None, _all_canonical_points)
+    else:
+        idx, pts = skeleton.canonical_points(names)
     return points_on_joints(skeleton, q, idx, pts, world)
 
 

@@ -36,7 +36,7 @@ from mocapkit.geometry.transforms import points_in_frame
 from mocapkit.ik.config import IKConfig, IKResult
 from mocapkit.ik.effectors import Effector
 from mocapkit.ik.sdls import SDLSSolver
-from mocapkit.skeleton.kinematics import forward_kinematics, points_on_joints
+from mocapkit.skeleton.kinematics import canonical_positions, forward_kinematics
 from mocapkit.skeleton.limbs import (
     SIDES,
     arm,
@@ -647,9 +647,6 @@ class HybridTracker:
             else _CountedSolver(skeleton, effectors, restore_ik)
         )
         self._arms = {side: arm(skeleton, side) for side in SIDES}
-        #: The canonical joints' joints and points (`Skeleton.canonical_points`), for the
-        #: output of every frame.
-        self._canonical_points = skeleton.canonical_points()
         #: The relaxed legs follow the head's height over the feet (`Crouch`): a standing
         #: subject with planted feet and no leg sets, outside paper mode.
         self._crouch: Crouch | None = None
@@ -1465,7 +1462,7 @@ class HybridTracker:
         names = self.marker_sets + FEET + tuple(m for _, m in self.members)
         residual = {nm: float(r) for nm, r in zip(names, resid_arr, strict=True)}
         world = forward_kinematics(sk, q)
-        joints = points_on_joints(sk, q, *self._canonical_points, world=world)
+        joints = canonical_positions(sk, q, world=world)
         if self._elbow_prior:
             self._prev_elbows = self._elbows_in_shoulder_parents(q, world)
             self._prev_time_s = float(sample.time_s)
