@@ -17,6 +17,7 @@ from mocapkit.ik.secondary import clamp_max_abs_nb
 
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
+IntArray = NDArray[np.int64]
 
 #: Singular values below this fraction of the largest are ignored (errata Z6).
 SIGMA_CUTOFF = 1e-10
@@ -39,6 +40,28 @@ def clamp_error_nb(s: FloatArray, t: FloatArray, dmax: float, out: FloatArray) -
         out[3 * k] = dx * f
         out[3 * k + 1] = dy * f
         out[3 * k + 2] = dz * f
+
+
+@numba.njit(cache=True)
+def used_columns_nb(jw: FloatArray, skip: BoolArray, keep: BoolArray) -> tuple[IntArray, int]:
+    """The columns of ``jw`` (3K, D) an SVD takes, in order: those not ``skip``ped that
+    have a nonzero entry or are marked ``keep``. Returns ``cols`` (D,) and how many of
+    its first entries are used."""
+    n_rows, n_cols = jw.shape
+    cols = np.empty(n_cols, dtype=np.int64)
+    n_c = 0
+    for j in range(n_cols):
+        if skip[j]:
+            continue
+        use = keep[j]
+        for r in range(n_rows):
+            if use:
+                break
+            use = jw[r, j] != 0.0
+        if use:
+            cols[n_c] = j
+            n_c += 1
+    return cols, n_c
 
 
 @numba.njit(cache=True)
@@ -82,16 +105,7 @@ def sdls_nb(
     # Columns that are zero for another reason (the legs' DoFs in a solve with the feet
     # free: no effector below the pelvis) are left out the same way: half the columns
     # of a re-plant's feet-free solves, whose SVD then costs about half as much
-    cols = np.empty(n_cols, dtype=np.int64)
-    n_c = 0
-    for j in range(n_cols):
-        if skip[j]:
-            continue
-        for r in range(n_rows):
-            if jw[r, j] != 0.0:
-                cols[n_c] = j
-                n_c += 1
-                break
+    cols, n_c = used_columns_nb(jw, skip, np.zeros(n_cols, dtype=np.bool_))
     if n_c == 0 or n_rows == 0:
         return 0
     jwc = np.empty((n_c, n_rows))  # the nonzero columns, column-major
@@ -407,4 +421,5 @@ __all__ = [
     "sdls_gesdd_nb",
     "sdls_nb",
     "sdls_response",
+    "used_columns_nb",
 ]

@@ -15,6 +15,7 @@ from mocapkit.ik.sdls_step import (
     residuals_nb,
     sdls_gesdd_nb,
     sdls_nb,
+    used_columns_nb,
 )
 from mocapkit.ik.secondary import lever_weights_nb, secondary_task_nb
 from mocapkit.skeleton.kinematics import KinematicArrays, fk_points_jacobian_pose_nb
@@ -172,8 +173,6 @@ def _sdls_step_nb(
     locked: BoolArray,
     e: FloatArray,
     settings: IKSettings,
-    live: NDArray[np.int64],
-    n_live: int,
     bufs: _Buffers,
     pts: FloatArray,
     sets: tuple[NDArray[np.int64], NDArray[np.int64]],
@@ -205,18 +204,7 @@ def _sdls_step_nb(
         # the frozen DoFs' zero columns are left out here too (re-planting solves move
         # the legs alone), and so are the columns that are zero without a lock (the
         # legs where the feet are free); the locked ones stay in
-        cols = np.empty(n_live, dtype=np.int64)
-        n_use = 0
-        for c in range(n_live):
-            d = live[c]
-            keep = locked[d]
-            for r in range(n_rows):
-                if keep:
-                    break
-                keep = jw[r, d] != 0.0
-            if keep:
-                cols[n_use] = d
-                n_use += 1
+        cols, n_use = used_columns_nb(jw, frozen, locked)
         if n_use < n_dofs:
             jw_live = np.empty((n_rows, n_use))
             for r in range(n_rows):
@@ -389,11 +377,9 @@ def solve_ik_nb(
     jac = np.empty((3 * k_eff, n_dofs))
     e = np.empty(3 * k_eff)
     locked = np.zeros(n_dofs, dtype=np.bool_)
-    live = np.empty(n_dofs, dtype=np.int64)  # the DoFs not frozen
-    n_live = 0
+    n_live = 0  # the DoFs not frozen
     for d in range(n_dofs):
         if not frozen[d]:
-            live[n_live] = d
             n_live += 1
     bufs = _buffers_nb(k_eff, n_dofs, n_live)
     sets = rigid_sets_nb(eff_joint)
@@ -423,9 +409,7 @@ def solve_ik_nb(
         if stall_iter > 0 and min(since_best, since_best_sum) >= stall_iter and it >= min_iter:
             break
         clamp_error_nb(pts, targets, settings.dmax, e)
-        rank = _sdls_step_nb(
-            jac, inv_mu, frozen, locked, e, settings, live, n_live, bufs, pts, sets
-        )
+        rank = _sdls_step_nb(jac, inv_mu, frozen, locked, e, settings, bufs, pts, sets)
         if settings.gain > 0.0:
             _relax_nb(q, kin, frames, weighting, settings, frozen, locked, rank, inv_mu, bufs)
         _take_step_nb(
