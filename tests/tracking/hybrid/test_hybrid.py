@@ -587,7 +587,7 @@ def test_lost_arm_is_started_again_from_the_relaxed_pose():
     hand = tracker.marker_sets.index("right_hand")
     before = np.linalg.norm(tracker.solver.effector_positions(folded)[hand] - targets[hand])
     assert before > 300.0
-    q, iterations = tracker._reseed_lost_arms(folded, targets, None)
+    q, iterations = tracker._reseed_lost_arms(folded, targets)
     assert iterations > 0
     assert np.linalg.norm(tracker.solver.effector_positions(q)[hand] - targets[hand]) < 5.0
     # the frame is solved whole: head and the other hand stay on their sets
@@ -596,22 +596,22 @@ def test_lost_arm_is_started_again_from_the_relaxed_pose():
     near = tracker.solver.effector_positions(folded)
     near[hand] += [0.0, 0.0, 40.0]
     near[3:5] = np.nan
-    same, none = tracker._reseed_lost_arms(folded, near, None)
+    same, none = tracker._reseed_lost_arms(folded, near)
     assert none == 0
     np.testing.assert_array_equal(same, folded)
     with pytest.raises(ConfigError, match="reseed_arm_mm: expected >= 0 mm"):
         HybridConfig(reseed_arm_mm=-1.0)
 
 
-def test_reseeded_arm_does_not_swing_the_pelvis_faster_than_the_bound():
-    """The re-seed's whole-body solve moves the pelvis and legs no further from the
-    previous frame's pose than the re-plant's bound allows (``replant_min_speed_mm_s``
-    over the frame without a head speed), and still brings the hand set closer."""
+def test_reseed_moves_the_arm_and_its_clavicle_only():
+    """The re-seed holds the trunk, the pelvis and the legs (a whole-body solve swung the
+    shoulder 250-360 mm in a frame on a real take): only the lost arms' and their
+    clavicles' DoFs change, also where head and hands ask the body 150 mm aside, and the
+    hand set still comes closer."""
     from mocapkit.pipelines.hybrid import hybrid_skeleton
 
-    sk = hybrid_skeleton(1750.0, forearm_rotation=True)
-    cfg = HybridConfig(use_video=False, reseed_arm_mm=50.0)
-    tracker = HybridTracker(sk, config=cfg)
+    sk = hybrid_skeleton(1750.0, forearm_rotation=True, clavicle=True, twist=True)
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False, reseed_arm_mm=50.0))
     omega = tracker.solver.secondary.omega
     folded = omega.copy()
     for name, deg in (
@@ -622,22 +622,70 @@ def test_reseeded_arm_does_not_swing_the_pelvis_faster_than_the_bound():
         folded[sk.dof_index(name)] = np.radians(deg)
     goal = omega.copy()
     goal[sk.dof_index("r_shoulder_flexion")] = np.radians(90.0)
-    goal[sk.dof_index("root_tx")] += 150.0  # head and hands ask the body 150 mm aside
+    goal[sk.dof_index("root_tx")] += 150.0
     targets = tracker.solver.effector_positions(goal)
     targets[3:5] = np.nan
     hand = tracker.marker_sets.index("right_hand")
     before = np.linalg.norm(tracker.solver.effector_positions(folded)[hand] - targets[hand])
-    free, _ = tracker._reseed_lost_arms(folded, targets, None)
-    tracker._q = folded  # the previous frame's pose
-    dt_s = 0.02
-    bound_mm = cfg.replant_min_speed_mm_s * dt_s
-    prev_mm = tracker._lower_points_mm(folded)
-    assert tracker._lower_move_mm(free, prev_mm) > 3.0 * bound_mm  # unbounded, it swings
-    q, iterations = tracker._reseed_lost_arms(folded, targets, dt_s)
+    q, iterations = tracker._reseed_lost_arms(folded, targets)
     assert iterations > 0
-    assert tracker._lower_move_mm(q, prev_mm) <= bound_mm + 1e-6
+    free = {
+        d
+        for side in ("left", "right")
+        for d in (*arm(sk, side).dofs, *sk.dofs_of_joint(arm(sk, side).parent))
+    }
+    assert {sk.dof_names[d] for d in free} >= {"l_clavicle_elevation", "r_clavicle_elevation"}
+    moved = set(np.flatnonzero(q != folded).tolist())
+    assert moved and moved <= free
     after = np.linalg.norm(tracker.solver.effector_positions(q)[hand] - targets[hand])
     assert after < 0.5 * before
+
+
+def test_reseed_keeps_the_branch_nearest_the_elbow():
+    """A right arm turned 90 deg about its shoulder-wrist axis into its joint limits, its
+    hand set 79 mm off on the other branch. The re-seed puts the wrist back on
+    its set, on the branch whose elbow is nearest the stuck one (the swivel seeds), where
+    the relaxed seed alone takes the elbow more than twice as far in one frame."""
+    from mocapkit.ik.swivel import swivel_arm
+    from mocapkit.pipelines.hybrid import hybrid_skeleton
+    from mocapkit.tracking.hybrid.reseed import arm_seeds
+
+    sk = hybrid_skeleton(1750.0, forearm_rotation=True)
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False, reseed_arm_mm=50.0))
+    omega = tracker.solver.secondary.omega
+    goal = omega.copy()
+    for name, deg in (
+        ("r_shoulder_flexion", 70.0),
+        ("r_shoulder_abduction", 20.0),
+        ("r_elbow_flexion", 90.0),
+    ):
+        goal[sk.dof_index(name)] = np.radians(deg)
+    stuck = np.clip(swivel_arm(sk, goal, "right", np.radians(90.0)), sk.lower, sk.upper)
+    assert (
+        stuck[sk.dof_index("r_shoulder_abduction")]
+        == sk.lower[sk.dof_index("r_shoulder_abduction")]
+    )
+    targets = tracker.solver.effector_positions(goal)
+    targets[3:5] = np.nan
+    hand = tracker.marker_sets.index("right_hand")
+    targets[hand] += [0.0, 60.0, 0.0]  # the set moved on while the arm was held
+    assert np.linalg.norm(tracker.solver.effector_positions(stuck)[hand] - targets[hand]) > 50.0
+    elbow = arm(sk, "right").middle
+
+    def elbow_move_mm(q: np.ndarray) -> float:
+        return float(
+            np.linalg.norm(
+                forward_kinematics(sk, q)[elbow, :3, 3]
+                - forward_kinematics(sk, stuck)[elbow, :3, 3]
+            )
+        )
+
+    q, _ = tracker._reseed_lost_arms(stuck, targets)
+    assert np.linalg.norm(tracker.solver.effector_positions(q)[hand] - targets[hand]) < 5.0
+    relaxed_seed = arm_seeds(sk, stuck, "right", omega)[0]
+    relaxed = tracker.solver.solve(relaxed_seed, targets, frozen=tracker._reseed_frozen["right"]).q
+    assert np.linalg.norm(tracker.solver.effector_positions(relaxed)[hand] - targets[hand]) < 5.0
+    assert elbow_move_mm(q) < 0.5 * elbow_move_mm(relaxed)
 
 
 def test_pelvis_and_foot_sets_drive_the_legs():

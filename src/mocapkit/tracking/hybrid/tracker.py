@@ -66,6 +66,7 @@ from mocapkit.tracking.hybrid.balance import (
     support_points,
 )
 from mocapkit.tracking.hybrid.posture import SEATED_LEFT_OUT, Crouch, standing_relaxed_pose
+from mocapkit.tracking.hybrid.reseed import arm_seeds, nearest_fit
 
 FloatArray = NDArray[np.float64]
 
@@ -621,7 +622,7 @@ class HybridTracker:
         ]
         self._lower_dofs = np.setdiff1d(np.arange(skeleton.n_dofs), np.concatenate(arm_dofs))
         #: The same DoFs as a mask: frozen where the arms are solved again over a
-        #: bounded pelvis and trunk (`_reseed_lost_arms`, `_bound_polish`).
+        #: bounded pelvis and trunk (`_bound_polish`).
         self._lower_frozen = np.zeros(skeleton.n_dofs, dtype=bool)
         self._lower_frozen[self._lower_dofs] = True
         #: Joints of the pelvis and legs, whose move a re-plant's relaxation bounds.
@@ -647,6 +648,16 @@ class HybridTracker:
             else _CountedSolver(skeleton, effectors, restore_ik)
         )
         self._arms = {side: arm(skeleton, side) for side in SIDES}
+        #: Per side, the DoFs an arm re-seed holds (`_reseed_lost_arms`): all but the
+        #: arm's and its clavicle's (the arm's parent where it carries no other limb).
+        self._reseed_frozen: dict[str, NDArray[np.bool_]] = {}
+        for side, limb in self._arms.items():
+            held = np.ones(skeleton.n_dofs, dtype=bool)
+            held[limb.dofs] = False
+            carried = skeleton.subtree(limb.parent)
+            if all(other.root not in carried for s, other in self._arms.items() if s != side):
+                held[skeleton.dofs_of_joint(limb.parent)] = False
+            self._reseed_frozen[side] = held
         #: The relaxed legs follow the head's height over the feet (`Crouch`): a standing
         #: subject with planted feet and no leg sets, outside paper mode.
         self._crouch: Crouch | None = None
@@ -710,8 +721,6 @@ class HybridTracker:
         #: goes on (`_bound_relaxation`), and the time of the last frame the re-plant saw.
         self._relax_frames = 0
         self._replant_time_s: float | None = None
-        #: The time of the last sample solved (the arm re-seed's bound, `_reseed_lost_arms`).
-        self._solved_time_s: float | None = None
         #: Lowest height (mm) a re-planted foot effector may take: the lower of the
         #: feet's heights in the first pose and the model's ankle height standing on z = 0
         #: (the lab floor), so a subject who starts on a box may later step down from it.
@@ -1174,21 +1183,21 @@ class HybridTracker:
                 self._feet[k] = p
                 self._marked_feet[k] = True
 
-    def _reseed_lost_arms(
-        self, q: FloatArray, targets: FloatArray, dt_s: float | None
-    ) -> tuple[FloatArray, int]:
-        """Start an arm again from the relaxed pose where its hand set is lost.
+    def _reseed_lost_arms(self, q: FloatArray, targets: FloatArray) -> tuple[FloatArray, int]:
+        """Start an arm again where its hand set is lost.
 
         The IK is local and warm-started: an arm driven into its joint limits (a tennis
         serve's racket drop asks the shoulder for more lateral rotation than its range)
         can stay folded there, its hand set hundreds of mm off, for seconds. Where a hand
-        set is further than ``reseed_arm_mm`` from the model after the solve, the frame
-        is solved again with that arm's DoFs set to the relaxed pose (the secondary
-        task's ``omega``), and that solve is kept if it brings the hand set closer. The
-        whole-body solve may swing the pelvis and legs along with the arm (200 mm in one
-        frame on a real take): their move is bounded as the re-plant's
-        is (`_share_lower`, at the head's pace over ``dt_s``, the time since the previous
-        sample); the arm is the re-seeded one. Returns the pose and the extra iterations.
+        set is further than ``reseed_arm_mm`` from the model after the solve, the arm is
+        solved again from the seeds of `mocapkit.tracking.hybrid.reseed.arm_seeds` (the
+        relaxed pose's arm, the secondary task's ``omega``, and the current arm turned
+        about its shoulder-wrist axis), with all but the arm and its clavicle held
+        (``_reseed_frozen``: a whole-body solve swung the trunk, the shoulder 250-360 mm
+        in a frame, and the pelvis and legs with it). Of the solves that fit the set
+        within ``smoothing_polish_tol_mm`` (the marker noise) of the best, the one whose
+        elbow moved least (`nearest_fit`) is kept if it brings the set closer. Returns
+        the pose and the extra iterations.
         """
         now = self.solver.effector_positions(q)
         extra = 0
@@ -1199,27 +1208,21 @@ class HybridTracker:
             off = float(np.linalg.norm(now[i] - targets[i]))
             if not off > self.config.reseed_arm_mm:
                 continue
-            seed = q.copy()
-            dofs = self._arms[side].dofs
-            seed[dofs] = self.solver.secondary.omega[dofs]
-            res = self.solver.solve(seed, targets)
-            extra += res.iterations
-            q_new = res.q
-            if self._q is not None and dt_s is not None and dt_s > 0:
-                before = self._lower_points_mm(self._q)
-                limit_mm = max(self._lower_bound_mm(dt_s), self._lower_move_mm(q, before))
-                if self._lower_move_mm(q_new, before) > limit_mm:
-                    # the arm solved again over the pelvis and trunk the bound allows
-                    bounded = self.solver.solve(
-                        self._share_lower(q, q_new, limit_mm, before),
-                        targets,
-                        frozen=self._lower_frozen,
-                    )
-                    q_new = bounded.q
-                    extra += bounded.iterations
-            now_new = self.solver.effector_positions(q_new)
-            if float(np.linalg.norm(now_new[i] - targets[i])) < off:
-                q, now = q_new, now_new
+            elbow = self._arms[side].middle
+            elbow_mm = forward_kinematics(self.skeleton, q)[elbow, :3, 3]
+            solved, fit, move = [], [], []
+            for seed in arm_seeds(self.skeleton, q, side, self.solver.secondary.omega):
+                res = self.solver.solve(seed, targets, frozen=self._reseed_frozen[side])
+                extra += res.iterations
+                solved.append(res.q)
+                reached = self.solver.effector_positions(res.q)[i]
+                fit.append(float(np.linalg.norm(reached - targets[i])))
+                moved = forward_kinematics(self.skeleton, res.q)[elbow, :3, 3] - elbow_mm
+                move.append(float(np.linalg.norm(moved)))
+            k = nearest_fit(fit, move, self.config.smoothing_polish_tol_mm)
+            if fit[k] < off:
+                q = solved[k]
+                now = self.solver.effector_positions(q)
         return q, extra
 
     def _hold_feet(self, q: FloatArray, targets: FloatArray) -> tuple[FloatArray, int]:
@@ -1306,7 +1309,6 @@ class HybridTracker:
         self._balance_lean = None
         self._relax_frames = 0
         self._replant_time_s = None
-        self._solved_time_s = None
         self._tracks = {n: _Track() for n in self.marker_sets}
         self.events = []
 
@@ -1365,12 +1367,9 @@ class HybridTracker:
                     q, extra = self._replant_if_stepped(q, targets, res.residual_mm[:n], sample)
                     iterations += extra
                 if self.config.reseed_arm_mm > 0:
-                    last = self._solved_time_s
-                    dt_s = None if last is None else float(sample.time_s) - last
-                    q, extra = self._reseed_lost_arms(q, targets, dt_s)
+                    q, extra = self._reseed_lost_arms(q, targets)
                     iterations += extra
             self._hold_released_arms(q, released)
-            self._solved_time_s = float(sample.time_s)
         refined = False
         edge_fit: dict[str, float] = {}
         ref = (
