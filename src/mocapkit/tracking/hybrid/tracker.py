@@ -221,7 +221,8 @@ class HybridConfig:
     smoothing_polish_tol_mm : float
         After smoothing, effectors further than this from their markers are put back
         by IK. A tolerance near the marker noise keeps the smoothing (a tight one would
-        re-inject the noise into the redundant DoFs, e.g. the elbow swivel).
+        re-inject the noise into the redundant DoFs, e.g. the elbow swivel). The arm
+        re-seed also takes its solves within this of the best fit as equally good.
     smoothing_polish_stall_iterations : int
         The polish also stops when the largest error has not dropped by 1 % in this
         many iterations (0: never): with member markers the error settles near the
@@ -273,6 +274,11 @@ class HybridConfig:
         (`mocapkit.tracking.hybrid.posture.seat_skeleton`: pelvis held at the seat's height,
         legs held bent); ``auto`` is resolved before the tracker
         (`mocapkit.tracking.hybrid.posture.choose_posture`).
+    reseed_arm_mm : float
+        Where a hand set is further than this (mm) from the model after the frame's
+        solve, its arm is solved again from several seeds, the trunk held
+        (`HybridTracker._reseed_lost_arms`); 0 never. Raw marker files use
+        `mocapkit.pipelines.hybrid_markers.RAW_MARKERS_RESEED_MM`.
     rejoin_blend_s : float
         A hand set released after a long gap holds its arm's last observed pose (relative
         to the shoulder's parent); when the set is seen again its IK targets (the set and
