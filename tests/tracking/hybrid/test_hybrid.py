@@ -688,6 +688,42 @@ def test_reseed_keeps_the_branch_nearest_the_elbow():
     assert elbow_move_mm(q) < 0.5 * elbow_move_mm(relaxed)
 
 
+def test_reseed_fits_the_members_of_the_set():
+    """A hand set with a member marker tells the branches apart: an arm turned 150 deg
+    about its shoulder-wrist axis into its limits is re-seeded onto the pose the set and
+    its member were taken from (elbow within 10 mm), however far its elbow goes; with the
+    set's centre alone the branch nearest the stuck elbow is kept, elsewhere."""
+    from mocapkit.ik.swivel import swivel_arm
+    from mocapkit.pipelines.hybrid import hybrid_skeleton
+
+    sk = hybrid_skeleton(1750.0)
+    elbow = arm(sk, "right").middle
+    members = {"right_hand": {"RFRM": (0.0, 80.0, 0.0)}}
+    elbows = {}
+    for with_member in (True, False):
+        cfg = HybridConfig(
+            use_video=False, reseed_arm_mm=50.0, member_offsets_mm=members if with_member else {}
+        )
+        tracker = HybridTracker(sk, config=cfg)
+        goal = tracker.solver.secondary.omega.copy()
+        for name, deg in (
+            ("r_shoulder_flexion", 70.0),
+            ("r_shoulder_abduction", 20.0),
+            ("r_elbow_flexion", 90.0),
+        ):
+            goal[sk.dof_index(name)] = np.radians(deg)
+        stuck = np.clip(swivel_arm(sk, goal, "right", np.radians(150.0)), sk.lower, sk.upper)
+        targets = tracker.solver.effector_positions(goal)
+        targets[3:5] = np.nan
+        q, _ = tracker._reseed_lost_arms(stuck, targets)
+        fit = np.linalg.norm(tracker.solver.effector_positions(q) - targets, axis=1)
+        assert np.nanmax(fit) < 5.0  # the set, and its member where there is one
+        elbows[with_member] = np.linalg.norm(
+            forward_kinematics(sk, q)[elbow, :3, 3] - forward_kinematics(sk, goal)[elbow, :3, 3]
+        )
+    assert elbows[True] < 10.0 < 100.0 < elbows[False]
+
+
 def test_pelvis_and_foot_sets_drive_the_legs():
     """A squat (hips and knees bent 0.2 -> 1.2 rad): with the pelvis and foot sets as further
     IK tasks the knees follow the markers, closer than from head and hands alone. The

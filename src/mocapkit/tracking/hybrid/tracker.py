@@ -1114,6 +1114,11 @@ class HybridTracker:
             if dofs is not None and name not in released:
                 self._tracks[name].held_q = q[dofs].copy()
 
+    def _set_rows(self, i: int) -> list[int]:
+        """Target rows of marker set ``i`` (of `marker_sets`): its centre and members."""
+        n, name = len(self.marker_sets), self.marker_sets[i]
+        return [i] + [n + 2 + k for k, (s, _) in enumerate(self.members) if s == name]
+
     def _blend_rejoined(self, targets: FloatArray, time_s: float, unseen: Sequence[str]) -> None:
         """Rejoin blend (`HybridConfig.rejoin_blend_s`), targets in place.
 
@@ -1126,11 +1131,10 @@ class HybridTracker:
         smoothing), as the user saw it.
         """
         blend_s = self.config.rejoin_blend_s
-        n = len(self.marker_sets)
         now: FloatArray | None = None
         for i, name in enumerate(self.marker_sets):
             tr = self._tracks[name]
-            rows = [i] + [n + 2 + k for k, (s, _) in enumerate(self.members) if s == name]
+            rows = self._set_rows(i)
             if tr.rejoined and blend_s > 0 and self._out_q is not None:
                 if now is None:
                     now = self.solver.effector_positions(self._out_q)
@@ -1202,8 +1206,10 @@ class HybridTracker:
         (``_reseed_frozen``: a whole-body solve swung the trunk, the shoulder 250-360 mm
         in a frame, and the pelvis and legs with it). Of the solves that fit the set
         within ``smoothing_polish_tol_mm`` (the marker noise) of the best, the one whose
-        elbow moved least (`nearest_fit`) is kept if it brings the set closer. Returns
-        the pose and the extra iterations.
+        elbow moved least (`nearest_fit`) is kept if it brings the set closer. A set's fit
+        is its largest distance over its centre and its members seen (`_set_rows`): a
+        forearm member tells the branches apart. Returns the pose and the extra
+        iterations.
         """
         now = self.solver.effector_positions(q)
         extra = 0
@@ -1214,6 +1220,7 @@ class HybridTracker:
             off = float(np.linalg.norm(now[i] - targets[i]))
             if not off > self.config.reseed_arm_mm:
                 continue
+            rows = [r for r in self._set_rows(i) if np.all(np.isfinite(targets[r]))]
             elbow = self._arms[side].middle
             elbow_mm = forward_kinematics(self.skeleton, q)[elbow, :3, 3]
             solved, fit, move = [], [], []
@@ -1221,12 +1228,12 @@ class HybridTracker:
                 res = self.solver.solve(seed, targets, frozen=self._reseed_frozen[side])
                 extra += res.iterations
                 solved.append(res.q)
-                reached = self.solver.effector_positions(res.q)[i]
-                fit.append(float(np.linalg.norm(reached - targets[i])))
+                reached = self.solver.effector_positions(res.q)[rows]
+                fit.append(float(np.max(np.linalg.norm(reached - targets[rows], axis=1))))
                 moved = forward_kinematics(self.skeleton, res.q)[elbow, :3, 3] - elbow_mm
                 move.append(float(np.linalg.norm(moved)))
             k = nearest_fit(fit, move, self.config.smoothing_polish_tol_mm)
-            if fit[k] < off:
+            if fit[k] < float(np.max(np.linalg.norm(now[rows] - targets[rows], axis=1))):
                 q = solved[k]
                 now = self.solver.effector_positions(q)
         return q, extra
