@@ -641,26 +641,37 @@ def test_reseed_moves_the_arm_and_its_clavicle_only():
     assert after < 0.5 * before
 
 
-def test_reseed_keeps_the_branch_nearest_the_elbow():
-    """A right arm turned 90 deg about its shoulder-wrist axis into its joint limits, its
-    hand set 79 mm off on the other branch. The re-seed puts the wrist back on
-    its set, on the branch whose elbow is nearest the stuck one (the swivel seeds), where
-    the relaxed seed alone takes the elbow more than twice as far in one frame."""
+def _raised_and_turned_right_arm(
+    tracker: HybridTracker, turn_deg: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The relaxed pose with the right arm raised and bent (the goal), and that arm turned
+    ``turn_deg`` about its shoulder-wrist axis and clipped to its limits (stuck there)."""
     from mocapkit.ik.swivel import swivel_arm
-    from mocapkit.pipelines.hybrid import hybrid_skeleton
-    from mocapkit.tracking.hybrid.reseed import arm_seeds
 
-    sk = hybrid_skeleton(1750.0, forearm_rotation=True)
-    tracker = HybridTracker(sk, config=HybridConfig(use_video=False, reseed_arm_mm=50.0))
-    omega = tracker.solver.secondary.omega
-    goal = omega.copy()
+    sk = tracker.skeleton
+    goal = tracker.solver.secondary.omega.copy()
     for name, deg in (
         ("r_shoulder_flexion", 70.0),
         ("r_shoulder_abduction", 20.0),
         ("r_elbow_flexion", 90.0),
     ):
         goal[sk.dof_index(name)] = np.radians(deg)
-    stuck = np.clip(swivel_arm(sk, goal, "right", np.radians(90.0)), sk.lower, sk.upper)
+    stuck = np.clip(swivel_arm(sk, goal, "right", np.radians(turn_deg)), sk.lower, sk.upper)
+    return goal, stuck
+
+
+def test_reseed_keeps_the_branch_nearest_the_elbow():
+    """A right arm turned 90 deg about its shoulder-wrist axis into its joint limits, its
+    hand set 79 mm off on the other branch. The re-seed puts the wrist back on
+    its set, on the branch whose elbow is nearest the stuck one (the swivel seeds), where
+    the relaxed seed alone takes the elbow more than twice as far in one frame."""
+    from mocapkit.pipelines.hybrid import hybrid_skeleton
+    from mocapkit.tracking.hybrid.reseed import arm_seeds
+
+    sk = hybrid_skeleton(1750.0, forearm_rotation=True)
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False, reseed_arm_mm=50.0))
+    omega = tracker.solver.secondary.omega
+    goal, stuck = _raised_and_turned_right_arm(tracker, 90.0)
     assert (
         stuck[sk.dof_index("r_shoulder_abduction")]
         == sk.lower[sk.dof_index("r_shoulder_abduction")]
@@ -693,7 +704,6 @@ def test_reseed_fits_the_members_of_the_set():
     about its shoulder-wrist axis into its limits is re-seeded onto the pose the set and
     its member were taken from (elbow within 10 mm), however far its elbow goes; with the
     set's centre alone the branch nearest the stuck elbow is kept, elsewhere."""
-    from mocapkit.ik.swivel import swivel_arm
     from mocapkit.pipelines.hybrid import hybrid_skeleton
 
     sk = hybrid_skeleton(1750.0)
@@ -705,14 +715,7 @@ def test_reseed_fits_the_members_of_the_set():
             use_video=False, reseed_arm_mm=50.0, member_offsets_mm=members if with_member else {}
         )
         tracker = HybridTracker(sk, config=cfg)
-        goal = tracker.solver.secondary.omega.copy()
-        for name, deg in (
-            ("r_shoulder_flexion", 70.0),
-            ("r_shoulder_abduction", 20.0),
-            ("r_elbow_flexion", 90.0),
-        ):
-            goal[sk.dof_index(name)] = np.radians(deg)
-        stuck = np.clip(swivel_arm(sk, goal, "right", np.radians(150.0)), sk.lower, sk.upper)
+        goal, stuck = _raised_and_turned_right_arm(tracker, 150.0)
         targets = tracker.solver.effector_positions(goal)
         targets[3:5] = np.nan
         q, _ = tracker._reseed_lost_arms(stuck, targets)
