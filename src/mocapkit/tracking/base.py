@@ -40,11 +40,6 @@ BRIDGE_S = 0.25
 #: motion (`mocapkit.tracking.mono.placement.DepthRate`).
 UNSEEN_SPEED_MM_S = 1000.0
 
-#: Share of what an input shows that a step it cannot show may add to it: the hybrid
-#: re-plant's (`HybridConfig.replant_speed_factor`), and the mono tracker's bound on a
-#: link crossing the image plane (`mocapkit.tracking.mono.crossing`).
-SHOWN_STEP_FACTOR = 1.5
-
 #: Time (s) over which a part released after a long gap goes from its held pose back to
 #: the tracked one when it is observed again, rather than snapping there: the hybrid's
 #: hand sets (their IK targets) and every result folder's held parts (their joint
@@ -226,7 +221,6 @@ def fit_summary(distances_mm: Mapping[str, float]) -> tuple[dict[str, float], st
 __all__ = [
     "BRIDGE_S",
     "REJOIN_BLEND_S",
-    "SHOWN_STEP_FACTOR",
     "STATUSES",
     "UNOBSERVED",
     "UNSEEN_SPEED_MM_S",

@@ -11,11 +11,6 @@ poses, the ones with the lowest first-order forward cost are kept (a beam; exact
 the cap). A layer is kept only until its frame is decided, and once the next two frames
 no longer read it only with its beam's poses, so memory does not grow with the
 recording (the decoder's window bounds the open frames offline, its lag online).
-
-With a `mocapkit.tracking.mono.crossing.CrossingBound`, a transition that moves a link
-through the image plane faster than a frame allows is pruned (infinite weight, on the
-decoder's edges and the beam's) unless it would leave no path into the frame: then that
-frame's transitions are all kept and its layer says so (``lifted``).
 """
 
 from __future__ import annotations
@@ -26,7 +21,6 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from mocapkit.tracking.mono.crossing import CrossingBound
 from mocapkit.tracking.mono.motion_cost import (
     acceleration_min,
     joint_acceleration_cost,
@@ -60,8 +54,6 @@ class Layer:
         The poses the pair-state decoder keeps (the beam; all of them under the cap).
     info : object
         What the caller attaches to the frame (returned with the decision).
-    lifted : bool
-        Every transition into this frame was pruned by the crossing bound, so none was.
     """
 
     index: int
@@ -72,7 +64,6 @@ class Layer:
     unary: FloatArray
     keep: IntArray
     info: Any
-    lifted: bool = False
 
 
 class PoseGraph:
@@ -90,9 +81,6 @@ class PoseGraph:
         Offline: most frames a frame stays undecided (`Decoder`'s ``window``).
     max_pair_states : int
         Beam cap of pair-state decoding.
-    crossing : CrossingBound or None
-        Transitions pruned where a link crosses the image plane too fast (module
-        docstring); None: none.
     """
 
     def __init__(
@@ -103,10 +91,8 @@ class PoseGraph:
         lag: int | None,
         window: int,
         max_pair_states: int,
-        crossing: CrossingBound | None = None,
     ) -> None:
         self.model = model
-        self.crossing = crossing
         self.cost = cost
         self.dt_s = float(dt_s)
         self.max_pair_states = max_pair_states
@@ -130,19 +116,18 @@ class PoseGraph:
         k = self._n
         vectors = self.model.link_vectors(positions)
         prev = self._layers.get(k - 1)
-        w_full = r_full = barred = None
+        w_full = r_full = None
         if prev is not None:
-            dt = self._dt(prev.time_s, time_s)
-            w_full, r_full = pair_omegas_and_rotation(prev.vectors, vectors, dt)
-            if self.crossing is not None:
-                barred = np.where(self.crossing.pruned(prev.positions, positions, dt), np.inf, 0.0)
-        keep = self._beam_select(unary, r_full, barred)
+            w_full, r_full = pair_omegas_and_rotation(
+                prev.vectors, vectors, self._dt(prev.time_s, time_s)
+            )
+        keep = self._beam_select(unary, r_full)
         if only is not None:
             keep = np.array([only], dtype=np.int64)
         layer = Layer(k, float(time_s), codes, positions, vectors, unary, keep, info)
         self._layers[k] = layer
         self._n += 1
-        decided = self._push(layer, w_full, r_full, barred)
+        decided = self._push(layer, w_full, r_full)
         self._compact(k - 2)
         return self._answer(decided)
 
@@ -174,21 +159,17 @@ class PoseGraph:
             old.unary[sel],
             np.arange(sel.shape[0]),
             old.info,
-            old.lifted,
         )
 
     def _dt(self, t0: float, t1: float) -> float:
         d = t1 - t0
         return d if d > 0 else self.dt_s
 
-    def _beam_select(
-        self, unary: FloatArray, rotation: FloatArray | None, barred: FloatArray | None
-    ) -> IntArray:
+    def _beam_select(self, unary: FloatArray, rotation: FloatArray | None) -> IntArray:
         """Poses of this layer the pair-state decoder keeps (all of them under the cap).
 
-        The beam runs a first-order (rotation) forward pass over the full layers, with the
-        crossing bound's pruning (``barred``: inf where pruned), and keeps the
-        ``max_pair_states`` poses of lowest forward cost.
+        The beam runs a first-order (rotation) forward pass over the full layers and keeps
+        the ``max_pair_states`` poses of lowest forward cost.
         """
         n = unary.shape[0]
         if self.decoder.order == 1:
@@ -196,19 +177,14 @@ class PoseGraph:
         if rotation is None:
             self._beam.push(unary)
         else:
-            extra = _unless_all(self._beam.forward_costs(), barred)
-            self._beam.push(unary, rotation if extra is None else rotation + extra)
+            self._beam.push(unary, rotation)
         if n <= self.max_pair_states:
             return np.arange(n)
         cost = self._beam.forward_costs()
         return np.sort(np.argsort(cost, kind="stable")[: self.max_pair_states])
 
     def _push(
-        self,
-        layer: Layer,
-        w_full: FloatArray | None,
-        r_full: FloatArray | None,
-        barred: FloatArray | None,
+        self, layer: Layer, w_full: FloatArray | None, r_full: FloatArray | None
     ) -> list[tuple[int, int]]:
         sel = layer.keep
         u = layer.unary[sel]
@@ -217,13 +193,8 @@ class PoseGraph:
         prev = self._layers[layer.index - 1]
         pick = np.ix_(prev.keep, sel)
         pair = np.zeros((prev.keep.shape[0], sel.shape[0]))
-        if barred is not None:
-            kept = _unless_all(self.decoder.forward_costs(), barred[pick])
-            layer.lifted = kept is None
-            if kept is not None:
-                pair = kept
         if self.cost == "rotation":
-            return self.decoder.push(u, r_full[pick] + pair)
+            return self.decoder.push(u, r_full[pick])
         w_b = w_full[pick]
         older = self._layers.get(layer.index - 2)
         if older is None:
@@ -239,13 +210,3 @@ class PoseGraph:
         )
         self._last_w = w_b
         return self.decoder.push(u, pair, triple)
-
-
-def _unless_all(forward: FloatArray, barred: FloatArray | None) -> FloatArray | None:
-    """``barred`` (inf where a transition is pruned, else 0), or None where it leaves no
-    state of the previous frame that a path reaches (``forward`` finite) with a
-    transition into this frame: then nothing is pruned."""
-    if barred is None:
-        return None
-    ok = np.isfinite(forward)[:, None] & np.isfinite(barred)
-    return barred if ok.any() else None

@@ -93,9 +93,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.camera.pinhole import Camera
 from mocapkit.errors import ConfigError, ShapeError, unknown_name
-from mocapkit.tracking.base import SHOWN_STEP_FACTOR, UNSEEN_SPEED_MM_S
 from mocapkit.tracking.mono.arm_prior import ArmPrior, default_arm_prior
-from mocapkit.tracking.mono.crossing import CrossingBound
 from mocapkit.tracking.mono.flips import enumerate_poses
 from mocapkit.tracking.mono.graph import Layer, PoseGraph
 from mocapkit.tracking.mono.placement import ANKLE_JOINTS, floor_points
@@ -473,28 +471,11 @@ class MonoTracker:
             self.model.n_joints, dt_s, cfg.smooth_lag, cfg.noise_px, cfg.accel_px_s2, cfg.max_gap
         )
 
-        def graph(model: StickModel, links: IntArray) -> PoseGraph:
-            crossing = None
-            if cfg.camera_model != "orthographic":  # lengths in mm
-                crossing = CrossingBound(
-                    model.parent,
-                    model.child,
-                    links,
-                    UNSEEN_SPEED_MM_S,
-                    SHOWN_STEP_FACTOR,
-                    cfg.camera_model == "perspective",
-                    self._reach[: model.n_links],
-                )
-            return PoseGraph(
-                model, cfg.cost, dt_s, cfg.lag, cfg.window, cfg.max_pair_states, crossing
-            )
+        def graph(model: StickModel) -> PoseGraph:
+            return PoseGraph(model, cfg.cost, dt_s, cfg.lag, cfg.window, cfg.max_pair_states)
 
-        self._graph = graph(self.upper, np.arange(self.upper.n_links))
-        self._leg_graph = (
-            graph(self.model, np.arange(self.upper.n_links, self.model.n_links))
-            if self._legs
-            else None
-        )
+        self._graph = graph(self.upper)
+        self._leg_graph = graph(self.model) if self._legs else None
         # (time, raw, the detector's link sines or None) of the frames to smooth
         self._pending: deque[tuple[float, FloatArray, FloatArray | None]] = deque()
         self._pushed = 0
@@ -760,7 +741,7 @@ class MonoTracker:
                 info.depth,
                 info.n_candidates * max(n_cand, 1),
                 info.n_survivors * codes.shape[0],
-                info.pruned_all or pruned or layer.lifted,
+                info.pruned_all or pruned,
             )
             unary = np.zeros(codes.shape[0])  # the upper body's soft costs are decided
             if info.floor_depth is not None:
@@ -795,7 +776,7 @@ class MonoTracker:
             code=code,
             n_candidates=info.n_candidates,
             n_survivors=info.n_survivors if code >= 0 else 0,
-            pruned_all=info.pruned_all or layer.lifted,
+            pruned_all=info.pruned_all,
             residual_px=self._residual(pos, info.raw_px),
             depth_mm=info.depth,
         )
