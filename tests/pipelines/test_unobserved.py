@@ -82,16 +82,17 @@ def test_hybrid_released_hand_nan_joints_and_bvh_holds_the_last_bridged_arm(tmp_
     ch = _bvh_channels(out / "motion.bvh", chain)
     last = max(bridged)
     np.testing.assert_allclose(ch[released], np.tile(ch[last], (released.sum(), 1)), atol=1e-7)
-    # ... which the tracker's own pose (motion.npz's q) holds too: the arm's DoFs of the
-    # last bridged frame, not an arm dropped into the relaxed pose
+    # ... which the tracker's own pose holds too: the arm's DoFs of the last bridged
+    # frame, not an arm dropped into the relaxed pose
+    own = np.asarray(run.motion.q)
     np.testing.assert_allclose(
-        npz.q[released][:, right.dofs], np.tile(npz.q[last, right.dofs], (released.sum(), 1))
+        own[released][:, right.dofs], np.tile(own[last, right.dofs], (released.sum(), 1))
     )
     # nothing else is held: the BVH's other channels are those of the tracker's own pose
     from mocapkit.io.motion import Motion
     from mocapkit.io.motion_files import write_motion
 
-    write_motion(tmp_path / "own.bvh", Motion.from_q(sk, npz.time_s, npz.q))
+    write_motion(tmp_path / "own.bvh", Motion.from_q(sk, npz.time_s, own))
     others = [n for n in sk.joint_names if n not in chain]
     np.testing.assert_allclose(
         _bvh_channels(out / "motion.bvh", others),

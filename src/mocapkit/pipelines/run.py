@@ -428,8 +428,9 @@ def write_run_folder(
     """Write a result folder whole: ``motion.npz``, ``joints.csv``, ``motion.bvh``
     (`mocapkit.io.motion_files.write_result_folder`), ``fit.csv`` (`write_fit_csv`) and
     ``opensim/`` (TRC, model and IK setup: `mocapkit.io.opensim.write_opensim_folder`).
-    ``motion`` is the tracker's; the poses written hold its unobserved parts
-    (`unobserved_to_nan`, then `motion_for_bvh`).
+    ``motion`` is the tracker's: the poses of ``motion.npz`` and the BVH hold its
+    unobserved parts (`unobserved_to_nan`, then `motion_for_bvh`); the TRC's markers
+    are the tracker's observed joints (`unobserved_to_nan` only).
 
     The folder is built under a temporary name beside ``out_dir`` and swapped in when
     complete (`mocapkit.io.atomic.atomic_folder`): a kill or an error mid-write leaves
@@ -442,10 +443,10 @@ def write_run_folder(
     trackers that need the whole sequence before their motion exists; returns the folder.
     """
     out = check_result_folder(out_dir)
-    motion = motion_for_bvh(unobserved_to_nan(motion, results), results)
+    motion = unobserved_to_nan(motion, results)
     remove_stale_temporaries(out.parent, out.name)
     with atomic_folder(out) as tmp:
-        write_result_folder(tmp, motion)
+        write_result_folder(tmp, motion_for_bvh(motion, results))
         write_fit_csv(tmp / FIT_FILE, results)
         write_opensim_folder(tmp / OPENSIM_FOLDER, motion)
     return out
