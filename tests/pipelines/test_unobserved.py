@@ -82,16 +82,17 @@ def test_hybrid_released_hand_nan_joints_and_bvh_holds_the_last_bridged_arm(tmp_
     ch = _bvh_channels(out / "motion.bvh", chain)
     last = max(bridged)
     np.testing.assert_allclose(ch[released], np.tile(ch[last], (released.sum(), 1)), atol=1e-7)
-    # ... which the tracker's own pose (motion.npz's q) holds too: the arm's DoFs of the
-    # last bridged frame, not an arm dropped into the relaxed pose
+    # ... which the tracker's own pose holds too: the arm's DoFs of the last bridged
+    # frame, not an arm dropped into the relaxed pose
+    own = np.asarray(run.motion.q)
     np.testing.assert_allclose(
-        npz.q[released][:, right.dofs], np.tile(npz.q[last, right.dofs], (released.sum(), 1))
+        own[released][:, right.dofs], np.tile(own[last, right.dofs], (released.sum(), 1))
     )
     # nothing else is held: the BVH's other channels are those of the tracker's own pose
     from mocapkit.io.motion import Motion
     from mocapkit.io.motion_files import write_motion
 
-    write_motion(tmp_path / "own.bvh", Motion.from_q(sk, npz.time_s, npz.q))
+    write_motion(tmp_path / "own.bvh", Motion.from_q(sk, npz.time_s, own))
     others = [n for n in sk.joint_names if n not in chain]
     np.testing.assert_allclose(
         _bvh_channels(out / "motion.bvh", others),
@@ -165,10 +166,10 @@ def test_stereo_blackout_gives_nan_joints_a_held_bvh_and_printed_gaps(
     np.testing.assert_allclose(ch[released], np.tile(ch[last], (released.sum(), 1)), atol=1e-7)
 
 
-def _mono_session_with_a_hidden_elbow(folder: Path) -> tuple[Path, np.ndarray]:
+def _mono_session_with_a_hidden_elbow(folder: Path, n: int = 30) -> tuple[Path, np.ndarray]:
     from tests.pipelines.test_mono import _session
 
-    session = _session(folder, lengths=True)
+    session = _session(folder, lengths=True, n=n)
     kp = read_keypoints_csv(session / "keypoints" / "mono.csv")
     px = np.array(kp.pixels, copy=True)
     hidden = (kp.time_s >= 0.3) & (kp.time_s < 0.8)  # left elbow only; its wrist is seen
@@ -211,65 +212,52 @@ def test_mono_limb_unseen_past_the_bridge_is_released_with_nan_joints(tmp_path, 
     assert len(gap) == 1 and f"({released.sum()} frames)" in gap[0]
 
 
-def test_mono_released_arm_holds_its_pose_then_blends_back(tmp_path) -> None:
-    """Mono, the left elbow's 2-D point missing for 0.5 s: while the arm is released its
-    joint angles hold those of its last observed frame; when it is seen again they go
-    from the held ones to the tracked ones linearly over ``rejoin_blend_s``, where with 0
-    they snap; the rest of the pose and the joints are the same either way."""
-    from mocapkit.io.session import load_session
-    from mocapkit.pipelines.mono import online_mono_stream, stick_pixels
-    from mocapkit.skeleton.kinematics import canonical_positions
+def test_mono_released_arm_is_held_then_blended_back_once_in_motion_npz_and_bvh(tmp_path) -> None:
+    """Mono, the left elbow's 2-D point missing for 0.5 s: the tracker's own angles put
+    the released arm at rest (no joints to follow); in the result folder (motion.npz's
+    q and the BVH, the same poses) its DoFs hold those of its last observed frame, then
+    go from them to the tracked ones linearly over GAP_BLEND_S = REJOIN_BLEND_S, once:
+    weight (t - t_last_held) / 0.5 s of the way on each frame, not its square."""
+    from mocapkit.io.bvh import read_bvh
+    from mocapkit.pipelines.mono import track_mono
+    from mocapkit.pipelines.run import GAP_BLEND_S
     from mocapkit.tracking.base import REJOIN_BLEND_S
-    from mocapkit.tracking.mono.stream import MonoSample
-    from mocapkit.tracking.mono.tracker import MonoConfig
 
-    folder, _ = _mono_session_with_a_hidden_elbow(tmp_path / "s")
-    session = load_session(folder)
-    kp = session.keypoints["mono"]
-    runs = []
-    for blend_s in (REJOIN_BLEND_S, 0.0):
-        stream = online_mono_stream(session, "mono", MonoConfig(lag=10), 1 / 30)
-        assert stream.rejoin_blend_s == REJOIN_BLEND_S
-        stream.rejoin_blend_s = blend_s
-        px = stick_pixels(kp, stream.tracker.model)
-        out = []
-        for ti, p in zip(kp.time_s, px):
-            out += stream.push(MonoSample(float(ti), p))
-        out += stream.finish()
-        runs.append(out)
-    blended, snapped = runs
-    dofs = arm(stream.skeleton, "left").dofs
-    q = np.stack([r.q for r in blended])
-    q0 = np.stack([r.q for r in snapped])
-    st = [r.status["left_arm"] for r in blended]
-    assert st == [r.status["left_arm"] for r in snapped]
-    released = np.flatnonzero(np.array(st) == "released")
+    assert GAP_BLEND_S == REJOIN_BLEND_S == 0.5
+    folder, _ = _mono_session_with_a_hidden_elbow(tmp_path / "s", n=45)  # 1.5 s at 30 Hz
+    out = tmp_path / "r"
+    run = track_mono(folder, out, use_session_lengths=True)
+    tracked = np.asarray(run.motion.q)  # the tracker's own pose
+    npz = load_motion_npz(out / "motion.npz")
+    bvh = read_bvh(out / "motion.bvh", unit_mm=1000.0)
+    sk = npz.skeleton
+    # the arm's DoFs and its clavicle's (`motion_for_bvh`'s part)
+    clavicle = sk.parents[arm(sk, "left").chain[0]]
+    dofs = np.union1d(arm(sk, "left").dofs, np.flatnonzero(sk.dof_joint == clavicle))
+    st = np.array([r.status["left_arm"] for r in run.results])
+    released = np.flatnonzero(st == "released")
     assert released.size >= 5
     first, last = released[0], released[-1]
-    tt = np.array([r.time_s for r in blended])
-    held = q[first - 1, dofs]
-    np.testing.assert_array_equal(q[released][:, dofs], np.tile(held, (released.size, 1)))
-    np.testing.assert_array_equal(q0[released][:, dofs], np.tile(held, (released.size, 1)))
-    back = np.flatnonzero((tt > tt[last]) & (tt < tt[last] + REJOIN_BLEND_S))
-    assert back.size >= 5
-    w = (tt[back] - tt[last]) / REJOIN_BLEND_S
+    held = npz.q[first - 1, dofs]
+    np.testing.assert_array_equal(held, tracked[first - 1, dofs])  # last observed angles
+    np.testing.assert_array_equal(npz.q[released][:, dofs], np.tile(held, (released.size, 1)))
+    assert np.abs(tracked[released][:, dofs] - held).max() > 0.2  # the tracker's: at rest
+    tt = npz.time_s
+    back = np.flatnonzero((tt > tt[last]) & (tt < tt[last] + GAP_BLEND_S - 1e-9))
+    assert back.size == round(GAP_BLEND_S * 30) - 1  # 30 frames/s
+    w = (tt[back] - tt[last]) / GAP_BLEND_S
     np.testing.assert_allclose(
-        q[back][:, dofs], held + w[:, None] * (q0[back][:, dofs] - held), atol=1e-9
+        npz.q[back][:, dofs], held + w[:, None] * (tracked[back][:, dofs] - held), atol=1e-12
     )
-    after = tt >= tt[last] + REJOIN_BLEND_S
-    np.testing.assert_array_equal(q[after], q0[after])
-    others = np.setdiff1d(np.arange(q.shape[1]), dofs)
-    np.testing.assert_array_equal(q[:, others], q0[:, others])
-    # the joints stay those tracked
-    for a, b in zip(blended, snapped):
-        np.testing.assert_array_equal(a.joints_mm, b.joints_mm)
-    # the snap without the blend, spread over the blend's frames with it
-    wrist = canonical_positions(stream.skeleton, q, ["left_wrist"])[:, 0]
-    wrist0 = canonical_positions(stream.skeleton, q0, ["left_wrist"])[:, 0]
-    step = np.linalg.norm(wrist[last + 1] - wrist[last])
-    step0 = np.linalg.norm(wrist0[last + 1] - wrist0[last])
-    assert step0 > 20.0
-    assert step < 0.2 * step0
+    after = np.flatnonzero(tt >= tt[last] + GAP_BLEND_S - 1e-9)
+    assert after.size >= 5
+    np.testing.assert_allclose(npz.q[after], tracked[after], rtol=0, atol=1e-12)
+    others = np.setdiff1d(np.arange(sk.n_dofs), dofs)
+    np.testing.assert_array_equal(npz.q[:, others], tracked[:, others])
+    # the BVH is written from the same poses: its joints are those of motion.npz's q
+    fk = forward_kinematics(sk, npz.q)[:, :, :3, 3]
+    fk_bvh = forward_kinematics(bvh.skeleton, bvh.q)[:, :, :3, 3]
+    np.testing.assert_allclose(fk_bvh, fk, atol=1e-3)
 
 
 def test_hybrid_hand_blanked_for_one_second_is_held_then_blended_back_in_the_bvh(

@@ -99,15 +99,11 @@ def write_motion(path: str | os.PathLike[str], motion: Motion) -> None:
         )
 
 
-def write_result_folder(
-    folder: str | os.PathLike[str], motion: Motion, bvh_motion: Motion | None = None
-) -> Path:
+def write_result_folder(folder: str | os.PathLike[str], motion: Motion) -> Path:
     """Write ``motion.npz``, ``joints.csv`` and ``motion.bvh`` into a folder (each atomic).
 
-    ``bvh_motion`` (default ``motion``) is what the BVH is written from, where it must
-    differ (a pose with no NaN where ``motion`` has no observation). Returns the folder
-    path (created when missing). See `mocapkit.io.bvh.write_bvh` for how frames without
-    a pose are written to BVH.
+    Returns the folder path (created when missing). See `mocapkit.io.bvh.write_bvh` for
+    how frames without a pose are written to BVH.
     """
     out = Path(folder)
     out.mkdir(parents=True, exist_ok=True)
@@ -115,7 +111,7 @@ def write_result_folder(
     write_joints_csv(out / "joints.csv", motion)
     write_bvh(
         out / "motion.bvh",
-        motion if bvh_motion is None else bvh_motion,
+        motion,
         max_roll_speed_rad_s=MAX_ROLL_SPEED_RAD_S,
     )
     return out

@@ -7,8 +7,9 @@ folder: ``motion.npz``, ``joints.csv``, ``motion.bvh``
 ``fit.csv`` (per frame: status of each effector or limb and the fit-quality figures).
 The folder is built beside ``--out`` and swapped in whole (`write_run_folder`).
 Every tracker's result follows one rule for what was not observed: the joints of a
-released or missing effector or limb are NaN (`unobserved_to_nan`) and the BVH holds
-that part at its last observed pose (`motion_for_bvh`). Method pipelines
+released or missing effector or limb are NaN (`unobserved_to_nan`) and the pose
+(``motion.npz``'s ``q`` and the BVH alike) holds that part at its last observed pose and
+blends it back (`motion_for_bvh`). Method pipelines
 (`mocapkit.pipelines.hybrid`) only build the tracker and its sample stream.
 """
 
@@ -63,7 +64,8 @@ class RunResult:
     Attributes
     ----------
     motion : Motion
-        The tracked motion (poses and canonical joints).
+        The tracked motion (the tracker's poses and canonical joints; the folder's poses
+        hold the unobserved parts, `motion_for_bvh`).
     results : list of FrameResult
         One per sample, in order (empty with ``keep_results`` False: see ``table``).
     out_dir : Path or None
@@ -221,9 +223,9 @@ def unobserved_to_nan(motion: Motion, results: Sequence[FrameResult]) -> Motion:
     each effector or limb whose status is ``released`` or ``missing``, the joints that it
     alone places (`mocapkit.tracking.base.unobserved_part`: the head; elbow and wrist
     for a hand or arm; knee and ankle for a foot or leg). So ``joints.csv`` and
-    ``motion.npz`` hold no made-up joints, whatever a tracker did with the limb's pose,
-    while ``q`` keeps the tracker's pose (see `motion_for_bvh` for the BVH). Results of
-    another count than the motion's frames are not applied.
+    ``motion.npz`` hold no made-up joints, whatever a tracker did with the limb's pose
+    (``q`` is left as it is: see `motion_for_bvh`). Results of another count than the
+    motion's frames are not applied.
     """
     if len(results) != motion.n_frames:
         return motion
@@ -268,11 +270,10 @@ def _part_dofs(skeleton: Skeleton, part: str) -> NDArray[np.int64]:
     return np.union1d(carried, lmb.translation_dofs).astype(np.int64)
 
 
-#: Time over which a part held through a gap in the BVH is blended back to the tracked
-#: pose once it is observed again (`motion_for_bvh`), rather than snapped there: the
-#: trackers' own rejoin time (`mocapkit.tracking.base.REJOIN_BLEND_S`), so a tracker that
-#: already blends (the hybrid, mono) ends both blends together instead of a shorter one
-#: stepping onto its longer one.
+#: Time over which a part held through a gap is blended back to the tracked pose once
+#: it is observed again (`motion_for_bvh`), rather than snapped there: the trackers' own
+#: rejoin time (`mocapkit.tracking.base.REJOIN_BLEND_S`), so the hybrid, which leads a
+#: rejoining hand set's IK targets back over that time, ends its blend with this one.
 GAP_BLEND_S = REJOIN_BLEND_S
 
 
@@ -296,7 +297,10 @@ def _blend_back(
 
 def motion_for_bvh(motion: Motion, results: Sequence[FrameResult]) -> Motion:
     """``motion`` with each released or missing part held at its last observed pose: what
-    the BVH, which cannot hold NaN, is written from.
+    the result folder's poses (``motion.npz``'s ``q`` and the BVH, which cannot hold NaN)
+    are written from (`write_run_folder`), the one place a part is held and blended back
+    (the mono tracker's ``q`` does not hold it; the hybrid holds a released arm in its
+    own state for its IK, which this leaves as it is).
 
     On the frames where an effector or limb is ``released`` or ``missing``, the DoFs that
     pose its part (those of an arm or leg `mocapkit.skeleton.limbs.limb`, of the joints
@@ -306,7 +310,8 @@ def motion_for_bvh(motion: Motion, results: Sequence[FrameResult]) -> Motion:
     seen); the rest of the pose is the tracker's. When the part is observed again, its
     DoFs go from the held values to the tracked ones linearly over `GAP_BLEND_S`, not in
     one frame. A part never observed keeps the tracker's pose. ``fit.csv`` holds the
-    status that says so. Frames without any pose (NaN ``q``) are left to
+    status that says so. Apply it once, to the tracker's motion: a second pass would
+    blend the blended pose again. Frames without any pose (NaN ``q``) are left to
     `mocapkit.io.bvh.write_bvh`, which holds the previous pose.
     """
     if len(results) != motion.n_frames:
@@ -423,6 +428,9 @@ def write_run_folder(
     """Write a result folder whole: ``motion.npz``, ``joints.csv``, ``motion.bvh``
     (`mocapkit.io.motion_files.write_result_folder`), ``fit.csv`` (`write_fit_csv`) and
     ``opensim/`` (TRC, model and IK setup: `mocapkit.io.opensim.write_opensim_folder`).
+    ``motion`` is the tracker's: the poses of ``motion.npz`` and the BVH hold its
+    unobserved parts (`unobserved_to_nan`, then `motion_for_bvh`); the TRC's markers
+    are the tracker's observed joints (`unobserved_to_nan` only).
 
     The folder is built under a temporary name beside ``out_dir`` and swapped in when
     complete (`mocapkit.io.atomic.atomic_folder`): a kill or an error mid-write leaves
@@ -436,10 +444,9 @@ def write_run_folder(
     """
     out = check_result_folder(out_dir)
     motion = unobserved_to_nan(motion, results)
-    bvh = motion_for_bvh(motion, results)
     remove_stale_temporaries(out.parent, out.name)
     with atomic_folder(out) as tmp:
-        write_result_folder(tmp, motion, bvh_motion=bvh)
+        write_result_folder(tmp, motion_for_bvh(motion, results))
         write_fit_csv(tmp / FIT_FILE, results)
         write_opensim_folder(tmp / OPENSIM_FOLDER, motion)
     return out

@@ -42,7 +42,8 @@ UNSEEN_SPEED_MM_S = 1000.0
 
 #: Time (s) over which a part released after a long gap goes from its held pose back to
 #: the tracked one when it is observed again, rather than snapping there: the hybrid's
-#: hand sets (their IK targets) and the mono tracker's limbs (their joint angles).
+#: hand sets (their IK targets) and every result folder's held parts (their joint
+#: angles, `mocapkit.pipelines.run.GAP_BLEND_S`).
 REJOIN_BLEND_S = 0.5
 
 

@@ -17,14 +17,11 @@ from numpy.typing import NDArray
 
 from mocapkit.camera.pinhole import Camera
 from mocapkit.geometry.transforms import transform_points
-from mocapkit.skeleton import limbs
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
 from mocapkit.skeleton.presets import load_preset
 from mocapkit.skeleton.scaling import fit_segments
 from mocapkit.tracking.base import (
     BRIDGE_S,
-    REJOIN_BLEND_S,
-    UNOBSERVED,
     FrameResult,
     observation_status,
     unobserved_part,
@@ -142,6 +139,9 @@ class MonoStream:
     ``upper_stick`` pose fitted (`mocapkit.tracking.mono.pose_fit.fit_stick_pose`) and
     returned as a `MonoResult`. Offline (``config.lag`` None) every result comes from
     ``finish``; online, the result of frame k comes with frame k + ``smooth_lag + lag``.
+    A released limb's angles in ``q`` are the fit's (no joints to follow: its rest
+    pose); the runner holds and blends it back in the result folder, as for every
+    tracker (`mocapkit.pipelines.run.motion_for_bvh`).
 
     Parameters
     ----------
@@ -163,13 +163,6 @@ class MonoStream:
         depth. A frame whose sample brings ``link_sines`` then has each link's depth
         offset blended with the detector's (``config.depth_fusion_weight``,
         `mocapkit.tracking.mono.depth_fusion.fuse_link_depths`; perspective model only).
-    rejoin_blend_s : float
-        A limb ``released`` holds the joint angles it had when last observed (its pose
-        relative to its parent, in ``q``: ``motion.npz`` and the BVH); when it is
-        observed again its angles go from the held ones to the tracked ones linearly over
-        this time instead of snapping there, as the hybrid's hand sets do
-        (`mocapkit.tracking.base.REJOIN_BLEND_S`); 0: snap. The joints
-        (``joints.csv``) stay those tracked: NaN while released, observed after.
     """
 
     def __init__(
@@ -180,10 +173,8 @@ class MonoStream:
         px_per_mm: float,
         bridge_s: float = BRIDGE_S,
         floor: FloorDepth | None = None,
-        rejoin_blend_s: float = REJOIN_BLEND_S,
     ) -> None:
         self.tracker = tracker
-        self.rejoin_blend_s = rejoin_blend_s
         self.floor = floor
         self.skeleton = skeleton
         self.camera = camera
@@ -206,15 +197,6 @@ class MonoStream:
         self._unseen: dict[int, dict[str, float]] = {}
         self._pushed = 0
         self._posed: set[str] = set()
-        # per limb: the DoFs that pose it, its last observed values, and (time, values)
-        # of its last held frame while it is released or blended back
-        self._limb_dofs: dict[str, NDArray[np.int64]] = {}
-        for name in self._limbs:
-            if name == "head":
-                self._limb_dofs[name] = limbs.head_dofs(skeleton)
-            elif limbs.has_limb(skeleton, name):
-                self._limb_dofs[name] = limbs.limb(skeleton, name).dofs
-        self._held: dict[str, FloatArray] = {}
         self._depth_rate = DepthRate()
         cfg = tracker.config
         # the detector's link sines of the pending frames, where its depth is fused
@@ -222,7 +204,6 @@ class MonoStream:
             cfg.depth_fusion_weight > 0 and cfg.camera_model == "perspective" and camera is not None
         )
         self._sines: dict[int, FloatArray] = {}
-        self._rejoin: dict[str, tuple[float, FloatArray]] = {}
 
     def push(self, sample: MonoSample) -> list[FrameResult]:
         """Track one frame; returns the results it makes final."""
@@ -275,7 +256,6 @@ class MonoStream:
                 status[limb] = observation_status(unseen[limb], True, self.bridge_s)
             else:
                 status[limb] = "released" if limb in self._posed else "missing"
-        self._hold_and_blend(f.time_s, q, status)
         fit = {
             "residual_px": f.residual_px,
             "candidates": float(f.n_candidates),
@@ -286,29 +266,3 @@ class MonoStream:
             "on_floor": on_floor,
         }
         return MonoResult(f.time_s, q, canonical, status, fit, "", frame=f)
-
-    def _hold_and_blend(self, time_s: float, q: FloatArray, status: dict[str, str]) -> None:
-        """A released limb's DoFs of ``q`` set to their last observed values; a limb
-        observed again within ``rejoin_blend_s`` of its last held frame moved that share
-        of the way from the held values to the tracked ones (in place)."""
-        if not np.isfinite(q).any():
-            return  # no pose this frame
-        for name, dofs in self._limb_dofs.items():
-            if name not in status:
-                continue
-            if status[name] in UNOBSERVED:
-                held = self._held.get(name)
-                if held is not None:
-                    q[dofs] = held
-                    self._rejoin[name] = (time_s, held)
-                continue
-            if not np.isfinite(q[dofs]).all():
-                continue
-            start = self._rejoin.get(name)
-            if start is not None:
-                w = (time_s - start[0]) / self.rejoin_blend_s if self.rejoin_blend_s > 0 else 1.0
-                if w < 1.0:
-                    q[dofs] = start[1] + w * (q[dofs] - start[1])
-                else:
-                    del self._rejoin[name]
-            self._held[name] = q[dofs].copy()
