@@ -144,10 +144,11 @@ def lever_weights_nb(
         msum[j] = mass[j]
     for j in range(n_joints - 1, 0, -1):
         p = parents[j]
-        wsum[p] += wsum[j]
+        for a in range(3):
+            wsum[p, a] += wsum[j, a]
         msum[p] += msum[j]
     total_m = msum[0]
-    total_w = wsum[0]
+    # scalars, not array temporaries: this runs every IK iteration
     for d in range(axis_world.shape[0]):
         if not mask[d]:
             out[d] = 0.0
@@ -155,16 +156,17 @@ def lever_weights_nb(
         j = dof_joint[d]
         if planted[d]:
             m = total_m - msum[j]
-            w = total_w - wsum[j]
+            wx = wsum[0, 0] - wsum[j, 0]
+            wy = wsum[0, 1] - wsum[j, 1]
         else:
             m = msum[j]
-            w = wsum[j].copy()
+            wx = wsum[j, 0]
+            wy = wsum[j, 1]
         if m <= 1e-12:
             out[d] = 0.0
             continue
-        c = w / m
-        rx = c[0] - pivot_world[d, 0]
-        ry = c[1] - pivot_world[d, 1]
+        rx = wx / m - pivot_world[d, 0]
+        ry = wy / m - pivot_world[d, 1]
         # (c - p) x g_hat with g_hat = (0, 0, -1) is (-ry, rx, 0)
         h = abs(-axis_world[d, 0] * ry + axis_world[d, 1] * rx)
         out[d] = m * h

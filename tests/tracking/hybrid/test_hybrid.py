@@ -271,6 +271,51 @@ def test_replant_relaxation_is_spread_over_frames_not_a_pop(truth):
     assert ends[cfg.replant_min_speed_mm_s] <= ends[1e12] + 1.0
 
 
+def test_a_frame_that_goes_on_with_a_cut_relaxation_skips_the_feet_held_solve(truth):
+    """A re-plant whose relaxation is cut by the bound goes on over the next frames, and
+    those frames re-plant whatever the solve with the old plants finds: they start with
+    the feet-free solve from the previous frame's pose instead (its feet NaN), go on from
+    that pose without the bound's head-only solve, and end with the new plants."""
+    sk, t, _q, pos = truth
+    bent = pos.copy()
+    ramp = np.minimum(np.arange(40), 10)[:, None] / 10.0
+    bent[20:, :, 1] += ramp * 500.0
+    bent[20:, :, 2] -= ramp * 100.0
+    tracker = HybridTracker(sk, config=HybridConfig(use_video=False))
+    n = len(tracker.marker_sets)
+    calls: list[tuple[np.ndarray, bool]] = []
+    solve = tracker.solver.solve
+
+    def logged(q0, targets, *args, **kwargs):
+        calls.append((np.array(q0, dtype=float), bool(np.isnan(targets[n : n + 2]).all())))
+        return solve(q0, targets, *args, **kwargs)
+
+    tracker.solver.solve = logged  # type: ignore[method-assign]
+    unpulled: list[int] = []
+    solve_unpulled = tracker._unpulled.solve
+
+    def counted(*args, **kwargs):
+        unpulled.append(1)
+        return solve_unpulled(*args, **kwargs)
+
+    tracker._unpulled.solve = counted  # type: ignore[method-assign]
+    carried = 0
+    for s in samples(t, bent):
+        going_on = tracker._relax_frames > 0
+        previous = None if tracker._q is None else tracker._q.copy()
+        del calls[:], unpulled[:]
+        tracker.update(s)
+        if going_on:
+            assert not unpulled
+            carried += 1
+            assert previous is not None
+            # first solve: the feet-free one, from the previous frame's pose
+            assert calls[0][1]
+            np.testing.assert_array_equal(calls[0][0], previous)
+            assert not calls[1][1]  # then the solve with the new plants
+    assert carried >= 2  # the bound cut the relaxation and it went on
+
+
 def test_replant_relaxation_is_not_dragged_by_a_hand_its_arm_cannot_reach():
     """The left arm held by its joint limits (within 0.05 rad of the relaxed pose) and its
     hand set 150 mm below where that arm can put it, head and right hand still: freed of

@@ -911,7 +911,7 @@ class HybridTracker:
         self,
         q: FloatArray,
         targets: FloatArray,
-        marker_residual_mm: FloatArray,
+        marker_residual_mm: FloatArray | None,
         sample: HybridSample,
     ) -> tuple[FloatArray, int]:
         """Move the planted feet when they keep head or hands off their markers.
@@ -929,20 +929,25 @@ class HybridTracker:
         free pose's straight legs would put the feet of a subject who jumps or reaches
         up far above where they are (a tennis serve: 440 mm against the ankle markers'
         165 mm). The free solve's pull on the pelvis and legs is spread over frames at
-        the head's pace (`_bound_relaxation`). Returns the pose and the extra iterations.
+        the head's pace (`_bound_relaxation`). ``q`` is the frame's solve with the feet
+        held and ``marker_residual_mm`` its marker sets' errors; a frame that goes on with
+        a cut relaxation (``_relax_frames``) re-plants whatever that solve finds, so it is
+        not run there: ``q`` is the previous frame's pose and the errors None, and the
+        relaxation goes on from that pose. Returns the pose and the extra iterations.
         """
         assert self._feet is not None
         n = len(self.marker_sets)
         dt_s = None if self._replant_time_s is None else sample.time_s - self._replant_time_s
         self._replant_time_s = float(sample.time_s)
-        worst = np.nanmax(marker_residual_mm) if np.any(np.isfinite(marker_residual_mm)) else 0.0
-        if not worst > self.config.replant_mm and not self._relax_frames > 0:
-            return q, 0
+        carried = marker_residual_mm is None
+        if marker_residual_mm is not None and not self._relax_frames > 0:
+            finite = np.isfinite(marker_residual_mm)
+            if not (np.any(finite) and np.nanmax(marker_residual_mm) > self.config.replant_mm):
+                return q, 0
         free = targets.copy()
         free[n : n + 2][~self._marked_feet] = np.nan
         res_free = self.solver.solve(q, free)
-        reached = not worst > self.config.replant_mm  # a carried frame: q holds the markers
-        q_free, extra = self._bound_relaxation(q, free, res_free.q, dt_s, reached)
+        q_free, extra = self._bound_relaxation(q, free, res_free.q, dt_s, carried)
         feet = self.solver.effector_positions(q_free)[n : n + 2]
         if self.config.start_upright:
             np.maximum(feet[:, 2], self._floor_z_mm, out=feet[:, 2])
@@ -970,7 +975,7 @@ class HybridTracker:
         free: FloatArray,
         q_free: FloatArray,
         dt_s: float | None,
-        reached: bool,
+        carried: bool,
     ) -> tuple[FloatArray, int]:
         """Bound the part of a re-plant's feet-free pose that head and hands do not ask for.
 
@@ -987,10 +992,10 @@ class HybridTracker:
         pelvis does: a hand set an arm held by its joint limits cannot reach would drag
         the freed pelvis and legs after it, 150-300 mm in a frame); the following
         frames re-plant again from there, for as many frames as the whole move takes at
-        the bound (``_relax_frames``), so the correction is spread, not dropped. Where the
-        feet-held pose ``q`` already holds head and hands (``reached``: a frame re-planted
-        only to go on with a cut relaxation), it is what they ask for, and the solve
-        without the pull is skipped. Returns the pose and the extra iterations.
+        the bound (``_relax_frames``), so the correction is spread, not dropped: on those
+        frames (``carried``, ``q`` the previous frame's pose, `_replant_if_stepped`) the
+        pelvis and legs go on from where they are, at most the bound towards ``q_free``,
+        and no solve without the pull is run. Returns the pose and the extra iterations.
         """
         left, self._relax_frames = self._relax_frames, 0
         if self._q is None or dt_s is None or not dt_s > 0:
@@ -999,7 +1004,7 @@ class HybridTracker:
         before = self._lower_points_mm(self._q)
         if self._lower_move_mm(q_free, before) <= bound_mm:
             return q_free, 0
-        if reached:
+        if carried:
             q_head, iterations = q, 0
         else:
             head = free.copy()
@@ -1368,17 +1373,24 @@ class HybridTracker:
                 self._crouch_to_head(targets)
                 observed = targets.copy()
                 self._blend_rejoined(targets, sample.time_s, (*bridged, *released))
-                res = self.solver.solve(self._q, targets)
-                q = res.q
-                iterations += res.iterations
-                if (
+                replants = (
                     self.config.feet_planted
                     and self.config.replant_mm > 0
                     and not self.config.paper
                     and not self._marked_feet.all()  # foot sets place both feet
-                ):
-                    q, extra = self._replant_if_stepped(q, targets, res.residual_mm[:n], sample)
+                )
+                if replants and self._relax_frames > 0:
+                    # a frame that goes on with a cut relaxation re-plants whatever the
+                    # solve with the feet held would find: that solve is not run
+                    q, extra = self._replant_if_stepped(self._q, targets, None, sample)
                     iterations += extra
+                else:
+                    res = self.solver.solve(self._q, targets)
+                    q = res.q
+                    iterations += res.iterations
+                    if replants:
+                        q, extra = self._replant_if_stepped(q, targets, res.residual_mm[:n], sample)
+                        iterations += extra
                 if self.config.reseed_arm_mm > 0:
                     q, extra = self._reseed_lost_arms(q, targets)
                     iterations += extra
