@@ -4,6 +4,7 @@ the BVH holds that part at its last observed pose, and the CLI lists the gaps.""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ from mocapkit.io.motion_npz import load_motion_npz
 from mocapkit.io.session_csv import read_keypoints_csv, write_keypoints_csv
 from mocapkit.pipelines.run import FIT_FILE, find_gaps, motion_for_bvh, read_fit_csv, run_tracker
 from mocapkit.skeleton import forward_kinematics, load_preset
-from mocapkit.skeleton.limbs import arm
+from mocapkit.skeleton.limbs import arm, part_dofs
 from mocapkit.tracking.base import BRIDGE_S, unobserved_part
 from mocapkit.tracking.hybrid.tracker import HybridConfig, HybridSample, HybridTracker
 
@@ -260,18 +261,70 @@ def test_mono_released_arm_is_held_then_blended_back_once_in_motion_npz_and_bvh(
     np.testing.assert_allclose(fk_bvh, fk, atol=1e-3)
 
 
+def test_motion_for_bvh_leaves_the_dofs_a_tracker_declares_and_holds_the_rest() -> None:
+    """A hybrid-like result: the left hand set released on frames 5-9 (0.1 s apart), the
+    tracker declaring the arm below the clavicle held (``held_dofs``). The result
+    folder's poses leave those DoFs as given (the tracker's own hold and blend, once);
+    the clavicle, which the tracker did not declare, holds frame 4's values and is
+    blended back linearly over GAP_BLEND_S (weights 0.2, 0.4, 0.6, 0.8 on frames
+    10-13); the rest of the pose is the tracker's. The same from a ResultTable."""
+    from mocapkit.io.motion import Motion
+    from mocapkit.pipelines.result_table import ResultTable
+    from mocapkit.pipelines.run import GAP_BLEND_S
+    from mocapkit.tracking.base import FrameResult
+
+    assert GAP_BLEND_S == 0.5
+    sk = load_preset("zhang21", ("clavicle",))
+    n, dt = 20, 0.1
+    t = dt * np.arange(n)
+    q = np.random.default_rng(7).uniform(-0.5, 0.5, (n, sk.n_dofs))
+    declared = arm(sk, "left").dofs
+    clavicle = np.flatnonzero(sk.dof_joint == sk.parents[arm(sk, "left").chain[0]])
+    assert clavicle.size > 0 and not np.isin(clavicle, declared).any()
+    released = range(5, 10)
+    results = [
+        FrameResult(
+            t[i],
+            q[i],
+            np.zeros((15, 3)),
+            {"head": "seen", "left_hand": "released" if i in released else "seen"},
+            {},
+            "",
+            declared if i in released else np.zeros(0, dtype=np.int64),
+        )
+        for i in range(n)
+    ]
+    table = ResultTable(4)  # grows past its capacity
+    table.extend(results)
+    motion = Motion.from_q(sk, t, q)
+    for res in (results, table):
+        out = motion_for_bvh(motion, res).q
+        expected = q.copy()
+        expected[5:10, clavicle] = q[4, clavicle]
+        for i, w in zip(range(10, 14), (0.2, 0.4, 0.6, 0.8)):
+            expected[i, clavicle] = q[4, clavicle] + w * (q[i, clavicle] - q[4, clavicle])
+        np.testing.assert_allclose(out, expected, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(out[:, declared], q[:, declared])
+    # without the declaration the arm is held and blended back too
+    undeclared = [replace(r, held_dofs=np.zeros(0, dtype=np.int64)) for r in results]
+    out = motion_for_bvh(motion, undeclared).q
+    np.testing.assert_array_equal(out[5:10, declared], np.tile(q[4, declared], (5, 1)))
+    np.testing.assert_allclose(
+        out[10, declared], q[4, declared] + 0.2 * (q[10, declared] - q[4, declared]), atol=1e-12
+    )
+
+
 def test_hybrid_hand_blanked_for_one_second_is_held_then_blended_back_in_the_bvh(
     tmp_path,
 ) -> None:
-    """The left hand set blanked for 1 s while the hand moves on: in the BVH the arm holds
-    its last observed pose, and when the set comes back the arm goes to the tracked pose
-    over GAP_BLEND_S (its DoFs in equal time shares), not in one frame. The tracker holds
-    the arm too and blends its targets back (`HybridConfig.rejoin_blend_s`), so the tracked
-    hand does not snap either."""
+    """The left hand set blanked for 1 s while the hand moves on (a skeleton with
+    clavicles): the tracker holds the arm and its clavicle at their last observed pose
+    and, when the set comes back, blends its IK targets back
+    (`HybridConfig.rejoin_blend_s`), so the hand does not snap; it declares those DoFs
+    (``held_dofs``), and the BVH shows that one blend, not a second one on top."""
     from mocapkit.io.bvh import read_bvh
-    from mocapkit.pipelines.run import GAP_BLEND_S
 
-    sk = load_preset("zhang21")
+    sk = load_preset("zhang21", ("clavicle",))
     tracker = HybridTracker(sk, config=HybridConfig(use_video=False))
     q0 = tracker.solver.secondary.omega.copy()
     pos = tracker.solver.effector_positions(q0)[:3]
@@ -315,14 +368,13 @@ def test_hybrid_hand_blanked_for_one_second_is_held_then_blended_back_in_the_bvh
     for skel, q in ((back.skeleton, back.q), (sk, np.asarray(run.motion.q))):  # BVH, tracked
         hand = forward_kinematics(skel, q[first_back - 1 :])[:, wrist_j, :3, 3]
         assert np.linalg.norm(np.diff(hand, axis=0), axis=1).max() < 0.2 * jump  # no snap
-    # the arm's DoFs go from the held values to the tracked ones in equal time shares
-    dofs = arm(sk, "left").dofs
-    bvh_q = motion_for_bvh(run.motion, run.results).q[:, dofs]
-    held, tracked_q = bvh_q[first_back - 1], np.asarray(run.motion.q)[:, dofs]
-    for k in range(3):
-        w = (k + 1) * dt / GAP_BLEND_S
-        np.testing.assert_allclose(
-            bvh_q[first_back + k], held + w * (tracked_q[first_back + k] - held), atol=1e-9
-        )
-    blended = first_back + round(GAP_BLEND_S / dt)
-    np.testing.assert_allclose(wrist[blended + 1 :], tracked[blended + 1 :], atol=1e-3)
+    # the part held is the arm with its clavicle; the result folder's poses are the tracker's
+    part = part_dofs(sk, "left_arm")
+    clavicle = np.flatnonzero(sk.dof_joint == sk.parents[arm(sk, "left").chain[0]])
+    assert clavicle.size > 0 and np.isin(clavicle, part).all()
+    for r, gone_now in zip(run.results, released, strict=True):
+        np.testing.assert_array_equal(np.sort(r.held_dofs), part if gone_now else [])
+    q = np.asarray(run.motion.q)
+    np.testing.assert_array_equal(q[gap][:, part], np.tile(q[gap[0] - 1, part], (gap.size, 1)))
+    np.testing.assert_array_equal(motion_for_bvh(run.motion, run.results).q, q)
+    np.testing.assert_allclose(wrist, tracked, atol=1e-3)

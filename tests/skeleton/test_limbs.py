@@ -119,3 +119,19 @@ def test_vertical_root_dof() -> None:
     fixed_root = sk.replace(dof_axis=axes)
     with pytest.raises(UnknownNameError, match="no prismatic DoF along"):
         limbs.vertical_root_dof(fixed_root)
+
+
+def test_part_dofs_are_the_limb_with_its_lone_carrier_and_all_below() -> None:
+    """An arm's part is its own DoFs plus the clavicle's where the model has one (the
+    clavicle carries that arm alone); the head's is `head_dofs`; none where absent."""
+    plain = load_preset("zhang21")
+    np.testing.assert_array_equal(limbs.part_dofs(plain, "left_arm"), limbs.arm(plain, "left").dofs)
+    sk = load_preset("zhang21", ("clavicle",))
+    lmb = limbs.arm(sk, "left")
+    clavicle = np.flatnonzero(sk.dof_joint == sk.parents[lmb.chain[0]])
+    assert clavicle.size == 2
+    np.testing.assert_array_equal(limbs.part_dofs(sk, "left_arm"), np.union1d(clavicle, lmb.dofs))
+    np.testing.assert_array_equal(limbs.part_dofs(sk, "head"), limbs.head_dofs(sk))
+    leg = limbs.leg(sk, "right")
+    assert set(leg.dofs) <= set(limbs.part_dofs(sk, "right_leg").tolist())
+    assert limbs.part_dofs(load_preset("upper_stick"), "left_leg").size == 0

@@ -1,9 +1,9 @@
 """A run's per-frame results as compact columns: what a long recording's run keeps.
 
 `ResultTable` holds what each `mocapkit.tracking.base.FrameResult` of a run says
-(time, ``q``, ``joints_mm``, status per effector or limb, fit figures, ``worst``) in
-numpy columns, about 0.7 kB a frame for the mono tracker against 2.7 kB for the objects
-with their dicts. It is a sequence of `FrameResult`: indexing it builds that frame's
+(time, ``q``, ``joints_mm``, status per effector or limb, fit figures, ``worst``,
+``held_dofs``) in numpy columns, about 0.7 kB a frame for the mono tracker against 2.7 kB
+for the objects with their dicts. It is a sequence of `FrameResult`: indexing it builds that frame's
 result (a plain `FrameResult`, without a tracker's own fields), so `write_fit_csv` and
 the rest of `mocapkit.pipelines.run` read it as a list; a figure or a status over all
 frames is read as one column (`ResultTable.fit_column`, `ResultTable.status_column`).
@@ -38,6 +38,7 @@ class ResultTable(Sequence[FrameResult]):
         self._time = np.empty(self._capacity)
         self._q: FloatArray | None = None
         self._joints: FloatArray | None = None
+        self._held: NDArray[np.bool_] | None = None  # (capacity, D): each frame's held_dofs
         self.status_names: list[str] = []  # effectors or limbs, in order of appearance
         self._status_values: list[str] = []  # code k + 1 is _status_values[k]; 0: absent
         self._status = np.zeros((self._capacity, 0), dtype=np.int8)
@@ -55,6 +56,7 @@ class ResultTable(Sequence[FrameResult]):
         if self._q is None or self._joints is None:
             self._q = np.empty((self._capacity, *q.shape))
             self._joints = np.empty((self._capacity, *joints.shape))
+            self._held = np.zeros((self._capacity, q.size), dtype=bool)
         if q.shape != self._q.shape[1:] or joints.shape != self._joints.shape[1:]:
             raise ShapeError(
                 f"result at {r.time_s} s: expected q {self._q.shape[1:]} and joints_mm "
@@ -67,6 +69,9 @@ class ResultTable(Sequence[FrameResult]):
         self._time[i] = r.time_s
         self._q[i] = q
         self._joints[i] = joints
+        assert self._held is not None
+        self._held[i] = False
+        self._held[i, np.asarray(r.held_dofs, dtype=np.int64)] = True
         for name, st in r.status.items():
             k = self._column(self.status_names, name, "_status")  # may widen the column
             self._status[i, k] = self._code(st)
@@ -89,7 +94,7 @@ class ResultTable(Sequence[FrameResult]):
         order = np.argsort(self._time[: self._n], kind="stable")
         if np.array_equal(order, np.arange(self._n)):
             return
-        for name in ("_time", "_q", "_joints", "_status", "_fit", "_has_fit", "_worst"):
+        for name in ("_time", "_q", "_joints", "_held", "_status", "_fit", "_has_fit", "_worst"):
             col = getattr(self, name)
             if col is not None:
                 col[: self._n] = col[order]
@@ -101,7 +106,7 @@ class ResultTable(Sequence[FrameResult]):
 
     def _grow(self, capacity: int) -> None:
         keep = min(self._n, capacity)
-        for name in ("_time", "_q", "_joints", "_status", "_fit", "_has_fit", "_worst"):
+        for name in ("_time", "_q", "_joints", "_held", "_status", "_fit", "_has_fit", "_worst"):
             col = getattr(self, name)
             if col is None:
                 continue
@@ -198,6 +203,7 @@ class ResultTable(Sequence[FrameResult]):
             for n, v, has in zip(self.fit_names, self._fit[i].tolist(), self._has_fit[i])
             if has
         }
+        assert self._held is not None
         return FrameResult(
             float(self._time[i]),
             self._q[i].copy(),
@@ -205,6 +211,7 @@ class ResultTable(Sequence[FrameResult]):
             status,
             fit,
             self._worst_names[int(self._worst[i])],
+            np.flatnonzero(self._held[i]),
         )
 
     def __iter__(self) -> Iterator[FrameResult]:

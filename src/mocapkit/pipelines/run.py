@@ -38,7 +38,7 @@ from mocapkit.io.motion_files import write_result_folder
 from mocapkit.io.opensim import write_opensim_folder
 from mocapkit.pipelines.result_table import ResultTable
 from mocapkit.progress import Progress
-from mocapkit.skeleton.limbs import has_limb, head_dofs, limb
+from mocapkit.skeleton.limbs import part_dofs
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
 from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.base import (
@@ -248,32 +248,10 @@ def unobserved_to_nan(motion: Motion, results: Sequence[FrameResult]) -> Motion:
     )
 
 
-def _part_dofs(skeleton: Skeleton, part: str) -> NDArray[np.int64]:
-    """DoFs that pose a body part of `unobserved_part` (empty where the skeleton lacks it)."""
-    if part == "head":
-        return head_dofs(skeleton)
-    if not has_limb(skeleton, part):
-        return np.zeros(0, dtype=np.int64)
-    lmb = limb(skeleton, part)
-    # the limb with the joints that carry it alone (a clavicle above a shoulder, a hip
-    # joint above a femur) and everything below it: what the missing markers would pose
-    parents = skeleton.parents
-    n_children = np.bincount(parents[parents >= 0], minlength=skeleton.n_joints)
-    top = int(lmb.root)
-    while parents[top] > 0 and n_children[parents[top]] == 1:
-        top = int(parents[top])
-    below = {top}
-    for j in range(top + 1, skeleton.n_joints):
-        if int(parents[j]) in below:
-            below.add(j)
-    carried = np.flatnonzero(np.isin(skeleton.dof_joint, sorted(below)))
-    return np.union1d(carried, lmb.translation_dofs).astype(np.int64)
-
-
 #: Time over which a part held through a gap is blended back to the tracked pose once
 #: it is observed again (`motion_for_bvh`), rather than snapped there: the trackers' own
-#: rejoin time (`mocapkit.tracking.base.REJOIN_BLEND_S`), so the hybrid, which leads a
-#: rejoining hand set's IK targets back over that time, ends its blend with this one.
+#: rejoin time (`mocapkit.tracking.base.REJOIN_BLEND_S`): the hybrid's own blend of a
+#: rejoining arm (which it declares, `FrameResult.held_dofs`) takes as long.
 GAP_BLEND_S = REJOIN_BLEND_S
 
 
@@ -295,30 +273,52 @@ def _blend_back(
             q[i, dofs] = start + w * (q[i, dofs] - start)
 
 
+def _hold(
+    q: NDArray[np.float64],
+    time_s: NDArray[np.float64],
+    held: NDArray[np.bool_],
+    dofs: NDArray[np.int64],
+) -> None:
+    """``q[:, dofs]`` on the ``held`` frames set to their values of the last frame not
+    held (of the first, before any), then `_blend_back` (in place)."""
+    good = ~held & np.isfinite(q[:, dofs]).all(axis=1)
+    if not held.any() or not good.any():
+        return
+    src = np.maximum.accumulate(np.where(good, np.arange(len(q)), -1))
+    src[src < 0] = np.flatnonzero(good)[0]
+    rows = np.flatnonzero(held)
+    q[np.ix_(rows, dofs)] = q[np.ix_(src[rows], dofs)]
+    _blend_back(q, time_s, held, dofs)
+
+
 def motion_for_bvh(motion: Motion, results: Sequence[FrameResult]) -> Motion:
     """``motion`` with each released or missing part held at its last observed pose: what
     the result folder's poses (``motion.npz``'s ``q`` and the BVH, which cannot hold NaN)
     are written from (`write_run_folder`), the one place a part is held and blended back
-    (the mono tracker's ``q`` does not hold it; the hybrid holds a released arm in its
-    own state for its IK, which this leaves as it is).
+    besides the DoFs a tracker declares it holds and blends itself
+    (`mocapkit.tracking.base.FrameResult.held_dofs`: the hybrid's released arm), which
+    are left as the tracker gave them, so they are blended back once.
 
     On the frames where an effector or limb is ``released`` or ``missing``, the DoFs that
-    pose its part (those of an arm or leg `mocapkit.skeleton.limbs.limb`, of the joints
-    that carry it alone above it, a clavicle, and of every joint below it,
-    `mocapkit.skeleton.limbs.head_dofs` of the head) keep their values of the last frame
-    where it was ``seen`` or ``bridged`` (of the first such frame, before it was ever
-    seen); the rest of the pose is the tracker's. When the part is observed again, its
-    DoFs go from the held values to the tracked ones linearly over `GAP_BLEND_S`, not in
-    one frame. A part never observed keeps the tracker's pose. ``fit.csv`` holds the
-    status that says so. Apply it once, to the tracker's motion: a second pass would
-    blend the blended pose again. Frames without any pose (NaN ``q``) are left to
-    `mocapkit.io.bvh.write_bvh`, which holds the previous pose.
+    pose its part (`mocapkit.skeleton.limbs.part_dofs`: an arm or leg with the joints
+    that carry it alone above it, a clavicle, and every joint below it; the head's),
+    less the frame's ``held_dofs``, keep their values of the last frame where it was
+    ``seen`` or ``bridged`` (of the first such frame, before it was ever seen); the rest
+    of the pose is the tracker's.
+    When the part is observed again, those DoFs go from the held values to the tracked
+    ones linearly over `GAP_BLEND_S`, not in one frame. A part never observed keeps the
+    tracker's pose. ``fit.csv`` holds the status that says so. Apply it once, to the
+    tracker's motion: a second pass would blend the blended pose again. Frames without
+    any pose (NaN ``q``) are left to `mocapkit.io.bvh.write_bvh`, which holds the
+    previous pose.
     """
     if len(results) != motion.n_frames:
         return motion
     q = np.array(motion.q, dtype=float, copy=True)
     unobserved: dict[str, NDArray[np.bool_]] = {}
+    declared = np.zeros(q.shape, dtype=bool)  # the tracker's own holds, per frame and DoF
     for i, r in enumerate(results):
+        declared[i, np.asarray(r.held_dofs, dtype=np.int64)] = True
         for name, st in r.status.items():
             part = unobserved_part(name)
             if part is None:
@@ -326,18 +326,15 @@ def motion_for_bvh(motion: Motion, results: Sequence[FrameResult]) -> Motion:
             flags = unobserved.setdefault(part[0], np.zeros(motion.n_frames, dtype=bool))
             flags[i] |= st in UNOBSERVED
     for part_name, flags in unobserved.items():
-        dofs = _part_dofs(motion.skeleton, part_name)
+        dofs = part_dofs(motion.skeleton, part_name)
         if dofs.size == 0 or not flags.any():
             continue
-        good = ~flags & np.isfinite(q[:, dofs]).all(axis=1)
-        if not good.any():
-            continue
-        src = np.where(good, np.arange(motion.n_frames), -1)
-        src = np.maximum.accumulate(src)
-        src[src < 0] = np.flatnonzero(good)[0]
-        held = np.flatnonzero(flags)
-        q[np.ix_(held, dofs)] = q[np.ix_(src[held], dofs)]
-        _blend_back(q, motion.time_s, flags, dofs)
+        # per DoF, the frames held here; the DoFs held on the same frames go together
+        held = flags[:, None] & ~declared[:, dofs]
+        columns, group = np.unique(held, axis=1, return_inverse=True)
+        group = np.ravel(group)
+        for k in range(columns.shape[1]):
+            _hold(q, motion.time_s, columns[:, k], dofs[group == k])
     if np.array_equal(q, motion.q, equal_nan=True):
         return motion
     return Motion(

@@ -198,6 +198,30 @@ def head_dofs(skeleton: Skeleton) -> IntArray:
     return np.flatnonzero(np.isin(skeleton.dof_joint, joints)).astype(np.int64)
 
 
+def part_dofs(skeleton: Skeleton, part: str) -> IntArray:
+    """DoFs that pose a body part whose markers or detections went unseen: ``"head"``
+    (`head_dofs`), or an arm or leg (``"left_arm"``, ...) with the joints that carry it
+    alone above it (a clavicle; a hip joint above a femur) and every joint below it:
+    what the part's observations would pose. Empty where the skeleton lacks the part.
+    """
+    if part == "head":
+        return head_dofs(skeleton)
+    if not has_limb(skeleton, part):
+        return np.zeros(0, dtype=np.int64)
+    lmb = limb(skeleton, part)
+    parents = skeleton.parents
+    n_children = np.bincount(parents[parents >= 0], minlength=skeleton.n_joints)
+    top = int(lmb.root)
+    while parents[top] > 0 and n_children[parents[top]] == 1:
+        top = int(parents[top])
+    below = {top}
+    for j in range(top + 1, skeleton.n_joints):
+        if int(parents[j]) in below:
+            below.add(j)
+    carried = np.flatnonzero(np.isin(skeleton.dof_joint, sorted(below)))
+    return np.union1d(carried, lmb.translation_dofs).astype(np.int64)
+
+
 def spine_joints(skeleton: Skeleton) -> IntArray:
     """Joints strictly between the canonical pelvis and neck, pelvis to neck order.
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -134,6 +134,12 @@ class FrameResult:
         ``"max_mm"``; a video tracker's ``"edge_px"``).
     worst : str
         Name of the effector or term that gives ``fit["max_mm"]`` (empty if none).
+    held_dofs : ndarray of int
+        DoFs of ``q`` that the tracker itself holds on this frame at their values of the
+        last frame their part was observed (a ``released`` part), and blends back itself
+        when the part is observed again: the result folder leaves them as given
+        (`mocapkit.pipelines.run.motion_for_bvh`) and holds the rest of the part. Empty
+        (the default): the tracker holds nothing.
     """
 
     time_s: float
@@ -142,6 +148,7 @@ class FrameResult:
     status: dict[str, str]
     fit: dict[str, float]
     worst: str
+    held_dofs: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
 
 @runtime_checkable

@@ -43,6 +43,7 @@ from mocapkit.skeleton.limbs import (
     head_joint,
     leg,
     limbs_present,
+    part_dofs,
     vertical_root_dof,
 )
 from mocapkit.skeleton.model import CANONICAL_JOINTS, PRISMATIC, Skeleton
@@ -664,6 +665,8 @@ class HybridTracker:
             if all(other.root not in carried for s, other in self._arms.items() if s != side):
                 held[skeleton.dofs_of_joint(limb.parent)] = False
             self._reseed_frozen[side] = held
+        #: Per side, what a released hand set's arm is held by (`_arm_dofs`).
+        self._arm_part_dofs = {side: part_dofs(skeleton, f"{side}_arm") for side in SIDES}
         #: The relaxed legs follow the head's height over the feet (`Crouch`): a standing
         #: subject with planted feet and no leg sets, outside paper mode.
         self._crouch: Crouch | None = None
@@ -1101,9 +1104,11 @@ class HybridTracker:
         return res.q, res.iterations
 
     def _arm_dofs(self, name: str) -> NDArray[np.int64] | None:
-        """The DoFs of the arm a hand set (``<side>_hand``) places; None for other sets."""
+        """The DoFs of the arm a hand set (``<side>_hand``) places, with the clavicle that
+        carries it alone (`mocapkit.skeleton.limbs.part_dofs`, the part a result folder
+        holds); None for other sets."""
         side = name.removesuffix("_hand")
-        return self._arms[side].dofs if side in SIDES and side != name else None
+        return self._arm_part_dofs[side] if side in SIDES and side != name else None
 
     def _hold_released_arms(self, q: FloatArray, released: Sequence[str]) -> None:
         """Put each released hand set's arm at its last observed values (in place)."""
@@ -1111,6 +1116,16 @@ class HybridTracker:
             dofs, held = self._arm_dofs(name), self._tracks[name].held_q
             if dofs is not None and held is not None:
                 q[dofs] = held
+
+    def _held_arm_dofs(self, released: Sequence[str]) -> NDArray[np.int64]:
+        """The DoFs `_hold_released_arms` holds (`FrameResult.held_dofs`): `_blend_rejoined`
+        brings them back, so the result folder leaves them as they are."""
+        held = [
+            dofs
+            for name in released
+            if (dofs := self._arm_dofs(name)) is not None and self._tracks[name].held_q is not None
+        ]
+        return np.concatenate(held).astype(np.int64) if held else np.zeros(0, dtype=np.int64)
 
     def _remember_arms(self, q: FloatArray, released: Sequence[str]) -> None:
         """Keep the arm DoFs of the hand sets observed (seen or bridged) in ``q``."""
@@ -1499,6 +1514,7 @@ class HybridTracker:
             status=self._status(bridged, released),
             fit=fit,
             worst=worst,
+            held_dofs=self._held_arm_dofs(released),
             iterations=iterations,
             residual_mm=residual,
             released=tuple(released),
