@@ -96,7 +96,10 @@ def test_tennis_serve_leg_sets_drive_the_legs(shared_data):
         )
         assert np.nanpercentile(ankle, 95) < 100.0
         assert np.nanmedian(knee) < 150.0
-    with pytest.raises(ConfigError, match=r"uses only sets \['head', .*'pelvis', 'left_foot'"):
+    with pytest.raises(
+        ConfigError,
+        match=r"uses only sets \['head', .*'pelvis', 'left_foot', 'right_foot', 'thorax'\]",
+    ):
         track_hybrid_marker_file(markers, [*TENNIS_SETS, "left_leg=LKNE+LTIB+LANK"])
 
 

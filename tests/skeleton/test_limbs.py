@@ -46,6 +46,22 @@ def test_spine_dofs_and_feet() -> None:
     assert sk.joint_names[limbs.head_joint(sk)] == "head"
 
 
+def test_thorax_joint_carries_neck_and_clavicles() -> None:
+    sk = load_preset("zhang21")
+    j = limbs.thorax_joint(sk)
+    assert sk.joint_names[j] == "spine3"
+    children = {sk.joint_names[c] for c in np.flatnonzero(sk.parents == j)}
+    assert children == {"neck", "l_clavicle", "r_clavicle"}
+    # a stick whose arms hang from the neck: the neck is the chest's joint
+    stick = load_preset("upper_stick")
+    assert stick.joint_names[limbs.thorax_joint(stick)] == stick.canonical["neck"][0]
+    partial = dataclasses.replace(
+        sk, canonical={k: v for k, v in sk.canonical.items() if k != "right_shoulder"}
+    )
+    with pytest.raises(UnknownNameError, match="canonical joint 'right_shoulder'.*thorax"):
+        limbs.thorax_joint(partial)
+
+
 def test_unknown_limb_names_choices() -> None:
     sk = load_preset("zhang21")
     with pytest.raises(UnknownNameError, match="expected one of: left_arm, left_leg"):

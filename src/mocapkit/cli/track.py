@@ -63,7 +63,8 @@ def register(subparsers: Any) -> None:
         default=[],
         metavar="NAME=M1+M2[/T1]",
         help="marker set for --markers (head, left_hand, right_hand; optionally pelvis, "
-        "left_foot, right_foot, which drive the legs); markers after '/' "
+        "left_foot, right_foot, which drive the legs, and thorax, which holds the "
+        "trunk's twist); markers after '/' "
         "turn the set without placing it (e.g. a forearm marker with a wrist bar: "
         "left_hand=LWRA+LWRB/LFRM); repeat",
     )

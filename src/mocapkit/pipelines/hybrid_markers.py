@@ -59,8 +59,9 @@ from mocapkit.tracking.hybrid.static_calibration import (
     find_static_interval,
 )
 from mocapkit.tracking.hybrid.tracker import (
-    LEG_SETS,
     MARKER_SETS,
+    OPTIONAL_SETS,
+    SEGMENT_SETS,
     HybridConfig,
     HybridPose,
     HybridSample,
@@ -252,7 +253,7 @@ def track_hybrid_marker_arrays(
 
 def partial_marker_sets(sets: Iterable[str], where: str) -> tuple[str, ...]:
     """The hybrid marker sets present among ``sets``, in `MARKER_SETS` order, then the
-    optional `LEG_SETS` present.
+    `OPTIONAL_SETS` present.
 
     A subject instrumented on one side has one hand set: the head set and at least one
     hand set are needed; an arm without its hand set is left out (its elbow and wrist are
@@ -260,14 +261,14 @@ def partial_marker_sets(sets: Iterable[str], where: str) -> tuple[str, ...]:
     """
     given = set(sets)
     present = tuple(n for n in MARKER_SETS if n in given)
-    legs = tuple(n for n in LEG_SETS if n in given)
+    optional = tuple(n for n in OPTIONAL_SETS if n in given)
     if "head" not in given or len(present) < 2:
         raise ShapeError(
             f"{where}: the hybrid tracker needs marker set 'head' and at least one of "
             f"'left_hand', 'right_hand'; missing marker set "
             f"{'head' if 'head' not in given else 'left_hand/right_hand'!r}; found {sorted(given)}"
         )
-    return present + legs
+    return present + optional
 
 
 def drop_unobserved_arms(
@@ -549,10 +550,10 @@ def _checked_request(
         )
     sets = parse_marker_sets(list(marker_sets))
     names = [s.name for s in sets]
-    extra = [n for n in names if n not in MARKER_SETS + LEG_SETS]
+    extra = [n for n in names if n not in MARKER_SETS + OPTIONAL_SETS]
     if extra:
         raise ConfigError(
-            f"marker_sets: the hybrid tracker uses only sets {list(MARKER_SETS + LEG_SETS)}; "
+            f"marker_sets: the hybrid tracker uses only sets {list(MARKER_SETS + OPTIONAL_SETS)}; "
             f"found {extra} as well, which it would ignore"
         )
     try:
@@ -682,7 +683,7 @@ def _calibrated_config(
             calib, how = _calibrate_dynamic(plain, cfg, sets, world, height_mm, timer)
             note = f"{failed}dynamic: {how}"
         if calib is not None:
-            members, centres = _leg_set_offsets(sets, calib.offsets_mm)
+            members, centres = _optional_set_offsets(sets, calib.offsets_mm)
             cfg = replace(
                 cfg,
                 member_offsets_mm=members,
@@ -698,15 +699,17 @@ def _calibrated_config(
     return cfg, calib, note, skeleton
 
 
-def _leg_set_offsets(
+def _optional_set_offsets(
     sets: Sequence[MarkerSet], offsets_mm: Mapping[str, Mapping[str, Sequence[float]]]
 ) -> tuple[dict[str, dict[str, Sequence[float]]], dict[str, tuple[float, float, float]]]:
-    """The calibrated member offsets with the leg sets' (`LEG_SETS`) made consistent with
-    where their centres sit, and those centres (offsets in the joint's frame).
+    """The calibrated member offsets with the optional sets' (`OPTIONAL_SETS`) made
+    consistent with where their centres sit, and those centres (offsets in the joint's
+    frame).
 
-    The calibration's pose comes from head and hands alone. It places the pelvis
-    under the head as a standing subject's is, so a pelvis set's centre (well above
-    the hips) is where its members' mean says. It does not know where the feet stand,
+    The calibration's pose comes from head and hands alone. It places the trunk under the
+    head as a standing subject's is, so a segment set's centre (`SEGMENT_SETS`: a pelvis
+    set's well above the hips, a thorax set's in front of or behind the chest joint) is
+    where its members' mean says. It does not know where the feet stand,
     so a foot set keeps only its layout (members about their mean) and its centre is
     taken at the ankle (the markers' own offset from the joint, a few cm, against a
     stance that may differ by a foot's length).
@@ -715,10 +718,10 @@ def _leg_set_offsets(
     centres = {}
     for s in sets:
         got = offsets_mm.get(s.name, {})
-        if s.name not in LEG_SETS or not all(m in got for m in s.members):
+        if s.name not in OPTIONAL_SETS or not all(m in got for m in s.members):
             continue
         c = np.mean([np.asarray(got[m], dtype=float) for m in s.members], axis=0)
-        if s.name == "pelvis":
+        if s.name in SEGMENT_SETS:
             centres[s.name] = (float(c[0]), float(c[1]), float(c[2]))
         else:
             members[s.name] = {

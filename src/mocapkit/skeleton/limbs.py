@@ -175,6 +175,25 @@ def head_joint(skeleton: Skeleton) -> int:
     return _canonical_joint(skeleton, "head", "head")
 
 
+def thorax_joint(skeleton: Skeleton) -> int:
+    """The chest's joint: the lowest one carrying the canonical neck and both shoulders
+    (``spine3`` on ``zhang21``, where the neck and the clavicles hang).
+
+    Raises
+    ------
+    UnknownNameError
+        A skeleton without a canonical neck or shoulder.
+    """
+    ends = [
+        _canonical_joint(skeleton, c, "thorax") for c in ("neck", "left_shoulder", "right_shoulder")
+    ]
+    above = skeleton.ancestors_mask()
+    j = ends[0]
+    while not all(above[j, e] for e in ends):
+        j = int(skeleton.parents[j])
+    return j
+
+
 def head_dofs(skeleton: Skeleton) -> IntArray:
     """DoFs that turn the head and nothing of the arms: those of the joints from the
     canonical neck down to the head joint, less the joints the arms also hang from.

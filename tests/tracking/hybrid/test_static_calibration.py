@@ -210,3 +210,59 @@ def test_separate_static_trial():
     got = np.array([run.calibration.offsets_mm["left_hand"][m] for m in ("LWRA", "LWRB")])
     want = np.array(list(TRUE_MEMBERS["left_hand"].values()))
     assert np.abs(got - want).max() < 5.0
+
+
+#: Plug-in Gait's thorax markers about the chest joint (mm, its frame; the subject faces +Y).
+THORAX_MEMBERS = {
+    "CLAV": np.array([0.0, 90.0, 130.0]),
+    "STRN": np.array([0.0, 110.0, 40.0]),
+    "C7": np.array([0.0, -80.0, 170.0]),
+    "T10": np.array([0.0, -110.0, -40.0]),
+}
+THORAX_SPEC = "thorax=CLAV+STRN+C7+T10"
+
+
+def test_thorax_set_calibrates_and_holds_the_trunk_twist():
+    """A thorax set (``thorax=CLAV+STRN+C7+T10``) rides on the chest joint: its members are
+    calibrated about it on the still start, and on the motion (the trunk twisted 35 deg
+    while the head looks ahead) it holds the chest's turn, which head and hands alone leave
+    free (17 deg off, median). A member the file lacks is refused, naming the set, the
+    marker and the valid choices."""
+    from mocapkit.errors import UnknownNameError
+    from mocapkit.pipelines.hybrid_markers import raw_marker_skeleton
+    from mocapkit.skeleton.limbs import thorax_joint
+
+    sk = raw_marker_skeleton(1700.0, ("head", "left_hand", "right_hand"))
+    rng = np.random.default_rng(6)
+    q = _take(sk, 60, 60)
+    ramp = np.linspace(0.0, 1.0, 60)
+    q[60:, sk.dof_index("spine_rotation")] = np.radians(35.0) * ramp
+    q[60:, sk.dof_index("neck_rotation")] = -np.radians(35.0) * ramp
+    q = np.clip(q, sk.lower, sk.upper)
+    band = np.asarray(head_band_offset_mm(sk))
+    members = _members_from_poses(sk, q, rng, set_offsets_mm={"head": band})
+    chest = forward_kinematics(sk, q)[:, thorax_joint(sk)]
+    for m, off in THORAX_MEMBERS.items():
+        p = np.einsum("nij,j->ni", chest[:, :3, :3], off) + chest[:, :3, 3]
+        members[m] = p + rng.normal(0.0, 0.5, p.shape)
+    markers = _recording(sk, q, members)
+
+    def chest_turn_error_deg(run):  # type: ignore[no-untyped-def]
+        got = forward_kinematics(run.motion.skeleton, run.motion.q)[60:, thorax_joint(sk), :3, :3]
+        cos = (np.einsum("nij,nij->n", got, chest[60:, :3, :3]) - 1.0) / 2.0
+        return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+
+    run = track_hybrid_marker_file(markers, [*SPECS, THORAX_SPEC], height_mm=1700.0, up="z")
+    assert run.calibration is not None and "thorax" in run.calibration.offsets_mm
+    got = np.array([run.calibration.offsets_mm["thorax"][m] for m in THORAX_MEMBERS])
+    assert np.abs(got - np.array(list(THORAX_MEMBERS.values()))).max() < 5.0
+    assert max(r.residual_mm["thorax"] for r in run.results) < 5.0
+    assert max(r.fit["T10_mm"] for r in run.results) < 5.0
+    without = track_hybrid_marker_file(markers, SPECS, height_mm=1700.0, up="z")
+    assert chest_turn_error_deg(run).max() < 2.0
+    assert np.median(chest_turn_error_deg(without)) > 10.0
+    with pytest.raises(
+        UnknownNameError,
+        match=r"marker set 'thorax': unknown marker 'CLAV2'.*expected one of: C7, CLAV,",
+    ):
+        track_hybrid_marker_file(markers, [*SPECS, "thorax=CLAV2+STRN+C7+T10"], up="z")

@@ -44,6 +44,7 @@ from mocapkit.skeleton.limbs import (
     leg,
     limbs_present,
     part_dofs,
+    thorax_joint,
     vertical_root_dof,
 )
 from mocapkit.skeleton.model import CANONICAL_JOINTS, PRISMATIC, Skeleton
@@ -77,6 +78,12 @@ FEET: tuple[str, ...] = ("left_foot", "right_foot")
 #: Optional marker sets of a full-body file: on the pelvis (the canonical ``pelvis``
 #: point) and on each foot (its ankle); a foot set takes the place of that foot's plant.
 LEG_SETS: tuple[str, ...] = ("pelvis", *FEET)
+#: Optional marker sets that ride on one trunk segment (`segment_set_effector`): the
+#: pelvis, and the thorax (the chest's joint, `mocapkit.skeleton.limbs.thorax_joint`),
+#: which holds the trunk's twist that head and hands leave free.
+SEGMENT_SETS: tuple[str, ...] = ("pelvis", "thorax")
+#: Every optional marker set, in the order the tracker takes them.
+OPTIONAL_SETS: tuple[str, ...] = (*LEG_SETS, "thorax")
 
 Refiner = Callable[..., FloatArray]
 
@@ -107,14 +114,24 @@ def default_marker_effectors(skeleton: Skeleton) -> dict[str, Effector]:
 
 
 def marker_set_effectors(skeleton: Skeleton) -> dict[str, Effector]:
-    """`default_marker_effectors` and those of the `LEG_SETS`: the canonical ``pelvis``
-    point and the ankles, with zero marker offsets (the sets' members, calibrated, carry
-    where the markers sit)."""
-    pj, pp = skeleton.canonical["pelvis"]
+    """`default_marker_effectors` and those of the `OPTIONAL_SETS`: the segment sets'
+    (`segment_set_effector`) and the ankles, with zero marker offsets (the sets' members,
+    calibrated, carry where the markers sit)."""
     effs = default_marker_effectors(skeleton)
-    effs["pelvis"] = Effector("pelvis", pj, (float(pp[0]), float(pp[1]), float(pp[2])))
+    effs.update({n: segment_set_effector(skeleton, n) for n in SEGMENT_SETS})
     effs.update({e.name: e for e in foot_effectors(skeleton)})
     return effs
+
+
+def segment_set_effector(skeleton: Skeleton, name: str) -> Effector:
+    """The effector of a segment set (`SEGMENT_SETS`): ``pelvis`` at the canonical pelvis
+    point, ``thorax`` at the chest joint's origin (`thorax_joint`)."""
+    if name == "pelvis":
+        pj, pp = skeleton.canonical["pelvis"]
+        return Effector(name, pj, (float(pp[0]), float(pp[1]), float(pp[2])))
+    if name == "thorax":
+        return Effector(name, skeleton.joint_names[thorax_joint(skeleton)])
+    raise unknown_name("segment marker set", name, SEGMENT_SETS)
 
 
 def foot_effectors(skeleton: Skeleton) -> list[Effector]:
@@ -587,11 +604,11 @@ class HybridTracker:
         self.marker_sets = tuple(n for n in effs if n not in FEET)
         feet = [effs.get(e.name, e) for e in foot_effectors(skeleton)]
         effectors = [effs[n] for n in self.marker_sets] + feet + member_effs
-        #: The balance step in effect: none where a pelvis or foot set places the lower
-        #: body (its lean would move them off their markers).
+        #: The balance step in effect: none where a segment or foot set places the
+        #: trunk or the lower body (its lean would move them off their markers).
         self._balance_config = (
             BalanceConfig(mode="off")
-            if self.foot_sets or "pelvis" in self.marker_sets
+            if self.foot_sets or set(SEGMENT_SETS) & set(self.marker_sets)
             else self.config.balance_config
         )
         self.solver = _CountedSolver(skeleton, effectors, self.config.ik)
