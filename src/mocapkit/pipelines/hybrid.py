@@ -68,6 +68,7 @@ def hybrid_skeleton(
     twist: bool = False,
     proportions: str = "preset",
     forearm_rotation: bool = False,
+    spine_lateral: bool = False,
 ) -> Skeleton:
     """``zhang21`` scaled to a subject, for the hybrid tracker.
 
@@ -91,6 +92,9 @@ def hybrid_skeleton(
     ``forearm_rotation`` of ``zhang21``): without it a wrist cluster's orientation (two
     or more members on the hand set) can be followed only by turning the whole arm.
 
+    ``spine_lateral`` bends the trunk sideways at spine2 (option ``spine_lateral`` of
+    ``zhang21``), for a thorax marker set that sees the bend.
+
     ``proportions``: ``"preset"`` scales Table 1's model by the stature alone;
     ``"anthropometric"`` (for subjects known by their stature only: raw marker files)
     also gives it a population's proportions
@@ -109,6 +113,7 @@ def hybrid_skeleton(
         + (("clavicle",) if clavicle else ())
         + (("spine_rotation", "neck_rotation") if twist else ())
         + (("forearm_rotation",) if forearm_rotation else ())
+        + (("spine_lateral",) if spine_lateral else ())
     )
     sk = load_preset("zhang21", options)
     if proportions == "anthropometric":

@@ -137,7 +137,10 @@ def raw_marker_skeleton(
       (a serve's racket arm) where the oriented forearm puts the elbow;
     * the head set and a hand set: the spine's and neck's twists (``spine_rotation``,
       ``neck_rotation``), so that the head turns apart from the shoulders (a server looks
-      up at the ball while the trunk coils), the trunk's turn left to the hands.
+      up at the ball while the trunk coils), the trunk's turn left to the hands;
+    * a thorax set: the trunk's sideways bend (``spine_lateral``), which it sees (tennis
+      serve with pelvis and thorax sets: largest joint speed 12.2 m/s with the bend, 19.0
+      without; the pelvis set 13 against 23 mm off, median).
 
     With positions only (no set oriented) the model has Table 1's DoFs: those extra DoFs
     would be left to the relaxed-pose task (tennis serve, positions only: elbows 115 /
@@ -151,6 +154,7 @@ def raw_marker_skeleton(
         forearm_rotation=hands,
         clavicle=hands,
         twist=hands and "head" in names,
+        spine_lateral="thorax" in names,
     )
 
 

@@ -224,20 +224,21 @@ THORAX_SPEC = "thorax=CLAV+STRN+C7+T10"
 
 def test_thorax_set_calibrates_and_holds_the_trunk_twist():
     """A thorax set (``thorax=CLAV+STRN+C7+T10``) rides on the chest joint: its members are
-    calibrated about it on the still start, and on the motion (the trunk twisted 35 deg
-    while the head looks ahead) it holds the chest's turn, which head and hands alone leave
-    free (17 deg off, median). A member the file lacks is refused, naming the set, the
+    calibrated about it on the still start, and on the motion (the trunk twisted 35 deg and
+    bent 15 deg sideways while the head looks ahead) it holds the chest's turn, which head
+    and hands alone leave free. A member the file lacks is refused, naming the set, the
     marker and the valid choices."""
     from mocapkit.errors import UnknownNameError
     from mocapkit.pipelines.hybrid_markers import raw_marker_skeleton
     from mocapkit.skeleton.limbs import thorax_joint
 
-    sk = raw_marker_skeleton(1700.0, ("head", "left_hand", "right_hand"))
+    sk = raw_marker_skeleton(1700.0, ("head", "left_hand", "right_hand", "thorax"))
     rng = np.random.default_rng(6)
     q = _take(sk, 60, 60)
     ramp = np.linspace(0.0, 1.0, 60)
     q[60:, sk.dof_index("spine_rotation")] = np.radians(35.0) * ramp
     q[60:, sk.dof_index("neck_rotation")] = -np.radians(35.0) * ramp
+    q[60:, sk.dof_index("spine_lateral")] = np.radians(15.0) * ramp
     q = np.clip(q, sk.lower, sk.upper)
     band = np.asarray(head_band_offset_mm(sk))
     members = _members_from_poses(sk, q, rng, set_offsets_mm={"head": band})
@@ -249,6 +250,7 @@ def test_thorax_set_calibrates_and_holds_the_trunk_twist():
 
     def chest_turn_error_deg(run):  # type: ignore[no-untyped-def]
         got = forward_kinematics(run.motion.skeleton, run.motion.q)[60:, thorax_joint(sk), :3, :3]
+        assert run.motion.skeleton.joint_names == sk.joint_names
         cos = (np.einsum("nij,nij->n", got, chest[60:, :3, :3]) - 1.0) / 2.0
         return np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
 
