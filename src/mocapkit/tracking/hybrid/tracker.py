@@ -672,18 +672,15 @@ class HybridTracker:
             else _CountedSolver(skeleton, effectors, restore_ik)
         )
         self._arms = {side: arm(skeleton, side) for side in SIDES}
-        #: Per side, the DoFs an arm re-seed holds (`_reseed_lost_arms`): all but the
-        #: arm's and its clavicle's (the arm's parent where it carries no other limb).
-        self._reseed_frozen: dict[str, NDArray[np.bool_]] = {}
-        for side, limb in self._arms.items():
-            held = np.ones(skeleton.n_dofs, dtype=bool)
-            held[limb.dofs] = False
-            carried = skeleton.subtree(limb.parent)
-            if all(other.root not in carried for s, other in self._arms.items() if s != side):
-                held[skeleton.dofs_of_joint(limb.parent)] = False
-            self._reseed_frozen[side] = held
-        #: Per side, what a released hand set's arm is held by (`_arm_dofs`).
+        #: Per side, the arm with its clavicle (`mocapkit.skeleton.limbs.part_dofs`): what a
+        #: released hand set's arm is held by (`_arm_dofs`) and all an arm re-seed moves.
         self._arm_part_dofs = {side: part_dofs(skeleton, f"{side}_arm") for side in SIDES}
+        #: Per side, the DoFs an arm re-seed holds (`_reseed_lost_arms`): all but those.
+        self._reseed_frozen: dict[str, NDArray[np.bool_]] = {}
+        for side, dofs in self._arm_part_dofs.items():
+            held = np.ones(skeleton.n_dofs, dtype=bool)
+            held[dofs] = False
+            self._reseed_frozen[side] = held
         #: The relaxed legs follow the head's height over the feet (`Crouch`): a standing
         #: subject with planted feet and no leg sets, outside paper mode.
         self._crouch: Crouch | None = None
