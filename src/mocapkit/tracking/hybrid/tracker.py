@@ -957,7 +957,7 @@ class HybridTracker:
         dt_s = None if self._replant_time_s is None else sample.time_s - self._replant_time_s
         self._replant_time_s = float(sample.time_s)
         carried = marker_residual_mm is None
-        if marker_residual_mm is not None and not self._relax_frames > 0:
+        if marker_residual_mm is not None:  # a fresh frame: re-plant only where needed
             finite = np.isfinite(marker_residual_mm)
             if not (np.any(finite) and np.nanmax(marker_residual_mm) > self.config.replant_mm):
                 return q, 0
