@@ -149,8 +149,8 @@ def best_swivel_elbow(
     lengths and hand placement), so its distance to ``target`` (an elbow marker) is the
     error no swivel could remove (the *best-swivel floor*), and ``turn_rad`` is how far
     the tracked swivel is from it. With positions-only hand sets nothing but the IK's
-    relaxed-pose task chooses the swivel (docs/design-notes/hybrid.md, "Raw files: where the elbow
-    error comes from").
+    relaxed-pose task chooses the swivel (docs/design-notes/hybrid.md, "Elbow error split per
+    frame").
 
     Parameters
     ----------

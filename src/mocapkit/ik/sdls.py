@@ -54,7 +54,7 @@ response to round-off, 10-20 % cheaper an iteration, and much cheaper where most
 are frozen (foot re-planting). With exact zeros a locked DoF would stay locked for the
 rest of the solve (measured: solves stall short of their targets); releasing it by the
 sign of ``J^T e`` (the gradient at the start of the step) let the scaled iteration
-cycle between release and clip (docs/design-notes/hybrid.md). With ``"gesvd"`` both
+cycle between release and clip (`git log -p docs/design-notes/hybrid.md`). With ``"gesvd"`` both
 SVDs are taken of fewer rows: the rows of the effectors fixed to one joint (a marker
 set and its members) reduced to six with the same singular values and V
 (`mocapkit.ik.rigid_rows`).

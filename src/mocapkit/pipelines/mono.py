@@ -699,14 +699,15 @@ def track_mono(
         Every pass but the last runs without the soft priors of `MonoConfig`
         (`mocapkit.tracking.mono.priors`) and without its ``reach_tolerance`` (M5
         exactly; with it there too the five accuracy clips got worse, 45.2 -> 46.4 mm,
-        docs/design-notes/mono.md); the last one with them.
+        `git log -p docs/design-notes/mono.md`); the last one with them.
     initial_pose : (K, 3) float, optional
         The subject's known pose in the first posed frame (the paper's assumption 3):
         the stick's joints (``stick_model(config.legs).joint_names``, e.g. picked by
         `initial_pose_from`) in the world frame, mm, NaN where unknown. The last pass
         starts from the candidate nearest to it (`MonoTracker`); the length passes, like
         the priors, leave it out (given to them too, it changed one clip's refined lengths
-        online and cost 16 mm there, docs/design-notes/mono.md). None: the start is free.
+        online and cost 16 mm there, `git log -p docs/design-notes/mono.md`). None: the
+        start is free.
     """
     if out_dir is not None:
         check_result_folder(out_dir)  # before the work (the length passes), not after it

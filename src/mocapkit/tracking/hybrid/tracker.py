@@ -252,7 +252,7 @@ class HybridConfig:
         tolerance, the pose crawling along the redundant DoFs, i.e. undoing the
         smoothing) 4.7 remain; smoothing 1.77 -> 0.67 ms a frame, the accuracy within
         0.5 mm in the default configuration and 1 mm in the other two
-        (docs/design-notes/hybrid.md, Speed).
+        (`git log -p docs/design-notes/hybrid.md`).
     member_offsets_mm : mapping of str to mapping of str to (3,) array_like
         Per marker set, its member markers' offsets (mm) in the effector joint's frame,
         from the default effector point (as ``marker_offsets_mm``). Each member then

@@ -159,7 +159,7 @@ def raise_short_links(
     `estimate_link_lengths`), are left alone. The result is rescaled to the input's sum,
     so the absolute scale stays tied to the stature.
 
-    On the nine CMU clips of docs/design-notes/mono.md, 0.5 was the middle of the
+    On the nine CMU clips of `git log -p docs/design-notes/mono.md`, 0.5 was the middle of the
     weights that helped both clip sets (0.5-0.7, with the ratios taken without the
     tested subject): in the frames whose true flips were absent from every candidate
     set, the trunk, clavicles and upper arms were the links cut short.

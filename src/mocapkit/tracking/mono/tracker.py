@@ -178,7 +178,7 @@ class MonoConfig:
         clavicle's projected length by up to 10 %, so a clavicle 15-20 deg out of the
         plane can look longer than its link and lose both flips to the in-plane one.
         Default 0.1 (0.08-0.1 with the girdle cost kept both sets' figures; 0.15 and
-        0.06 did not, docs/design-notes/mono.md).
+        0.06 did not, `git log -p docs/design-notes/mono.md`).
     rebuilt_reach_links : tuple of str
         Links the wider band applies to: the clavicles (also the trunk and head: worse).
     girdle_weight : float
@@ -186,7 +186,7 @@ class MonoConfig:
         the clavicles' common parent (the neck) is in ``rebuilt_joints`` and
         ``girdle_cosine`` is finite; 0: off. Default 100: offline 300 gained 0.3-0.5 mm
         and about a point of flips on the tuning clips, but online (``lag`` 10) it
-        mirrored an arm; 1000 mirrors it offline too (docs/design-notes/mono.md).
+        mirrored an arm; 1000 mirrors it offline too (`git log -p docs/design-notes/mono.md`).
     girdle_cosine : float
         Cosine of the angle between the two clavicles of the subject's rigid girdle;
         NaN (default): no girdle cost.
