@@ -23,8 +23,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.errors import SessionError, unknown_name
+from mocapkit.eval.plausibility import combine_views
 from mocapkit.io.markers import true_runs
 from mocapkit.io.motion import Motion
+from mocapkit.pipelines.input_speeds import pixel_input_speeds
 from mocapkit.pipelines.run import run_tracker, write_run_folder
 from mocapkit.skeleton.model import Skeleton
 from mocapkit.skeleton.smoothing import filter_poses
@@ -232,7 +234,14 @@ def track_multiview_session(
     far = far_spans(run.results, tracker.names)
     out = None
     if out_dir is not None:
-        out = write_run_folder(out_dir, motion, run.results)
+        out = write_run_folder(
+            out_dir,
+            motion,
+            run.results,
+            lambda m: combine_views(
+                [pixel_input_speeds(c, pixels[v], joint_names, m) for v, c in enumerate(cams)]
+            ),
+        )
     return MultiviewRun(motion, run.results, lengths, far, seconds, out)
 
 

@@ -1,0 +1,103 @@
+"""What the inputs of a run show: per frame and joint of its motion, the speed (mm/s) the
+tracker's inputs show near that joint (`mocapkit.pipelines.run.InputSpeeds`), from which
+the runner judges whether the result's motion is plausible
+(`mocapkit.eval.plausibility`).
+
+- Markers (the hybrid): the speed of the marker nearest the joint among those the
+  tracker used (its sets' members): the marker on the joint's own segment where there is
+  one, and the closest observed motion elsewhere (`marker_input_speeds`).
+- 2-D keypoints in calibrated views (stereo, multi-view, mono): per view, the keypoint's
+  image speed times the joint's depth over the focal length (a lateral speed), the views
+  combined as the root of the sum of squares (`keypoint_input_speeds`,
+  `pixel_input_speeds`); a single view does not see depth, which is left to the bound's
+  allowance for what no input shows.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from mocapkit.camera.pinhole import Camera
+from mocapkit.eval.plausibility import combine_views, nearest_input_speeds, view_speeds_mm_s
+from mocapkit.io.keypoint_checks import max_age_s
+from mocapkit.io.motion import Motion
+from mocapkit.io.session import Session
+from mocapkit.io.session_csv import Keypoints
+from mocapkit.pipelines.run import InputSpeeds
+
+FloatArray = NDArray[np.float64]
+
+
+def marker_input_speeds(
+    marker_time_s: ArrayLike, markers_mm: ArrayLike, sets: Sequence[str]
+) -> InputSpeeds:
+    """`InputSpeeds` from the markers a tracker used, (Tm, M, 3) at ``marker_time_s``, in
+    the motion's frame, with each marker's set (M names): each frame sees the newest
+    marker sample at or before it (as a session's samples do), and each joint the speed
+    of the set of its nearest marker (`mocapkit.eval.plausibility.nearest_input_speeds`)."""
+    labels = {n: k for k, n in enumerate(dict.fromkeys(sets))}
+    groups = [labels[n] for n in sets]
+    mt = np.asarray(marker_time_s, dtype=float)
+    m = np.asarray(markers_mm, dtype=float)
+
+    def speeds(motion: Motion) -> FloatArray:
+        rows = np.searchsorted(mt, motion.time_s + 1e-9, side="right") - 1
+        at = m[np.clip(rows, 0, max(mt.shape[0] - 1, 0))].copy()
+        at[rows < 0] = np.nan
+        return nearest_input_speeds(motion.time_s, motion.joints_mm, at, groups)
+
+    return speeds
+
+
+def pixel_input_speeds(
+    camera: Camera, pixels: ArrayLike, names: Sequence[str], motion: Motion
+) -> FloatArray:
+    """The lateral speeds (mm/s) one view's keypoints ``pixels`` (T, N, 2), of the joints
+    ``names``, show for ``motion``'s joints (T, K); NaN for joints the view lacks."""
+    px = np.asarray(pixels, dtype=float)
+    cols = {n: k for k, n in enumerate(names)}
+    aligned = np.full((*motion.joints_mm.shape[:2], 2), np.nan)
+    for k, n in enumerate(motion.joint_names):
+        if n in cols:
+            aligned[:, k] = px[:, cols[n]]
+    return view_speeds_mm_s(motion.time_s, motion.joints_mm, camera, aligned)
+
+
+def _keypoints_at_frames(kp: Keypoints, time_s: FloatArray) -> FloatArray:
+    """`mocapkit.io.keypoint_checks.keypoints_at` for every frame at once: (T, K, 2), the
+    nearest row within the age rule (`max_age_s`), else NaN."""
+    age = max_age_s(kp.time_s, time_s)
+    after = np.clip(np.searchsorted(kp.time_s, time_s), 0, kp.time_s.shape[0] - 1)
+    before = np.clip(after - 1, 0, kp.time_s.shape[0] - 1)
+    d_after, d_before = np.abs(kp.time_s[after] - time_s), np.abs(kp.time_s[before] - time_s)
+    rows = np.where(d_before <= d_after, before, after)
+    out = kp.pixels[rows].copy()
+    out[np.minimum(d_before, d_after) > age + 1e-9] = np.nan
+    return out
+
+
+def keypoint_input_speeds(session: Session, cameras: Sequence[str]) -> InputSpeeds | None:
+    """`InputSpeeds` from a session's 2-D keypoints of ``cameras`` (those that have them),
+    each frame seeing the row the session's samples give it; the views
+    combined (`mocapkit.eval.plausibility.combine_views`). None when no camera has
+    keypoints."""
+    views: Mapping[str, Keypoints] = {
+        c: session.keypoints[c] for c in cameras if c in session.keypoints
+    }
+    if not views:
+        return None
+
+    def speeds(motion: Motion) -> FloatArray:
+        out = []
+        for cam, kp in views.items():
+            px = _keypoints_at_frames(kp, motion.time_s)
+            out.append(pixel_input_speeds(session.camera(cam), px, kp.joint_names, motion))
+        return combine_views(out)
+
+    return speeds
+
+
+__all__ = ["keypoint_input_speeds", "marker_input_speeds", "pixel_input_speeds"]
