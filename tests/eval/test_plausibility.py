@@ -48,7 +48,7 @@ def test_a_joint_step_the_inputs_do_not_make_is_flagged_on_exactly_its_frame() -
     assert np.isnan(cols["implausible_joints"][0]) and cols["worst_joint"][0] == ""
     ratio = check.speed_mm_s[10, 1] / (1.5 * inp[10, 1] + 1000.0)
     np.testing.assert_allclose(cols["worst_speed_ratio"][10], ratio)
-    np.testing.assert_allclose(cols["worst_input_speed_mm_s"][10], inp[10, 1])
+    np.testing.assert_allclose(cols["worst_input_speed_mm_per_s"][10], inp[10, 1])
 
 
 def test_a_joint_step_the_input_makes_too_is_kept() -> None:

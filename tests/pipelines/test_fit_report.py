@@ -117,8 +117,8 @@ def test_implausible_motion_round_trips_through_fit_csv_and_is_warned_about(
     np.testing.assert_array_equal(
         np.flatnonzero(np.nan_to_num(columns["implausible_joints"])), [10, 11, 20]
     )
-    np.testing.assert_allclose(columns["worst_input_speed_mm_s"][10], 500.0)
-    np.testing.assert_allclose(columns["worst_joint_speed_mm_s"][10], 11800.0, rtol=0.01)
+    np.testing.assert_allclose(columns["worst_input_speed_mm_per_s"][10], 500.0)
+    np.testing.assert_allclose(columns["worst_joint_speed_mm_per_s"][10], 11800.0, rtol=0.01)
     assert np.isnan(columns["worst_speed_ratio"][0]) and rows[0]["worst_joint"] == ""
     spans = implausible_spans_in_folder(tmp_path / "r")
     assert [(s.name, s.start_s, s.end_s, s.n_frames) for s in spans] == [

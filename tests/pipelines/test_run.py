@@ -190,7 +190,7 @@ def test_run_tracker_writes_the_plausibility_of_the_motion_against_the_inputs(tm
     rows, numeric = read_fit_csv(tmp_path / "still" / FIT_FILE)
     moved = np.flatnonzero(np.nan_to_num(numeric["implausible_joints"]))
     assert moved.tolist() == [4] and rows[4]["worst_joint"].startswith("right_")
-    assert numeric["worst_input_speed_mm_s"][4] == 0.0
+    assert numeric["worst_input_speed_mm_per_s"][4] == 0.0
     assert np.isnan(numeric["implausible_joints"][0])
     run_tracker(ReplayTracker(sk), zip(t, q), 6, tmp_path / "none")  # no evidence
     _, numeric = read_fit_csv(tmp_path / "none" / FIT_FILE)

@@ -30,11 +30,11 @@ FRAME_COLUMNS: tuple[str, ...] = (
     "implausible_joints",
     "worst_joint",
     "worst_speed_ratio",
-    "worst_joint_speed_mm_s",
-    "worst_input_speed_mm_s",
+    "worst_joint_speed_mm_per_s",
+    "worst_input_speed_mm_per_s",
     "implausible_rolls",
     "worst_roll_bone",
-    "worst_roll_deg_s",
+    "worst_roll_deg_per_s",
 )
 NAME_COLUMNS: tuple[str, ...] = ("worst_joint", "worst_roll_bone")
 
@@ -254,13 +254,13 @@ class MotionCheck:
                 self.joint_names[k] if h else "" for k, h in zip(worst.tolist(), list(any_has))
             ],
             "worst_speed_ratio": pick(ratio),
-            "worst_joint_speed_mm_s": pick(self.speed_mm_s),
-            "worst_input_speed_mm_s": pick(self.input_mm_s),
+            "worst_joint_speed_mm_per_s": pick(self.speed_mm_s),
+            "worst_input_speed_mm_per_s": pick(self.input_mm_s),
             "implausible_rolls": np.where(any_roll, self.roll_flags.sum(axis=1), np.nan),
             "worst_roll_bone": [
                 self.bone_names[k] if h else "" for k, h in zip(fastest.tolist(), list(any_roll))
             ],
-            "worst_roll_deg_s": (
+            "worst_roll_deg_per_s": (
                 np.where(any_roll, self.roll_deg_s[rows, fastest], np.nan)
                 if self.roll_deg_s.size
                 else np.full(n_frames, np.nan)

@@ -188,8 +188,8 @@ def implausible_spans(
     """
     t = np.asarray(columns["time_s"], dtype=float)
     kinds = (
-        ("joint", "implausible_joints", "worst_joint", "worst_joint_speed_mm_s"),
-        ("roll", "implausible_rolls", "worst_roll_bone", "worst_roll_deg_s"),
+        ("joint", "implausible_joints", "worst_joint", "worst_joint_speed_mm_per_s"),
+        ("roll", "implausible_rolls", "worst_roll_bone", "worst_roll_deg_per_s"),
     )
     out = []
     for kind, count, name, value in kinds:
@@ -199,7 +199,7 @@ def implausible_spans(
         v = np.asarray(columns[value], dtype=float)
         if kind == "joint":
             ratio = np.asarray(columns["worst_speed_ratio"], dtype=float)
-            inp = np.asarray(columns["worst_input_speed_mm_s"], dtype=float)
+            inp = np.asarray(columns["worst_input_speed_mm_per_s"], dtype=float)
         else:
             ratio, inp = v / ROLL_LIMIT_DEG_S, np.full(t.shape, np.nan)
         for a, b in true_runs(flag):
