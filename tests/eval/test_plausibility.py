@@ -12,9 +12,9 @@ from mocapkit.eval.continuity import roll_steps_deg
 from mocapkit.eval.plausibility import (
     SpeedBound,
     check_motion,
-    combine_views,
     nearest_input_speeds,
     roll_speeds_deg_s,
+    triangulated_speeds_mm_s,
     view_speeds_mm_s,
 )
 from mocapkit.skeleton import load_preset
@@ -119,14 +119,26 @@ def test_a_view_shows_lateral_motion_and_not_depth() -> None:
         view_speeds_mm_s(t, joints, cam, px[:, :, :1])
 
 
-def test_views_combine_as_the_root_of_the_sum_of_squares() -> None:
-    a = np.array([[3.0, 1.0], [np.nan, 2.0]])
-    b = np.array([[4.0, 0.0], [1.0, np.nan]])
-    out = combine_views([a, b])
-    np.testing.assert_allclose(out[0], [5.0, 1.0])
-    assert np.isnan(out[1]).all()  # a view lacks the joint: no evidence
-    with pytest.raises(ShapeError, match="expected one or more views"):
-        combine_views([])
+def test_two_views_show_the_depth_one_misses() -> None:
+    def camera(name: str, eye: list[float]) -> Camera:
+        k = intrinsics_from_fov((640, 480), 60.0)
+        return Camera(name, (640, 480), k, np.zeros(5), look_at(eye, [0.0, 0.0, 1000.0]))
+
+    # a stereo pair 300 mm apart, both looking along +y
+    cams = [camera("l", [-150.0, -3000.0, 1000.0]), camera("r", [150.0, -3000.0, 1000.0])]
+    t = np.array([0.0, 0.1, 0.2])
+    # 300 mm towards the pair (3 m/s, in depth), then 100 mm sideways (1 m/s)
+    joints = np.array([[[0.0, 0.0, 1000.0]], [[0.0, -300.0, 1000.0]], [[100.0, -300.0, 1000.0]]])
+    px = np.stack([c.project(joints) for c in cams])
+    np.testing.assert_allclose(
+        triangulated_speeds_mm_s(t, cams, px)[1:, 0], [3000.0, 1000.0], rtol=1e-6
+    )
+    assert view_speeds_mm_s(t, joints, cams[0], px[0])[1, 0] < 400.0  # one view: lateral only
+    px[1, 2] = np.nan  # one view left on frame 2: no evidence
+    speeds = triangulated_speeds_mm_s(t, cams, px)
+    assert np.isnan(speeds[[0, 2], 0]).all() and np.isfinite(speeds[1, 0])
+    with pytest.raises(ShapeError, match="pixels: expected shape"):
+        triangulated_speeds_mm_s(t, cams, px[:1])
 
 
 def test_a_bone_rolling_faster_than_the_limit_is_flagged(monkeypatch) -> None:

@@ -5,8 +5,9 @@ plus ``floor_mm_s`` for what no input can show (`SpeedBound`); a joint faster th
 is implausible on that frame (a pop: a re-seed, a branch switch, a depth flip), while a
 jump the inputs make too is allowed. Where a joint's input is missing there is no
 evidence (NaN) and nothing is flagged. The input speed near a joint comes from markers
-(`nearest_input_speeds`) or from 2-D keypoints in calibrated views (`view_speeds_mm_s`,
-`combine_views`). Each bone's roll about its own axis, which no input shows, is held to
+(`nearest_input_speeds`) or from 2-D keypoints in calibrated views (one view: the
+lateral speed it shows, `view_speeds_mm_s`; two or more: the keypoints triangulated,
+`triangulated_speeds_mm_s`). Each bone's roll about its own axis, which no input shows, is held to
 one speed limit (`roll_speeds_deg_s`). `check_motion` does both, batched over a run.
 """
 
@@ -19,6 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.camera.pinhole import Camera
+from mocapkit.camera.triangulation import triangulate_views
 from mocapkit.errors import ConfigError, ShapeError
 from mocapkit.eval.continuity import roll_steps_deg
 from mocapkit.skeleton.model import Skeleton
@@ -168,15 +170,23 @@ def view_speeds_mm_s(
     return out
 
 
-def combine_views(speeds_mm_s: Sequence[ArrayLike]) -> FloatArray:
-    """The views' lateral speeds (each (T, K), mm/s) combined into one bound of the 3-D
-    speed: the root of the sum of squares (views that see different components of the
-    motion add them); NaN where any view lacks the joint on the frame (a component of
-    its motion is then unobserved: no evidence)."""
-    if not speeds_mm_s:
-        raise ShapeError("combine_views: expected one or more views, found none")
-    stack = np.stack([np.asarray(s, dtype=float) for s in speeds_mm_s])
-    return np.sqrt(np.sum(stack**2, axis=0))
+def triangulated_speeds_mm_s(
+    time_s: ArrayLike, cameras: Sequence[Camera], pixels: ArrayLike
+) -> FloatArray:
+    """Per frame and joint, the speed (mm/s) of the joint's keypoints triangulated from
+    the views that see it (`mocapkit.camera.triangulation.triangulate_views`, two or
+    more): the depth one view misses, the others see. NaN where fewer than two views see
+    the joint on either frame (a component of its motion unobserved: no evidence).
+
+    ``pixels`` (V, T, K, 2): the keypoints of each of the ``cameras``, NaN where unseen.
+    """
+    t = np.asarray(time_s, dtype=float)
+    px = np.asarray(pixels, dtype=float)
+    if px.ndim != 4 or px.shape[0] != len(cameras) or px.shape[1] != t.shape[0]:
+        raise ShapeError(
+            f"pixels: expected shape ({len(cameras)}, {t.shape[0]}, K, 2), found {px.shape}"
+        )
+    return frame_speeds_mm_s(t, triangulate_views(cameras, px))
 
 
 @dataclass(frozen=True)
@@ -304,7 +314,7 @@ def check_motion(
         The result's joints, NaN where not observed (never flagged).
     input_mm_s : (T, K) array-like or None
         The speed the inputs show near each joint (`nearest_input_speeds`,
-        `combine_views`); None: no evidence anywhere.
+        `view_speeds_mm_s`, `triangulated_speeds_mm_s`); None: no evidence anywhere.
     bound : SpeedBound
     roll_limit_deg_s : float
         Fastest roll of a bone about its own axis (deg/s).
@@ -341,9 +351,9 @@ __all__ = [
     "MotionCheck",
     "SpeedBound",
     "check_motion",
-    "combine_views",
     "frame_speeds_mm_s",
     "nearest_input_speeds",
     "roll_speeds_deg_s",
+    "triangulated_speeds_mm_s",
     "view_speeds_mm_s",
 ]

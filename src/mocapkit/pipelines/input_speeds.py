@@ -6,11 +6,11 @@ the runner judges whether the result's motion is plausible
 - Markers (the hybrid): the speed of the marker nearest the joint among those the
   tracker used (its sets' members): the marker on the joint's own segment where there is
   one, and the closest observed motion elsewhere (`marker_input_speeds`).
-- 2-D keypoints in calibrated views (stereo, multi-view, mono): per view, the keypoint's
-  image speed times the joint's depth over the focal length (a lateral speed), the views
-  combined as the root of the sum of squares (`keypoint_input_speeds`,
-  `pixel_input_speeds`); a single view does not see depth, which is left to the bound's
-  allowance for what no input shows.
+- 2-D keypoints in calibrated views (stereo, multi-view, mono): two or more views, the
+  speed of the joint's keypoints triangulated; one view (mono), the keypoint's image
+  speed times the joint's depth over the focal length (a lateral speed): a single view
+  does not see depth, which is left to the bound's allowance for what no input shows
+  (`keypoint_input_speeds`, `pixel_input_speeds`).
 """
 
 from __future__ import annotations
@@ -21,7 +21,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.camera.pinhole import Camera
-from mocapkit.eval.plausibility import combine_views, nearest_input_speeds, view_speeds_mm_s
+from mocapkit.eval.plausibility import (
+    nearest_input_speeds,
+    triangulated_speeds_mm_s,
+    view_speeds_mm_s,
+)
 from mocapkit.io.keypoint_checks import max_age_s
 from mocapkit.io.motion import Motion
 from mocapkit.io.session import Session
@@ -53,49 +57,61 @@ def marker_input_speeds(
 
 
 def pixel_input_speeds(
-    camera: Camera, pixels: ArrayLike, names: Sequence[str], motion: Motion
+    cameras: Sequence[Camera],
+    pixels: Sequence[ArrayLike],
+    names: Sequence[str],
+    motion: Motion,
 ) -> FloatArray:
-    """The lateral speeds (mm/s) one view's keypoints ``pixels`` (T, N, 2), of the joints
-    ``names``, show for ``motion``'s joints (T, K); NaN for joints the view lacks."""
-    px = np.asarray(pixels, dtype=float)
+    """The speeds (mm/s) the keypoints ``pixels`` (per camera (T, N, 2), of the joints
+    ``names``) show for ``motion``'s joints (T, K): one camera, the lateral speed
+    (`mocapkit.eval.plausibility.view_speeds_mm_s`); two or more, the speed of the
+    keypoints triangulated (`mocapkit.eval.plausibility.triangulated_speeds_mm_s`). NaN
+    for joints the views lack."""
     cols = {n: k for k, n in enumerate(names)}
-    aligned = np.full((*motion.joints_mm.shape[:2], 2), np.nan)
-    for k, n in enumerate(motion.joint_names):
-        if n in cols:
-            aligned[:, k] = px[:, cols[n]]
-    return view_speeds_mm_s(motion.time_s, motion.joints_mm, camera, aligned)
+    aligned = np.full((len(cameras), *motion.joints_mm.shape[:2], 2), np.nan)
+    for v, px in enumerate(pixels):
+        p = np.asarray(px, dtype=float)
+        for k, n in enumerate(motion.joint_names):
+            if n in cols:
+                aligned[v, :, k] = p[:, cols[n]]
+    if len(cameras) == 1:
+        return view_speeds_mm_s(motion.time_s, motion.joints_mm, cameras[0], aligned[0])
+    return triangulated_speeds_mm_s(motion.time_s, cameras, aligned)
 
 
-def _keypoints_at_frames(kp: Keypoints, time_s: FloatArray) -> FloatArray:
-    """`mocapkit.io.keypoint_checks.keypoints_at` for every frame at once: (T, K, 2), the
-    nearest row within the age rule (`max_age_s`), else NaN."""
+def _keypoints_at_frames(kp: Keypoints, time_s: FloatArray, names: Sequence[str]) -> FloatArray:
+    """`mocapkit.io.keypoint_checks.keypoints_at` for every frame at once, for the joints
+    ``names``: (T, N, 2), the nearest row within the age rule (`max_age_s`), else NaN
+    (and for joints the keypoints lack)."""
     age = max_age_s(kp.time_s, time_s)
     after = np.clip(np.searchsorted(kp.time_s, time_s), 0, kp.time_s.shape[0] - 1)
     before = np.clip(after - 1, 0, kp.time_s.shape[0] - 1)
     d_after, d_before = np.abs(kp.time_s[after] - time_s), np.abs(kp.time_s[before] - time_s)
     rows = np.where(d_before <= d_after, before, after)
-    out = kp.pixels[rows].copy()
+    out = np.full((time_s.shape[0], len(names), 2), np.nan)
+    for k, n in enumerate(names):
+        if n in kp.joint_names:
+            out[:, k] = kp.pixels[rows, kp.joint_names.index(n)]
     out[np.minimum(d_before, d_after) > age + 1e-9] = np.nan
     return out
 
 
 def keypoint_input_speeds(session: Session, cameras: Sequence[str]) -> InputSpeeds | None:
     """`InputSpeeds` from a session's 2-D keypoints of ``cameras`` (those that have them),
-    each frame seeing the row the session's samples give it; the views
-    combined (`mocapkit.eval.plausibility.combine_views`). None when no camera has
-    keypoints."""
+    each frame seeing the row the session's samples give it (`pixel_input_speeds`). None
+    when no camera has keypoints."""
     views: Mapping[str, Keypoints] = {
         c: session.keypoints[c] for c in cameras if c in session.keypoints
     }
     if not views:
         return None
 
+    names = sorted({n for kp in views.values() for n in kp.joint_names})
+    calibrated = [session.camera(c) for c in views]
+
     def speeds(motion: Motion) -> FloatArray:
-        out = []
-        for cam, kp in views.items():
-            px = _keypoints_at_frames(kp, motion.time_s)
-            out.append(pixel_input_speeds(session.camera(cam), px, kp.joint_names, motion))
-        return combine_views(out)
+        pixels = [_keypoints_at_frames(kp, motion.time_s, names) for kp in views.values()]
+        return pixel_input_speeds(calibrated, pixels, names, motion)
 
     return speeds
 

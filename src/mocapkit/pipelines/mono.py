@@ -829,7 +829,7 @@ def track_mono(
         source=f"mono tracker (camera {cam_name}) on {session.path}",
         joint_names=stream.joint_names,
         keep_results=False,
-        input_speeds=partial(pixel_input_speeds, cam, px, model.joint_names),
+        input_speeds=partial(pixel_input_speeds, [cam], [px], model.joint_names),
     )
     recorded.frames.sort()
     warn_placed_subject(session, cam_name, run.motion.joints_mm, run.motion.joint_names)

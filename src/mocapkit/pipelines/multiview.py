@@ -23,7 +23,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.errors import SessionError, unknown_name
-from mocapkit.eval.plausibility import combine_views
 from mocapkit.io.markers import true_runs
 from mocapkit.io.motion import Motion
 from mocapkit.pipelines.input_speeds import pixel_input_speeds
@@ -238,9 +237,7 @@ def track_multiview_session(
             out_dir,
             motion,
             run.results,
-            lambda m: combine_views(
-                [pixel_input_speeds(c, pixels[v], joint_names, m) for v, c in enumerate(cams)]
-            ),
+            partial(pixel_input_speeds, cams, list(pixels), joint_names),
         )
     return MultiviewRun(motion, run.results, lengths, far, seconds, out)
 
