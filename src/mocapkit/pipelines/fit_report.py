@@ -239,8 +239,9 @@ def implausible_warnings(spans: Sequence[ImplausibleSpan], shown: int = SHOWN_SP
     ]
     out = [
         f"WARNING: implausible motion in {len(spans)} span{'s' if len(spans) != 1 else ''} "
-        f"({n_frames} frames): faster than the inputs show (fit.csv's implausible_joints, "
-        "implausible_rolls); check those frames before using them"
+        f"({n_frames} frame{'s' if n_frames != 1 else ''}): faster than the inputs show "
+        "(fit.csv's implausible_joints, implausible_rolls); check those frames before using "
+        "them"
     ]
     out += [f"  {s}" for s in worst]
     if len(spans) > len(worst):
