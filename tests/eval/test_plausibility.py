@@ -23,6 +23,13 @@ DT_S = 0.02
 BOUND = SpeedBound(1.5, 1000.0)
 
 
+def camera_at(eye_mm: list[float], name: str = "c") -> Camera:
+    """A 640 x 480 camera with a 60 deg field of view at ``eye_mm`` looking at
+    (0, 0, 1000) mm."""
+    k = intrinsics_from_fov((640, 480), 60.0)
+    return Camera(name, (640, 480), k, np.zeros(5), look_at(eye_mm, [0.0, 0.0, 1000.0]))
+
+
 def _take(seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """20 frames at 50 Hz: three joints 400 mm apart drifting slowly (< 0.3 m/s), each
     with a marker 30 mm from it moving with it."""
@@ -98,13 +105,7 @@ def test_the_bound_is_factor_times_the_input_plus_the_floor() -> None:
 
 
 def test_a_view_shows_lateral_motion_and_not_depth() -> None:
-    cam = Camera(
-        "c",
-        (640, 480),
-        intrinsics_from_fov((640, 480), 60.0),
-        np.zeros(5),
-        look_at([0.0, -3000.0, 1000.0], [0.0, 0.0, 1000.0]),
-    )
+    cam = camera_at([0.0, -3000.0, 1000.0])
     t = np.array([0.0, 0.1, 0.2])
     # frame 1: 300 mm towards the camera along its axis; frame 2: 100 mm sideways
     joints = np.array([[[0.0, 0.0, 1000.0]], [[0.0, -300.0, 1000.0]], [[100.0, -300.0, 1000.0]]])
@@ -120,12 +121,8 @@ def test_a_view_shows_lateral_motion_and_not_depth() -> None:
 
 
 def test_two_views_show_the_depth_one_misses() -> None:
-    def camera(name: str, eye: list[float]) -> Camera:
-        k = intrinsics_from_fov((640, 480), 60.0)
-        return Camera(name, (640, 480), k, np.zeros(5), look_at(eye, [0.0, 0.0, 1000.0]))
-
     # a stereo pair 300 mm apart, both looking along +y
-    cams = [camera("l", [-150.0, -3000.0, 1000.0]), camera("r", [150.0, -3000.0, 1000.0])]
+    cams = [camera_at([-150.0, -3000.0, 1000.0], "l"), camera_at([150.0, -3000.0, 1000.0], "r")]
     t = np.array([0.0, 0.1, 0.2])
     # 300 mm towards the pair (3 m/s, in depth), then 100 mm sideways (1 m/s)
     joints = np.array([[[0.0, 0.0, 1000.0]], [[0.0, -300.0, 1000.0]], [[100.0, -300.0, 1000.0]]])

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from mocapkit.camera.pinhole import Camera, intrinsics_from_fov, look_at
 from mocapkit.io.motion import Motion
 from mocapkit.pipelines.input_speeds import marker_input_speeds, pixel_input_speeds
 from mocapkit.skeleton import load_preset
+from tests.eval.test_plausibility import camera_at
 
 
 def _motion(t: np.ndarray, joints: np.ndarray, names: tuple[str, ...]) -> Motion:
@@ -36,13 +36,7 @@ def test_markers_are_sampled_as_the_session_does_and_read_by_set() -> None:
 
 
 def test_keypoints_are_matched_to_the_joints_by_name() -> None:
-    cam = Camera(
-        "c",
-        (640, 480),
-        intrinsics_from_fov((640, 480), 60.0),
-        np.zeros(5),
-        look_at([0.0, -3000.0, 1000.0], [0.0, 0.0, 1000.0]),
-    )
+    cam = camera_at([0.0, -3000.0, 1000.0])
     t = np.array([0.0, 0.1])
     joints = np.array([[[0.0, 0.0, 1000.0], [0.0, 0.0, 1500.0]]])
     joints = np.concatenate([joints, joints + np.array([100.0, 0.0, 0.0])])  # 1 m/s sideways
