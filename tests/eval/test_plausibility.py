@@ -42,10 +42,14 @@ def _take(seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return t, joints, markers
 
 
-def test_a_joint_step_the_inputs_do_not_make_is_flagged_on_exactly_its_frame() -> None:
+def test_a_joint_step_the_inputs_do_not_make_is_flagged_on_exactly_its_frame(
+    monkeypatch,
+) -> None:
     t, joints, markers = _take()
     joints[10:, 1] += [200.0, 0.0, 0.0]  # 200 mm in one frame: 10 m/s
     inp = nearest_input_speeds(t, joints, markers)
+    monkeypatch.setattr(plausibility, "_FRAME_CHUNK", 3)  # in chunks of frames: the same
+    np.testing.assert_array_equal(nearest_input_speeds(t, joints, markers), inp)
     check = check_motion(t, ("a", "b", "c"), joints, inp, BOUND, 1200.0)
     assert np.argwhere(check.joint_flags).tolist() == [[10, 1]]
     np.testing.assert_allclose(check.speed_mm_s[10, 1], 10000.0, rtol=0.01)
@@ -158,7 +162,7 @@ def test_a_bone_rolling_faster_than_the_limit_is_flagged(monkeypatch) -> None:
         "l_hand",
     )
     # chunked as one pass: the same steps
-    monkeypatch.setattr(plausibility, "_ROLL_CHUNK", 7)
+    monkeypatch.setattr(plausibility, "_FRAME_CHUNK", 7)
     names, speeds = roll_speeds_deg_s(sk, t, q)
     _, steps = roll_steps_deg(sk, q)
     np.testing.assert_allclose(speeds[1:], steps / DT_S, atol=1e-9)

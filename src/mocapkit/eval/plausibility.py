@@ -40,9 +40,10 @@ FRAME_COLUMNS: tuple[str, ...] = (
 )
 NAME_COLUMNS: tuple[str, ...] = ("worst_joint", "worst_roll_bone")
 
-#: Frames of poses turned into world rotations at a time by `roll_speeds_deg_s` (its
-#: memory stays flat as a recording grows).
-_ROLL_CHUNK = 2048
+#: Frames handled at a time by `roll_speeds_deg_s` (poses turned into world rotations)
+#: and `nearest_input_speeds` (joint-to-input distances): memory stays flat as a
+#: recording grows.
+_FRAME_CHUNK = 2048
 
 
 @dataclass(frozen=True)
@@ -129,12 +130,14 @@ def nearest_input_speeds(
             top = np.max(np.where(np.isfinite(speed[:, members]), speed[:, members], -1.0), axis=1)
             fastest[:, members] = np.where(top >= 0, top, np.nan)[:, None]
         speed = np.where(np.isfinite(speed), fastest, np.nan)  # the nearest one must be seen
-    dist = np.linalg.norm(j[:-1, :, None, :] - m[:-1, None, :, :], axis=3)  # (T - 1, K, M)
-    dist = np.where(np.isfinite(dist), dist, np.inf)
-    nearest = np.argmin(dist, axis=2)  # (T - 1, K)
-    has = np.isfinite(np.take_along_axis(dist, nearest[..., None], axis=2)[..., 0])
-    picked = np.take_along_axis(speed, nearest, axis=1)
-    out[1:] = np.where(has, picked, np.nan)
+    for a in range(0, t.shape[0] - 1, _FRAME_CHUNK):  # (frames, K, M) at a time: flat memory
+        b = min(a + _FRAME_CHUNK, t.shape[0] - 1)
+        dist = np.linalg.norm(j[a:b, :, None, :] - m[a:b, None, :, :], axis=3)
+        dist = np.where(np.isfinite(dist), dist, np.inf)
+        nearest = np.argmin(dist, axis=2)  # (frames, K)
+        has = np.isfinite(np.take_along_axis(dist, nearest[..., None], axis=2)[..., 0])
+        picked = np.take_along_axis(speed[a:b], nearest, axis=1)
+        out[a + 1 : b + 1] = np.where(has, picked, np.nan)
     return out
 
 
@@ -287,8 +290,8 @@ def roll_speeds_deg_s(
     qa = np.asarray(q, dtype=float)
     names, _ = roll_steps_deg(skeleton, qa[:1])
     out = np.full((t.shape[0], len(names)), np.nan)
-    for a in range(0, max(t.shape[0] - 1, 0), _ROLL_CHUNK):
-        b = min(a + _ROLL_CHUNK, t.shape[0] - 1)
+    for a in range(0, max(t.shape[0] - 1, 0), _FRAME_CHUNK):
+        b = min(a + _FRAME_CHUNK, t.shape[0] - 1)
         _, steps = roll_steps_deg(skeleton, qa[a : b + 1])
         out[a + 1 : b + 1] = steps / np.diff(t[a : b + 1])[:, None]
     return names, out
