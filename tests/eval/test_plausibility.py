@@ -98,6 +98,15 @@ def test_a_set_moves_as_fast_as_its_fastest_marker() -> None:
     np.testing.assert_allclose(nearest_input_speeds(t, joints, markers, [0, 0, 1])[1], [1000.0])
     with pytest.raises(ShapeError, match="groups: expected 3 group labels"):
         nearest_input_speeds(t, joints, markers, [0, 1])
+    # only the fast marker may show the joint's motion (its limb's); none: all may
+    np.testing.assert_allclose(
+        nearest_input_speeds(t, joints, markers, candidates=[[False, False, True]])[1], [5000.0]
+    )
+    np.testing.assert_allclose(
+        nearest_input_speeds(t, joints, markers, candidates=[[False, False, False]])[1], [0.0]
+    )
+    with pytest.raises(ShapeError, match=r"candidates: expected shape \(1, 3\)"):
+        nearest_input_speeds(t, joints, markers, candidates=[[True, False]])
 
 
 def test_the_bound_is_factor_times_the_input_plus_the_floor() -> None:

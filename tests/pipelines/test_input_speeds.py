@@ -5,7 +5,12 @@ from __future__ import annotations
 import numpy as np
 
 from mocapkit.io.motion import Motion
-from mocapkit.pipelines.input_speeds import marker_input_speeds, pixel_input_speeds
+from mocapkit.pipelines.hybrid import hybrid_skeleton
+from mocapkit.pipelines.input_speeds import (
+    limb_candidates,
+    marker_input_speeds,
+    pixel_input_speeds,
+)
 from mocapkit.skeleton import load_preset
 from tests.eval.test_plausibility import camera_at
 
@@ -46,3 +51,17 @@ def test_keypoints_are_matched_to_the_joints_by_name() -> None:
     np.testing.assert_allclose(speeds[1], [1000.0, 1000.0], rtol=1e-6)
     only_neck = pixel_input_speeds([cam], [px[:, :1]], ("neck",), motion)
     assert np.isnan(only_neck[1, 0]) and np.isfinite(only_neck[1, 1])
+
+
+def test_a_joint_is_shown_by_the_sets_on_its_limb() -> None:
+    sk = hybrid_skeleton(1750.0)
+    sets = ["head", "left_hand", "right_hand", "pelvis", "left_foot", "nowhere"]
+    joints = ("right_elbow", "left_shoulder", "pelvis", "head", "right_knee")
+    cand = limb_candidates(sk, joints, sets)
+    assert cand.tolist() == [
+        [False, False, True, True, False, True],  # its hand below, the pelvis above
+        [False, True, False, True, False, True],
+        [True, True, True, True, True, True],  # the root: every set hangs below it
+        [True, False, False, True, False, True],
+        [False, False, False, True, False, True],  # no right foot set: the pelvis
+    ]

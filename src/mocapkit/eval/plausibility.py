@@ -85,16 +85,17 @@ def nearest_input_speeds(
     joints_mm: ArrayLike,
     inputs_mm: ArrayLike,
     groups: Sequence[int] | None = None,
+    candidates: ArrayLike | None = None,
 ) -> FloatArray:
     """Per frame and joint, the speed (mm/s) of the inputs nearest the joint.
 
-    The nearest input is taken among those seen on the frame before, by distance to the
-    joint there (before any jump of the joint on this frame); the speed of its group
-    from that frame to this one (its fastest member seen on both: the markers of one set
-    are on one segment, any point of which, the joint it drives included, may move as
-    fast as its fastest marker as the segment turns) is the joint's evidence, NaN where
-    the nearest input is missing on this frame (no evidence, nothing to flag) or the
-    joint has no position on the frame before.
+    The nearest input is taken among the joint's ``candidates`` seen on the frame
+    before, by distance to the joint there (before any jump of the joint on this frame);
+    the speed of its group from that frame to this one (its fastest member seen on both:
+    the markers of one set are on one segment, any point of which, the joint it drives
+    included, may move as fast as its fastest marker as the segment turns) is the
+    joint's evidence, NaN where the nearest input is missing on this frame (no evidence,
+    nothing to flag) or the joint has no position on the frame before.
 
     Parameters
     ----------
@@ -104,6 +105,9 @@ def nearest_input_speeds(
         The input points the tracker used (markers of its sets), NaN where unseen.
     groups : sequence of int, optional
         Per input, its group (its marker set); default: each input its own.
+    candidates : (K, M) bool array-like, optional
+        Per joint, the inputs that may show its motion (those on its limb,
+        `mocapkit.skeleton` chains); default all, and all for a joint with none.
 
     Returns
     -------
@@ -119,6 +123,14 @@ def nearest_input_speeds(
     out = np.full(j.shape[:2], np.nan)
     if t.shape[0] < 2 or m.shape[1] == 0:
         return out
+    cand = np.ones((j.shape[1], m.shape[1]), dtype=bool)
+    if candidates is not None:
+        cand = np.array(candidates, dtype=bool)
+        if cand.shape != (j.shape[1], m.shape[1]):
+            raise ShapeError(
+                f"candidates: expected shape ({j.shape[1]}, {m.shape[1]}), found {cand.shape}"
+            )
+        cand[~cand.any(axis=1)] = True
     speed = frame_speeds_mm_s(t, m)[1:]  # (T - 1, M)
     if groups is not None:
         g = np.asarray(groups)
@@ -133,7 +145,7 @@ def nearest_input_speeds(
     for a in range(0, t.shape[0] - 1, _FRAME_CHUNK):  # (frames, K, M) at a time: flat memory
         b = min(a + _FRAME_CHUNK, t.shape[0] - 1)
         dist = np.linalg.norm(j[a:b, :, None, :] - m[a:b, None, :, :], axis=3)
-        dist = np.where(np.isfinite(dist), dist, np.inf)
+        dist = np.where(np.isfinite(dist) & cand, dist, np.inf)
         nearest = np.argmin(dist, axis=2)  # (frames, K)
         has = np.isfinite(np.take_along_axis(dist, nearest[..., None], axis=2)[..., 0])
         picked = np.take_along_axis(speed[a:b], nearest, axis=1)

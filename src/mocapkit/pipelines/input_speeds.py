@@ -3,9 +3,10 @@ tracker's inputs show near that joint (`mocapkit.pipelines.run.InputSpeeds`), fr
 the runner judges whether the result's motion is plausible
 (`mocapkit.eval.plausibility`).
 
-- Markers (the hybrid): the speed of the marker nearest the joint among those the
-  tracker used (its sets' members): the marker on the joint's own segment where there is
-  one, and the closest observed motion elsewhere (`marker_input_speeds`).
+- Markers (the hybrid): the speed of the set of the marker nearest the joint among those
+  the tracker used on the joint's limb (its sets' members; `limb_candidates`): the
+  marker on the joint's own segment where there is one, and the closest observed motion
+  elsewhere (`marker_input_speeds`).
 - 2-D keypoints in calibrated views (stereo, multi-view, mono): two or more views, the
   speed of the joint's keypoints triangulated; one view (mono), the keypoint's image
   speed times the joint's depth over the focal length (a lateral speed): a single view
@@ -21,6 +22,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from mocapkit.camera.pinhole import Camera
+from mocapkit.errors import MocapError
 from mocapkit.eval.plausibility import (
     nearest_input_speeds,
     triangulated_speeds_mm_s,
@@ -31,8 +33,55 @@ from mocapkit.io.motion import Motion
 from mocapkit.io.session import Session
 from mocapkit.io.session_csv import Keypoints
 from mocapkit.pipelines.run import InputSpeeds
+from mocapkit.skeleton.model import Skeleton
 
 FloatArray = NDArray[np.float64]
+
+
+def limb_candidates(
+    skeleton: Skeleton, joint_names: Sequence[str], sets: Sequence[str]
+) -> NDArray[np.bool_]:
+    """(K, M): which markers may show each canonical joint's motion: those whose set's
+    effector (`mocapkit.tracking.hybrid.tracker.marker_set_effectors`) hangs below the
+    joint or carries it (on the chain from the root through the joint and below it), so
+    a hand held near the other arm's elbow is not that elbow's evidence. A marker of no
+    known set (or of a set the model has no effector for) is a candidate of every
+    joint."""
+    from mocapkit.tracking.hybrid.tracker import (
+        default_marker_effectors,
+        marker_set_effectors,
+    )
+
+    try:
+        effectors = marker_set_effectors(skeleton)
+    except MocapError:  # a model without legs: the head and hand sets only
+        try:
+            effectors = default_marker_effectors(skeleton)
+        except MocapError:
+            effectors = {}
+    parents = np.asarray(skeleton.parents)
+
+    def chain(j: int) -> set[int]:  # j and its ancestors
+        out = set()
+        while j >= 0:
+            out.add(j)
+            j = int(parents[j])
+        return out
+
+    set_joint = {
+        n: skeleton.joint_index(effectors[n].joint) for n in dict.fromkeys(sets) if n in effectors
+    }
+    cand = np.ones((len(joint_names), len(sets)), dtype=bool)
+    for k, name in enumerate(joint_names):
+        if name not in skeleton.canonical:
+            continue
+        j = skeleton.joint_index(skeleton.canonical[name][0])
+        above = chain(j)
+        for i, s in enumerate(sets):
+            if s in set_joint:
+                e = set_joint[s]
+                cand[k, i] = e in above or j in chain(e)
+    return cand
 
 
 def marker_input_speeds(
@@ -41,7 +90,8 @@ def marker_input_speeds(
     """`InputSpeeds` from the markers a tracker used, (Tm, M, 3) at ``marker_time_s``, in
     the motion's frame, with each marker's set (M names): each frame sees the newest
     marker sample at or before it (as a session's samples do), and each joint the speed
-    of the set of its nearest marker (`mocapkit.eval.plausibility.nearest_input_speeds`)."""
+    of the set of its nearest marker on its limb (`limb_candidates`;
+    `mocapkit.eval.plausibility.nearest_input_speeds`)."""
     labels = {n: k for k, n in enumerate(dict.fromkeys(sets))}
     groups = [labels[n] for n in sets]
     mt = np.asarray(marker_time_s, dtype=float)
@@ -51,7 +101,8 @@ def marker_input_speeds(
         rows = np.searchsorted(mt, motion.time_s + 1e-9, side="right") - 1
         at = m[np.clip(rows, 0, max(mt.shape[0] - 1, 0))].copy()
         at[rows < 0] = np.nan
-        return nearest_input_speeds(motion.time_s, motion.joints_mm, at, groups)
+        candidates = limb_candidates(motion.skeleton, motion.joint_names, sets)
+        return nearest_input_speeds(motion.time_s, motion.joints_mm, at, groups, candidates)
 
     return speeds
 
