@@ -15,8 +15,10 @@ Usage::
 or a raw C3D); ``--names`` restricts the input speeds to the markers the tracker used.
 ``--session`` is the session folder the result was tracked from (markerless input): per
 canonical joint of ``joints.csv``, its peak speed against the truth's (``truth.npz``, a
-synthetic session) and, per camera, its image speed (the joint projected) against the 2-D
-keypoints' own (the detections' motion, px/s).
+synthetic session) and the frames on which it moves faster than the cameras' 2-D
+keypoints show (the rule of fit.csv's plausibility columns,
+`mocapkit.eval.plausibility`). With a ``fit.csv`` holding those columns, its spans of
+implausible motion are listed as ``mocapkit track`` warns of them.
 """
 
 from __future__ import annotations
@@ -31,7 +33,9 @@ from mocapkit.io.bvh import read_bvh
 from mocapkit.io.joints_csv import read_joints_csv
 from mocapkit.io.marker_files import read_markers
 from mocapkit.io.motion_npz import load_motion_npz
-from mocapkit.pipelines.run import FIT_FILE, read_fit_csv
+from mocapkit.pipelines.fit_report import implausible_spans_in_folder, implausible_warnings
+from mocapkit.pipelines.input_speeds import keypoint_input_speeds
+from mocapkit.pipelines.run import FIT_FILE, check_run_motion, read_fit_csv
 from mocapkit.skeleton.kinematics import forward_kinematics
 
 #: Bones of a leg (after the side prefix, ``l_`` or ``r_``).
@@ -97,32 +101,23 @@ def _per_joint(result: Path, session_dir: Path, factor: float) -> None:
                 f"    {n:16s} {out_peak[k] / 1000:6.2f} at {t[i + 1]:5.2f} s / "
                 f"{tr_peak[k] / 1000:5.2f}   {pops:3d}"
             )
-    if not session.keypoints:
+    evidence = keypoint_input_speeds(session, sorted(session.keypoints))
+    if evidence is None:
         return
-    # a joint's step is shown by the keypoints when some camera's keypoint moves at least
-    # 1 / factor of the joint's projected step on the same frame (or the step is < 10 px)
-    shown = np.zeros(out_speed.shape, dtype=bool)
-    for cam, kp in sorted(session.keypoints.items()):
-        px = session.camera(cam).project(joints)
-        out_px = np.linalg.norm(np.diff(px, axis=0), axis=2)
-        rows = np.clip(np.searchsorted(kp.time_s, t - 1e-6), 0, kp.time_s.shape[0] - 1)
-        kp_px = np.full(out_px.shape, np.nan)
-        for k, n in enumerate(names):
-            if n in kp.joint_names:
-                p_k = kp.pixels[rows, kp.joint_names.index(n)]
-                kp_px[:, k] = np.linalg.norm(np.diff(p_k, axis=0), axis=1)
-        with np.errstate(invalid="ignore"):
-            shown |= (out_px < 10.0) | (kp_px * factor >= out_px) | ~np.isfinite(out_px)
-    step_mm = out_speed * np.diff(t)[:, None]
-    fast = np.isfinite(out_speed) & ~shown
-    print(f"  per joint, frames whose step no camera's keypoints show (within {factor:g} x):")
+    # the runner's rule: faster than the bound on what every camera's keypoints show
+    motion = load_motion_npz(result / "motion.npz")  # the joints of joints.csv, with q
+    check = check_run_motion(motion, evidence)
+    t, names = motion.time_s, motion.joint_names
+    flags, step_mm = check.joint_flags, check.speed_mm_s * np.gradient(t)[:, None]
+    print("  per joint, frames faster than the cameras' keypoints show (fit.csv's rule):")
     for k, n in enumerate(names):
-        if fast[:, k].any():
-            i = np.flatnonzero(fast[:, k])
+        if flags[:, k].any():
+            i = np.flatnonzero(flags[:, k])
             worst = i[int(np.argmax(step_mm[i, k]))]
             print(
                 f"    {n:16s} {i.size:3d} frames, largest {step_mm[worst, k]:.0f} mm "
-                f"({out_speed[worst, k] / 1000:.2f} m/s) at {t[worst + 1]:.2f} s"
+                f"({check.speed_mm_s[worst, k] / 1000:.2f} m/s, keypoints "
+                f"{check.input_mm_s[worst, k] / 1000:.2f} m/s) at {t[worst]:.2f} s"
             )
 
 
@@ -179,6 +174,8 @@ def main() -> None:
     print(f"  frames with a joint faster than 5 m/s: {int(over.sum())}")
     fit = args.result / FIT_FILE
     if fit.is_file():
+        for line in implausible_warnings(implausible_spans_in_folder(args.result), 5):
+            print(f"  {line}")
         _, columns = read_fit_csv(fit)
         if "flips" in columns:  # the mono tracker's chosen flip code per frame
             code = columns["flips"][columns["flips"] >= 0]

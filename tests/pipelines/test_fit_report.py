@@ -79,3 +79,59 @@ def test_short_stature_warns_on_tennis_serve(shared_data):
     run = track_hybrid_marker_file(part, sets, height_mm=900.0)
     flagged = {s.name for s in summarize_fit(run.results).flagged}
     assert "head" in flagged
+
+
+def test_implausible_motion_round_trips_through_fit_csv_and_is_warned_about(
+    tmp_path, capsys
+) -> None:
+    from mocapkit.eval.plausibility import FRAME_COLUMNS, SpeedBound, check_motion
+    from mocapkit.pipelines.fit_report import (
+        implausible_spans_in_folder,
+        implausible_warnings,
+        warn_implausible,
+    )
+    from mocapkit.pipelines.run import FIT_FILE, read_fit_csv, speed_bound, write_fit_csv
+    from mocapkit.tracking.base import UNSEEN_SPEED_MM_S
+    from mocapkit.tracking.hybrid.tracker import HybridConfig
+
+    # one rule for every tracker: the hybrid re-plant's bound
+    assert speed_bound() == SpeedBound(
+        HybridConfig().replant_speed_factor, HybridConfig().replant_min_speed_mm_s
+    )
+    assert speed_bound().floor_mm_s == UNSEEN_SPEED_MM_S
+    rng = np.random.default_rng(7)
+    t = np.arange(30) / 10.0  # the times of `_result`
+    joints = np.cumsum(rng.uniform(-2.0, 2.0, (30, 2, 3)), axis=0)
+    inp = np.full((30, 2), 500.0)  # the inputs near both joints: 0.5 m/s
+    inp[0] = np.nan
+    joints[10:, 0] += [1180.0, 0, 0]  # 11.8 m/s on frames 10 and 11
+    joints[11:, 0] += [1180.0, 0, 0]
+    joints[20:, 1] += [0.0, 500.0, 0.0]  # 5 m/s on frame 20
+    check = check_motion(t, ("left_shoulder", "right_knee"), joints, inp, speed_bound(), 1200.0)
+    results = [_result(i, {"head": 5.0}) for i in range(30)]
+    (tmp_path / "r").mkdir()
+    write_fit_csv(tmp_path / "r" / FIT_FILE, results, check.columns())
+    rows, columns = read_fit_csv(tmp_path / "r" / FIT_FILE)
+    assert list(rows[0])[-len(FRAME_COLUMNS) :] == list(FRAME_COLUMNS)
+    assert [rows[i]["worst_joint"] for i in (10, 11, 20)] == ["left_shoulder"] * 2 + ["right_knee"]
+    np.testing.assert_array_equal(
+        np.flatnonzero(np.nan_to_num(columns["implausible_joints"])), [10, 11, 20]
+    )
+    np.testing.assert_allclose(columns["worst_input_speed_mm_per_s"][10], 500.0)
+    np.testing.assert_allclose(columns["worst_joint_speed_mm_per_s"][10], 11800.0, rtol=0.01)
+    assert np.isnan(columns["worst_speed_ratio"][0]) and rows[0]["worst_joint"] == ""
+    spans = implausible_spans_in_folder(tmp_path / "r")
+    assert [(s.name, s.start_s, s.end_s, s.n_frames) for s in spans] == [
+        ("left_shoulder", 1.0, 1.1, 2),
+        ("right_knee", 2.0, 2.0, 1),
+    ]
+    lines = implausible_warnings(spans, shown=1)
+    assert lines[0].startswith("WARNING: implausible motion in 2 spans (3 frames)")
+    assert lines[1] == (
+        "  left_shoulder moves 11.8 m/s at 1.00-1.10 s (2 frames) where the inputs near it "
+        "move at most 0.5 m/s"
+    )
+    assert lines[2] == "  ... and 1 more (fit.csv)"
+    warn_implausible(tmp_path / "r")
+    assert "right_knee moves 5.0 m/s at 2.00 s" in capsys.readouterr().err
+    assert implausible_warnings([]) == []

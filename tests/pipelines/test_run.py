@@ -173,3 +173,26 @@ def test_run_tracker_drains_a_delayed_tracker_and_takes_its_joints(tmp_path) -> 
     np.testing.assert_allclose(numeric["time_s"], t, atol=1e-9)
     with pytest.raises(UnknownNameError, match="elbow_tip"):
         run_tracker(LaggedReplay(sk, 1), zip(t, q), 7, joint_names=("elbow_tip",))
+
+
+def test_run_tracker_writes_the_plausibility_of_the_motion_against_the_inputs(tmp_path) -> None:
+    sk = load_preset("upper_stick")
+    q = np.tile(sk.zero_pose(), (6, 1))
+    q[4:, arm(sk, "right").dofs[0]] += 0.5  # the right arm swings in one frame
+    t = np.arange(6) * 0.02
+    still = run_tracker(
+        ReplayTracker(sk),
+        zip(t, q),
+        6,
+        tmp_path / "still",
+        input_speeds=lambda m: np.zeros(m.joints_mm.shape[:2]),  # the inputs keep still
+    )
+    rows, numeric = read_fit_csv(tmp_path / "still" / FIT_FILE)
+    moved = np.flatnonzero(np.nan_to_num(numeric["implausible_joints"]))
+    assert moved.tolist() == [4] and rows[4]["worst_joint"].startswith("right_")
+    assert numeric["worst_input_speed_mm_per_s"][4] == 0.0
+    assert np.isnan(numeric["implausible_joints"][0])
+    run_tracker(ReplayTracker(sk), zip(t, q), 6, tmp_path / "none")  # no evidence
+    _, numeric = read_fit_csv(tmp_path / "none" / FIT_FILE)
+    assert np.isnan(numeric["implausible_joints"]).all()
+    assert len(still.results) == 6

@@ -352,3 +352,34 @@ def test_view_truth_on_a_session_without_truth_says_so(npz_result, small_session
     assert code == 2
     assert re.search(r"mocapkit view: error: .*no_truth.*truth.npz", capsys.readouterr().err)
     assert not (tmp_path / "r").exists()
+
+
+def test_report_lists_the_spans_of_implausible_motion(npz_result, tmp_path):
+    from mocapkit.eval.plausibility import SpeedBound, check_motion
+    from mocapkit.io.motion_npz import load_motion_npz
+    from mocapkit.pipelines.run import write_fit_csv
+    from mocapkit.tracking.base import FrameResult
+
+    result = tmp_path / "result"
+    shutil.copytree(npz_result, result)
+    motion = load_motion_npz(result / "motion.npz")
+    # the inputs keep still: the sway (up to 0.6 m/s) is allowed, a 2 m/s step is not
+    joints = np.array(motion.joints_mm, copy=True)
+    joints[20:, motion.joint_names.index("head")] += [
+        0.0,
+        0.0,
+        2000.0 * (motion.time_s[20] - motion.time_s[19]),
+    ]
+    still = np.zeros(joints.shape[:2])
+    check = check_motion(
+        motion.time_s, motion.joint_names, joints, still, SpeedBound(1.5, 1000.0), 1200.0
+    )
+    results = [
+        FrameResult(float(t), np.zeros(1), np.zeros((1, 3)), {}, {}, "") for t in motion.time_s
+    ]
+    write_fit_csv(result / "fit.csv", results, check.columns())
+    page = build_report(result, out_dir=tmp_path / "rep")
+    text = page.read_text(encoding="utf-8")
+    assert "WARNING: implausible motion in 1 span (1 frame)" in text
+    assert f"head moves 2.0 m/s at {motion.time_s[20]:.2f} s" in text
+    assert column_unit("worst_roll_deg_per_s") == "deg/s"

@@ -180,7 +180,12 @@ def _run_hybrid(args: argparse.Namespace) -> int:
 
     from mocapkit.io.lab_frame import parse_up
     from mocapkit.io.marker_files import read_markers
-    from mocapkit.pipelines.fit_report import WARN_FRACTION, WARN_MM, summarize_fit
+    from mocapkit.pipelines.fit_report import (
+        WARN_FRACTION,
+        WARN_MM,
+        summarize_fit,
+        warn_implausible,
+    )
     from mocapkit.pipelines.hybrid import track_hybrid_session_run
     from mocapkit.pipelines.hybrid_markers import track_hybrid_marker_file
     from mocapkit.pipelines.hybrid_options import HybridRunOptions
@@ -261,6 +266,7 @@ def _run_hybrid(args: argparse.Namespace) -> int:
     print("\n".join(report.lines()))
     for line in report.warnings():
         print(line, file=sys.stderr)
+    warn_implausible(args.out)
     return 0
 
 

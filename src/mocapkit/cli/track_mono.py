@@ -119,6 +119,7 @@ def add_mono_parser(methods: Any) -> None:
 
 
 def _run_mono(args: argparse.Namespace) -> int:
+    from mocapkit.pipelines.fit_report import warn_implausible
     from mocapkit.pipelines.mono import (
         SkinOptions,
         costume_skin_options,
@@ -173,6 +174,7 @@ def _run_mono(args: argparse.Namespace) -> int:
     if not args.json:  # limbs unseen past the bridge: NaN joints, status in fit.csv
         for gap in find_gaps(run.results):
             print(f"gap: {gap}")
+    warn_implausible(args.out)
     if args.json:
         print(json.dumps(summary, indent=2))
     else:

@@ -128,6 +128,7 @@ def _run(args: argparse.Namespace) -> int:
 
     from mocapkit.errors import ConfigError
     from mocapkit.io.session import load_session
+    from mocapkit.pipelines.fit_report import warn_implausible
     from mocapkit.pipelines.multiview import resolve_stereo_method
     from mocapkit.pipelines.run import find_gaps
     from mocapkit.pipelines.stereo import evaluate_stereo, track_stereo_session
@@ -187,6 +188,7 @@ def _run(args: argparse.Namespace) -> int:
         print(f"gap: {gap}")
     for jump in run.jumps:
         print(f"warning: {jump}")
+    warn_implausible(args.out)
     fps = run.motion.n_frames / max(run.seconds, 1e-9)
     print(f"tracked {run.motion.n_frames} frames in {run.seconds:.1f} s ({fps:.1f} frames/s)")
     print(f"wrote {args.out}")
@@ -209,6 +211,7 @@ def _run_fit(args: argparse.Namespace, session: Session) -> int:
 
     from mocapkit.errors import ConfigError
     from mocapkit.pipelines.accuracy import evaluate_result
+    from mocapkit.pipelines.fit_report import warn_implausible
     from mocapkit.pipelines.multiview import track_multiview_session
     from mocapkit.pipelines.run import find_gaps
 
@@ -235,6 +238,7 @@ def _run_fit(args: argparse.Namespace, session: Session) -> int:
         f"smoothing {cfg.smoothing}"
     )
     print(f"wrote {args.out}")
+    warn_implausible(args.out)
     if (Path(args.session) / "truth.npz").is_file():
         rep = evaluate_result(args.out, args.session)
         if args.json:

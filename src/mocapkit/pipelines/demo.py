@@ -35,6 +35,7 @@ import numpy as np
 
 from mocapkit.eval.metrics import EvalReport, evaluate_result
 from mocapkit.io.motion import Motion
+from mocapkit.pipelines.fit_report import implausible_spans_in_folder, implausible_warnings
 from mocapkit.pipelines.hybrid import track_hybrid_session
 from mocapkit.pipelines.mono import track_mono
 from mocapkit.pipelines.report import build_report
@@ -358,5 +359,8 @@ def _run(
         say("warning: a tracker produced no comparable pose")
     for jump in elbow_jumps_in_folder(rows["stereo"].result_dir):
         say(f"warning: stereo: {jump}")
+    for name, row in rows.items():  # motion faster than the inputs show: count and worst
+        for line in implausible_warnings(implausible_spans_in_folder(row.result_dir), 1)[:2]:
+            say(f"{name}: {line.strip()}")
     say(f"report: {index}")
     return DemoResult(out, session, rows, variants, index)

@@ -5,17 +5,27 @@ effector's distance to its marker set) of a run and gives, per set, the mean and
 over the frames where the set was seen and the share of those frames further than a
 threshold; `FitReport.lines` prints it and `FitReport.warnings` names the sets that miss
 on too many frames (a wrong marker set, a wrong stature, a mislabelled marker).
+
+`implausible_spans` reads fit.csv's plausibility columns (every tracker's,
+`mocapkit.eval.plausibility`) back into spans of frames where a joint moved faster than
+its inputs allow or a bone rolled too fast, and `implausible_warnings` says where, the
+worst first.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+import os
+import sys
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from mocapkit.errors import ConfigError
+from mocapkit.io.markers import true_runs
+from mocapkit.pipelines.run import FIT_FILE, ROLL_LIMIT_DEG_S, read_fit_csv
 from mocapkit.tracking.base import FrameResult
 
 #: Default distance (mm) above which a set counts as off the model on a frame.
@@ -126,4 +136,135 @@ def summarize_fit(
     return FitReport(tuple(sets), len(results), float(warn_mm), float(warn_fraction))
 
 
-__all__ = ["WARN_FRACTION", "WARN_MM", "FitReport", "SetFit", "summarize_fit"]
+#: Spans of implausible joints, and of rolls, that `implausible_warnings` lists.
+SHOWN_SPANS = 3
+
+
+@dataclass(frozen=True)
+class ImplausibleSpan:
+    """Consecutive frames of implausible motion: joints faster than their inputs allow
+    (``kind`` ``"joint"``) or bones rolling faster than the limit (``"roll"``).
+
+    ``name``, ``value`` (mm/s, or deg/s for a roll) and ``input_mm_s`` (the speed of the
+    inputs near the joint; NaN for a roll) are those of the span's worst frame, the one
+    with the largest ``ratio`` of speed to allowed speed.
+    """
+
+    kind: str
+    name: str
+    start_s: float
+    end_s: float
+    n_frames: int
+    value: float
+    input_mm_s: float
+    ratio: float
+
+    def __str__(self) -> str:
+        when = f"at {self.start_s:.2f}-{self.end_s:.2f} s ({self.n_frames} frames)"
+        if self.n_frames == 1:
+            when = f"at {self.start_s:.2f} s"
+        if self.kind == "roll":
+            limit = self.value / self.ratio
+            return (
+                f"the {self.name} bone rolls {self.value:.0f} deg/s about its axis {when} "
+                f"(limit {limit:.0f} deg/s)"
+            )
+        return (
+            f"{self.name} moves {self.value / 1000:.1f} m/s {when} where the inputs near it "
+            f"move at most {self.input_mm_s / 1000:.1f} m/s"
+        )
+
+
+def implausible_spans(
+    rows: Sequence[Mapping[str, str]], columns: Mapping[str, np.ndarray]
+) -> list[ImplausibleSpan]:
+    """The spans of fit.csv's frames with implausible joints or rolls, in time order.
+
+    Parameters
+    ----------
+    rows, columns
+        fit.csv as `mocapkit.pipelines.run.read_fit_csv` returns it; without the
+        plausibility columns (an older result) there are no spans.
+    """
+    t = np.asarray(columns["time_s"], dtype=float)
+    kinds = (
+        ("joint", "implausible_joints", "worst_joint", "worst_joint_speed_mm_per_s"),
+        ("roll", "implausible_rolls", "worst_roll_bone", "worst_roll_deg_per_s"),
+    )
+    out = []
+    for kind, count, name, value in kinds:
+        if count not in columns:
+            continue
+        flag = np.nan_to_num(np.asarray(columns[count], dtype=float)) > 0
+        v = np.asarray(columns[value], dtype=float)
+        if kind == "joint":
+            ratio = np.asarray(columns["worst_speed_ratio"], dtype=float)
+            inp = np.asarray(columns["worst_input_speed_mm_per_s"], dtype=float)
+        else:
+            ratio, inp = v / ROLL_LIMIT_DEG_S, np.full(t.shape, np.nan)
+        for a, b in true_runs(flag):
+            i = a + int(np.nanargmax(ratio[a:b]))
+            out.append(
+                ImplausibleSpan(
+                    kind,
+                    rows[i][name],
+                    float(t[a]),
+                    float(t[b - 1]),
+                    int(b - a),
+                    float(v[i]),
+                    float(inp[i]),
+                    float(ratio[i]),
+                )
+            )
+    return sorted(out, key=lambda s: (s.start_s, s.kind))
+
+
+def implausible_spans_in_folder(result_dir: str | os.PathLike[str]) -> list[ImplausibleSpan]:
+    """`implausible_spans` of a result folder's fit.csv."""
+    rows, columns = read_fit_csv(Path(result_dir) / FIT_FILE)
+    return implausible_spans(rows, columns)
+
+
+def implausible_warnings(spans: Sequence[ImplausibleSpan], shown: int = SHOWN_SPANS) -> list[str]:
+    """The end-of-run warning about implausible motion: a count, the ``shown`` worst
+    spans of joints and of rolls (largest ratio to the allowed speed), then how many
+    more; nothing without spans."""
+    if not spans:
+        return []
+    n_frames = sum(s.n_frames for s in spans)
+    worst = [
+        s
+        for kind in ("joint", "roll")
+        for s in sorted((s for s in spans if s.kind == kind), key=lambda s: -s.ratio)[:shown]
+    ]
+    out = [
+        f"WARNING: implausible motion in {len(spans)} span{'s' if len(spans) != 1 else ''} "
+        f"({n_frames} frame{'s' if n_frames != 1 else ''}): faster than the inputs show "
+        "(fit.csv's implausible_joints, implausible_rolls); check those frames before using "
+        "them"
+    ]
+    out += [f"  {s}" for s in worst]
+    if len(spans) > len(worst):
+        out.append(f"  ... and {len(spans) - len(worst)} more (fit.csv)")
+    return out
+
+
+def warn_implausible(result_dir: str | os.PathLike[str]) -> None:
+    """Print `implausible_warnings` of a result folder to stderr (the end of a run)."""
+    for line in implausible_warnings(implausible_spans_in_folder(result_dir)):
+        print(line, file=sys.stderr)
+
+
+__all__ = [
+    "SHOWN_SPANS",
+    "WARN_FRACTION",
+    "WARN_MM",
+    "FitReport",
+    "ImplausibleSpan",
+    "SetFit",
+    "implausible_spans",
+    "implausible_spans_in_folder",
+    "implausible_warnings",
+    "summarize_fit",
+    "warn_implausible",
+]

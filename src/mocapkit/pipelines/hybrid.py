@@ -18,6 +18,7 @@ from numpy.typing import ArrayLike, NDArray
 from mocapkit.errors import ConfigError, SessionError, unknown_name
 from mocapkit.io.motion import Motion
 from mocapkit.pipelines.camera_check import check_session_cameras
+from mocapkit.pipelines.input_speeds import marker_input_speeds
 from mocapkit.pipelines.run import (
     RunResult,
     run_tracker,
@@ -428,6 +429,8 @@ def track_hybrid_session_run(
         session, paper, use_video, config, oriented_sets, clavicle, twist, refine_config
     )
     wanted = member_markers(cfg)
+    # the markers the sets are made of: the inputs whose motion the result is held to
+    used = [(n, m) for n in MARKER_SETS for m in session.marker_sets[n]]
     check_posture(posture)
     if posture != "standing":
         head_z = positions[:, MARKER_SETS.index("head"), 2]
@@ -475,6 +478,11 @@ def track_hybrid_session_run(
         source=f"hybrid tracker ({mode}, video="
         f"{'on' if cfg.use_video else 'off'}{seated}, camera {cams[0]}) on {session.path}",
         timer=timer,
+        input_speeds=marker_input_speeds(
+            session.markers.time_s,
+            session.markers.select([m for _, m in used]).positions_mm,
+            [n for n, _ in used],
+        ),
     )
 
 

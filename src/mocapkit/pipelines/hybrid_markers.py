@@ -27,6 +27,7 @@ from mocapkit.pipelines.hybrid import (
     require_observed_sets,
     seated_skeleton,
 )
+from mocapkit.pipelines.input_speeds import marker_input_speeds
 from mocapkit.pipelines.run import (
     check_result_folder,
     run_tracker,
@@ -248,9 +249,16 @@ def track_hybrid_marker_arrays(
     run = run_tracker(tracker, samples, t.size, None, label, source=source, timer=timer)
     poses = [p for p in run.results if isinstance(p, HybridPose)]
     if out_dir is not None:
+        # the inputs: the sets' positions and the members given
+        used = np.stack([*arrays.values(), *members.values()], axis=1)
+        set_of = {m: n for n, ms in cfg.member_offsets_mm.items() for m in ms}
+        of_set = [*arrays, *(set_of.get(m, m) for m in members)]
         with timer.stage("write"):
             write_run_folder(
-                out_dir, drop_unobserved_arms(run.motion, arrays, run.results), run.results
+                out_dir,
+                drop_unobserved_arms(run.motion, arrays, run.results),
+                run.results,
+                marker_input_speeds(t, used, of_set),
             )
     return sk, np.asarray(run.motion.q), poses
 
@@ -529,8 +537,15 @@ def track_hybrid_marker_file(
             source,
         )
     if out_dir is not None:
+        # the markers the sets are made of, in the frame of the motion's joints
+        used = np.stack([world.trajectory(m) for s in sets for m in s.all_members], axis=1)
+        if not world_output:
+            used = frame.lab_from_world_points(used)
+        of_set = [s.name for s in sets for _ in s.all_members]
         with timer.stage("write"):
-            write_run_folder(out_dir, motion, poses)
+            write_run_folder(
+                out_dir, motion, poses, marker_input_speeds(world.time_s, used, of_set)
+            )
     return MarkerFileRun(motion, frame, list(poses), choice, calib, note, floor_warning)
 
 

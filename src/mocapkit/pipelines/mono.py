@@ -16,6 +16,7 @@ import os
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +36,7 @@ from mocapkit.io.openpose import (
 from mocapkit.io.session import Session, load_session
 from mocapkit.io.session_csv import Keypoints, read_keypoints_csv
 from mocapkit.pipelines.camera_check import check_session_cameras, warn_placed_subject
+from mocapkit.pipelines.input_speeds import pixel_input_speeds
 from mocapkit.pipelines.mono_frames import MonoFrames, camera_joints
 from mocapkit.pipelines.result_table import ResultTable
 from mocapkit.pipelines.run import check_result_folder, run_tracker
@@ -828,6 +830,7 @@ def track_mono(
         source=f"mono tracker (camera {cam_name}) on {session.path}",
         joint_names=stream.joint_names,
         keep_results=False,
+        input_speeds=partial(pixel_input_speeds, [cam], [px], model.joint_names),
     )
     recorded.frames.sort()
     warn_placed_subject(session, cam_name, run.motion.joints_mm, run.motion.joint_names)

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from mocapkit.errors import SessionError, unknown_name
 from mocapkit.io.markers import true_runs
 from mocapkit.io.motion import Motion
+from mocapkit.pipelines.input_speeds import pixel_input_speeds
 from mocapkit.pipelines.run import run_tracker, write_run_folder
 from mocapkit.skeleton.model import Skeleton
 from mocapkit.skeleton.smoothing import filter_poses
@@ -232,7 +233,12 @@ def track_multiview_session(
     far = far_spans(run.results, tracker.names)
     out = None
     if out_dir is not None:
-        out = write_run_folder(out_dir, motion, run.results)
+        out = write_run_folder(
+            out_dir,
+            motion,
+            run.results,
+            partial(pixel_input_speeds, cams, list(pixels), joint_names),
+        )
     return MultiviewRun(motion, run.results, lengths, far, seconds, out)
 
 

@@ -33,6 +33,7 @@ from mocapkit.io.motion_npz import load_motion_npz
 from mocapkit.io.session import Session, load_session
 from mocapkit.io.trc import write_trc
 from mocapkit.io.truth import Truth, load_truth
+from mocapkit.pipelines.fit_report import implausible_spans_in_folder, implausible_warnings
 from mocapkit.skeleton.model import UPPER_BODY_JOINTS, Skeleton
 from mocapkit.viz.overlay_video import OverlayLayer, write_overlay_video
 from mocapkit.viz.report.figures import (
@@ -555,11 +556,17 @@ def build_report(
         fit_path = result.folder / FIT_FILE
         if fit_path.is_file():
             fit = read_fit_table(fit_path)
+            # the spans of motion faster than the inputs show, as the run warned
+            pops = (
+                implausible_warnings(implausible_spans_in_folder(result.folder))
+                if "implausible_joints" in fit.numeric
+                else []
+            )
             sections.append(
                 Section(
                     "Fit quality",
                     figures=fit_figures(fit.time_s, fit.numeric, fit.text),
-                    notes=[f"Every column of {FIT_FILE} against time."],
+                    notes=[f"Every column of {FIT_FILE} against time.", *pops],
                 )
             )
         trc_name = "joints.trc"

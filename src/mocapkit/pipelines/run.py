@@ -18,7 +18,7 @@ from __future__ import annotations
 import csv
 import math
 import os
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,12 +27,19 @@ import numpy as np
 from numpy.typing import NDArray
 
 from mocapkit.errors import ShapeError, unknown_name
+from mocapkit.eval.plausibility import (
+    NAME_COLUMNS,
+    MotionCheck,
+    SpeedBound,
+    check_motion,
+)
 from mocapkit.io.atomic import (
     atomic_folder,
     atomic_write,
     check_own_folder,
     remove_stale_temporaries,
 )
+from mocapkit.io.bvh import MAX_ROLL_SPEED_RAD_S
 from mocapkit.io.motion import Motion
 from mocapkit.io.motion_files import write_result_folder
 from mocapkit.io.opensim import write_opensim_folder
@@ -53,6 +60,44 @@ from mocapkit.tracking.base import (
 
 #: Name of the per-frame fit and status file in a result folder.
 FIT_FILE = "fit.csv"
+
+#: What a pipeline passes the runner so it can hold the result against the inputs: the
+#: motion (its canonical joints) -> the speed (mm/s) the inputs show near each joint on
+#: each frame, (T, K), NaN without evidence (`mocapkit.eval.plausibility`).
+InputSpeeds = Callable[[Motion], NDArray[np.float64]]
+
+#: Fastest a bone may roll about its own axis (deg/s): the BVH writer's limit, so a
+#: flagged roll is one the BVH slows down.
+ROLL_LIMIT_DEG_S = float(np.rad2deg(MAX_ROLL_SPEED_RAD_S))
+
+
+def speed_bound() -> SpeedBound:
+    """The speed a joint may move at given its input's: the hybrid re-plant's bound
+    (`mocapkit.tracking.hybrid.tracker.HybridConfig.replant_speed_factor` times the
+    input's speed plus `mocapkit.tracking.base.UNSEEN_SPEED_MM_S` for what no input
+    shows), one rule for every tracker."""
+    from mocapkit.tracking.base import UNSEEN_SPEED_MM_S
+    from mocapkit.tracking.hybrid.tracker import HybridConfig
+
+    return SpeedBound(HybridConfig.replant_speed_factor, UNSEEN_SPEED_MM_S)
+
+
+def check_run_motion(motion: Motion, input_speeds: InputSpeeds | None = None) -> MotionCheck:
+    """`mocapkit.eval.plausibility.check_motion` of a result: its canonical joints (NaN
+    where not observed) against ``input_speeds(motion)``, its poses' bone rolls against
+    `ROLL_LIMIT_DEG_S`."""
+    return check_motion(
+        motion.time_s,
+        motion.joint_names,
+        motion.joints_mm,
+        None if input_speeds is None else input_speeds(motion),
+        speed_bound(),
+        ROLL_LIMIT_DEG_S,
+        motion.skeleton,
+        motion.q,
+    )
+
+
 #: The result folder's OpenSim export (`mocapkit.io.opensim.write_opensim_folder`).
 OPENSIM_FOLDER = "opensim"
 
@@ -101,6 +146,7 @@ def run_tracker(
     skeleton: Skeleton | None = None,
     joint_names: Sequence[str] | None = None,
     keep_results: bool = True,
+    input_speeds: InputSpeeds | None = None,
 ) -> RunResult:
     """Stream ``samples`` through ``tracker.update`` and write the result folder.
 
@@ -134,6 +180,9 @@ def run_tracker(
         Keep the tracker's result objects (its own fields, as a pipeline reads them);
         False: only their common fields, in a `ResultTable` (about a quarter of the
         memory per frame: what keeps a long recording's run flat).
+    input_speeds : callable, optional
+        The speed the inputs show near each joint (`InputSpeeds`), for fit.csv's
+        plausibility columns (`write_run_folder`).
 
     Raises
     ------
@@ -178,7 +227,7 @@ def run_tracker(
     out = None
     if out_dir is not None:
         with timer.stage("write"):
-            out = write_run_folder(out_dir, motion, results)
+            out = write_run_folder(out_dir, motion, results, input_speeds)
     if isinstance(results, ResultTable):
         return RunResult(motion, [], out, results)
     return RunResult(motion, results, out)
@@ -420,7 +469,10 @@ def check_result_folder(out_dir: str | os.PathLike[str]) -> Path:
 
 
 def write_run_folder(
-    out_dir: str | os.PathLike[str], motion: Motion, results: Sequence[FrameResult]
+    out_dir: str | os.PathLike[str],
+    motion: Motion,
+    results: Sequence[FrameResult],
+    input_speeds: InputSpeeds | None = None,
 ) -> Path:
     """Write a result folder whole: ``motion.npz``, ``joints.csv``, ``motion.bvh``
     (`mocapkit.io.motion_files.write_result_folder`), ``fit.csv`` (`write_fit_csv`) and
@@ -438,13 +490,19 @@ def write_run_folder(
     (``.NAME.new-*``, ``.NAME.old-*``) is cleared first
     (`mocapkit.io.atomic.remove_stale_temporaries`). Shared by `run_tracker` and the
     trackers that need the whole sequence before their motion exists; returns the folder.
+
+    fit.csv gets the plausibility columns (`mocapkit.eval.plausibility.FRAME_COLUMNS`)
+    of the written motion (`check_run_motion`: its joints against ``input_speeds``, its
+    poses' rolls), computed after the tracking.
     """
     out = check_result_folder(out_dir)
     motion = unobserved_to_nan(motion, results)
     remove_stale_temporaries(out.parent, out.name)
+    posed = motion_for_bvh(motion, results)
+    check = check_run_motion(posed, input_speeds)
     with atomic_folder(out) as tmp:
-        write_result_folder(tmp, motion_for_bvh(motion, results))
-        write_fit_csv(tmp / FIT_FILE, results)
+        write_result_folder(tmp, posed)
+        write_fit_csv(tmp / FIT_FILE, results, check.columns())
         write_opensim_folder(tmp / OPENSIM_FOLDER, motion)
     return out
 
@@ -458,31 +516,44 @@ def _columns(results: Sequence[FrameResult]) -> tuple[list[str], list[str]]:
     return list(status), list(fit)
 
 
-def write_fit_csv(path: str | os.PathLike[str], results: Sequence[FrameResult]) -> None:
+def write_fit_csv(
+    path: str | os.PathLike[str],
+    results: Sequence[FrameResult],
+    extra: Mapping[str, Sequence[Any] | NDArray[Any]] | None = None,
+) -> None:
     """Write per-frame statuses and fit figures as CSV, atomically.
 
     Columns: ``time_s``, ``<name>_status`` per effector or limb (``seen``, ``bridged``,
     ``released``, ``missing``; empty where a frame did not report it), then the fit
-    figures by name (``nan`` where missing) and ``worst``.
+    figures by name (``nan`` where missing), ``worst``, then the ``extra`` columns (one
+    value per result: numbers, or names as strings; the plausibility columns of
+    `write_run_folder`), left out when their length is not the results'.
     """
     status_cols, fit_cols = _columns(results)
+    more = {k: v for k, v in (extra or {}).items() if len(v) == len(results)}
+
+    def cell(v: Any) -> str:
+        return v if isinstance(v, str) else f"{float(v):.6f}"
+
     with atomic_write(path, "w", newline="") as fh:  # rows go to the file as formatted
         w = csv.writer(fh, lineterminator="\n")
-        w.writerow(["time_s", *(f"{n}_status" for n in status_cols), *fit_cols, "worst"])
-        for r in results:
+        w.writerow(["time_s", *(f"{n}_status" for n in status_cols), *fit_cols, "worst", *more])
+        for i, r in enumerate(results):
             w.writerow(
                 [
                     f"{r.time_s:.9f}",
                     *(r.status.get(n, "") for n in status_cols),
                     *(f"{r.fit.get(n, math.nan):.6f}" for n in fit_cols),
                     r.worst,
+                    *(cell(v[i]) for v in more.values()),
                 ]
             )
 
 
 def read_fit_csv(path: str | os.PathLike[str]) -> tuple[list[dict[str, str]], dict[str, Any]]:
     """Read ``fit.csv`` back: per-frame rows as dicts of strings, and the fit columns as
-    float arrays (``{"time_s": (T,), "<figure>": (T,), ...}``)."""
+    float arrays (``{"time_s": (T,), "<figure>": (T,), ...}``; the name columns, as
+    ``worst`` and `mocapkit.eval.plausibility.NAME_COLUMNS`, only in the rows)."""
     from mocapkit.errors import FormatError
 
     p = Path(path)
@@ -495,7 +566,7 @@ def read_fit_csv(path: str | os.PathLike[str]) -> tuple[list[dict[str, str]], di
         raise FormatError(f"{p}: expected a fit.csv with time_s and worst columns")
     numeric: dict[str, Any] = {}
     for name in rows[0]:
-        if name == "worst" or name.endswith("_status"):
+        if name == "worst" or name.endswith("_status") or name in NAME_COLUMNS:
             continue
         try:
             numeric[name] = np.array([float(r[name]) for r in rows])
@@ -509,14 +580,18 @@ __all__ = [
     "GAP_BLEND_S",
     "OPENSIM_FOLDER",
     "RESULT_MARKER_FILE",
+    "ROLL_LIMIT_DEG_S",
     "Gap",
+    "InputSpeeds",
     "RunResult",
     "check_result_folder",
+    "check_run_motion",
     "find_gaps",
     "motion_for_bvh",
     "read_fit_csv",
     "results_motion",
     "run_tracker",
+    "speed_bound",
     "unobserved_joints",
     "unobserved_to_nan",
     "write_fit_csv",

@@ -29,6 +29,7 @@ from mocapkit.errors import ConfigError, SessionError, unknown_name
 from mocapkit.io.markers import true_runs
 from mocapkit.io.motion import Motion
 from mocapkit.pipelines.camera_check import check_session_cameras
+from mocapkit.pipelines.input_speeds import keypoint_input_speeds
 from mocapkit.pipelines.run import run_tracker
 from mocapkit.timing import StageTimer
 from mocapkit.tracking.stereo.arm_filter import ArmFilterConfig
@@ -235,6 +236,7 @@ def track_stereo_session(
         label=f"track stereo {session.path.name}",
         source=f"stereo tracker ({mode}, cameras {','.join(names)}) on {session.path}",
         timer=timer,
+        input_speeds=keypoint_input_speeds(session, names),
     )
     poses = [cast(StereoPose, r) for r in run.results]
     fit_keys = poses[0].fit if poses else {}

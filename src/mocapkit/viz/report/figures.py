@@ -39,7 +39,14 @@ STATUS_COLOURS = {
 #: Unit suffixes of ``fit.csv`` column names and their axis titles, the first that ends
 #: the name wins (a speed before its seconds); a column without one is unitless (a ratio,
 #: a count, a flag or an edge cost).
-UNIT_SUFFIXES = {"_mm_per_s": "mm/s", "_mm": "mm", "_px": "px", "_deg": "degrees", "_s": "s"}
+UNIT_SUFFIXES = {
+    "_mm_per_s": "mm/s",
+    "_deg_per_s": "deg/s",
+    "_mm": "mm",
+    "_px": "px",
+    "_deg": "degrees",
+    "_s": "s",
+}
 
 
 @dataclass(frozen=True)
