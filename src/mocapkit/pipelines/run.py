@@ -49,8 +49,10 @@ from mocapkit.skeleton.limbs import part_dofs
 from mocapkit.skeleton.model import CANONICAL_JOINTS, Skeleton
 from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.base import (
+    INPUT_SPEED_FACTOR,
     REJOIN_BLEND_S,
     UNOBSERVED,
+    UNSEEN_SPEED_MM_S,
     DelayedTracker,
     FrameResult,
     Tracker,
@@ -72,14 +74,11 @@ ROLL_LIMIT_DEG_S = float(np.rad2deg(MAX_ROLL_SPEED_RAD_S))
 
 
 def speed_bound() -> SpeedBound:
-    """The speed a joint may move at given its input's: the hybrid re-plant's bound
-    (`mocapkit.tracking.hybrid.tracker.HybridConfig.replant_speed_factor` times the
-    input's speed plus `mocapkit.tracking.base.UNSEEN_SPEED_MM_S` for what no input
-    shows), one rule for every tracker."""
-    from mocapkit.tracking.base import UNSEEN_SPEED_MM_S
-    from mocapkit.tracking.hybrid.tracker import HybridConfig
-
-    return SpeedBound(HybridConfig.replant_speed_factor, UNSEEN_SPEED_MM_S)
+    """The speed a joint may move at given its input's: the hybrid re-plant's bound,
+    `mocapkit.tracking.base.INPUT_SPEED_FACTOR` times the input's speed plus
+    `mocapkit.tracking.base.UNSEEN_SPEED_MM_S` for what no input shows, one rule for
+    every tracker."""
+    return SpeedBound(INPUT_SPEED_FACTOR, UNSEEN_SPEED_MM_S)
 
 
 def check_run_motion(motion: Motion, input_speeds: InputSpeeds | None = None) -> MotionCheck:

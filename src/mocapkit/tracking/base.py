@@ -40,6 +40,12 @@ BRIDGE_S = 0.25
 #: motion (`mocapkit.tracking.mono.placement.DepthRate`).
 UNSEEN_SPEED_MM_S = 1000.0
 
+#: Factor on an input's speed that a part may move at beyond `UNSEEN_SPEED_MM_S`: the
+#: hybrid re-plant's bound on the pelvis and legs against the head set
+#: (`HybridConfig.replant_speed_factor`), and every result's plausibility check of each
+#: joint against the inputs near it (`mocapkit.pipelines.run.speed_bound`).
+INPUT_SPEED_FACTOR = 1.5
+
 #: Time (s) over which a part released after a long gap goes from its held pose back to
 #: the tracked one when it is observed again, rather than snapping there: the hybrid's
 #: hand sets (their IK targets) and every result folder's held parts (their joint

@@ -51,6 +51,7 @@ from mocapkit.skeleton.model import CANONICAL_JOINTS, PRISMATIC, Skeleton
 from mocapkit.timing import NULL_TIMER, StageTimer
 from mocapkit.tracking.base import (
     BRIDGE_S,
+    INPUT_SPEED_FACTOR,
     REJOIN_BLEND_S,
     UNSEEN_SPEED_MM_S,
     FrameResult,
@@ -319,7 +320,7 @@ class HybridConfig:
     smoothing_polish_tol_mm: float = 5.0
     smoothing_polish_stall_iterations: int = 3
     replant_mm: float = 8.0
-    replant_speed_factor: float = 1.5
+    replant_speed_factor: float = INPUT_SPEED_FACTOR
     replant_min_speed_mm_s: float = UNSEEN_SPEED_MM_S
     member_offsets_mm: Mapping[str, Mapping[str, Sequence[float]]] = field(default_factory=dict)
     start_upright: bool = True
