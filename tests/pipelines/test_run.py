@@ -9,7 +9,7 @@ import pytest
 
 from mocapkit.errors import ShapeError, UnknownNameError
 from mocapkit.io.motion_npz import load_motion_npz
-from mocapkit.pipelines.run import FIT_FILE, motion_for_bvh, read_fit_csv, run_tracker
+from mocapkit.pipelines.run import FIT_FILE, motion_with_held_parts, read_fit_csv, run_tracker
 from mocapkit.skeleton import CANONICAL_JOINTS, canonical_positions, load_preset
 from mocapkit.skeleton.limbs import arm
 from mocapkit.timing import StageTimer
@@ -48,8 +48,8 @@ def test_run_tracker_writes_the_result_folder_and_fit(tmp_path) -> None:
     }
     motion = load_motion_npz(tmp_path / "res" / "motion.npz")
     # the left arm missing from the fourth frame: its DoFs held there at the third's
-    # (`motion_for_bvh`, the poses of motion.npz and the BVH alike), the rest as given
-    np.testing.assert_allclose(motion.q, motion_for_bvh(run.motion, run.results).q)
+    # (`motion_with_held_parts`, the poses of motion.npz and the BVH alike), the rest as given
+    np.testing.assert_allclose(motion.q, motion_with_held_parts(run.motion, run.results).q)
     np.testing.assert_allclose(motion.q[:3], q[:3])
     dofs = arm(sk, "left").dofs
     np.testing.assert_allclose(motion.q[3:, dofs], np.tile(q[2, dofs], (3, 1)))

@@ -15,7 +15,13 @@ from mocapkit.io.bvh import parse_bvh
 from mocapkit.io.joints_csv import read_joints_csv
 from mocapkit.io.motion_npz import load_motion_npz
 from mocapkit.io.session_csv import read_keypoints_csv, write_keypoints_csv
-from mocapkit.pipelines.run import FIT_FILE, find_gaps, motion_for_bvh, read_fit_csv, run_tracker
+from mocapkit.pipelines.run import (
+    FIT_FILE,
+    find_gaps,
+    motion_with_held_parts,
+    read_fit_csv,
+    run_tracker,
+)
 from mocapkit.skeleton import forward_kinematics, load_preset
 from mocapkit.skeleton.limbs import arm, part_dofs
 from mocapkit.tracking.base import BRIDGE_S, unobserved_part
@@ -232,7 +238,7 @@ def test_mono_released_arm_is_held_then_blended_back_once_in_motion_npz_and_bvh(
     npz = load_motion_npz(out / "motion.npz")
     bvh = read_bvh(out / "motion.bvh", unit_mm=1000.0)
     sk = npz.skeleton
-    # the arm's DoFs and its clavicle's (`motion_for_bvh`'s part)
+    # the arm's DoFs and its clavicle's (`motion_with_held_parts`'s part)
     clavicle = sk.parents[arm(sk, "left").chain[0]]
     dofs = np.union1d(arm(sk, "left").dofs, np.flatnonzero(sk.dof_joint == clavicle))
     st = np.array([r.status["left_arm"] for r in run.results])
@@ -261,7 +267,7 @@ def test_mono_released_arm_is_held_then_blended_back_once_in_motion_npz_and_bvh(
     np.testing.assert_allclose(fk_bvh, fk, atol=1e-3)
 
 
-def test_motion_for_bvh_leaves_the_dofs_a_tracker_declares_and_holds_the_rest() -> None:
+def test_motion_with_held_parts_leaves_the_dofs_a_tracker_declares_and_holds_the_rest() -> None:
     """A hybrid-like result: the left hand set released on frames 5-9 (0.1 s apart), the
     tracker declaring the arm below the clavicle held (``held_dofs``). The result
     folder's poses leave those DoFs as given (the tracker's own hold and blend, once);
@@ -298,7 +304,7 @@ def test_motion_for_bvh_leaves_the_dofs_a_tracker_declares_and_holds_the_rest() 
     table.extend(results)
     motion = Motion.from_q(sk, t, q)
     for res in (results, table):
-        out = motion_for_bvh(motion, res).q
+        out = motion_with_held_parts(motion, res).q
         expected = q.copy()
         expected[5:10, clavicle] = q[4, clavicle]
         for i, w in zip(range(10, 14), (0.2, 0.4, 0.6, 0.8)):
@@ -307,7 +313,7 @@ def test_motion_for_bvh_leaves_the_dofs_a_tracker_declares_and_holds_the_rest() 
         np.testing.assert_array_equal(out[:, declared], q[:, declared])
     # without the declaration the arm is held and blended back too
     undeclared = [replace(r, held_dofs=np.zeros(0, dtype=np.int64)) for r in results]
-    out = motion_for_bvh(motion, undeclared).q
+    out = motion_with_held_parts(motion, undeclared).q
     np.testing.assert_array_equal(out[5:10, declared], np.tile(q[4, declared], (5, 1)))
     np.testing.assert_allclose(
         out[10, declared], q[4, declared] + 0.2 * (q[10, declared] - q[4, declared]), atol=1e-12
@@ -376,5 +382,5 @@ def test_hybrid_hand_blanked_for_one_second_is_held_then_blended_back_in_the_bvh
         np.testing.assert_array_equal(np.sort(r.held_dofs), part if gone_now else [])
     q = np.asarray(run.motion.q)
     np.testing.assert_array_equal(q[gap][:, part], np.tile(q[gap[0] - 1, part], (gap.size, 1)))
-    np.testing.assert_array_equal(motion_for_bvh(run.motion, run.results).q, q)
+    np.testing.assert_array_equal(motion_with_held_parts(run.motion, run.results).q, q)
     np.testing.assert_allclose(wrist, tracked, atol=1e-3)

@@ -9,7 +9,7 @@ The folder is built beside ``--out`` and swapped in whole (`write_run_folder`).
 Every tracker's result follows one rule for what was not observed: the joints of a
 released or missing effector or limb are NaN (`unobserved_to_nan`) and the pose
 (``motion.npz``'s ``q`` and the BVH alike) holds that part at its last observed pose and
-blends it back (`motion_for_bvh`). Method pipelines
+blends it back (`motion_with_held_parts`). Method pipelines
 (`mocapkit.pipelines.hybrid`) only build the tracker and its sample stream.
 """
 
@@ -109,7 +109,7 @@ class RunResult:
     ----------
     motion : Motion
         The tracked motion (the tracker's poses and canonical joints; the folder's poses
-        hold the unobserved parts, `motion_for_bvh`).
+        hold the unobserved parts, `motion_with_held_parts`).
     results : list of FrameResult
         One per sample, in order (empty with ``keep_results`` False: see ``table``).
     out_dir : Path or None
@@ -272,7 +272,7 @@ def unobserved_to_nan(motion: Motion, results: Sequence[FrameResult]) -> Motion:
     alone places (`mocapkit.tracking.base.unobserved_part`: the head; elbow and wrist
     for a hand or arm; knee and ankle for a foot or leg). So ``joints.csv`` and
     ``motion.npz`` hold no made-up joints, whatever a tracker did with the limb's pose
-    (``q`` is left as it is: see `motion_for_bvh`). Results of another count than the
+    (``q`` is left as it is: see `motion_with_held_parts`). Results of another count than the
     motion's frames are not applied.
     """
     if len(results) != motion.n_frames:
@@ -297,7 +297,7 @@ def unobserved_to_nan(motion: Motion, results: Sequence[FrameResult]) -> Motion:
 
 
 #: Time over which a part held through a gap is blended back to the tracked pose once
-#: it is observed again (`motion_for_bvh`), rather than snapped there: the trackers' own
+#: it is observed again (`motion_with_held_parts`), rather than snapped there: the trackers' own
 #: rejoin time (`mocapkit.tracking.base.REJOIN_BLEND_S`): the hybrid's own blend of a
 #: rejoining arm (which it declares, `FrameResult.held_dofs`) takes as long.
 GAP_BLEND_S = REJOIN_BLEND_S
@@ -339,7 +339,7 @@ def _hold(
     _blend_back(q, time_s, held, dofs)
 
 
-def motion_for_bvh(motion: Motion, results: Sequence[FrameResult]) -> Motion:
+def motion_with_held_parts(motion: Motion, results: Sequence[FrameResult]) -> Motion:
     """``motion`` with each released or missing part held at its last observed pose: what
     the result folder's poses (``motion.npz``'s ``q`` and the BVH, which cannot hold NaN)
     are written from (`write_run_folder`), the one place a part is held and blended back
@@ -477,7 +477,7 @@ def write_run_folder(
     (`mocapkit.io.motion_files.write_result_folder`), ``fit.csv`` (`write_fit_csv`) and
     ``opensim/`` (TRC, model and IK setup: `mocapkit.io.opensim.write_opensim_folder`).
     ``motion`` is the tracker's: the poses of ``motion.npz`` and the BVH hold its
-    unobserved parts (`unobserved_to_nan`, then `motion_for_bvh`); the TRC's markers
+    unobserved parts (`unobserved_to_nan`, then `motion_with_held_parts`); the TRC's markers
     are the tracker's observed joints (`unobserved_to_nan` only).
 
     The folder is built under a temporary name beside ``out_dir`` and swapped in when
@@ -497,7 +497,7 @@ def write_run_folder(
     out = check_result_folder(out_dir)
     motion = unobserved_to_nan(motion, results)
     remove_stale_temporaries(out.parent, out.name)
-    posed = motion_for_bvh(motion, results)
+    posed = motion_with_held_parts(motion, results)
     check = check_run_motion(posed, input_speeds)
     with atomic_folder(out) as tmp:
         write_result_folder(tmp, posed)
@@ -586,7 +586,7 @@ __all__ = [
     "check_result_folder",
     "check_run_motion",
     "find_gaps",
-    "motion_for_bvh",
+    "motion_with_held_parts",
     "read_fit_csv",
     "results_motion",
     "run_tracker",

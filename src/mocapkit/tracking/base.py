@@ -144,7 +144,7 @@ class FrameResult:
         DoFs of ``q`` that the tracker itself holds on this frame at their values of the
         last frame their part was observed (a ``released`` part), and blends back itself
         when the part is observed again: the result folder leaves them as given
-        (`mocapkit.pipelines.run.motion_for_bvh`) and holds the rest of the part. Empty
+        (`mocapkit.pipelines.run.motion_with_held_parts`) and holds the rest of the part. Empty
         (the default): the tracker holds nothing.
     """
 

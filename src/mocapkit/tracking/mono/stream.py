@@ -141,7 +141,7 @@ class MonoStream:
     ``finish``; online, the result of frame k comes with frame k + ``smooth_lag + lag``.
     A released limb's angles in ``q`` are the fit's (no joints to follow: its rest
     pose); the runner holds and blends it back in the result folder, as for every
-    tracker (`mocapkit.pipelines.run.motion_for_bvh`).
+    tracker (`mocapkit.pipelines.run.motion_with_held_parts`).
 
     Parameters
     ----------
