@@ -176,3 +176,23 @@ def test_a_bone_rolling_faster_than_the_limit_is_flagged(monkeypatch) -> None:
     _, steps = roll_steps_deg(sk, q)
     np.testing.assert_allclose(speeds[1:], steps / DT_S, atol=1e-9)
     assert np.isnan(speeds[0]).all() and names == check.bone_names
+
+
+def test_frames_without_a_pose_have_no_roll_speed() -> None:
+    """A subject out of view (NaN ``q`` on some frames): no error, no roll speed on those
+    frames nor on the frame after each, the rest as without the gap."""
+    sk = load_preset("zhang21", ["forearm_rotation"])
+    q = np.tile(sk.zero_pose(), (12, 1))
+    rot = sk.dof_names.index("l_forearm_rotation")
+    q[:, rot] = np.deg2rad(np.arange(12.0))  # 1 deg a frame: 50 deg/s
+    t = np.arange(12) * DT_S
+    gap = q.copy()
+    gap[4:6] = np.nan
+    _, full = roll_speeds_deg_s(sk, t, q)
+    _, holed = roll_speeds_deg_s(sk, t, gap)
+    unposed = np.zeros(12, dtype=bool)
+    unposed[[0, 4, 5, 6]] = True  # frame 0 has no step; 4, 5 no pose; 6 follows one
+    assert np.isnan(holed[unposed]).all()
+    np.testing.assert_allclose(holed[~unposed], full[~unposed], atol=1e-9)
+    check = check_motion(t, ("x",), np.zeros((12, 1, 3)), None, BOUND, 1200.0, sk, gap)
+    assert not check.roll_flags.any()

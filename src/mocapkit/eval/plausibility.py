@@ -297,15 +297,21 @@ def roll_speeds_deg_s(
     skeleton: Skeleton, time_s: ArrayLike, q: ArrayLike
 ) -> tuple[tuple[str, ...], FloatArray]:
     """Each roll-free bone's roll speed (deg/s) from the frame before, (T, B) with row 0
-    NaN (`mocapkit.eval.continuity.roll_steps_deg`), in chunks of frames."""
+    NaN (`mocapkit.eval.continuity.roll_steps_deg`), in chunks of frames. A frame without
+    a pose (a non-finite ``q``, e.g. the subject out of view) has no roll speed, nor has
+    the frame after it."""
     t = np.asarray(time_s, dtype=float)
     qa = np.asarray(q, dtype=float)
-    names, _ = roll_steps_deg(skeleton, qa[:1])
+    posed = np.isfinite(qa).all(axis=-1)
+    qa = np.where(posed[:, None], qa, 0.0)  # a finite stand-in; its steps are dropped below
+    names, _ = roll_steps_deg(skeleton, np.zeros((1, qa.shape[-1])))
     out = np.full((t.shape[0], len(names)), np.nan)
     for a in range(0, max(t.shape[0] - 1, 0), _FRAME_CHUNK):
         b = min(a + _FRAME_CHUNK, t.shape[0] - 1)
         _, steps = roll_steps_deg(skeleton, qa[a : b + 1])
         out[a + 1 : b + 1] = steps / np.diff(t[a : b + 1])[:, None]
+    out[~posed] = np.nan
+    out[1:][~posed[:-1]] = np.nan
     return names, out
 
 
