@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from mocapkit.camera.plausibility import (
+    FLOOR_CHECK_FRAMES,
     VIEW_CHECK_FRAMES,
     CameraFinding,
     floor_findings,
@@ -26,6 +27,7 @@ from mocapkit.camera.plausibility import (
     refuse_or_warn,
     sees_findings,
     view_findings,
+    view_floor_findings,
 )
 from mocapkit.io.session import Session
 from mocapkit.io.session_csv import Keypoints
@@ -47,14 +49,30 @@ def _first_frames(kp: Keypoints) -> np.ndarray:
     return seen[:VIEW_CHECK_FRAMES]
 
 
+def _spread_frames(kp: Keypoints) -> np.ndarray:
+    """Row indices of at most `FLOOR_CHECK_FRAMES` frames with any keypoint, spread
+    evenly over the take."""
+    seen = np.flatnonzero(np.any(np.isfinite(kp.pixels), axis=(1, 2)))
+    if seen.size <= FLOOR_CHECK_FRAMES:
+        return seen
+    return seen[np.linspace(0, seen.size - 1, FLOOR_CHECK_FRAMES).round().astype(int)]
+
+
 def _matched_views(
     keypoints: Sequence[Keypoints],
+    rows_of: Callable[[Keypoints], np.ndarray] = _first_frames,
+    joints: Sequence[str] | None = None,
 ) -> tuple[np.ndarray, tuple[str, ...]] | None:
-    """The views' keypoints (V, T, K, 2) of the first frames, matched by time stamp to
-    the first view's frames (within half a frame), on the joints all views name."""
+    """The views' keypoints (V, T, K, 2) of the first view's frames ``rows_of`` picks
+    (default: the first ones), matched by time stamp (within half a frame), on the joints
+    all views name (of ``joints``, when given)."""
     first = keypoints[0]
-    names = tuple(n for n in first.joint_names if all(n in k.joint_names for k in keypoints))
-    rows = _first_frames(first)
+    names = tuple(
+        n
+        for n in first.joint_names
+        if all(n in k.joint_names for k in keypoints) and (joints is None or n in joints)
+    )
+    rows = rows_of(first)
     if not names or rows.size == 0:
         return None
     t = first.time_s[rows]
@@ -142,7 +160,13 @@ def check_session_cameras(
                 if known:
                     pos = canonical_positions(skeleton, skeleton.zero_pose(), known)
                     rest = dict(zip(known, pos))
-            findings += view_findings(with_kp, px, names, rest)
+            views = view_findings(with_kp, px, names, rest)
+            findings += views
+            ankles = _matched_views(
+                [kps[c.name] for c in with_kp], _spread_frames, ("left_ankle", "right_ankle")
+            )
+            if not views and ankles is not None:
+                findings += view_floor_findings(with_kp, ankles[0])
     refuse_or_warn(findings, str(session.path), warn or _print_warning)
     return [f for f in findings if not f.refuse]
 
