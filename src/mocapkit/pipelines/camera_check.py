@@ -186,7 +186,12 @@ def warn_placed_subject(
     if not idx:
         return
     pts = np.asarray(joints_mm, dtype=float)[:, idx]
-    findings = floor_findings(camera, pts, "as placed from this camera")
+    findings = floor_findings(
+        camera,
+        pts,
+        "as placed from this one camera",
+        "; its depth from the feet on the floor or the subject's limb lengths, not triangulated",
+    )
     refuse_or_warn(findings, str(session.path), warn or _print_warning)
 
 
