@@ -18,6 +18,7 @@ from mocapkit.camera.plausibility import (
     sees_findings,
     view_findings,
     view_floor_findings,
+    view_up_findings,
 )
 from mocapkit.errors import SessionError
 
@@ -224,3 +225,33 @@ def test_the_camera_names_of_a_finding():
     ]
     refuse_or_warn(findings, "S", lines.append)
     assert lines == ["S: camera 'a' (floor): one", "S: cameras 'a', 'b', 'c', 'd' (floor): all"]
+
+
+def test_a_world_turned_is_warned_by_the_up_check(rng):
+    """The neck 1360 mm above the ankles: upright in the world. The same pixels in a world
+    turned upside down (a board lying face up: z down) or onto its side (y up) stand
+    180 and 90 deg from +z; upside down the ankles stay near z = 0, so the floor check
+    alone passes it. A narrow pair with 8 px of noise cannot tell: no finding."""
+    names = ("neck", "left_ankle", "right_ankle")
+    ank = _ankles(rng)
+    neck = ank.mean(axis=1, keepdims=True) + np.array([0.0, 0.0, 1360.0])
+    pts = np.concatenate([neck, ank], axis=1)
+    cams = _rig()
+    px = np.stack([c.project(pts) for c in cams]) + rng.normal(0.0, 1.0, (2, 60, 3, 2))
+    assert view_up_findings(cams, px, names) == []
+    for turn, tilt in ((180.0, r"1(79|80)"), (90.0, r"(89|90|91)")):
+        (f,) = view_up_findings(_world_moved(cams, turn_deg=turn), px, names)
+        assert f.camera == ("left", "right") and f.check == "up" and not f.refuse
+        assert re.match(
+            rf"the subject, triangulated from cameras left, right, stands {tilt} deg from the "
+            r"world's \+z \(from the ankles to the neck, median of 60 frames\); expected "
+            r"within 60 deg of it. A world whose z is not up",
+            f.text,
+        ), f.text
+    assert view_floor_findings(_world_moved(cams, turn_deg=180.0), px[:, :, 1:]) == []
+    narrow = [
+        Camera(c.name, c.image_size, c.K, c.dist, look_at((x, -3000.0, 1300.0), (x, 0.0, 1100.0)))
+        for c, x in zip(cams, (-45.0, 45.0))
+    ]
+    noisy = np.stack([c.project(pts) for c in narrow]) + rng.normal(0.0, 8.0, (2, 60, 3, 2))
+    assert view_up_findings(_world_moved(narrow, turn_deg=180.0), noisy, names) == []

@@ -80,6 +80,13 @@ def _world_1m_up(cams: Cameras) -> None:  # the world 1 m lower: the subject 1 m
         c["camera_from_world"] = m.tolist()
 
 
+def _world_upside_down(cams: Cameras) -> None:  # a board's frame lying face up: z down
+    for c in cams:
+        m = np.array(c["camera_from_world"])
+        m[:3, :3] = m[:3, :3] @ np.diag([1.0, -1.0, -1.0])
+        c["camera_from_world"] = m.tolist()
+
+
 def _cx_5000(cams: Cameras) -> None:
     for c in cams:
         c["K"][0][2] = 5000.0
@@ -170,7 +177,8 @@ def test_track_mono_warns_of_a_camera_in_metres(rendered, tmp_path):
 def test_the_floor_from_several_views_and_from_one(rendered, tmp_path):
     """The subject on the floor (z = 0): no finding; the calibration's world 1 m lower:
     the ankles, triangulated from both views, 1 m up, warned naming both cameras. One
-    view: no floor before tracking (no depth), after it the placed ankles, saying so."""
+    view: no floor before tracking (no depth), after it the placed ankles, saying so. The
+    world upside down: the subject's up is warned."""
     s = load_session(_variant(rendered["stereo"], tmp_path / "s", _world_1m_up))
     sk = azad_skeleton(s.bone_lengths_mm, s.segment_vectors_mm)
     lines: list[str] = []
@@ -182,6 +190,11 @@ def test_the_floor_from_several_views_and_from_one(rendered, tmp_path):
         lines[0],
     ), lines[0]
     assert check_session_cameras(s, ["stereo_left"], warn=lines.append) == []
+    turned = load_session(_variant(rendered["stereo"], tmp_path / "t", _world_upside_down))
+    check_session_cameras(turned, turned.video_cameras, skeleton=sk, warn=lines.append)
+    assert len(lines) == 2  # the ankles stay near z = 0: only the subject's up tells
+    assert "cameras 'stereo_left', 'stereo_right' (up): the subject, triangulated from " in lines[1]
+    del lines[1]
     truth = np.load(rendered["stereo"] / "truth.npz")
     names = [str(n) for n in truth["joint_names"]]
     warn_placed_subject(s, "stereo_left", truth["joints_mm"], names, lines.append)

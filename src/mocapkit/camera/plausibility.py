@@ -17,7 +17,10 @@ what the data allow:
   the subject a thousand times smaller, doubled ``fx`` and ``fy`` about half as tall);
 - **the floor** (`view_floor_findings`, two or more views; `floor_findings` on the mono
   result): the ankles near the world's z = 0, a warning only (doubled ``fx`` and ``fy``
-  on a parallel pair agree with every other check, and sink the subject below it).
+  on a parallel pair agree with every other check, and sink the subject below it);
+- **the subject upright** (`view_up_findings`, two or more views): the neck above the
+  ankles along the world's +z, a warning only (a world whose z points down or along the
+  floor).
 
 Each check returns `CameraFinding` items; `refuse_or_warn` raises `SessionError` for the
 refusals and hands the warnings to a callback. Thresholds are wide: they catch a wrong
@@ -84,7 +87,7 @@ class CameraFinding:
         views together.
     check : str
         ``intrinsics``, ``in front``, ``in image``, ``views agree``, ``limb lengths``,
-        ``floor`` or ``scale``.
+        ``floor``, ``up`` or ``scale``.
     text : str
         What was found and what was expected, with the numbers.
     refuse : bool
@@ -352,6 +355,26 @@ def floor_findings(
     ]
 
 
+def _relative_depth_error(
+    cameras: Sequence[Camera], pixels: FloatArray, points_mm: FloatArray
+) -> tuple[NDArray[np.bool_], FloatArray]:
+    """Which views see each triangulated point (V, M), and how far (as a share of its
+    distance) its depth may be off (M,): the keypoints' angular noise (twice the median
+    reprojection error, over the focal length; two views each show about half of it)
+    times sqrt(2), over the widest angle between the views that see it."""
+    sees = np.all(np.isfinite(pixels), axis=-1)  # (V, M)
+    err = reprojection_errors_px(cameras, points_mm, pixels)
+    noise_rad = 2.0 * float(np.nanmedian(err)) / float(np.median([c.K[0, 0] for c in cameras]))
+    centres = np.stack([np.asarray(c.center_in_world, dtype=float) for c in cameras])
+    rays = centres[:, None, :] - points_mm[None]  # (V, M, 3): from each point to each camera
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    rays[~sees] = np.nan
+    cos = np.einsum("imk,jmk->ijm", rays, rays).reshape(-1, points_mm.shape[0])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        parallax = np.arccos(np.clip(np.nanmin(cos, axis=0), -1.0, 1.0))
+        return sees, np.sqrt(2.0) * noise_rad / parallax
+
+
 def view_floor_findings(cameras: Sequence[Camera], ankle_pixels: ArrayLike) -> list[CameraFinding]:
     """The subject's ankles triangulated from two or more views and compared with the
     floor (`floor_findings`).
@@ -379,19 +402,9 @@ def view_floor_findings(cameras: Sequence[Camera], ankle_pixels: ArrayLike) -> l
     if not np.any(keep):
         return []
     flat, pts = flat[:, keep], pts[keep]
-    sees = np.all(np.isfinite(flat), axis=-1)  # (V, M)
-    err = reprojection_errors_px(cameras, pts, flat)
-    noise_rad = 2.0 * float(np.nanmedian(err)) / float(np.median([c.K[0, 0] for c in cameras]))
+    sees, rel = _relative_depth_error(cameras, flat, pts)
     centres = np.stack([np.asarray(c.center_in_world, dtype=float) for c in cameras])
-    rays = centres[:, None, :] - pts[None]  # (V, M, 3): from each ankle to each camera
-    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
-    rays[~sees] = np.nan
-    cos = np.einsum("imk,jmk->ijm", rays, rays)  # (V, V, M)
-    with np.errstate(invalid="ignore"):
-        parallax = np.arccos(np.clip(np.nanmin(cos.reshape(-1, cos.shape[-1]), axis=0), -1, 1))
-    height_mm = np.abs(np.median(centres[:, 2]) - pts[:, 2])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        each_mm = np.sqrt(2.0) * noise_rad / parallax * height_mm
+    each_mm = rel * np.abs(np.median(centres[:, 2]) - pts[:, 2])
     uncertainty = float(np.nanmedian(each_mm)) if np.any(np.isfinite(each_mm)) else 0.0
     z = pts[:, 2].copy()
     for i, c in enumerate(cameras):
@@ -410,6 +423,74 @@ def view_floor_findings(cameras: Sequence[Camera], ankle_pixels: ArrayLike) -> l
         "; each triangulated from the views that see it",
         uncertainty,
     )
+
+
+#: Largest angle (deg) between the subject's up (from the mid-ankles to the neck, median
+#: over the frames) and the world's +z before a warning: a subject leans, bends and sits
+#: well within it; a world whose z points down (a calibration board lying face up) or
+#: along the floor (a board on a wall) is 90-180 deg from it.
+MAX_UP_TILT_DEG = 60.0
+#: Largest uncertainty of a triangulated joint, as a share of the neck-to-ankle length,
+#: for the up check to run (a narrow pair with a detector's noise: not at all).
+MAX_UP_UNCERTAINTY = 0.25
+
+
+def view_up_findings(
+    cameras: Sequence[Camera], pixels: ArrayLike, joint_names: Sequence[str]
+) -> list[CameraFinding]:
+    """Warn when the subject, triangulated from two or more views, does not stand along
+    the world's +z (`MAX_UP_TILT_DEG`): the floor check alone passes a world turned
+    upside down (the ankles stay near z = 0, the head goes below them).
+
+    Parameters
+    ----------
+    cameras : sequence of Camera, length V
+    pixels : array_like, shape (V, T, K, 2)
+        Each view's keypoints of the same frames (NaN where unseen), spread over the take.
+    joint_names : sequence of str, length K
+        Canonical names; ``neck`` and one or both ankles are used.
+    """
+    names = list(joint_names)
+    ankles = [names.index(n) for n in ("left_ankle", "right_ankle") if n in names]
+    if "neck" not in names or not ankles:
+        return []
+    px = np.asarray(pixels, dtype=float)[:, :, [names.index("neck"), *ankles]]
+    n_views, n_frames, n_joints = px.shape[:3]
+    flat = px.reshape(n_views, -1, 2)
+    pts = triangulate_views(cameras, flat)  # (T * J, 3)
+    keep = np.all(np.isfinite(pts), axis=1)
+    if np.count_nonzero(keep) < 3:
+        return []
+    _, rel = _relative_depth_error(cameras, flat[:, keep], pts[keep])
+    centres = np.stack([np.asarray(c.center_in_world, dtype=float) for c in cameras])
+    distance = np.linalg.norm(pts[keep][:, None] - centres[None], axis=-1).min(axis=1)
+    joints = pts.reshape(n_frames, n_joints, 3)
+    feet = np.isfinite(joints[:, 1:, 0])  # (T, A)
+    mid = np.where(feet[..., None], joints[:, 1:], 0.0).sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        up = joints[:, 0] - mid / feet.sum(axis=1)[:, None]
+        length = np.linalg.norm(up, axis=1)
+    ok = np.isfinite(length) & (length > 0)
+    if np.count_nonzero(ok) < 3:
+        return []
+    if not np.nanmedian(rel * distance) <= MAX_UP_UNCERTAINTY * np.median(length[ok]):
+        return []
+    tilt = float(np.degrees(np.arccos(np.clip(np.median(up[ok, 2] / length[ok]), -1, 1))))
+    if tilt <= MAX_UP_TILT_DEG:
+        return []
+    cams = tuple(c.name for c in cameras)
+    return [
+        CameraFinding(
+            cams,
+            "up",
+            f"the subject, triangulated from cameras {', '.join(cams)}, stands {tilt:.0f} deg "
+            f"from the world's +z (from the ankles to the neck, median of "
+            f"{np.count_nonzero(ok)} frames); expected within {MAX_UP_TILT_DEG:.0f} deg of "
+            "it. A world whose z is not up (a calibration board's frame: z down, or y up)? "
+            "Ignore it if the subject lies or hangs upside down throughout",
+            refuse=False,
+        )
+    ]
 
 
 def pose_findings(camera: Camera) -> list[CameraFinding]:
@@ -482,6 +563,8 @@ __all__ = [
     "MAX_FLOOR_OFFSET_MM",
     "MAX_PIXEL_ASPECT",
     "MAX_REPROJECTION_SHARE",
+    "MAX_UP_TILT_DEG",
+    "MAX_UP_UNCERTAINTY",
     "MIN_CAMERA_DISTANCE_MM",
     "MIN_SHARE",
     "RIGID_PAIRS",
@@ -495,4 +578,5 @@ __all__ = [
     "sees_findings",
     "view_findings",
     "view_floor_findings",
+    "view_up_findings",
 ]

@@ -28,6 +28,7 @@ from mocapkit.camera.plausibility import (
     sees_findings,
     view_findings,
     view_floor_findings,
+    view_up_findings,
 )
 from mocapkit.io.session import Session
 from mocapkit.io.session_csv import Keypoints
@@ -162,11 +163,17 @@ def check_session_cameras(
                     rest = dict(zip(known, pos))
             views = view_findings(with_kp, px, names, rest)
             findings += views
-            ankles = _matched_views(
-                [kps[c.name] for c in with_kp], _spread_frames, ("left_ankle", "right_ankle")
+            spread = _matched_views(
+                [kps[c.name] for c in with_kp],
+                _spread_frames,
+                ("neck", "left_ankle", "right_ankle"),
             )
-            if not views and ankles is not None:
-                findings += view_floor_findings(with_kp, ankles[0])
+            if not views and spread is not None:
+                sp_px, sp_names = spread
+                feet = [i for i, n in enumerate(sp_names) if n != "neck"]
+                if feet:
+                    findings += view_floor_findings(with_kp, sp_px[:, :, feet])
+                findings += view_up_findings(with_kp, sp_px, sp_names)
     refuse_or_warn(findings, str(session.path), warn or _print_warning)
     return [f for f in findings if not f.refuse]
 
