@@ -16,6 +16,7 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from mocapkit.camera.pinhole import Camera
 from mocapkit.camera.plausibility import (
     FLOOR_CHECK_FRAMES,
     VIEW_CHECK_FRAMES,
@@ -89,6 +90,20 @@ def _matched_views(
     return out, names
 
 
+def _placement_findings(
+    cameras: Sequence[Camera], keypoints: Sequence[Keypoints]
+) -> list[CameraFinding]:
+    """The floor and up warnings, from the neck and ankles of frames spread over the take
+    triangulated from the views (cameras that agree on the first frames)."""
+    spread = _matched_views(keypoints, _spread_frames, ("neck", "left_ankle", "right_ankle"))
+    if spread is None:
+        return []
+    px, names = spread
+    feet = [i for i, n in enumerate(names) if n != "neck"]
+    out = view_floor_findings(cameras, px[:, :, feet]) if feet else []
+    return out + view_up_findings(cameras, px, names)
+
+
 def check_session_cameras(
     session: Session,
     cameras: Sequence[str],
@@ -107,7 +122,8 @@ def check_session_cameras(
         The cameras the tracker will use.
     skeleton : Skeleton, optional
         The subject's body model: with keypoints in two or more views, the limb lengths
-        triangulated from the views are compared with it.
+        triangulated from the views are compared with it (and, where the views agree,
+        the triangulated ankles with the floor and the neck above them with +z, warnings).
     keypoints : mapping of camera name to Keypoints, optional
         The 2-D keypoints the tracker will use (default: the session's
         ``keypoints/<camera>.csv``, used for the check even when the tracker reads the
@@ -163,17 +179,8 @@ def check_session_cameras(
                     rest = dict(zip(known, pos))
             views = view_findings(with_kp, px, names, rest)
             findings += views
-            spread = _matched_views(
-                [kps[c.name] for c in with_kp],
-                _spread_frames,
-                ("neck", "left_ankle", "right_ankle"),
-            )
-            if not views and spread is not None:
-                sp_px, sp_names = spread
-                feet = [i for i, n in enumerate(sp_names) if n != "neck"]
-                if feet:
-                    findings += view_floor_findings(with_kp, sp_px[:, :, feet])
-                findings += view_up_findings(with_kp, sp_px, sp_names)
+            if not views:
+                findings += _placement_findings(with_kp, [kps[c.name] for c in with_kp])
     refuse_or_warn(findings, str(session.path), warn or _print_warning)
     return [f for f in findings if not f.refuse]
 
