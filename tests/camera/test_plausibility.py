@@ -17,6 +17,8 @@ from mocapkit.camera.plausibility import (
     refuse_or_warn,
     sees_findings,
     view_findings,
+    view_floor_findings,
+    view_up_findings,
 )
 from mocapkit.errors import SessionError
 
@@ -146,3 +148,110 @@ def test_warnings_go_to_the_callback_and_refusals_raise():
         r"'c' \(intrinsics\): bad",
     ):
         refuse_or_warn([CameraFinding("c", "intrinsics", "bad")], "S", lines.append)
+
+
+def _ankles(rng: np.random.Generator, n: int = 60) -> np.ndarray:
+    """(n, 2, 3): two ankles 90 mm above the floor (z = 0), stepping a little."""
+    feet = np.array([[-100.0, 0.0, 90.0], [100.0, 0.0, 90.0]])
+    return feet + rng.normal(0.0, 30.0, (n, 2, 3)) * np.array([1.0, 1.0, 0.3])
+
+
+def _world_moved(cams: list[Camera], up_mm: float = 0.0, turn_deg: float = 0.0) -> list[Camera]:
+    """The calibration in another world: the points it triangulates turned ``turn_deg``
+    about the x axis (a world whose z is not up), then ``up_mm`` higher."""
+    a = np.deg2rad(turn_deg)
+    new_from_world = np.eye(4)
+    new_from_world[1:3, 1:3] = [[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]]
+    new_from_world[2, 3] = up_mm
+    world_from_new = np.linalg.inv(new_from_world)
+    return [
+        Camera(c.name, c.image_size, c.K, c.dist, c.camera_from_world @ world_from_new)
+        for c in cams
+    ]
+
+
+def test_the_floor_from_triangulated_ankles(rng):
+    """Ankles 90 mm above z = 0 seen by two views: no finding; the same pixels with the
+    calibration's world 1 m lower or higher put them 1 m off the floor: warned, with
+    the cameras named as a list and the height of each ankle triangulated at its own
+    depth (not the subject's median depth)."""
+    cams = _rig()
+    ank = _ankles(rng)
+    px = np.stack([c.project(ank) for c in cams]) + rng.normal(0.0, 1.0, (2, 60, 2, 2))
+    assert view_floor_findings(cams, px) == []
+    for up, z in ((1000.0, r"1\d\d\d"), (-1000.0, r"-9\d\d")):
+        (f,) = view_floor_findings(_world_moved(cams, up_mm=up), px)
+        assert f.camera == ("left", "right") and f.check == "floor" and not f.refuse
+        assert re.match(
+            rf"the subject's ankles, placed from cameras left, right, lie at z = {z} mm "
+            r"\(median of 120, 5-95 % .* mm; each triangulated from the views that see it\); "
+            r"expected within 3\d\d mm of z = 0",
+            f.text,
+        ), f.text
+    lines: list[str] = []
+    refuse_or_warn([f], "S", lines.append)
+    assert lines[0].startswith("S: cameras 'left', 'right' (floor): the subject's ankles")
+
+
+def test_a_narrow_pair_widens_the_floor_by_its_uncertainty(rng):
+    """90 mm apart at 3 m: exact keypoints place the ankles within mm, a calibration 1 m
+    off is warned; with 8 px of noise one triangulated ankle is hundreds of mm off and
+    the median moves (the linear triangulation of nearly parallel rays is biased): the
+    limit widens by that uncertainty, so the right calibration is not warned about."""
+    cams = [
+        Camera(c.name, c.image_size, c.K, c.dist, look_at((x, -3000.0, 1300.0), (x, 0.0, 1100.0)))
+        for c, x in zip(_rig(), (-45.0, 45.0))
+    ]
+    ank = _ankles(rng, 120)
+    exact = np.stack([c.project(ank) for c in cams])
+    assert view_floor_findings(cams, exact) == []
+    (f,) = view_floor_findings(_world_moved(cams, up_mm=1000.0), exact)
+    assert "expected within 300 mm of z = 0, the floor." in f.text, f.text
+    noisy = exact + rng.normal(0.0, 8.0, exact.shape)
+    assert view_floor_findings(cams, noisy) == []
+    (f,) = view_floor_findings(_world_moved(cams, up_mm=3000.0), noisy)
+    limit = re.search(
+        r"expected within (\d+) mm of z = 0, the floor \(300 mm plus 2 x (\d+) mm", f.text
+    )
+    assert limit is not None, f.text
+    assert 300 < int(limit[2]) < 2000 and int(limit[1]) == 300 + 2 * int(limit[2])
+
+
+def test_the_camera_names_of_a_finding():
+    lines: list[str] = []
+    findings = [
+        CameraFinding(("a",), "floor", "one", refuse=False),
+        CameraFinding(("a", "b", "c", "d"), "floor", "all", refuse=False),
+    ]
+    refuse_or_warn(findings, "S", lines.append)
+    assert lines == ["S: camera 'a' (floor): one", "S: cameras 'a', 'b', 'c', 'd' (floor): all"]
+
+
+def test_a_world_turned_is_warned_by_the_up_check(rng):
+    """The neck 1360 mm above the ankles: upright in the world. The same pixels in a world
+    turned upside down (a board lying face up: z down) or onto its side (y up) stand
+    180 and 90 deg from +z; upside down the ankles stay near z = 0, so the floor check
+    alone passes it. A narrow pair with 8 px of noise cannot tell: no finding."""
+    names = ("neck", "left_ankle", "right_ankle")
+    ank = _ankles(rng)
+    neck = ank.mean(axis=1, keepdims=True) + np.array([0.0, 0.0, 1360.0])
+    pts = np.concatenate([neck, ank], axis=1)
+    cams = _rig()
+    px = np.stack([c.project(pts) for c in cams]) + rng.normal(0.0, 1.0, (2, 60, 3, 2))
+    assert view_up_findings(cams, px, names) == []
+    for turn, tilt in ((180.0, r"1(79|80)"), (90.0, r"(89|90|91)")):
+        (f,) = view_up_findings(_world_moved(cams, turn_deg=turn), px, names)
+        assert f.camera == ("left", "right") and f.check == "up" and not f.refuse
+        assert re.match(
+            rf"the subject, triangulated from cameras left, right, stands {tilt} deg from the "
+            r"world's \+z \(from the ankles to the neck, median of 60 frames\); expected "
+            r"within 60 deg of it. A world whose z is not up",
+            f.text,
+        ), f.text
+    assert view_floor_findings(_world_moved(cams, turn_deg=180.0), px[:, :, 1:]) == []
+    narrow = [
+        Camera(c.name, c.image_size, c.K, c.dist, look_at((x, -3000.0, 1300.0), (x, 0.0, 1100.0)))
+        for c, x in zip(cams, (-45.0, 45.0))
+    ]
+    noisy = np.stack([c.project(pts) for c in narrow]) + rng.normal(0.0, 8.0, (2, 60, 3, 2))
+    assert view_up_findings(_world_moved(narrow, turn_deg=180.0), noisy, names) == []

@@ -4,6 +4,7 @@ stereo` and `track mono`, each refused or warned with the camera, the check and 
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from collections.abc import Callable
 from pathlib import Path
@@ -15,7 +16,7 @@ import pytest
 from mocapkit.cli.main import main
 from mocapkit.errors import SessionError
 from mocapkit.io.session import load_session
-from mocapkit.pipelines.camera_check import check_session_cameras
+from mocapkit.pipelines.camera_check import check_session_cameras, warn_placed_subject
 from mocapkit.pipelines.stereo import track_stereo_session
 from mocapkit.tracking.stereo.tracker import azad_skeleton
 
@@ -70,6 +71,20 @@ def _swap_extrinsics(cams: Cameras) -> None:
         cams[1]["camera_from_world"],
         cams[0]["camera_from_world"],
     )
+
+
+def _world_1m_up(cams: Cameras) -> None:  # the world 1 m lower: the subject 1 m up
+    for c in cams:
+        m = np.array(c["camera_from_world"])
+        m[:3, 3] += m[:3, :3] @ np.array([0.0, 0.0, -1000.0])
+        c["camera_from_world"] = m.tolist()
+
+
+def _world_upside_down(cams: Cameras) -> None:  # a board's frame lying face up: z down
+    for c in cams:
+        m = np.array(c["camera_from_world"])
+        m[:3, :3] = m[:3, :3] @ np.diag([1.0, -1.0, -1.0])
+        c["camera_from_world"] = m.tolist()
 
 
 def _cx_5000(cams: Cameras) -> None:
@@ -157,3 +172,36 @@ def test_track_mono_warns_of_a_camera_in_metres(rendered, tmp_path):
     assert "translations in metres instead of mm?" in lines[0]
     good = load_session(rendered["mono"])
     assert check_session_cameras(good, ["mono"], warn=lines.append) == []
+
+
+def test_the_floor_from_several_views_and_from_one(rendered, tmp_path):
+    """The subject on the floor (z = 0): no finding; the calibration's world 1 m lower:
+    the ankles, triangulated from both views, 1 m up, warned naming both cameras. One
+    view: no floor before tracking (no depth), after it the placed ankles, saying so. The
+    world upside down: the subject's up is warned."""
+    s = load_session(_variant(rendered["stereo"], tmp_path / "s", _world_1m_up))
+    sk = azad_skeleton(s.bone_lengths_mm, s.segment_vectors_mm)
+    lines: list[str] = []
+    check_session_cameras(s, s.video_cameras, skeleton=sk, warn=lines.append)
+    assert len(lines) == 1
+    assert re.search(
+        r": cameras 'stereo_left', 'stereo_right' \(floor\): the subject's ankles, placed from "
+        r"cameras stereo_left, stereo_right, lie at z = 1[01]\d\d mm \(median of \d+, ",
+        lines[0],
+    ), lines[0]
+    assert check_session_cameras(s, ["stereo_left"], warn=lines.append) == []
+    turned = load_session(_variant(rendered["stereo"], tmp_path / "t", _world_upside_down))
+    check_session_cameras(turned, turned.video_cameras, skeleton=sk, warn=lines.append)
+    assert len(lines) == 2  # the ankles stay near z = 0: only the subject's up tells
+    assert "cameras 'stereo_left', 'stereo_right' (up): the subject, triangulated from " in lines[1]
+    del lines[1]
+    truth = np.load(rendered["stereo"] / "truth.npz")
+    names = [str(n) for n in truth["joint_names"]]
+    warn_placed_subject(s, "stereo_left", truth["joints_mm"], names, lines.append)
+    assert len(lines) == 1  # the truth's ankles are on the floor
+    up = truth["joints_mm"] + np.array([0.0, 0.0, 1000.0])
+    warn_placed_subject(s, "stereo_left", up, names, lines.append)
+    assert (
+        "camera 'stereo_left' (floor): the subject's ankles, as placed from this one " in lines[1]
+    )
+    assert "its depth from the feet on the floor or the subject's limb lengths" in lines[1]

@@ -14,7 +14,13 @@ what the data allow:
   lie in front of every camera, reproject onto every view's keypoints (a pair of swapped
   keypoint files or swapped extrinsics gives errors of tens to hundreds of px, or points
   behind the cameras) and give the subject's limb lengths (a translation in metres makes
-  the subject a thousand times smaller, doubled ``fx`` and ``fy`` about half as tall).
+  the subject a thousand times smaller, doubled ``fx`` and ``fy`` about half as tall);
+- **the floor** (`view_floor_findings`, two or more views; `floor_findings` on the mono
+  result): the ankles near the world's z = 0, a warning only (doubled ``fx`` and ``fy``
+  on a parallel pair agree with every other check, and sink the subject below it);
+- **the subject upright** (`view_up_findings`, two or more views): the neck above the
+  ankles along the world's +z, a warning only (a world whose z points down or along the
+  floor).
 
 Each check returns `CameraFinding` items; `refuse_or_warn` raises `SessionError` for the
 refusals and hands the warnings to a callback. Thresholds are wide: they catch a wrong
@@ -76,18 +82,19 @@ class CameraFinding:
 
     Attributes
     ----------
-    camera : str
-        The camera's name (several for a check of the views together).
+    camera : str or tuple of str
+        The camera's name; the names of the cameras concerned, for a check of several
+        views together.
     check : str
         ``intrinsics``, ``in front``, ``in image``, ``views agree``, ``limb lengths``,
-        ``floor`` or ``scale``.
+        ``floor``, ``up`` or ``scale``.
     text : str
         What was found and what was expected, with the numbers.
     refuse : bool
         True: tracking would give garbage, refuse; False: ambiguous, warn.
     """
 
-    camera: str
+    camera: str | tuple[str, ...]
     check: str
     text: str
     refuse: bool = True
@@ -275,7 +282,7 @@ def view_findings(
         if not lo <= r <= hi:
             out.append(
                 CameraFinding(
-                    all_names,
+                    tuple(c.name for c in cameras),
                     "limb lengths",
                     f"limbs seen by cameras {all_names} at the depth triangulated from them "
                     f"are {r:.3g} times the subject's (median over {len(ratios)} limbs and "
@@ -284,45 +291,203 @@ def view_findings(
                     "size? the subject's height in session.json?)",
                 )
             )
-    ankles = [names.index(n) for n in ("left_ankle", "right_ankle") if n in names]
-    if not out and ankles and _depth_is_steady(cameras[0], pts):
-        # on each view's rays at the subject's median depth (as the limbs above)
-        placed = []
-        for i, c in enumerate(cameras):
-            subject_depth = float(np.median(c.to_camera(pts[ok])[:, 2]))
-            n = c.undistort_pixels(px[i][:, ankles]).reshape(-1, 2)
-            in_cam = np.column_stack([n * subject_depth, np.full(n.shape[0], subject_depth)])
-            placed.append(in_cam @ np.asarray(c.world_from_camera)[:3, :3].T + c.center_in_world)
-        out += floor_findings(all_names, np.concatenate(placed), f"placed from cameras {all_names}")
     return out
 
 
-#: Largest distance (mm) of the subject's lowest joints (ankles) from the world's z = 0
-#: before a warning: a session's floor is usually at 0 (`docs/conventions.md`), and a
-#: subject placed too far or too near (doubled focal lengths, translations in metres)
-#: stands above or below it.
+#: Largest distance (mm) of the subject's ankles (their median height) from the world's
+#: z = 0 before a warning: a session's floor is usually at 0 (`docs/conventions.md`), and
+#: a subject placed too far or too near (doubled focal lengths, a floor 1 m off) stands
+#: below or above it. A subject off the floor for the whole take (climbing, hanging,
+#: seated on a table) is above it too: the warning says so.
 MAX_FLOOR_OFFSET_MM = 300.0
+#: Multiples of the ankles' height uncertainty (how far the views' parallax and keypoint
+#: noise may misplace one triangulated ankle) added to `MAX_FLOOR_OFFSET_MM`: on a narrow
+#: pair with a detector's noise the triangulated ankles scatter and their median moves by
+#: about that uncertainty (the linear triangulation of nearly parallel rays is biased).
+FLOOR_CONFIDENCE = 2.0
+#: Most frames, spread evenly over the take, whose ankles the floor check triangulates.
+FLOOR_CHECK_FRAMES = 600
 #: Camera centres nearer than this to the world origin (mm) are taken for translations
 #: written in metres (a camera 3 m away read as 3 mm).
 MIN_CAMERA_DISTANCE_MM = 50.0
 
 
-def floor_findings(camera: str, ankles_mm: ArrayLike, how: str) -> list[CameraFinding]:
-    """Warn when the subject's ankles (..., 3), as placed by ``how``, lie far from z = 0."""
+def floor_findings(
+    camera: str | tuple[str, ...],
+    ankles_mm: ArrayLike,
+    how: str,
+    note: str = "",
+    uncertainty_mm: float = 0.0,
+) -> list[CameraFinding]:
+    """Warn when the subject's ankles (..., 3), as placed by ``how``, lie far from z = 0.
+
+    The ankles' median height (+-infinity counts as beyond either end) is compared with
+    `MAX_FLOOR_OFFSET_MM` plus `FLOOR_CONFIDENCE` times ``uncertainty_mm``, how far the
+    placement may misplace one ankle; ``note`` follows the numbers.
+    """
     a = np.asarray(ankles_mm, dtype=float).reshape(-1, 3)
-    z = a[np.isfinite(a[:, 2]), 2]
+    z = a[~np.isnan(a[:, 2]), 2]
     if z.size == 0:
         return []
-    lowest = float(np.median(z))
-    if abs(lowest) <= MAX_FLOOR_OFFSET_MM:
+    median = float(np.median(z))
+    if not np.isfinite(median):  # most of them turned round: nothing to tell
         return []
+    limit = MAX_FLOOR_OFFSET_MM + FLOOR_CONFIDENCE * uncertainty_mm
+    if abs(median) <= limit:
+        return []
+    low, high = np.percentile(z, [5.0, 95.0], method="nearest")
+    within = (
+        f"{limit:.0f} mm of z = 0, the floor ({MAX_FLOOR_OFFSET_MM:.0f} mm plus "
+        f"{FLOOR_CONFIDENCE:g} x {uncertainty_mm:.0f} mm, the uncertainty of one ankle)"
+        if uncertainty_mm >= 1.0
+        else f"{limit:.0f} mm of z = 0, the floor"
+    )
     return [
         CameraFinding(
             camera,
             "floor",
-            f"the subject's ankles, {how}, lie at z = {lowest:.0f} mm (median); expected near "
-            f"the floor, within {MAX_FLOOR_OFFSET_MM:.0f} mm of z = 0 (focal lengths or "
-            "translations in the wrong unit? ignore this if the session's floor is not at 0)",
+            f"the subject's ankles, {how}, lie at z = {median:.0f} mm (median of {z.size}, "
+            f"5-95 % {low:.0f} to {high:.0f} mm{note}); expected within {within}. Focal "
+            "lengths or translations in the wrong unit? Ignore it if the floor is not at "
+            "z = 0 or the subject is off it throughout (climbing, hanging, seated)",
+            refuse=False,
+        )
+    ]
+
+
+def _relative_depth_error(
+    cameras: Sequence[Camera], pixels: FloatArray, points_mm: FloatArray
+) -> tuple[NDArray[np.bool_], FloatArray]:
+    """Which views see each triangulated point (V, M), and how far (as a share of its
+    distance) its depth may be off (M,): the keypoints' angular noise (twice the median
+    reprojection error, over the focal length; two views each show about half of it)
+    times sqrt(2), over the widest angle between the views that see it."""
+    sees = np.all(np.isfinite(pixels), axis=-1)  # (V, M)
+    err = reprojection_errors_px(cameras, points_mm, pixels)
+    noise_rad = 2.0 * float(np.nanmedian(err)) / float(np.median([c.K[0, 0] for c in cameras]))
+    centres = np.stack([np.asarray(c.center_in_world, dtype=float) for c in cameras])
+    rays = centres[:, None, :] - points_mm[None]  # (V, M, 3): from each point to each camera
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    rays[~sees] = np.nan
+    cos = np.einsum("imk,jmk->ijm", rays, rays).reshape(-1, points_mm.shape[0])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        parallax = np.arccos(np.clip(np.nanmin(cos, axis=0), -1.0, 1.0))
+        return sees, np.sqrt(2.0) * noise_rad / parallax
+
+
+def view_floor_findings(cameras: Sequence[Camera], ankle_pixels: ArrayLike) -> list[CameraFinding]:
+    """The subject's ankles triangulated from two or more views and compared with the
+    floor (`floor_findings`).
+
+    Parameters
+    ----------
+    cameras : sequence of Camera, length V
+    ankle_pixels : array_like, shape (V, T, A, 2)
+        Each view's ankle keypoints of the same frames (NaN where unseen), spread over
+        the take (`FLOOR_CHECK_FRAMES` are enough).
+
+    Each ankle is triangulated where two or more views see it, at its own depth. A
+    point that lands behind a camera that sees it (a narrow pair's noise turned the
+    disparity round) lies beyond the far end of that camera's ray: its height is taken as
+    that end's (+-infinity), so that the median is not pulled up by leaving it out. The
+    uncertainty of one ankle's height is its relative depth error (the keypoint noise,
+    twice the median reprojection error, over the widest angle between the views that
+    see it) times its height below or above the cameras: a few mm on a wide rig, hundreds
+    on a narrow pair with a detector's noise.
+    """
+    px = np.asarray(ankle_pixels, dtype=float)
+    flat = px.reshape(len(cameras), -1, 2)
+    pts = triangulate_views(cameras, flat)  # (M, 3)
+    keep = np.all(np.isfinite(pts), axis=1)
+    if not np.any(keep):
+        return []
+    flat, pts = flat[:, keep], pts[keep]
+    sees, rel = _relative_depth_error(cameras, flat, pts)
+    centres = np.stack([np.asarray(c.center_in_world, dtype=float) for c in cameras])
+    each_mm = rel * np.abs(np.median(centres[:, 2]) - pts[:, 2])
+    uncertainty = float(np.nanmedian(each_mm)) if np.any(np.isfinite(each_mm)) else 0.0
+    z = pts[:, 2].copy()
+    for i, c in enumerate(cameras):
+        behind = sees[i] & (c.to_camera(pts)[:, 2] <= 0)
+        if np.any(behind):
+            n = c.undistort_pixels(flat[i, behind])
+            ray_z = (
+                np.column_stack([n, np.ones(n.shape[0])]) @ np.asarray(c.world_from_camera)[2, :3]
+            )
+            z[behind] = np.copysign(np.inf, ray_z)  # the far end of the ray it sees
+    names = tuple(c.name for c in cameras)
+    return floor_findings(
+        names,
+        np.column_stack([np.zeros((z.size, 2)), z]),
+        f"placed from cameras {', '.join(names)}",
+        "; each triangulated from the views that see it",
+        uncertainty,
+    )
+
+
+#: Largest angle (deg) between the subject's up (from the mid-ankles to the neck, median
+#: over the frames) and the world's +z before a warning: a subject leans, bends and sits
+#: well within it; a world whose z points down (a calibration board lying face up) or
+#: along the floor (a board on a wall) is 90-180 deg from it.
+MAX_UP_TILT_DEG = 60.0
+#: Largest uncertainty of a triangulated joint, as a share of the neck-to-ankle length,
+#: for the up check to run (a narrow pair with a detector's noise: not at all).
+MAX_UP_UNCERTAINTY = 0.25
+
+
+def view_up_findings(
+    cameras: Sequence[Camera], pixels: ArrayLike, joint_names: Sequence[str]
+) -> list[CameraFinding]:
+    """Warn when the subject, triangulated from two or more views, does not stand along
+    the world's +z (`MAX_UP_TILT_DEG`): the floor check alone passes a world turned
+    upside down (the ankles stay near z = 0, the head goes below them).
+
+    Parameters
+    ----------
+    cameras : sequence of Camera, length V
+    pixels : array_like, shape (V, T, K, 2)
+        Each view's keypoints of the same frames (NaN where unseen), spread over the take.
+    joint_names : sequence of str, length K
+        Canonical names; ``neck`` and one or both ankles are used.
+    """
+    names = list(joint_names)
+    ankles = [names.index(n) for n in ("left_ankle", "right_ankle") if n in names]
+    if "neck" not in names or not ankles:
+        return []
+    px = np.asarray(pixels, dtype=float)[:, :, [names.index("neck"), *ankles]]
+    n_views, n_frames, n_joints = px.shape[:3]
+    flat = px.reshape(n_views, -1, 2)
+    pts = triangulate_views(cameras, flat)  # (T * J, 3)
+    keep = np.all(np.isfinite(pts), axis=1)
+    if np.count_nonzero(keep) < 3:
+        return []
+    _, rel = _relative_depth_error(cameras, flat[:, keep], pts[keep])
+    centres = np.stack([np.asarray(c.center_in_world, dtype=float) for c in cameras])
+    distance = np.linalg.norm(pts[keep][:, None] - centres[None], axis=-1).min(axis=1)
+    joints = pts.reshape(n_frames, n_joints, 3)
+    feet = np.isfinite(joints[:, 1:, 0])  # (T, A)
+    mid = np.where(feet[..., None], joints[:, 1:], 0.0).sum(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        up = joints[:, 0] - mid / feet.sum(axis=1)[:, None]
+        length = np.linalg.norm(up, axis=1)
+    ok = np.isfinite(length) & (length > 0)
+    if np.count_nonzero(ok) < 3:
+        return []
+    if not np.nanmedian(rel * distance) <= MAX_UP_UNCERTAINTY * np.median(length[ok]):
+        return []
+    tilt = float(np.degrees(np.arccos(np.clip(np.median(up[ok, 2] / length[ok]), -1, 1))))
+    if tilt <= MAX_UP_TILT_DEG:
+        return []
+    cams = tuple(c.name for c in cameras)
+    return [
+        CameraFinding(
+            cams,
+            "up",
+            f"the subject, triangulated from cameras {', '.join(cams)}, stands {tilt:.0f} deg "
+            f"from the world's +z (from the ankles to the neck, median of "
+            f"{np.count_nonzero(ok)} frames); expected within {MAX_UP_TILT_DEG:.0f} deg of "
+            "it. A world whose z is not up (a calibration board's frame: z down, or y up)? "
+            "Ignore it if the subject lies or hangs upside down throughout",
             refuse=False,
         )
     ]
@@ -363,25 +528,13 @@ def pose_findings(camera: Camera) -> list[CameraFinding]:
     return out
 
 
-#: Largest spread (median absolute deviation over frames, as a share of the median) of
-#: the subject's per-frame median depth for the depth to be trusted by the floor check:
-#: a narrow baseline with a detector's noise (8 px on a 90 mm pair at 3 m) moves it by
-#: a quarter; exact keypoints, by a few per cent as the subject moves.
-MAX_DEPTH_SPREAD = 0.05
-
-
-def _depth_is_steady(camera: Camera, points_mm: FloatArray) -> bool:
-    """Whether the triangulated subject's depth from ``camera`` holds steady over the
-    frames (`MAX_DEPTH_SPREAD`), so that where it places the subject can be trusted."""
-    z = camera.to_camera(points_mm.reshape(-1, 3))[:, 2].reshape(points_mm.shape[:-1])
-    with np.errstate(all="ignore"):
-        per_frame = np.nanmedian(np.where(np.isfinite(z), z, np.nan), axis=-1)
-    per_frame = per_frame[np.isfinite(per_frame)]
-    if per_frame.size < 3:
-        return False
-    mid = float(np.median(per_frame))
-    spread = float(np.median(np.abs(per_frame - mid)))
-    return mid > 0 and spread <= MAX_DEPTH_SPREAD * mid
+def _named(camera: str | tuple[str, ...]) -> str:
+    """``camera 'a'`` for one camera, ``cameras 'a', 'b'`` for several."""
+    if isinstance(camera, str):
+        return f"camera {camera!r}"
+    if len(camera) == 1:
+        return f"camera {camera[0]!r}"
+    return "cameras " + ", ".join(repr(c) for c in camera)
 
 
 def refuse_or_warn(
@@ -393,9 +546,9 @@ def refuse_or_warn(
     refusals = [f for f in findings if f.refuse]
     for f in findings:
         if not f.refuse:
-            warn(f"{where}: camera {f.camera!r} ({f.check}): {f.text}")
+            warn(f"{where}: {_named(f.camera)} ({f.check}): {f.text}")
     if refusals:
-        lines = [f"camera {f.camera!r} ({f.check}): {f.text}" for f in refusals]
+        lines = [f"{_named(f.camera)} ({f.check}): {f.text}" for f in refusals]
         raise SessionError(
             f"{where}: the cameras do not fit the data; check cameras.json and the keypoints "
             "before tracking:\n  " + "\n  ".join(lines)
@@ -403,11 +556,15 @@ def refuse_or_warn(
 
 
 __all__ = [
+    "FLOOR_CHECK_FRAMES",
+    "FLOOR_CONFIDENCE",
     "IMAGE_MARGIN",
     "LIMB_RATIO_RANGE",
     "MAX_FLOOR_OFFSET_MM",
     "MAX_PIXEL_ASPECT",
     "MAX_REPROJECTION_SHARE",
+    "MAX_UP_TILT_DEG",
+    "MAX_UP_UNCERTAINTY",
     "MIN_CAMERA_DISTANCE_MM",
     "MIN_SHARE",
     "RIGID_PAIRS",
@@ -420,4 +577,6 @@ __all__ = [
     "refuse_or_warn",
     "sees_findings",
     "view_findings",
+    "view_floor_findings",
+    "view_up_findings",
 ]

@@ -16,7 +16,9 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 from numpy.typing import ArrayLike
 
+from mocapkit.camera.pinhole import Camera
 from mocapkit.camera.plausibility import (
+    FLOOR_CHECK_FRAMES,
     VIEW_CHECK_FRAMES,
     CameraFinding,
     floor_findings,
@@ -26,6 +28,8 @@ from mocapkit.camera.plausibility import (
     refuse_or_warn,
     sees_findings,
     view_findings,
+    view_floor_findings,
+    view_up_findings,
 )
 from mocapkit.io.session import Session
 from mocapkit.io.session_csv import Keypoints
@@ -47,14 +51,30 @@ def _first_frames(kp: Keypoints) -> np.ndarray:
     return seen[:VIEW_CHECK_FRAMES]
 
 
+def _spread_frames(kp: Keypoints) -> np.ndarray:
+    """Row indices of at most `FLOOR_CHECK_FRAMES` frames with any keypoint, spread
+    evenly over the take."""
+    seen = np.flatnonzero(np.any(np.isfinite(kp.pixels), axis=(1, 2)))
+    if seen.size <= FLOOR_CHECK_FRAMES:
+        return seen
+    return seen[np.linspace(0, seen.size - 1, FLOOR_CHECK_FRAMES).round().astype(int)]
+
+
 def _matched_views(
     keypoints: Sequence[Keypoints],
+    rows_of: Callable[[Keypoints], np.ndarray] = _first_frames,
+    joints: Sequence[str] | None = None,
 ) -> tuple[np.ndarray, tuple[str, ...]] | None:
-    """The views' keypoints (V, T, K, 2) of the first frames, matched by time stamp to
-    the first view's frames (within half a frame), on the joints all views name."""
+    """The views' keypoints (V, T, K, 2) of the first view's frames ``rows_of`` picks
+    (default: the first ones), matched by time stamp (within half a frame), on the joints
+    all views name (of ``joints``, when given)."""
     first = keypoints[0]
-    names = tuple(n for n in first.joint_names if all(n in k.joint_names for k in keypoints))
-    rows = _first_frames(first)
+    names = tuple(
+        n
+        for n in first.joint_names
+        if all(n in k.joint_names for k in keypoints) and (joints is None or n in joints)
+    )
+    rows = rows_of(first)
     if not names or rows.size == 0:
         return None
     t = first.time_s[rows]
@@ -68,6 +88,20 @@ def _matched_views(
         ok = np.abs(kp.time_s[near] - t) <= 0.5 * dt
         out[v, ok] = kp.pixels[near[ok]][:, cols]
     return out, names
+
+
+def _placement_findings(
+    cameras: Sequence[Camera], keypoints: Sequence[Keypoints]
+) -> list[CameraFinding]:
+    """The floor and up warnings, from the neck and ankles of frames spread over the take
+    triangulated from the views (cameras that agree on the first frames)."""
+    spread = _matched_views(keypoints, _spread_frames, ("neck", "left_ankle", "right_ankle"))
+    if spread is None:
+        return []
+    px, names = spread
+    feet = [i for i, n in enumerate(names) if n != "neck"]
+    out = view_floor_findings(cameras, px[:, :, feet]) if feet else []
+    return out + view_up_findings(cameras, px, names)
 
 
 def check_session_cameras(
@@ -88,7 +122,8 @@ def check_session_cameras(
         The cameras the tracker will use.
     skeleton : Skeleton, optional
         The subject's body model: with keypoints in two or more views, the limb lengths
-        triangulated from the views are compared with it.
+        triangulated from the views are compared with it (and, where the views agree,
+        the triangulated ankles with the floor and the neck above them with +z, warnings).
     keypoints : mapping of camera name to Keypoints, optional
         The 2-D keypoints the tracker will use (default: the session's
         ``keypoints/<camera>.csv``, used for the check even when the tracker reads the
@@ -142,7 +177,10 @@ def check_session_cameras(
                 if known:
                     pos = canonical_positions(skeleton, skeleton.zero_pose(), known)
                     rest = dict(zip(known, pos))
-            findings += view_findings(with_kp, px, names, rest)
+            views = view_findings(with_kp, px, names, rest)
+            findings += views
+            if not views:
+                findings += _placement_findings(with_kp, [kps[c.name] for c in with_kp])
     refuse_or_warn(findings, str(session.path), warn or _print_warning)
     return [f for f in findings if not f.refuse]
 
@@ -162,7 +200,12 @@ def warn_placed_subject(
     if not idx:
         return
     pts = np.asarray(joints_mm, dtype=float)[:, idx]
-    findings = floor_findings(camera, pts, "as placed from this camera")
+    findings = floor_findings(
+        camera,
+        pts,
+        "as placed from this one camera",
+        "; its depth from the feet on the floor or the subject's limb lengths, not triangulated",
+    )
     refuse_or_warn(findings, str(session.path), warn or _print_warning)
 
 
