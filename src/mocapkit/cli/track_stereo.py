@@ -131,7 +131,11 @@ def _run(args: argparse.Namespace) -> int:
     from mocapkit.pipelines.fit_report import warn_implausible
     from mocapkit.pipelines.multiview import resolve_stereo_method
     from mocapkit.pipelines.run import find_gaps
-    from mocapkit.pipelines.stereo import evaluate_stereo, track_stereo_session
+    from mocapkit.pipelines.stereo import (
+        elbow_jump_warnings,
+        evaluate_stereo,
+        track_stereo_session,
+    )
     from mocapkit.tracking.stereo.tracker import StereoConfig
 
     if args.keypoints:
@@ -186,8 +190,8 @@ def _run(args: argparse.Namespace) -> int:
     # its limb (NaN in joints.csv, the status in fit.csv): say where, as track hybrid does
     for gap in find_gaps(run.results):
         print(f"gap: {gap}")
-    for jump in run.jumps:
-        print(f"warning: {jump}")
+    for line in elbow_jump_warnings(run.jumps):
+        print(line)
     warn_implausible(args.out)
     fps = run.motion.n_frames / max(run.seconds, 1e-9)
     print(f"tracked {run.motion.n_frames} frames in {run.seconds:.1f} s ({fps:.1f} frames/s)")

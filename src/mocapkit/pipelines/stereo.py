@@ -29,6 +29,7 @@ from mocapkit.errors import ConfigError, SessionError, unknown_name
 from mocapkit.io.markers import true_runs
 from mocapkit.io.motion import Motion
 from mocapkit.pipelines.camera_check import check_session_cameras
+from mocapkit.pipelines.fit_report import SHOWN_SPANS, span_when, worst_spans_lines
 from mocapkit.pipelines.input_speeds import keypoint_input_speeds
 from mocapkit.pipelines.run import run_tracker
 from mocapkit.timing import StageTimer
@@ -70,12 +71,25 @@ class ElbowJump:
     top_mm_per_s: float
 
     def __str__(self) -> str:
-        frames = f"{self.n_frames} frame{'s' if self.n_frames != 1 else ''}"
+        when = span_when(self.start_s, self.end_s, self.n_frames)
         return (
-            f"the {self.side} elbow jumps at {self.start_s:.3f}-{self.end_s:.3f} s ({frames}, "
-            f"up to {self.top_mm_per_s / 1000:.1f} m/s relative to the shoulder): the arm "
-            "filter took the other side of the elbow circle; see fit.csv"
+            f"the {self.side} elbow jumps {when}, up to {self.top_mm_per_s / 1000:.1f} m/s "
+            "relative to the shoulder"
         )
+
+
+def elbow_jump_warnings(jumps: Sequence[ElbowJump], shown: int = SHOWN_SPANS) -> list[str]:
+    """The end-of-run warning about elbow jumps: a count, the ``shown`` fastest, then how
+    many more (`mocapkit.pipelines.fit_report.worst_spans_lines`); nothing without
+    jumps."""
+    n_frames = sum(j.n_frames for j in jumps)
+    header = (
+        f"warning: an elbow jumps in {len(jumps)} span{'s' if len(jumps) != 1 else ''} "
+        f"({n_frames} frame{'s' if n_frames != 1 else ''}): the arm filter took the other "
+        "side of the elbow circle; the pose there is not to be trusted (fit.csv's "
+        "left_elbow_jump, right_elbow_jump)"
+    )
+    return worst_spans_lines(header, [jumps], lambda j: j.top_mm_per_s, shown)
 
 
 def elbow_jumps(time_s: ArrayLike, fit: Mapping[str, ArrayLike]) -> list[ElbowJump]:
@@ -648,6 +662,7 @@ __all__ = [
     "accuracy_header",
     "arm_errors_per_frame",
     "bench_stereo",
+    "elbow_jump_warnings",
     "elbow_jumps",
     "elbow_jumps_in_folder",
     "evaluate_stereo",
