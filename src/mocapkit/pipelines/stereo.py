@@ -6,7 +6,7 @@ writes the usual result folder through the shared runner
 (`mocapkit.pipelines.run.run_tracker`, with ``fit.csv``). `evaluate_stereo` scores a
 result against a synthetic session's truth: the mean error of shoulders, elbows and
 wrists and the torso yaw error (the yaw of the line between the shoulders).
-`stereo_accuracy` renders the standard in-view excerpts (`STEREO_CLIPS`) and scores
+`stereo_accuracy` renders in-view excerpts of the project's clips (`STEREO_CLIPS`) and scores
 each tracker mode (`ACCURACY_MODES`) on them. `bench_stereo` times the whole per-frame pipeline at
 640x480 on a rendered stereo session.
 """
@@ -30,6 +30,7 @@ from mocapkit.io.markers import true_runs
 from mocapkit.io.motion import Motion
 from mocapkit.pipelines.camera_check import check_session_cameras
 from mocapkit.pipelines.fit_report import SHOWN_SPANS, span_when, worst_spans_lines
+from mocapkit.pipelines.harness import TUNING_CLIPS
 from mocapkit.pipelines.input_speeds import keypoint_input_speeds
 from mocapkit.pipelines.run import run_tracker
 from mocapkit.timing import StageTimer
@@ -408,17 +409,19 @@ def bench_stereo(
     return out
 
 
-#: Excerpts (clip, start s) where the subject stays in front of a fixed stereo rig, the
-#: paper's setting (walking clips leave the views; chosen by the pelvis travelling less
-#: than 0.8 m in 4 s).
-STEREO_CLIPS: tuple[tuple[str, float], ...] = (
-    ("13_26.bvh", 7.5),
-    ("01_09.amc", 7.5),
-    ("01_12.amc", 5.0),
-    ("lambada.amc", 12.5),
-    ("charleston1.amc", 0.0),
-    ("01_01.bvh", 7.5),
-)
+#: Start (s) of each clip's 4 s excerpt where the subject stays in front of a fixed stereo
+#: rig, the paper's setting (walking clips leave the views; chosen by the pelvis travelling
+#: less than 0.8 m in 4 s); a clip not listed starts at 0 s. Which clips are run is the
+#: project's split (`mocapkit.pipelines.harness.CLIP_SETS`, default the tuning clips).
+STEREO_CLIPS: dict[str, float] = {
+    "13_26.bvh": 7.5,
+    "01_09.amc": 7.5,
+    "01_12.amc": 5.0,
+    "lambada.amc": 12.5,
+    "charleston1.amc": 0.0,
+    "01_01.bvh": 7.5,
+    "01_01.amc": 7.5,  # the same trial as the BVH
+}
 
 
 #: Tracker modes of the accuracy study.
@@ -459,7 +462,7 @@ ACCURACY_MODES: dict[str, StereoConfig] = {
 def stereo_accuracy(
     mocap_dir: str | os.PathLike[str],
     work_dir: str | os.PathLike[str],
-    clips: Sequence[tuple[str, float]] = STEREO_CLIPS,
+    clips: Sequence[str] | None = None,
     modes: Sequence[str] = ("keypoints+torso",),
     cameras: str | None = "stereo_left,stereo_right",
     seconds: float = 4.0,
@@ -467,7 +470,9 @@ def stereo_accuracy(
     seed: int = 0,
     n_particles: int | None = None,
 ) -> list[dict[str, Any]]:
-    """Render each excerpt (``--rig all``, long sleeves) once, track it in each mode.
+    """Render each clip's excerpt (``--rig all``, long sleeves; `STEREO_CLIPS`) once,
+    track it in each mode. ``clips``: default the project's tuning clips
+    (`mocapkit.pipelines.harness.TUNING_CLIPS`).
 
     ``seed`` (the filters' random generator, `StereoConfig.seed`) and ``n_particles``
     (default 150) change every mode's settings, to measure the spread between seeds and
@@ -481,7 +486,8 @@ def stereo_accuracy(
             raise unknown_name("accuracy mode", m, ACCURACY_MODES, "--modes")
     rows = []
     work = Path(work_dir)
-    for clip, start in clips:
+    for clip in clips or TUNING_CLIPS:
+        start = STEREO_CLIPS.get(clip, 0.0)
         session = _study_session(work, mocap_dir, clip, start, seconds)
         for m in modes:
             cfg = replace(ACCURACY_MODES[m], seed=int(seed))
@@ -510,14 +516,6 @@ ABLATIONS: dict[str, StereoConfig] = {
     "weighted mean estimate": replace(_BASE, arm=replace(_BASE.arm, estimate="mean")),
     "no shoulder pull": replace(_BASE, arm=replace(_BASE.arm, shoulder_pull=0.0)),
 }
-
-#: Clips of the ablation study (a subset of `STEREO_CLIPS`).
-ABLATION_CLIPS: tuple[tuple[str, float], ...] = (
-    ("13_26.bvh", 7.5),
-    ("01_09.amc", 7.5),
-    ("01_12.amc", 5.0),
-    ("charleston1.amc", 0.0),
-)
 
 
 def arm_errors_per_frame(
@@ -577,7 +575,7 @@ def stereo_ablations(
     mocap_dir: str | os.PathLike[str],
     work_dir: str | os.PathLike[str],
     variants: Sequence[str] = tuple(ABLATIONS),
-    clips: Sequence[tuple[str, float]] = ABLATION_CLIPS,
+    clips: Sequence[str] | None = None,
     cameras: str | None = "stereo_left,stereo_right",
     reset_s: float = 1.0,
     tol_mm: float = 10.0,
@@ -587,7 +585,7 @@ def stereo_ablations(
     seed: int = 0,
 ) -> list[dict[str, Any]]:
     """Mean arm error and frames to converge from a wrong start, per variant and clip
-    (``seed``: `StereoConfig.seed` of every variant).
+    (``seed``: `StereoConfig.seed` of every variant; ``clips``: default the tuning clips).
 
     Each clip (rendered as in `stereo_accuracy`) is tracked twice per variant: once
     undisturbed (its arm mean error is the figure) and once with both arm filters reset
@@ -610,7 +608,8 @@ def stereo_ablations(
             f"{seconds:g} s), found reset_s = {reset_s:g} s"
         )
     rows = []
-    for clip, start in clips:
+    for clip in clips or TUNING_CLIPS:
+        start = STEREO_CLIPS.get(clip, 0.0)
         session = _study_session(Path(work_dir), mocap_dir, clip, start, seconds)
         for v in variants:
             cfg = replace(ABLATIONS[v], seed=int(seed))
@@ -645,6 +644,26 @@ def format_accuracy_row(row: dict[str, Any]) -> str:
     )
 
 
+def accuracy_means(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per mode (in the rows' order), the mean over its clips of each figure of
+    `format_accuracy_row`, as a row with ``clip`` ``"mean"``."""
+    out = []
+    for mode in dict.fromkeys(r["mode"] for r in rows):
+        mine = [r for r in rows if r["mode"] == mode]
+        out.append(
+            {
+                "clip": "mean",
+                "mode": mode,
+                "per_joint_mm": {
+                    j: float(np.mean([r["per_joint_mm"][j] for r in mine])) for j in ARM_JOINTS
+                },
+                "arm_mean_mm": float(np.mean([r["arm_mean_mm"] for r in mine])),
+                "torso_yaw_error_deg": float(np.mean([r["torso_yaw_error_deg"] for r in mine])),
+            }
+        )
+    return out
+
+
 def accuracy_header() -> str:
     """Column titles of `format_accuracy_row`."""
     short = " ".join(f"{j.replace('left_', 'L').replace('right_', 'R')[:6]:>6}" for j in ARM_JOINTS)
@@ -653,13 +672,13 @@ def accuracy_header() -> str:
 
 __all__ = [
     "ABLATIONS",
-    "ABLATION_CLIPS",
     "ACCURACY_MODES",
     "ARM_JOINTS",
     "STEREO_CLIPS",
     "ElbowJump",
     "StereoRun",
     "accuracy_header",
+    "accuracy_means",
     "arm_errors_per_frame",
     "bench_stereo",
     "elbow_jump_warnings",
