@@ -224,3 +224,14 @@ def test_track_mono_costume_needs_skin(tmp_path: Path, capsys: pytest.CaptureFix
     )
     assert code == 2
     assert "expected them with --skin" in capsys.readouterr().err
+
+
+def test_speed_line_says_when_the_run_compiled_the_kernels() -> None:
+    from mocapkit.cli.track_stereo import first_run
+    from mocapkit.timing import CompileTime
+
+    assert first_run(CompileTime()) == ""
+    assert first_run(CompileTime(67, 22.46)) == (
+        "; first run: includes compiling 67 kernels, 22.5 s; later runs load them from the cache"
+    )
+    assert first_run(CompileTime(1, 0.5)).startswith("; first run: includes compiling 1 kernel,")

@@ -15,6 +15,7 @@ from mocapkit.tracking.multiview.config import SMOOTHING, STEREO_METHODS, Multiv
 
 if TYPE_CHECKING:
     from mocapkit.io.session import Session
+    from mocapkit.timing import CompileTime
 
 #: The stereo tracker's settings (the paper's tracker: heavy to import, read by --help only)
 _STEREO = "mocapkit.tracking.stereo.tracker:StereoConfig"
@@ -194,7 +195,10 @@ def _run(args: argparse.Namespace) -> int:
         print(line)
     warn_implausible(args.out)
     fps = run.motion.n_frames / max(run.seconds, 1e-9)
-    print(f"tracked {run.motion.n_frames} frames in {run.seconds:.1f} s ({fps:.1f} frames/s)")
+    print(
+        f"tracked {run.motion.n_frames} frames in {run.seconds:.1f} s ({fps:.1f} frames/s"
+        f"{first_run(run.compiled)})"
+    )
     print(f"wrote {args.out}")
     if (Path(args.session) / "truth.npz").is_file():
         ev = evaluate_stereo(run, args.session)
@@ -206,6 +210,18 @@ def _run(args: argparse.Namespace) -> int:
             print(f"  {'arm mean':<16}{ev['arm_mean_mm']:8.1f} mm")
             print(f"  {'torso yaw':<16}{ev['torso_yaw_error_deg']:8.1f} deg")
     return 0
+
+
+def first_run(compiled: CompileTime) -> str:
+    """The speed line's note when the run compiled Numba kernels (a first run after
+    installing: later runs load them from their cache); empty otherwise."""
+    if not compiled.kernels:
+        return ""
+    kernels = f"{compiled.kernels} kernel{'s' if compiled.kernels != 1 else ''}"
+    return (
+        f"; first run: includes compiling {kernels}, {compiled.seconds:.1f} s; later runs "
+        "load them from the cache"
+    )
 
 
 def _run_fit(args: argparse.Namespace, session: Session) -> int:
@@ -238,8 +254,8 @@ def _run_fit(args: argparse.Namespace, session: Session) -> int:
         )
     fps = run.motion.n_frames / max(run.seconds, 1e-9)
     print(
-        f"fitted {run.motion.n_frames} frames in {run.seconds:.2f} s CPU ({fps:.1f} frames/s), "
-        f"smoothing {cfg.smoothing}"
+        f"fitted {run.motion.n_frames} frames in {run.seconds:.2f} s CPU ({fps:.1f} frames/s"
+        f"{first_run(run.compiled)}), smoothing {cfg.smoothing}"
     )
     print(f"wrote {args.out}")
     warn_implausible(args.out)

@@ -33,7 +33,7 @@ from mocapkit.pipelines.fit_report import SHOWN_SPANS, span_when, worst_spans_li
 from mocapkit.pipelines.harness import TUNING_CLIPS
 from mocapkit.pipelines.input_speeds import keypoint_input_speeds
 from mocapkit.pipelines.run import run_tracker
-from mocapkit.timing import StageTimer
+from mocapkit.timing import CompileTime, StageTimer, numba_compiling
 from mocapkit.tracking.stereo.arm_filter import ArmFilterConfig
 from mocapkit.tracking.stereo.fusion import default_fusion
 from mocapkit.tracking.stereo.tracker import (
@@ -126,8 +126,9 @@ def elbow_jumps_in_folder(result_dir: str | os.PathLike[str]) -> list[ElbowJump]
 
 @dataclass
 class StereoRun:
-    """A tracked session: the motion, per-frame diagnostics, `StereoPose` results and the
-    elbow jumps found in them (`elbow_jumps`)."""
+    """A tracked session: the motion, per-frame diagnostics, `StereoPose` results, the
+    elbow jumps found in them (`elbow_jumps`) and the Numba compilation of the run
+    (`mocapkit.timing.numba_compiling`: a first run's)."""
 
     motion: Motion
     yaw_rad: FloatArray  # (T,)
@@ -136,6 +137,7 @@ class StereoRun:
     seconds: float  # reading and tracking, without writing
     results: list[StereoPose] = field(default_factory=list)  # per frame, as fit.csv
     jumps: list[ElbowJump] = field(default_factory=list)
+    compiled: CompileTime = field(default_factory=CompileTime)  # Numba, on a first run
 
 
 def parse_cameras(text: str | None, available: Sequence[str]) -> list[str]:
@@ -243,16 +245,17 @@ def track_stereo_session(
     samples = _samples(session, names, n)
     mode = "keypoints" if cfg.use_keypoints else "skin blobs"
     timer = StageTimer()
-    run = run_tracker(
-        tracker,
-        samples,
-        n,
-        out_dir,
-        label=f"track stereo {session.path.name}",
-        source=f"stereo tracker ({mode}, cameras {','.join(names)}) on {session.path}",
-        timer=timer,
-        input_speeds=keypoint_input_speeds(session, names),
-    )
+    with numba_compiling() as compiled:
+        run = run_tracker(
+            tracker,
+            samples,
+            n,
+            out_dir,
+            label=f"track stereo {session.path.name}",
+            source=f"stereo tracker ({mode}, cameras {','.join(names)}) on {session.path}",
+            timer=timer,
+            input_speeds=keypoint_input_speeds(session, names),
+        )
     poses = [cast(StereoPose, r) for r in run.results]
     fit_keys = poses[0].fit if poses else {}
     totals = timer.totals_s()
@@ -264,6 +267,7 @@ def track_stereo_session(
         totals.get("input", 0.0) + totals.get("track", 0.0),
         poses,
         elbow_jumps([p.time_s for p in poses], {k: [p.fit[k] for p in poses] for k in fit_keys}),
+        compiled,
     )
 
 
