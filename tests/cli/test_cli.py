@@ -235,3 +235,17 @@ def test_speed_line_says_when_the_run_compiled_the_kernels() -> None:
         "; first run: includes compiling 67 kernels, 22.5 s; later runs load them from the cache"
     )
     assert first_run(CompileTime(1, 0.5)).startswith("; first run: includes compiling 1 kernel,")
+
+
+def test_help_names_every_tracker_setting(capsys: pytest.CaptureFixture[str]) -> None:
+    """The top help names the three set-ups, multi-view included; the stereo method's line
+    says its default is the full-body fit, the paper's tracker the narrow pair's."""
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    top = " ".join(capsys.readouterr().out.split())
+    assert "two or more calibrated cameras (stereo / multi-view)" in top
+    assert "one video (mono)" in top and "plus one camera (hybrid)" in top
+    with pytest.raises(SystemExit):
+        main(["track", "--help"])
+    track = " ".join(capsys.readouterr().out.split())
+    assert "the full body fitted to every view's 2-D keypoints; on a narrow pair" in track

@@ -27,7 +27,9 @@ def register_method(methods: Any) -> None:
     """Add ``stereo`` to the ``track`` methods."""
     p = methods.add_parser(
         "stereo",
-        help="two or more cameras, no markers (Azad, Asfour, Dillmann 2008)",
+        help="two or more cameras, no markers: the full body fitted to every view's 2-D "
+        "keypoints; on a narrow pair or without keypoints the paper's arm filters (Azad, "
+        "Asfour, Dillmann 2008)",
         description="Track a session folder with two or more calibrated cameras. With 2-D "
         "keypoints for every camera (default --method auto): the full body fitted to every "
         "view's detections (robust, left/right swaps per view, the subject's segment lengths "
