@@ -9,7 +9,7 @@ import argparse
 import json
 from typing import Any
 
-from mocapkit.cli.args import add_clip_options, chosen_clips, given, shows_default
+from mocapkit.cli.args import MOCAP_HELP, add_clip_options, chosen_clips, given, shows_default
 
 _RUN = "mocapkit.pipelines.stereo:stereo_accuracy"
 
@@ -20,7 +20,7 @@ def register_method(methods: Any) -> None:
         "stereo",
         help="arm joint and torso yaw errors of the stereo tracker on rendered excerpts",
     )
-    p.add_argument("--mocap", help="folder of motion clips (default: ../shared/data/mocap)")
+    p.add_argument("--mocap", help=MOCAP_HELP)
     add_clip_options(p)
     p.add_argument(
         "--work", default="accuracy-output/stereo", help="sessions folder (default %(default)s)"
