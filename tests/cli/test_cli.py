@@ -249,3 +249,20 @@ def test_help_names_every_tracker_setting(capsys: pytest.CaptureFixture[str]) ->
         main(["track", "--help"])
     track = " ".join(capsys.readouterr().out.split())
     assert "the full body fitted to every view's 2-D keypoints; on a narrow pair" in track
+
+
+def test_far_spans_listed_longest_first_then_counted() -> None:
+    from mocapkit.cli.track_stereo import far_warnings
+
+    spans = [("left_wrist", 0.5, 0.6, 5), ("right_knee", 1.0, 1.4, 13)]
+    spans += [("nose", 2.0 + k, 2.2 + k, 7) for k in range(3)]
+    lines = far_warnings(spans, 40.0)
+    assert lines == [
+        "warning: a joint is more than 40 px from its detections in most views in 5 spans "
+        "(39 frames); see fit.csv",
+        "  right_knee at 1.00-1.40 s (13 frames)",
+        "  nose at 2.00-2.20 s (7 frames)",
+        "  nose at 3.00-3.20 s (7 frames)",
+        "  ... and 2 more (fit.csv)",
+    ]
+    assert far_warnings([], 40.0) == []

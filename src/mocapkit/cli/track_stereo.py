@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import argparse
 import json
-from typing import TYPE_CHECKING, Any
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from mocapkit.cli.args import given, output_folder, shows_default
 from mocapkit.tracking.multiview.config import SMOOTHING, STEREO_METHODS, MultiviewRunConfig
@@ -214,6 +215,33 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
+class _FarSpan(NamedTuple):
+    joint: str
+    start_s: float
+    end_s: float
+    n_frames: int
+
+    def __str__(self) -> str:
+        from mocapkit.pipelines.fit_report import span_when
+
+        return f"{self.joint} {span_when(self.start_s, self.end_s, self.n_frames)}"
+
+
+def far_warnings(spans: Sequence[tuple[str, float, float, int]], warn_px: float) -> list[str]:
+    """The warning about the fit's far spans (joint, first s, last s, frames;
+    `mocapkit.pipelines.multiview.far_spans`): a count, the longest few, then how many
+    more, as the other end-of-run warnings list their spans."""
+    from mocapkit.pipelines.fit_report import worst_spans_lines
+
+    far = [_FarSpan(*s) for s in spans]
+    n_frames = sum(s.n_frames for s in far)
+    header = (
+        f"warning: a joint is more than {warn_px:g} px from its detections in most views in "
+        f"{len(far)} span{'s' if len(far) != 1 else ''} ({n_frames} frames); see fit.csv"
+    )
+    return worst_spans_lines(header, [far], lambda s: s.n_frames)
+
+
 def first_run(compiled: CompileTime) -> str:
     """The speed line's note when the run compiled Numba kernels (a first run after
     installing: later runs load them from their cache); empty otherwise."""
@@ -249,11 +277,8 @@ def _run_fit(args: argparse.Namespace, session: Session) -> int:
     run = track_multiview_session(session, args.out, cameras=args.cameras, config=cfg)
     for gap in find_gaps(run.results):
         print(f"gap: {gap}")
-    for joint, t0, t1, n in run.far:
-        print(
-            f"warning: {joint} is more than {cfg.fit.warn_px:g} px from its detections in most "
-            f"views over {t0:.3f}-{t1:.3f} s ({n} frames); see fit.csv"
-        )
+    for line in far_warnings(run.far, cfg.fit.warn_px):
+        print(line)
     fps = run.motion.n_frames / max(run.seconds, 1e-9)
     print(
         f"fitted {run.motion.n_frames} frames in {run.seconds:.2f} s CPU ({fps:.1f} frames/s"
