@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from mocapkit.errors import ConfigError
@@ -47,11 +48,31 @@ def test_studies_default_to_the_tuning_clips(tmp_path, monkeypatch):
     assert _studied(monkeypatch, lambda: stereo_ablations(tmp_path, tmp_path)) == [
         (TUNING_CLIPS[0], STEREO_CLIPS[TUNING_CLIPS[0]])
     ]
-    # a clip without a chosen excerpt starts at 0 s
+
+
+def test_an_unlisted_clip_starts_where_its_pelvis_travels_least():
+    from mocapkit.pipelines.stereo import stillest_start_s
+
+    t = 5.0 + np.arange(0, 241) / 30.0  # 8 s from 5 s
+    pelvis = np.zeros((t.size, 3))
+    pelvis[:, 0] = 400.0 * (t - 5.0)  # walks 0.4 m/s ...
+    pelvis[(t >= 7.0) & (t <= 7.0 + 4.0), 0] = 800.0  # ... but stands 2-6 s in
+    pelvis[t > 11.0, 0] = 800.0 + 400.0 * (t[t > 11.0] - 11.0)
+    assert stillest_start_s(t, pelvis, 4.0) == 2.0
+    assert stillest_start_s(t, pelvis, 4.0, step_s=1.5) == 1.5  # the grid's nearest
+    assert stillest_start_s(t[:90], pelvis[:90], 4.0) == 0.0  # shorter than the excerpt
+
+
+def test_unlisted_clip_start_from_the_real_clip(shared_data, monkeypatch):
+    from mocapkit.io.motion_files import read_motion
+    from mocapkit.pipelines.stereo import STEREO_CLIPS, excerpt_start_s, stillest_start_s
+
+    mocap = shared_data / "mocap"
     assert "zombie.amc" not in STEREO_CLIPS
-    assert _studied(monkeypatch, lambda: stereo_accuracy(tmp_path, tmp_path, ["zombie.amc"])) == [
-        ("zombie.amc", 0.0)
-    ]
+    m = read_motion(mocap / "zombie.amc")
+    start = stillest_start_s(m.time_s, m.joint("pelvis"), 4.0)
+    assert excerpt_start_s(mocap, "zombie.amc", 4.0) == start
+    assert excerpt_start_s(mocap, "13_26.bvh", 4.0) == STEREO_CLIPS["13_26.bvh"]
 
 
 def _row(clip: str, mode: str, err: float, yaw: float) -> dict:

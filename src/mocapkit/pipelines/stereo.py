@@ -415,8 +415,9 @@ def bench_stereo(
 
 #: Start (s) of each clip's 4 s excerpt where the subject stays in front of a fixed stereo
 #: rig, the paper's setting (walking clips leave the views; chosen by the pelvis travelling
-#: less than 0.8 m in 4 s); a clip not listed starts at 0 s. Which clips are run is the
-#: project's split (`mocapkit.pipelines.harness.CLIP_SETS`, default the tuning clips).
+#: less than 0.8 m in 4 s); a clip not listed starts where its pelvis travels least
+#: (`stillest_start_s`). Which clips are run is the project's split
+#: (`mocapkit.pipelines.harness.CLIP_SETS`, default the tuning clips).
 STEREO_CLIPS: dict[str, float] = {
     "13_26.bvh": 7.5,
     "01_09.amc": 7.5,
@@ -428,7 +429,35 @@ STEREO_CLIPS: dict[str, float] = {
 }
 
 
-#: Tracker modes of the accuracy study.
+def stillest_start_s(
+    time_s: ArrayLike, pelvis_mm: ArrayLike, seconds: float, step_s: float = 0.5
+) -> float:
+    """The start (s from the first frame, on a ``step_s`` grid) of the ``seconds`` long
+    window whose pelvis ends nearest where it began (the least net travel: a subject
+    staying in front of a fixed rig); 0 for a clip no longer than ``seconds``."""
+    t = np.asarray(time_s, dtype=float)
+    t = t - t[0]
+    p = np.asarray(pelvis_mm, dtype=float)
+    best, start = math.inf, 0.0
+    for s in np.arange(0.0, t[-1] - seconds + 1e-9, step_s):
+        a, b = np.searchsorted(t, s - 1e-9), np.searchsorted(t, s + seconds + 1e-9) - 1
+        travel = float(np.linalg.norm(p[b] - p[a]))
+        if travel < best:
+            best, start = travel, float(s)
+    return start
+
+
+def excerpt_start_s(mocap_dir: str | os.PathLike[str], clip: str, seconds: float) -> float:
+    """Start of a clip's excerpt in the stereo studies: `STEREO_CLIPS`' where listed,
+    else `stillest_start_s` of the clip's pelvis."""
+    if clip in STEREO_CLIPS:
+        return STEREO_CLIPS[clip]
+    from mocapkit.io.motion_files import read_motion
+
+    motion = read_motion(Path(mocap_dir) / clip)
+    return stillest_start_s(motion.time_s, motion.joint("pelvis"), seconds)
+
+
 def _study_session(
     work: Path, mocap_dir: str | os.PathLike[str], clip: str, start: float, seconds: float
 ) -> Path:
@@ -491,7 +520,7 @@ def stereo_accuracy(
     rows = []
     work = Path(work_dir)
     for clip in clips or TUNING_CLIPS:
-        start = STEREO_CLIPS.get(clip, 0.0)
+        start = excerpt_start_s(mocap_dir, clip, seconds)
         session = _study_session(work, mocap_dir, clip, start, seconds)
         for m in modes:
             cfg = replace(ACCURACY_MODES[m], seed=int(seed))
@@ -613,7 +642,7 @@ def stereo_ablations(
         )
     rows = []
     for clip in clips or TUNING_CLIPS:
-        start = STEREO_CLIPS.get(clip, 0.0)
+        start = excerpt_start_s(mocap_dir, clip, seconds)
         session = _study_session(Path(work_dir), mocap_dir, clip, start, seconds)
         for v in variants:
             cfg = replace(ABLATIONS[v], seed=int(seed))
@@ -689,11 +718,13 @@ __all__ = [
     "elbow_jumps",
     "elbow_jumps_in_folder",
     "evaluate_stereo",
+    "excerpt_start_s",
     "format_accuracy_row",
     "frames_to_converge",
     "parse_cameras",
     "stereo_ablations",
     "stereo_accuracy",
+    "stillest_start_s",
     "track_stereo_session",
     "truth_yaw_rad",
 ]
