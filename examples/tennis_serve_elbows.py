@@ -11,7 +11,8 @@ Usage::
 
     .venv/bin/python examples/tennis_serve_elbows.py [PATH/TO/kinematics_tennis_serve.c3d]
 
-The default path is ``../shared/data/c3d/kinematics_tennis_serve.c3d`` from the repo root.
+The default path is ``c3d/kinematics_tennis_serve.c3d`` in ``$MOCAPKIT_SHARED_DATA``, else
+in the first ``shared/data`` or ``../shared/data`` above this example (the repository).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from mocapkit.io.marker_files import read_markers
+from mocapkit.pipelines.demo import find_shared_data
 from mocapkit.pipelines.hybrid_markers import track_hybrid_markers
 
 HEAD = "head=LFHD+RFHD+LBHD+RBHD"
@@ -50,6 +52,19 @@ def main(path: Path) -> None:
         )
 
 
+def default_path() -> Path:
+    """The serve's C3D in the shared data beside the repository, or exit naming what was
+    tried."""
+    data = find_shared_data(Path(__file__).resolve().parent)
+    path = data / "c3d" / "kinematics_tennis_serve.c3d" if data else None
+    if path is None or not path.is_file():
+        raise SystemExit(
+            f"kinematics_tennis_serve.c3d not found: looked in {path or 'no shared/data'} "
+            f"($MOCAPKIT_SHARED_DATA, else shared/data or ../shared/data above "
+            f"{Path(__file__).resolve().parent}); set MOCAPKIT_SHARED_DATA or pass the path"
+        )
+    return path
+
+
 if __name__ == "__main__":
-    default = Path("..") / "shared" / "data" / "c3d" / "kinematics_tennis_serve.c3d"
-    main(Path(sys.argv[1]) if len(sys.argv) > 1 else default)
+    main(Path(sys.argv[1]) if len(sys.argv) > 1 else default_path())

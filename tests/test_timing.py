@@ -52,3 +52,23 @@ def test_recorded_stage_keeps_each_call():
     assert timer.durations_s("track") == [0.5, 2.0]
     assert timer.durations_s("other") == []  # not recorded
     assert timer.totals_s()["track"] == 2.5
+
+
+def test_numba_compiling_counts_a_first_compilation_only() -> None:
+    import numba
+
+    from mocapkit.timing import numba_compiling
+
+    @numba.njit(cache=False)
+    def twice(x: float) -> float:
+        return 2.0 * x
+
+    with numba_compiling(time.process_time) as first:
+        assert twice(1.5) == 3.0
+    assert first.kernels == 1 and first.seconds > 0.0
+    with numba_compiling() as again:  # compiled already: nothing to compile
+        assert twice(2.5) == 5.0
+    assert (again.kernels, again.seconds) == (0, 0.0)
+    with numba_compiling() as other:  # a new signature is a new kernel
+        assert twice(2) == 4
+    assert other.kernels == 1

@@ -5,13 +5,20 @@ reads the totals. The default `NULL_TIMER` does nothing, so untimed runs pay onl
 attribute look-up and an empty ``with`` per stage (well under a microsecond); a real
 `StageTimer` adds two ``perf_counter`` calls (about 0.1 us each), nothing measurable
 against a frame of several milliseconds.
+
+`numba_compiling` measures the time Numba spends compiling kernels inside a block (a
+first run after installing, before the kernels are in their on-disk cache), so a run's
+speed line can say its time includes it.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
 from types import TracebackType
+from typing import Any
 
 
 class _Stage:
@@ -143,4 +150,42 @@ class NullTimer(StageTimer):
 #: The shared no-op timer.
 NULL_TIMER = NullTimer()
 
-__all__ = ["NULL_TIMER", "NullTimer", "StageTimer"]
+
+@dataclass
+class CompileTime:
+    """Numba compilation inside a `numba_compiling` block: the kernels compiled (not
+    loaded from their cache nor compiled before) and the seconds it took (nested
+    compilations counted once)."""
+
+    kernels: int = 0
+    seconds: float = 0.0
+
+
+@contextmanager
+def numba_compiling(clock: Callable[[], float] = time.perf_counter) -> Iterator[CompileTime]:
+    """The `CompileTime` of the block, on ``clock`` (that of the times it is set beside:
+    ``time.process_time`` for CPU time)."""
+    from numba.core import event
+
+    found = CompileTime()
+
+    class _Listener(event.Listener):
+        depth = 0
+        start = 0.0
+
+        def on_start(self, ev: Any) -> None:
+            if self.depth == 0:
+                self.start = clock()
+            self.depth += 1
+            found.kernels += 1
+
+        def on_end(self, ev: Any) -> None:
+            self.depth -= 1
+            if self.depth == 0:
+                found.seconds += clock() - self.start
+
+    with event.install_listener("numba:compile", _Listener()):
+        yield found
+
+
+__all__ = ["NULL_TIMER", "CompileTime", "NullTimer", "StageTimer", "numba_compiling"]

@@ -217,3 +217,36 @@ def test_out_on_a_read_only_place_is_refused_before_the_work(
     err = _usage_error([*argv, "--out", str(readonly / "old")], capsys)
     assert f"cannot write to {readonly} (read-only)" in err
     assert sorted(p.name for p in readonly.iterdir()) == ["old"]  # no probe left behind
+
+
+def test_mocap_folder_default_from_the_shared_data(tmp_path, monkeypatch):
+    """``--mocap`` defaults to ``mocap`` in the shared data: ``$MOCAPKIT_SHARED_DATA``, else
+    found from the working directory, else from the installed package (a checkout's own);
+    when missing, the message names what was tried and the variable."""
+    import mocapkit
+    from mocapkit.cli.args import mocap_folder
+    from mocapkit.errors import SessionError
+    from mocapkit.pipelines import demo
+
+    assert mocap_folder("clips") == Path("clips")
+    monkeypatch.setenv("MOCAPKIT_SHARED_DATA", str(tmp_path))
+    with pytest.raises(
+        SessionError,
+        match=rf"tried MOCAPKIT_SHARED_DATA={tmp_path} \(.*mocap is not a folder\); pass --mocap",
+    ):
+        mocap_folder(None)
+    (tmp_path / "mocap").mkdir()
+    assert mocap_folder(None) == tmp_path / "mocap"
+    monkeypatch.delenv("MOCAPKIT_SHARED_DATA")
+    starts = []
+
+    def found_beside_the_package(start=None):
+        starts.append(start)
+        return tmp_path if start is not None else None
+
+    monkeypatch.setattr(demo, "find_shared_data", found_beside_the_package)
+    assert mocap_folder(None) == tmp_path / "mocap"
+    assert starts == [None, Path(mocapkit.__file__).resolve().parent]
+    monkeypatch.setattr(demo, "find_shared_data", lambda start=None: None)
+    with pytest.raises(SessionError, match=r"tried shared/data and .* \(none found\)"):
+        mocap_folder(None)

@@ -224,3 +224,45 @@ def test_track_mono_costume_needs_skin(tmp_path: Path, capsys: pytest.CaptureFix
     )
     assert code == 2
     assert "expected them with --skin" in capsys.readouterr().err
+
+
+def test_speed_line_says_when_the_run_compiled_the_kernels() -> None:
+    from mocapkit.cli.track_stereo import first_run
+    from mocapkit.timing import CompileTime
+
+    assert first_run(CompileTime()) == ""
+    assert first_run(CompileTime(67, 22.46)) == (
+        "; first run: includes compiling 67 kernels, 22.5 s; later runs load them from the cache"
+    )
+    assert first_run(CompileTime(1, 0.5)).startswith("; first run: includes compiling 1 kernel,")
+
+
+def test_help_names_every_tracker_setting(capsys: pytest.CaptureFixture[str]) -> None:
+    """The top help names the three set-ups, multi-view included; the stereo method's line
+    says its default is the full-body fit, the paper's tracker the narrow pair's."""
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    top = " ".join(capsys.readouterr().out.split())
+    assert "two or more calibrated cameras (stereo / multi-view)" in top
+    assert "one video (mono)" in top and "plus one camera (hybrid)" in top
+    with pytest.raises(SystemExit):
+        main(["track", "--help"])
+    track = " ".join(capsys.readouterr().out.split())
+    assert "the full body fitted to every view's 2-D keypoints; on a narrow pair" in track
+
+
+def test_far_spans_listed_longest_first_then_counted() -> None:
+    from mocapkit.cli.track_stereo import far_warnings
+
+    spans = [("left_wrist", 0.5, 0.6, 5), ("right_knee", 1.0, 1.4, 13)]
+    spans += [("nose", 2.0 + k, 2.2 + k, 7) for k in range(3)]
+    lines = far_warnings(spans, 40.0)
+    assert lines == [
+        "warning: a joint is more than 40 px from its detections in most views in 5 spans "
+        "(39 frames); see fit.csv",
+        "  right_knee at 1.00-1.40 s (13 frames)",
+        "  nose at 2.00-2.20 s (7 frames)",
+        "  nose at 3.00-3.20 s (7 frames)",
+        "  ... and 2 more (fit.csv)",
+    ]
+    assert far_warnings([], 40.0) == []

@@ -109,6 +109,17 @@ def test_bad_files_are_refused(tmp_path: Path) -> None:
     empty.mkdir()
     with pytest.raises(SessionError, match="found none"):
         read_openpose_folder(empty, np.zeros(1))
+    # a folder of per-camera folders (a multi-camera OpenPose export): named, one to pass
+    for cam in ("cam02", "cam01"):
+        (empty / cam).mkdir()
+        write_openpose_frame(empty / cam / f"{cam}_000000_keypoints.json", [])
+    (empty / "notes").mkdir()
+    with pytest.raises(
+        SessionError,
+        match=r"found none but subfolders of them, one per camera \(cam01, cam02\): pass one "
+        r"camera's folder: .*empty[/\\]cam01$",
+    ):
+        read_openpose_folder(empty, np.zeros(1))
     one = tmp_path / "one"
     one.mkdir()
     write_openpose_frame(one / "x_0.json", [])

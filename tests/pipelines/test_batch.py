@@ -93,6 +93,27 @@ def test_discover_takes_at_any_depth_skipping_results_and_temporaries(study):
     assert all(t.kind == "session" and t.source == (study / t.name).resolve() for t in takes)
 
 
+def test_discover_takes_through_linked_folders_without_looping(tmp_path):
+    """A study of links to sessions stored elsewhere: the links are followed, a link to a
+    folder above is no loop, a session linked twice is one take (the first link by name)."""
+    store, study = tmp_path / "store", tmp_path / "study"
+    for name in ("a", "b", "c"):
+        (store / name).mkdir(parents=True)
+        (store / name / "session.json").write_text("{}")
+    (study / "group").mkdir(parents=True)
+    (study / "x").symlink_to(store / "a", target_is_directory=True)
+    (study / "again").symlink_to(store / "a", target_is_directory=True)
+    (study / "group" / "y").symlink_to(store / "b", target_is_directory=True)
+    (study / "group" / "up").symlink_to(study, target_is_directory=True)  # a loop
+    (study / "out").mkdir()
+    (study / "out" / "c").symlink_to(store / "c", target_is_directory=True)
+    takes = discover_takes(study, exclude=[study / "out"])
+    assert [(t.name, t.source) for t in takes] == [
+        ("again", study.resolve() / "again"),
+        ("group/y", study.resolve() / "group" / "y"),
+    ]
+
+
 def test_discover_marker_files_but_not_those_inside_sessions(study):
     from mocapkit.io.marker_files import read_markers, write_markers
 

@@ -86,6 +86,7 @@ def test_implausible_motion_round_trips_through_fit_csv_and_is_warned_about(
 ) -> None:
     from mocapkit.eval.plausibility import FRAME_COLUMNS, SpeedBound, check_motion
     from mocapkit.pipelines.fit_report import (
+        ImplausibleSpan,
         implausible_spans_in_folder,
         implausible_warnings,
         warn_implausible,
@@ -135,3 +136,14 @@ def test_implausible_motion_round_trips_through_fit_csv_and_is_warned_about(
     warn_implausible(tmp_path / "r")
     assert "right_knee moves 5.0 m/s at 2.00 s" in capsys.readouterr().err
     assert implausible_warnings([]) == []
+    # joints and rolls: their frames counted apart (a frame may have both), the worst of each
+    roll = ImplausibleSpan("roll", "r_elbow", 1.0, 1.2, 3, 1500.0, np.nan, 1.25)
+    lines = implausible_warnings([*spans, roll], shown=1)
+    assert lines[0].startswith(
+        "WARNING: implausible motion in 3 spans (3 frames of joints, 3 of rolls): faster"
+    )
+    assert lines[2] == (
+        "  the r_elbow bone rolls 1500 deg/s about its axis at 1.00-1.20 s (3 frames) "
+        "(limit 1200 deg/s)"
+    )
+    assert lines[3] == "  ... and 1 more (fit.csv)"

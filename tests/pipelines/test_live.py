@@ -300,9 +300,14 @@ def test_live_refuses_stream_without_the_marker_sets(session, tmp_path):
 
 def test_cli_live_and_replay_refuse_bad_use(session, capsys):
     from mocapkit.cli.main import main
+    from mocapkit.pipelines.live import JOINTS_STREAM
 
     assert main(["live", "hybrid", str(session)]) == 2
-    assert "live hybrid: expected a marker stream (--markers NAME)" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "live hybrid: expected a marker stream (--markers NAME)" in err
+    assert f"live hybrid: publishing {JOINTS_STREAM}; Ctrl-C stops" in err
+    assert main(["live", "hybrid", str(session), "--stream", "lab_joints"]) == 2
+    assert "live hybrid: publishing lab_joints; Ctrl-C stops" in capsys.readouterr().err
     assert main(["live", "stereo", str(session), "--video", "mono=0"]) == 2
     assert "expected two or more cameras (--video), found ['mono']" in capsys.readouterr().err
     try:

@@ -8,6 +8,7 @@ from typing import Any
 from mocapkit.cli.accuracy_detect import register_method as register_detect
 from mocapkit.cli.accuracy_stereo import register_method as register_stereo
 from mocapkit.cli.args import (
+    MOCAP_HELP,
     add_clip_options,
     chosen_clips,
     imported,
@@ -35,7 +36,7 @@ def register(subparsers: Any) -> None:
         "hybrid",
         help="elbow and upper-body errors of the hybrid tracker, IK only and with video",
     )
-    h.add_argument("--mocap", help="folder of motion clips (default: ../shared/data/mocap)")
+    h.add_argument("--mocap", help=MOCAP_HELP)
     add_clip_options(h)
     h.add_argument(
         "--work",

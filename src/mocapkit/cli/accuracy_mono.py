@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from mocapkit.cli.args import add_clip_options, chosen_clips, given, shows_default
+from mocapkit.cli.args import MOCAP_HELP, add_clip_options, chosen_clips, given, shows_default
 from mocapkit.cli.track_mono import COSTS, MONO
 
 _RUN = "mocapkit.pipelines.mono_accuracy:mono_accuracy"
@@ -24,7 +24,7 @@ def add_mono_accuracy_parser(methods: Any) -> None:
         "and report the upper-body error after similarity alignment, the share of "
         "link-frames with the right flip and the poses pruned per frame.",
     )
-    m.add_argument("--mocap", help="folder of motion clips (default: ../shared/data/mocap)")
+    m.add_argument("--mocap", help=MOCAP_HELP)
     add_clip_options(m)
     m.add_argument(
         "--work", default="accuracy-output/mono", help="sessions and results (default %(default)s)"

@@ -9,7 +9,7 @@ import argparse
 import json
 from typing import Any
 
-from mocapkit.cli.args import given, shows_default
+from mocapkit.cli.args import MOCAP_HELP, add_clip_options, chosen_clips, given, shows_default
 
 _RUN = "mocapkit.pipelines.stereo:stereo_accuracy"
 
@@ -20,7 +20,8 @@ def register_method(methods: Any) -> None:
         "stereo",
         help="arm joint and torso yaw errors of the stereo tracker on rendered excerpts",
     )
-    p.add_argument("--mocap", help="folder of motion clips (default: ../shared/data/mocap)")
+    p.add_argument("--mocap", help=MOCAP_HELP)
+    add_clip_options(p)
     p.add_argument(
         "--work", default="accuracy-output/stereo", help="sessions folder (default %(default)s)"
     )
@@ -63,7 +64,7 @@ def register_method(methods: Any) -> None:
     p.add_argument(
         "--ablations",
         action="store_true",
-        help="instead of the modes: the ablation study (keypoints+torso variants on four "
+        help="instead of the modes: the ablation study (keypoints+torso variants on the "
         "clips): arm mean error and frames to converge after both arms are reset to a "
         "hanging arm at 1 s",
     )
@@ -81,7 +82,12 @@ def register_method(methods: Any) -> None:
 def _run(args: argparse.Namespace) -> int:
     from mocapkit.cli.args import mocap_folder
     from mocapkit.errors import ConfigError
-    from mocapkit.pipelines.stereo import accuracy_header, stereo_accuracy
+    from mocapkit.pipelines.stereo import (
+        accuracy_header,
+        accuracy_means,
+        format_accuracy_row,
+        stereo_accuracy,
+    )
 
     if args.particles is not None and args.particles < 2:
         raise ConfigError(f"--particles: expected at least 2, found {args.particles}")
@@ -93,6 +99,7 @@ def _run(args: argparse.Namespace) -> int:
     rows = stereo_accuracy(
         mocap,
         args.work,
+        chosen_clips(args),
         say=None if args.json else print,
         n_particles=args.particles,
         **given(
@@ -103,6 +110,9 @@ def _run(args: argparse.Namespace) -> int:
     )
     if args.json:
         print(json.dumps(rows, indent=2))
+        return 0
+    for row in accuracy_means(rows):
+        print(format_accuracy_row(row))
     return 0
 
 
@@ -120,6 +130,7 @@ def _ablations(args: argparse.Namespace, mocap: Any) -> int:
         mocap,
         args.work,
         variants=variants,
+        clips=chosen_clips(args),
         say=None if args.json else print,
         **given(cameras=args.cameras, seed=args.seed),
     )

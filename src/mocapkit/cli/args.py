@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import math
+import os
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import MISSING
 from pathlib import Path
@@ -241,6 +242,7 @@ def chosen_clips(args: argparse.Namespace) -> list[str] | None:
 
 
 __all__ = [
+    "MOCAP_HELP",
     "LazyChoices",
     "StatedDefault",
     "add_clip_options",
@@ -315,19 +317,41 @@ def _can_make_folder_in(folder: object) -> bool:
     return True
 
 
+#: The ``--mocap`` option's help (`mocap_folder`).
+MOCAP_HELP = (
+    "folder of motion clips (default: mocap in $MOCAPKIT_SHARED_DATA, else in shared/data or "
+    "../shared/data above the working directory or the installed package)"
+)
+
+
 def mocap_folder(given: str | None) -> Path:
-    """The ``--mocap`` folder of the accuracy studies: as given, else ``../shared/data/mocap``.
+    """The ``--mocap`` folder of the accuracy studies: as given, else ``mocap`` in the
+    shared data (`mocapkit.pipelines.demo.find_shared_data`: ``$MOCAPKIT_SHARED_DATA``,
+    else ``shared/data`` or ``../shared/data`` above the working directory, then above
+    the installed package: a checkout's own).
 
     Raises
     ------
     SessionError
-        Neither given nor found.
+        Neither given nor found; the message names the places tried and the variable.
     """
+    import mocapkit
     from mocapkit.pipelines.demo import find_shared_data
 
     if given is not None:
         return Path(given)
-    data = find_shared_data()
-    if data is None:
-        raise SessionError("no --mocap folder given and ../shared/data/mocap not found")
+    package = Path(mocapkit.__file__).resolve().parent
+    data = find_shared_data() or find_shared_data(package)
+    if data is None or not (data / "mocap").is_dir():
+        env = os.environ.get("MOCAPKIT_SHARED_DATA")
+        tried = (
+            f"MOCAPKIT_SHARED_DATA={env}"
+            if env
+            else f"shared/data and ../shared/data above {Path.cwd()} and above {package}"
+        )
+        found = f"{data / 'mocap'} is not a folder" if data is not None else "none found"
+        raise SessionError(
+            f"no --mocap folder given and no shared mocap folder: tried {tried} ({found}); "
+            "pass --mocap FOLDER or set MOCAPKIT_SHARED_DATA to the shared data folder"
+        )
     return data / "mocap"

@@ -6,7 +6,7 @@ import argparse
 import json
 import sys
 
-from mocapkit.cli.args import given, number, output_folder, shows_default
+from mocapkit.cli.args import number, output_folder, shows_default
 
 _CONFIG = "mocapkit.pipelines.live_config:LiveConfig"
 
@@ -104,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     from dataclasses import replace
 
     from mocapkit.io.session import load_session
-    from mocapkit.pipelines.live import track_live
+    from mocapkit.pipelines.live import JOINTS_STREAM, track_live
     from mocapkit.pipelines.live_feed import LiveConfig, LiveInputs, replay_inputs
 
     inputs = LiveInputs(args.markers, dict(args.keypoints), dict(args.video))
@@ -122,7 +122,8 @@ def run(args: argparse.Namespace) -> int:
     if args.method != "hybrid":
         inputs = replace(inputs, markers=None)
     config = LiveConfig(lost_after_s=args.lost_after_s, mono_lag=args.lag)
-    print(f"live {args.method}: publishing {args.stream}; Ctrl-C stops", file=sys.stderr)
+    stream = args.stream or JOINTS_STREAM
+    print(f"live {args.method}: publishing {stream}; Ctrl-C stops", file=sys.stderr)
     report = track_live(
         args.method,
         args.setup,
@@ -131,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
         args.record,
         config=config,
         view=args.view,
-        **given(stream_name=args.stream),
+        stream_name=stream,
     )
     summary = {
         "method": report.method,

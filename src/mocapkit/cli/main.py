@@ -45,8 +45,8 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     """
     parser = argparse.ArgumentParser(
         prog="mocapkit",
-        description="Human motion capture from markers plus one camera, one video, "
-        "or a stereo pair.",
+        description="Human motion capture from head and hand markers plus one camera "
+        "(hybrid), two or more calibrated cameras (stereo / multi-view), or one video (mono).",
     )
     parser.add_argument("--version", action="version", version=f"mocapkit {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")

@@ -8,13 +8,15 @@ from __future__ import annotations
 
 import argparse
 import json
-from typing import TYPE_CHECKING, Any
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 from mocapkit.cli.args import given, output_folder, shows_default
 from mocapkit.tracking.multiview.config import SMOOTHING, STEREO_METHODS, MultiviewRunConfig
 
 if TYPE_CHECKING:
     from mocapkit.io.session import Session
+    from mocapkit.timing import CompileTime
 
 #: The stereo tracker's settings (the paper's tracker: heavy to import, read by --help only)
 _STEREO = "mocapkit.tracking.stereo.tracker:StereoConfig"
@@ -26,7 +28,9 @@ def register_method(methods: Any) -> None:
     """Add ``stereo`` to the ``track`` methods."""
     p = methods.add_parser(
         "stereo",
-        help="two or more cameras, no markers (Azad, Asfour, Dillmann 2008)",
+        help="two or more cameras, no markers: the full body fitted to every view's 2-D "
+        "keypoints; on a narrow pair or without keypoints the paper's arm filters (Azad, "
+        "Asfour, Dillmann 2008)",
         description="Track a session folder with two or more calibrated cameras. With 2-D "
         "keypoints for every camera (default --method auto): the full body fitted to every "
         "view's detections (robust, left/right swaps per view, the subject's segment lengths "
@@ -131,7 +135,11 @@ def _run(args: argparse.Namespace) -> int:
     from mocapkit.pipelines.fit_report import warn_implausible
     from mocapkit.pipelines.multiview import resolve_stereo_method
     from mocapkit.pipelines.run import find_gaps
-    from mocapkit.pipelines.stereo import evaluate_stereo, track_stereo_session
+    from mocapkit.pipelines.stereo import (
+        elbow_jump_warnings,
+        evaluate_stereo,
+        track_stereo_session,
+    )
     from mocapkit.tracking.stereo.tracker import StereoConfig
 
     if args.keypoints:
@@ -186,11 +194,14 @@ def _run(args: argparse.Namespace) -> int:
     # its limb (NaN in joints.csv, the status in fit.csv): say where, as track hybrid does
     for gap in find_gaps(run.results):
         print(f"gap: {gap}")
-    for jump in run.jumps:
-        print(f"warning: {jump}")
+    for line in elbow_jump_warnings(run.jumps):
+        print(line)
     warn_implausible(args.out)
     fps = run.motion.n_frames / max(run.seconds, 1e-9)
-    print(f"tracked {run.motion.n_frames} frames in {run.seconds:.1f} s ({fps:.1f} frames/s)")
+    print(
+        f"tracked {run.motion.n_frames} frames in {run.seconds:.1f} s ({fps:.1f} frames/s"
+        f"{first_run(run.compiled)})"
+    )
     print(f"wrote {args.out}")
     if (Path(args.session) / "truth.npz").is_file():
         ev = evaluate_stereo(run, args.session)
@@ -202,6 +213,45 @@ def _run(args: argparse.Namespace) -> int:
             print(f"  {'arm mean':<16}{ev['arm_mean_mm']:8.1f} mm")
             print(f"  {'torso yaw':<16}{ev['torso_yaw_error_deg']:8.1f} deg")
     return 0
+
+
+class _FarSpan(NamedTuple):
+    joint: str
+    start_s: float
+    end_s: float
+    n_frames: int
+
+    def __str__(self) -> str:
+        from mocapkit.pipelines.fit_report import span_when
+
+        return f"{self.joint} {span_when(self.start_s, self.end_s, self.n_frames)}"
+
+
+def far_warnings(spans: Sequence[tuple[str, float, float, int]], warn_px: float) -> list[str]:
+    """The warning about the fit's far spans (joint, first s, last s, frames;
+    `mocapkit.pipelines.multiview.far_spans`): a count, the longest few, then how many
+    more, as the other end-of-run warnings list their spans."""
+    from mocapkit.pipelines.fit_report import worst_spans_lines
+
+    far = [_FarSpan(*s) for s in spans]
+    n_frames = sum(s.n_frames for s in far)
+    header = (
+        f"warning: a joint is more than {warn_px:g} px from its detections in most views in "
+        f"{len(far)} span{'s' if len(far) != 1 else ''} ({n_frames} frames); see fit.csv"
+    )
+    return worst_spans_lines(header, [far], lambda s: s.n_frames)
+
+
+def first_run(compiled: CompileTime) -> str:
+    """The speed line's note when the run compiled Numba kernels (a first run after
+    installing: later runs load them from their cache); empty otherwise."""
+    if not compiled.kernels:
+        return ""
+    kernels = f"{compiled.kernels} kernel{'s' if compiled.kernels != 1 else ''}"
+    return (
+        f"; first run: includes compiling {kernels}, {compiled.seconds:.1f} s; later runs "
+        "load them from the cache"
+    )
 
 
 def _run_fit(args: argparse.Namespace, session: Session) -> int:
@@ -227,15 +277,12 @@ def _run_fit(args: argparse.Namespace, session: Session) -> int:
     run = track_multiview_session(session, args.out, cameras=args.cameras, config=cfg)
     for gap in find_gaps(run.results):
         print(f"gap: {gap}")
-    for joint, t0, t1, n in run.far:
-        print(
-            f"warning: {joint} is more than {cfg.fit.warn_px:g} px from its detections in most "
-            f"views over {t0:.3f}-{t1:.3f} s ({n} frames); see fit.csv"
-        )
+    for line in far_warnings(run.far, cfg.fit.warn_px):
+        print(line)
     fps = run.motion.n_frames / max(run.seconds, 1e-9)
     print(
-        f"fitted {run.motion.n_frames} frames in {run.seconds:.2f} s CPU ({fps:.1f} frames/s), "
-        f"smoothing {cfg.smoothing}"
+        f"fitted {run.motion.n_frames} frames in {run.seconds:.2f} s CPU ({fps:.1f} frames/s"
+        f"{first_run(run.compiled)}), smoothing {cfg.smoothing}"
     )
     print(f"wrote {args.out}")
     warn_implausible(args.out)

@@ -139,6 +139,18 @@ def openpose_files(folder: str | os.PathLike[str]) -> list[Path]:
         )
     files = [f for f in p.iterdir() if f.suffix.lower() == ".json"]
     if not files:
+        cams = sorted(
+            d.name
+            for d in p.iterdir()
+            if d.is_dir() and any(f.suffix.lower() == ".json" for f in d.iterdir())
+        )
+        if cams:
+            shown = ", ".join(cams[:6]) + (f" and {len(cams) - 6} more" if len(cams) > 6 else "")
+            raise SessionError(
+                f"{p}: expected OpenPose JSON files (one per frame), found none but "
+                f"subfolders of them, one per camera ({shown}): pass one camera's folder: "
+                f"{p / cams[0]}"
+            )
         raise SessionError(f"{p}: expected OpenPose JSON files (one per frame), found none")
     return in_frame_order(files, p, "OpenPose JSON files")
 

@@ -186,6 +186,26 @@ def _hidden(rel: Path) -> bool:
     return any(part.startswith(".") for part in rel.parts)
 
 
+def _session_folders(root: Path, excluded: Callable[[Path], bool]) -> list[Path]:
+    """The folders under ``root`` holding a ``session.json``, sorted, following linked
+    folders (a study of links to sessions stored elsewhere); each real folder is searched
+    once, by the first path that reaches it, so a link to a folder above it is no loop
+    and a session linked twice is one take."""
+    found = []
+    seen: set[Path] = set()
+    for here, dirs, files in os.walk(root, followlinks=True):
+        folder = Path(here)
+        real = folder.resolve()
+        if real in seen or excluded(folder):
+            dirs[:] = []
+            continue
+        seen.add(real)
+        dirs.sort()  # the first path to a folder linked twice: the first by name
+        if "session.json" in files and (folder / "session.json").is_file():
+            found.append(folder)
+    return sorted(found)
+
+
 def discover_takes(
     study_dir: str | os.PathLike[str],
     markers_glob: str | None = None,
@@ -216,11 +236,11 @@ def discover_takes(
     skip = [Path(e).resolve() for e in exclude]
 
     def excluded(p: Path) -> bool:
-        return any(p == s or s in p.parents for s in skip) or _hidden(p.relative_to(root))
+        real = p.resolve()  # a link into the results folder is the results folder
+        inside = any(q == s or s in q.parents for s in skip for q in (p, real))
+        return inside or _hidden(p.relative_to(root))
 
-    sessions = sorted(
-        p.parent for p in root.rglob("session.json") if p.is_file() and not excluded(p.parent)
-    )
+    sessions = _session_folders(root, excluded)
     takes = [
         # a study folder that is itself a session: one take named after it
         Take(p.relative_to(root).as_posix() if p != root else root.name, "session", p)

@@ -39,7 +39,12 @@ from mocapkit.pipelines.fit_report import implausible_spans_in_folder, implausib
 from mocapkit.pipelines.hybrid import track_hybrid_session
 from mocapkit.pipelines.mono import track_mono
 from mocapkit.pipelines.report import build_report
-from mocapkit.pipelines.stereo import ACCURACY_MODES, elbow_jumps_in_folder, track_stereo_session
+from mocapkit.pipelines.stereo import (
+    ACCURACY_MODES,
+    elbow_jump_warnings,
+    elbow_jumps_in_folder,
+    track_stereo_session,
+)
 from mocapkit.progress import silenced
 from mocapkit.skeleton import UPPER_BODY_JOINTS, load_preset, standing_height_mm
 from mocapkit.synth.session_writer import SynthOptions, synthesize_session
@@ -357,8 +362,8 @@ def _run(
     )
     if not all(np.isfinite(row.report.elbow_mm) for row in rows.values()):
         say("warning: a tracker produced no comparable pose")
-    for jump in elbow_jumps_in_folder(rows["stereo"].result_dir):
-        say(f"warning: stereo: {jump}")
+    for line in elbow_jump_warnings(elbow_jumps_in_folder(rows["stereo"].result_dir), 1)[:2]:
+        say(f"stereo: {line.strip()}")
     for name, row in rows.items():  # motion faster than the inputs show: count and worst
         for line in implausible_warnings(implausible_spans_in_folder(row.result_dir), 1)[:2]:
             say(f"{name}: {line.strip()}")

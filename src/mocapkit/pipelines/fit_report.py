@@ -17,9 +17,10 @@ from __future__ import annotations
 import math
 import os
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
@@ -136,8 +137,37 @@ def summarize_fit(
     return FitReport(tuple(sets), len(results), float(warn_mm), float(warn_fraction))
 
 
-#: Spans of implausible joints, and of rolls, that `implausible_warnings` lists.
+#: Spans of each kind that an end-of-run warning lists (`worst_spans_lines`).
 SHOWN_SPANS = 3
+
+_Span = TypeVar("_Span")
+
+
+def span_when(start_s: float, end_s: float, n_frames: int) -> str:
+    """When a span of flagged frames happened: ``at 1.00-1.10 s (2 frames)``, or
+    ``at 2.00 s`` for one frame."""
+    if n_frames == 1:
+        return f"at {start_s:.2f} s"
+    return f"at {start_s:.2f}-{end_s:.2f} s ({n_frames} frames)"
+
+
+def worst_spans_lines(
+    header: str,
+    groups: Sequence[Sequence[_Span]],
+    severity: Callable[[_Span], float],
+    shown: int = SHOWN_SPANS,
+) -> list[str]:
+    """An end-of-run warning about spans of flagged frames: ``header``, the ``shown``
+    worst spans of each group (largest ``severity``) indented, then how many more
+    (fit.csv holds them all); nothing without spans."""
+    if not any(groups):
+        return []
+    worst = [s for g in groups for s in sorted(g, key=lambda s: -severity(s))[:shown]]
+    out = [header, *(f"  {s}" for s in worst)]
+    n = sum(len(g) for g in groups)
+    if n > len(worst):
+        out.append(f"  ... and {n - len(worst)} more (fit.csv)")
+    return out
 
 
 @dataclass(frozen=True)
@@ -160,9 +190,7 @@ class ImplausibleSpan:
     ratio: float
 
     def __str__(self) -> str:
-        when = f"at {self.start_s:.2f}-{self.end_s:.2f} s ({self.n_frames} frames)"
-        if self.n_frames == 1:
-            when = f"at {self.start_s:.2f} s"
+        when = span_when(self.start_s, self.end_s, self.n_frames)
         if self.kind == "roll":
             limit = self.value / self.ratio
             return (
@@ -229,24 +257,17 @@ def implausible_warnings(spans: Sequence[ImplausibleSpan], shown: int = SHOWN_SP
     """The end-of-run warning about implausible motion: a count, the ``shown`` worst
     spans of joints and of rolls (largest ratio to the allowed speed), then how many
     more; nothing without spans."""
-    if not spans:
-        return []
-    n_frames = sum(s.n_frames for s in spans)
-    worst = [
-        s
-        for kind in ("joint", "roll")
-        for s in sorted((s for s in spans if s.kind == kind), key=lambda s: -s.ratio)[:shown]
-    ]
-    out = [
+    groups = [[s for s in spans if s.kind == kind] for kind in ("joint", "roll")]
+    n_joint, n_roll = (sum(s.n_frames for s in g) for g in groups)
+    frames = f"{n_joint + n_roll} frame{'s' if n_joint + n_roll != 1 else ''}"
+    if n_joint and n_roll:  # a frame may have both: counted apart, not summed
+        frames = f"{n_joint} frames of joints, {n_roll} of rolls"
+    header = (
         f"WARNING: implausible motion in {len(spans)} span{'s' if len(spans) != 1 else ''} "
-        f"({n_frames} frame{'s' if n_frames != 1 else ''}): faster than the inputs show "
-        "(fit.csv's implausible_joints, implausible_rolls); check those frames before using "
-        "them"
-    ]
-    out += [f"  {s}" for s in worst]
-    if len(spans) > len(worst):
-        out.append(f"  ... and {len(spans) - len(worst)} more (fit.csv)")
-    return out
+        f"({frames}): faster than the inputs show (fit.csv's implausible_joints, "
+        "implausible_rolls); check those frames before using them"
+    )
+    return worst_spans_lines(header, groups, lambda s: s.ratio, shown)
 
 
 def warn_implausible(result_dir: str | os.PathLike[str]) -> None:
@@ -265,6 +286,8 @@ __all__ = [
     "implausible_spans",
     "implausible_spans_in_folder",
     "implausible_warnings",
+    "span_when",
     "summarize_fit",
     "warn_implausible",
+    "worst_spans_lines",
 ]

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -29,6 +29,7 @@ from mocapkit.pipelines.input_speeds import pixel_input_speeds
 from mocapkit.pipelines.run import run_tracker, write_run_folder
 from mocapkit.skeleton.model import Skeleton
 from mocapkit.skeleton.smoothing import filter_poses
+from mocapkit.timing import CompileTime, numba_compiling
 from mocapkit.tracking.base import FrameResult
 from mocapkit.tracking.multiview.config import (
     SMOOTHING,
@@ -51,7 +52,8 @@ FAR_MIN_FRAMES = 5
 @dataclass
 class MultiviewRun:
     """A tracked session: the motion, the per-frame results, the segment lengths used,
-    the far spans (joint, first s, last s, frames) and the seconds of the 3-D step."""
+    the far spans (joint, first s, last s, frames), the seconds of the 3-D step (CPU) and
+    the Numba compilation in them (a first run: `mocapkit.timing.numba_compiling`)."""
 
     motion: Motion
     results: list[FrameResult]
@@ -59,6 +61,7 @@ class MultiviewRun:
     far: list[tuple[str, float, float, int]]
     seconds: float
     out_dir: Path | None = None
+    compiled: CompileTime = field(default_factory=CompileTime)
 
 
 def _smooth_q(
@@ -202,33 +205,35 @@ def track_multiview_session(
     cams = [session.camera(c) for c in names]
     pixels = np.stack([k.pixels[:n] for k in kps])  # (V, T, K, 2)
     t0 = time.process_time()
-    lengths, vectors = subject_lengths_mm(
-        cams, joint_names, pixels, reject_mm=run_cfg.reject_mm, good_mm=run_cfg.good_mm
-    )
-    if point_offsets_mm is None:
-        point_offsets_mm = detector_offsets(detected_backend(session.path, names))
-    lengths, vectors = offset_segments(
-        multiview_skeleton(), lengths, vectors, dict(point_offsets_mm)
-    )
-    sk = multiview_skeleton(lengths, height_mm=session.height_mm, vectors_mm=vectors)
-    rebuilt = sorted({j for k in kps for j in k.rebuilt_joints})
-    tracker = MultiviewTracker(
-        sk, cams, joint_names, run_cfg.fit, rebuilt=rebuilt, point_offsets_mm=point_offsets_mm
-    )
-    time_s = kps[0].time_s[:n]
-    samples = (
-        _Sample(float(time_s[i]), {c: pixels[v, i] for v, c in enumerate(names)}) for i in range(n)
-    )
-    run = run_tracker(
-        tracker,
-        samples,
-        n,
-        None,
-        label=f"track stereo {session.path.name}",
-        source=f"multi-view fit (cameras {','.join(names)}) on {session.path}",
-    )
-    q = _smooth_q(sk, run.motion.q, run.motion.time_s, run_cfg)
-    motion = Motion.from_q(sk, run.motion.time_s, q, source=run.motion.source)
+    with numba_compiling(time.process_time) as compiled:
+        lengths, vectors = subject_lengths_mm(
+            cams, joint_names, pixels, reject_mm=run_cfg.reject_mm, good_mm=run_cfg.good_mm
+        )
+        if point_offsets_mm is None:
+            point_offsets_mm = detector_offsets(detected_backend(session.path, names))
+        lengths, vectors = offset_segments(
+            multiview_skeleton(), lengths, vectors, dict(point_offsets_mm)
+        )
+        sk = multiview_skeleton(lengths, height_mm=session.height_mm, vectors_mm=vectors)
+        rebuilt = sorted({j for k in kps for j in k.rebuilt_joints})
+        tracker = MultiviewTracker(
+            sk, cams, joint_names, run_cfg.fit, rebuilt=rebuilt, point_offsets_mm=point_offsets_mm
+        )
+        time_s = kps[0].time_s[:n]
+        samples = (
+            _Sample(float(time_s[i]), {c: pixels[v, i] for v, c in enumerate(names)})
+            for i in range(n)
+        )
+        run = run_tracker(
+            tracker,
+            samples,
+            n,
+            None,
+            label=f"track stereo {session.path.name}",
+            source=f"multi-view fit (cameras {','.join(names)}) on {session.path}",
+        )
+        q = _smooth_q(sk, run.motion.q, run.motion.time_s, run_cfg)
+        motion = Motion.from_q(sk, run.motion.time_s, q, source=run.motion.source)
     seconds = time.process_time() - t0
     far = far_spans(run.results, tracker.names)
     out = None
@@ -239,7 +244,7 @@ def track_multiview_session(
             run.results,
             partial(pixel_input_speeds, cams, list(pixels), joint_names),
         )
-    return MultiviewRun(motion, run.results, lengths, far, seconds, out)
+    return MultiviewRun(motion, run.results, lengths, far, seconds, out, compiled)
 
 
 def bench_multiview(repeats: int = 3, seconds: float = 4.0) -> dict[str, Any]:

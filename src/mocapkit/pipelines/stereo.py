@@ -6,7 +6,7 @@ writes the usual result folder through the shared runner
 (`mocapkit.pipelines.run.run_tracker`, with ``fit.csv``). `evaluate_stereo` scores a
 result against a synthetic session's truth: the mean error of shoulders, elbows and
 wrists and the torso yaw error (the yaw of the line between the shoulders).
-`stereo_accuracy` renders the standard in-view excerpts (`STEREO_CLIPS`) and scores
+`stereo_accuracy` renders in-view excerpts of the project's clips (`STEREO_CLIPS`) and scores
 each tracker mode (`ACCURACY_MODES`) on them. `bench_stereo` times the whole per-frame pipeline at
 640x480 on a rendered stereo session.
 """
@@ -29,9 +29,11 @@ from mocapkit.errors import ConfigError, SessionError, unknown_name
 from mocapkit.io.markers import true_runs
 from mocapkit.io.motion import Motion
 from mocapkit.pipelines.camera_check import check_session_cameras
+from mocapkit.pipelines.fit_report import SHOWN_SPANS, span_when, worst_spans_lines
+from mocapkit.pipelines.harness import TUNING_CLIPS
 from mocapkit.pipelines.input_speeds import keypoint_input_speeds
 from mocapkit.pipelines.run import run_tracker
-from mocapkit.timing import StageTimer
+from mocapkit.timing import CompileTime, StageTimer, numba_compiling
 from mocapkit.tracking.stereo.arm_filter import ArmFilterConfig
 from mocapkit.tracking.stereo.fusion import default_fusion
 from mocapkit.tracking.stereo.tracker import (
@@ -70,12 +72,25 @@ class ElbowJump:
     top_mm_per_s: float
 
     def __str__(self) -> str:
-        frames = f"{self.n_frames} frame{'s' if self.n_frames != 1 else ''}"
+        when = span_when(self.start_s, self.end_s, self.n_frames)
         return (
-            f"the {self.side} elbow jumps at {self.start_s:.3f}-{self.end_s:.3f} s ({frames}, "
-            f"up to {self.top_mm_per_s / 1000:.1f} m/s relative to the shoulder): the arm "
-            "filter took the other side of the elbow circle; see fit.csv"
+            f"the {self.side} elbow jumps {when}, up to {self.top_mm_per_s / 1000:.1f} m/s "
+            "relative to the shoulder"
         )
+
+
+def elbow_jump_warnings(jumps: Sequence[ElbowJump], shown: int = SHOWN_SPANS) -> list[str]:
+    """The end-of-run warning about elbow jumps: a count, the ``shown`` fastest, then how
+    many more (`mocapkit.pipelines.fit_report.worst_spans_lines`); nothing without
+    jumps."""
+    n_frames = sum(j.n_frames for j in jumps)
+    header = (
+        f"warning: an elbow jumps in {len(jumps)} span{'s' if len(jumps) != 1 else ''} "
+        f"({n_frames} frame{'s' if n_frames != 1 else ''}): the arm filter took the other "
+        "side of the elbow circle; the pose there is not to be trusted (fit.csv's "
+        "left_elbow_jump, right_elbow_jump)"
+    )
+    return worst_spans_lines(header, [jumps], lambda j: j.top_mm_per_s, shown)
 
 
 def elbow_jumps(time_s: ArrayLike, fit: Mapping[str, ArrayLike]) -> list[ElbowJump]:
@@ -111,8 +126,9 @@ def elbow_jumps_in_folder(result_dir: str | os.PathLike[str]) -> list[ElbowJump]
 
 @dataclass
 class StereoRun:
-    """A tracked session: the motion, per-frame diagnostics, `StereoPose` results and the
-    elbow jumps found in them (`elbow_jumps`)."""
+    """A tracked session: the motion, per-frame diagnostics, `StereoPose` results, the
+    elbow jumps found in them (`elbow_jumps`) and the Numba compilation of the run
+    (`mocapkit.timing.numba_compiling`: a first run's)."""
 
     motion: Motion
     yaw_rad: FloatArray  # (T,)
@@ -121,6 +137,7 @@ class StereoRun:
     seconds: float  # reading and tracking, without writing
     results: list[StereoPose] = field(default_factory=list)  # per frame, as fit.csv
     jumps: list[ElbowJump] = field(default_factory=list)
+    compiled: CompileTime = field(default_factory=CompileTime)  # Numba, on a first run
 
 
 def parse_cameras(text: str | None, available: Sequence[str]) -> list[str]:
@@ -228,16 +245,17 @@ def track_stereo_session(
     samples = _samples(session, names, n)
     mode = "keypoints" if cfg.use_keypoints else "skin blobs"
     timer = StageTimer()
-    run = run_tracker(
-        tracker,
-        samples,
-        n,
-        out_dir,
-        label=f"track stereo {session.path.name}",
-        source=f"stereo tracker ({mode}, cameras {','.join(names)}) on {session.path}",
-        timer=timer,
-        input_speeds=keypoint_input_speeds(session, names),
-    )
+    with numba_compiling() as compiled:
+        run = run_tracker(
+            tracker,
+            samples,
+            n,
+            out_dir,
+            label=f"track stereo {session.path.name}",
+            source=f"stereo tracker ({mode}, cameras {','.join(names)}) on {session.path}",
+            timer=timer,
+            input_speeds=keypoint_input_speeds(session, names),
+        )
     poses = [cast(StereoPose, r) for r in run.results]
     fit_keys = poses[0].fit if poses else {}
     totals = timer.totals_s()
@@ -249,6 +267,7 @@ def track_stereo_session(
         totals.get("input", 0.0) + totals.get("track", 0.0),
         poses,
         elbow_jumps([p.time_s for p in poses], {k: [p.fit[k] for p in poses] for k in fit_keys}),
+        compiled,
     )
 
 
@@ -394,20 +413,51 @@ def bench_stereo(
     return out
 
 
-#: Excerpts (clip, start s) where the subject stays in front of a fixed stereo rig, the
-#: paper's setting (walking clips leave the views; chosen by the pelvis travelling less
-#: than 0.8 m in 4 s).
-STEREO_CLIPS: tuple[tuple[str, float], ...] = (
-    ("13_26.bvh", 7.5),
-    ("01_09.amc", 7.5),
-    ("01_12.amc", 5.0),
-    ("lambada.amc", 12.5),
-    ("charleston1.amc", 0.0),
-    ("01_01.bvh", 7.5),
-)
+#: Start (s) of each clip's 4 s excerpt where the subject stays in front of a fixed stereo
+#: rig, the paper's setting (walking clips leave the views; chosen by the pelvis travelling
+#: less than 0.8 m in 4 s); a clip not listed starts where its pelvis travels least
+#: (`stillest_start_s`). Which clips are run is the project's split
+#: (`mocapkit.pipelines.harness.CLIP_SETS`, default the tuning clips).
+STEREO_CLIPS: dict[str, float] = {
+    "13_26.bvh": 7.5,
+    "01_09.amc": 7.5,
+    "01_12.amc": 5.0,
+    "lambada.amc": 12.5,
+    "charleston1.amc": 0.0,
+    "01_01.bvh": 7.5,
+    "01_01.amc": 7.5,  # the same trial as the BVH
+}
 
 
-#: Tracker modes of the accuracy study.
+def stillest_start_s(
+    time_s: ArrayLike, pelvis_mm: ArrayLike, seconds: float, step_s: float = 0.5
+) -> float:
+    """The start (s from the first frame, on a ``step_s`` grid) of the ``seconds`` long
+    window whose pelvis ends nearest where it began (the least net travel: a subject
+    staying in front of a fixed rig); 0 for a clip no longer than ``seconds``."""
+    t = np.asarray(time_s, dtype=float)
+    t = t - t[0]
+    p = np.asarray(pelvis_mm, dtype=float)
+    best, start = math.inf, 0.0
+    for s in np.arange(0.0, t[-1] - seconds + 1e-9, step_s):
+        a, b = np.searchsorted(t, s - 1e-9), np.searchsorted(t, s + seconds + 1e-9) - 1
+        travel = float(np.linalg.norm(p[b] - p[a]))
+        if travel < best:
+            best, start = travel, float(s)
+    return start
+
+
+def excerpt_start_s(mocap_dir: str | os.PathLike[str], clip: str, seconds: float) -> float:
+    """Start of a clip's excerpt in the stereo studies: `STEREO_CLIPS`' where listed,
+    else `stillest_start_s` of the clip's pelvis."""
+    if clip in STEREO_CLIPS:
+        return STEREO_CLIPS[clip]
+    from mocapkit.io.motion_files import read_motion
+
+    motion = read_motion(Path(mocap_dir) / clip)
+    return stillest_start_s(motion.time_s, motion.joint("pelvis"), seconds)
+
+
 def _study_session(
     work: Path, mocap_dir: str | os.PathLike[str], clip: str, start: float, seconds: float
 ) -> Path:
@@ -445,7 +495,7 @@ ACCURACY_MODES: dict[str, StereoConfig] = {
 def stereo_accuracy(
     mocap_dir: str | os.PathLike[str],
     work_dir: str | os.PathLike[str],
-    clips: Sequence[tuple[str, float]] = STEREO_CLIPS,
+    clips: Sequence[str] | None = None,
     modes: Sequence[str] = ("keypoints+torso",),
     cameras: str | None = "stereo_left,stereo_right",
     seconds: float = 4.0,
@@ -453,7 +503,9 @@ def stereo_accuracy(
     seed: int = 0,
     n_particles: int | None = None,
 ) -> list[dict[str, Any]]:
-    """Render each excerpt (``--rig all``, long sleeves) once, track it in each mode.
+    """Render each clip's excerpt (``--rig all``, long sleeves; `STEREO_CLIPS`) once,
+    track it in each mode. ``clips``: default the project's tuning clips
+    (`mocapkit.pipelines.harness.TUNING_CLIPS`).
 
     ``seed`` (the filters' random generator, `StereoConfig.seed`) and ``n_particles``
     (default 150) change every mode's settings, to measure the spread between seeds and
@@ -467,7 +519,8 @@ def stereo_accuracy(
             raise unknown_name("accuracy mode", m, ACCURACY_MODES, "--modes")
     rows = []
     work = Path(work_dir)
-    for clip, start in clips:
+    for clip in clips or TUNING_CLIPS:
+        start = excerpt_start_s(mocap_dir, clip, seconds)
         session = _study_session(work, mocap_dir, clip, start, seconds)
         for m in modes:
             cfg = replace(ACCURACY_MODES[m], seed=int(seed))
@@ -496,14 +549,6 @@ ABLATIONS: dict[str, StereoConfig] = {
     "weighted mean estimate": replace(_BASE, arm=replace(_BASE.arm, estimate="mean")),
     "no shoulder pull": replace(_BASE, arm=replace(_BASE.arm, shoulder_pull=0.0)),
 }
-
-#: Clips of the ablation study (a subset of `STEREO_CLIPS`).
-ABLATION_CLIPS: tuple[tuple[str, float], ...] = (
-    ("13_26.bvh", 7.5),
-    ("01_09.amc", 7.5),
-    ("01_12.amc", 5.0),
-    ("charleston1.amc", 0.0),
-)
 
 
 def arm_errors_per_frame(
@@ -563,7 +608,7 @@ def stereo_ablations(
     mocap_dir: str | os.PathLike[str],
     work_dir: str | os.PathLike[str],
     variants: Sequence[str] = tuple(ABLATIONS),
-    clips: Sequence[tuple[str, float]] = ABLATION_CLIPS,
+    clips: Sequence[str] | None = None,
     cameras: str | None = "stereo_left,stereo_right",
     reset_s: float = 1.0,
     tol_mm: float = 10.0,
@@ -573,7 +618,7 @@ def stereo_ablations(
     seed: int = 0,
 ) -> list[dict[str, Any]]:
     """Mean arm error and frames to converge from a wrong start, per variant and clip
-    (``seed``: `StereoConfig.seed` of every variant).
+    (``seed``: `StereoConfig.seed` of every variant; ``clips``: default the tuning clips).
 
     Each clip (rendered as in `stereo_accuracy`) is tracked twice per variant: once
     undisturbed (its arm mean error is the figure) and once with both arm filters reset
@@ -596,7 +641,8 @@ def stereo_ablations(
             f"{seconds:g} s), found reset_s = {reset_s:g} s"
         )
     rows = []
-    for clip, start in clips:
+    for clip in clips or TUNING_CLIPS:
+        start = excerpt_start_s(mocap_dir, clip, seconds)
         session = _study_session(Path(work_dir), mocap_dir, clip, start, seconds)
         for v in variants:
             cfg = replace(ABLATIONS[v], seed=int(seed))
@@ -631,6 +677,26 @@ def format_accuracy_row(row: dict[str, Any]) -> str:
     )
 
 
+def accuracy_means(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per mode (in the rows' order), the mean over its clips of each figure of
+    `format_accuracy_row`, as a row with ``clip`` ``"mean"``."""
+    out = []
+    for mode in dict.fromkeys(r["mode"] for r in rows):
+        mine = [r for r in rows if r["mode"] == mode]
+        out.append(
+            {
+                "clip": "mean",
+                "mode": mode,
+                "per_joint_mm": {
+                    j: float(np.mean([r["per_joint_mm"][j] for r in mine])) for j in ARM_JOINTS
+                },
+                "arm_mean_mm": float(np.mean([r["arm_mean_mm"] for r in mine])),
+                "torso_yaw_error_deg": float(np.mean([r["torso_yaw_error_deg"] for r in mine])),
+            }
+        )
+    return out
+
+
 def accuracy_header() -> str:
     """Column titles of `format_accuracy_row`."""
     short = " ".join(f"{j.replace('left_', 'L').replace('right_', 'R')[:6]:>6}" for j in ARM_JOINTS)
@@ -639,23 +705,26 @@ def accuracy_header() -> str:
 
 __all__ = [
     "ABLATIONS",
-    "ABLATION_CLIPS",
     "ACCURACY_MODES",
     "ARM_JOINTS",
     "STEREO_CLIPS",
     "ElbowJump",
     "StereoRun",
     "accuracy_header",
+    "accuracy_means",
     "arm_errors_per_frame",
     "bench_stereo",
+    "elbow_jump_warnings",
     "elbow_jumps",
     "elbow_jumps_in_folder",
     "evaluate_stereo",
+    "excerpt_start_s",
     "format_accuracy_row",
     "frames_to_converge",
     "parse_cameras",
     "stereo_ablations",
     "stereo_accuracy",
+    "stillest_start_s",
     "track_stereo_session",
     "truth_yaw_rad",
 ]

@@ -11,12 +11,14 @@ import pytest
 from mocapkit.cli.main import main
 from mocapkit.errors import ConfigError, UnknownNameError
 from mocapkit.io.session import load_session
+from mocapkit.pipelines.fit_report import SHOWN_SPANS
 from mocapkit.pipelines.run import FIT_FILE, read_fit_csv
 from mocapkit.pipelines.stereo import (
     ARM_JOINTS,
     ElbowJump,
     arm_errors_per_frame,
     bench_stereo,
+    elbow_jump_warnings,
     elbow_jumps,
     elbow_jumps_in_folder,
     evaluate_stereo,
@@ -221,8 +223,30 @@ def test_elbow_jumps_known_spans():
         ElbowJump("right", t[3], t[3], 1, 12000.0),
         ElbowJump("left", t[5], t[5], 1, 6500.0),
     ]
-    assert "right elbow jumps at 0.100-0.100 s" in str(elbow_jumps(t, fit)[1])
+    assert str(elbow_jumps(t, fit)[0]) == (
+        "the left elbow jumps at 0.03-0.07 s (2 frames), up to 9.0 m/s relative to the shoulder"
+    )
+    assert str(elbow_jumps(t, fit)[1]).startswith("the right elbow jumps at 0.10 s, up to 12.0")
     assert elbow_jumps(t, {"rms_mm": np.zeros(6)}) == []
+
+
+def test_elbow_jump_warnings_list_the_fastest_then_count_the_rest():
+    """Many jumps: one warning with a count, the fastest few, and how many more (as the
+    implausible-motion warning lists its spans), not a line per jump."""
+    jumps = [ElbowJump("right", i / 30.0, i / 30.0, 1, 6000.0 + i) for i in range(19)]
+    jumps.append(ElbowJump("left", 1.0, 1.1, 4, 5000.0))
+    lines = elbow_jump_warnings(jumps, shown=2)
+    assert lines[0].startswith("warning: an elbow jumps in 20 spans (23 frames): the arm filter")
+    assert lines[1:] == [
+        "  the right elbow jumps at 0.60 s, up to 6.0 m/s relative to the shoulder",
+        "  the right elbow jumps at 0.57 s, up to 6.0 m/s relative to the shoulder",
+        "  ... and 18 more (fit.csv)",
+    ]
+    assert len(elbow_jump_warnings(jumps)) == 1 + SHOWN_SPANS + 1
+    one = elbow_jump_warnings(jumps[-1:])
+    assert one[0].startswith("warning: an elbow jumps in 1 span (4 frames)")
+    assert one[1:] == [f"  {jumps[-1]}"]
+    assert elbow_jump_warnings([]) == []
 
 
 def test_an_elbow_moving_faster_than_the_limit_is_a_jump(session):
