@@ -119,3 +119,69 @@ def test_cli_takes_the_clip_set_and_prints_the_mean(tmp_path, monkeypatch, capsy
     out = capsys.readouterr().out.splitlines()
     assert out[-1].split()[:2] == ["mean", "keypoints+torso"]
     assert out[-1].split()[-2:] == ["22.5", "2.0"]
+
+
+def test_detector_option_is_passed_on_and_an_unknown_one_refused(tmp_path, monkeypatch, capsys):
+    from mocapkit.cli.main import main
+    from mocapkit.errors import UnknownNameError
+    from mocapkit.pipelines import stereo
+
+    # refused before any session is rendered, with the valid choices
+    with pytest.raises(UnknownNameError, match=r"unknown detector 'openpose' in --detector; "
+                       r"expected one of: mediapipe"):  # fmt: skip
+        stereo.stereo_accuracy(tmp_path, tmp_path / "w", detector="openpose")
+    with pytest.raises(ConfigError, match=r"--detector: the modes \['skin'\] track from the video"):
+        stereo.stereo_accuracy(tmp_path, tmp_path / "w", modes=("skin",), detector="mediapipe")
+    assert not (tmp_path / "w").exists()
+    args = ["accuracy", "stereo", "--mocap", str(tmp_path), "--work", str(tmp_path / "w")]
+    assert main([*args, "--detector", "openpose"]) == 2
+    assert "expected one of: mediapipe" in capsys.readouterr().err
+    assert main([*args, "--detector", "mediapipe", "--ablations"]) == 2
+    assert "--detector: not with --ablations" in capsys.readouterr().err
+
+    asked = []
+
+    def fake(mocap, work, clips=None, **kwargs):
+        asked.append(kwargs.get("detector"))
+        return [{**_row("x", "keypoints+torso", 10.0, 1.0), "keypoints": "mediapipe"}]
+
+    monkeypatch.setattr(stereo, "stereo_accuracy", fake)
+    assert main(args) == 0
+    assert main([*args, "--detector", "mediapipe"]) == 0
+    assert asked == [None, "mediapipe"]
+    assert capsys.readouterr().out.splitlines()[-1].split()[:3] == [
+        "mean",
+        "keypoints+torso",
+        "mediapipe",
+    ]
+
+
+def test_detected_keypoints_replace_the_true_ones_and_are_kept(tmp_path):
+    pytest.importorskip("mediapipe", reason="MediaPipe not installed (mocapkit[detect])")
+    from mocapkit.io.session import load_session
+    from mocapkit.pipelines.stereo import _with_keypoints
+    from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+
+    path = tmp_path / "s"
+    synthesize_session(
+        "builtin:table-tennis", path, SynthOptions(rig="stereo", seconds=0.3, sleeve="long")
+    )
+    true = load_session(path)
+    views = ("stereo_left", "stereo_right")
+    session = _with_keypoints(path, ",".join(views), "mediapipe")
+    csv = path / "detect_mediapipe" / "keypoints" / f"{views[0]}.csv"
+    kept = csv.stat().st_mtime_ns
+    for c in views:
+        kp, tk = session.keypoints[c], true.keypoints[c]
+        assert kp.source.endswith("(detected: mediapipe)")
+        assert kp.joint_names == tk.joint_names and kp.pixels.shape == tk.pixels.shape
+        err = np.linalg.norm(kp.pixels - tk.pixels, axis=-1)
+        # a real detection: near the truth but not it
+        wrists = [list(kp.joint_names).index(j) for j in ("left_wrist", "right_wrist")]
+        assert 0.0 < np.nanmedian(err[:, wrists]) < 20.0
+    assert (
+        _with_keypoints(path, None, None).keypoints[views[0]].source
+        == true.keypoints[views[0]].source
+    )
+    _with_keypoints(path, ",".join(views), "mediapipe")  # reused, not detected again
+    assert csv.stat().st_mtime_ns == kept

@@ -16,6 +16,8 @@ _RUN = "mocapkit.pipelines.stereo:stereo_accuracy"
 
 def register_method(methods: Any) -> None:
     """Add ``stereo`` to the ``accuracy`` methods."""
+    from mocapkit.pipelines.harness import HARNESS_DETECTORS  # light: names only
+
     p = methods.add_parser(
         "stereo",
         help="arm joint and torso yaw errors of the stereo tracker on rendered excerpts",
@@ -62,6 +64,14 @@ def register_method(methods: Any) -> None:
         "mocapkit.tracking.stereo.arm_filter:ArmFilterConfig.n_particles",
     )
     p.add_argument(
+        "--detector",
+        default=None,
+        help="the keypoint modes take this 2-D detector's keypoints "
+        f"({', '.join(HARNESS_DETECTORS)}), run on the tracked views' rendered video "
+        "(kept in each session folder and reused) instead of the true ones (default: the "
+        "true 2-D)",
+    )
+    p.add_argument(
         "--ablations",
         action="store_true",
         help="instead of the modes: the ablation study (keypoints+torso variants on the "
@@ -91,6 +101,8 @@ def _run(args: argparse.Namespace) -> int:
 
     if args.particles is not None and args.particles < 2:
         raise ConfigError(f"--particles: expected at least 2, found {args.particles}")
+    if args.detector is not None and args.ablations:
+        raise ConfigError("--detector: not with --ablations (they track from the true 2-D)")
     mocap = mocap_folder(args.mocap)
     if args.ablations:
         return _ablations(args, mocap)
@@ -106,6 +118,7 @@ def _run(args: argparse.Namespace) -> int:
             modes=None if args.modes is None else [m.strip() for m in args.modes.split(",")],
             cameras=args.cameras,
             seed=args.seed,
+            detector=args.detector,
         ),
     )
     if args.json:

@@ -37,6 +37,7 @@ from mocapkit.eval.metrics import evaluate_joints, evaluate_result
 from mocapkit.io.openpose import openpose_from_canonical, write_openpose_frame
 from mocapkit.io.session import Session, load_session
 from mocapkit.io.truth import Truth
+from mocapkit.pipelines.harness import detector_keypoints
 from mocapkit.pipelines.mono import (
     MonoRun,
     canonical_from_body25_world,
@@ -131,18 +132,6 @@ def detector3d_accuracy(
         for sel in (tuple(joints), ARM_JOINTS)
     )
     return upper, arms
-
-
-def detector_keypoints(base: Path, session: Path, detector: str, overwrite: bool) -> Path:
-    """Run ``detector`` on the session's rendered video into ``base/detect_<detector>``
-    (kept: a rerun reuses it unless ``overwrite``); returns that folder
-    (`mocapkit.detect.run` layout: ``keypoints/openpose/<camera>/``,
-    ``keypoints3d/<camera>.npz``)."""
-    from mocapkit.detect.run import detect_session
-
-    out = base / f"detect_{detector}"
-    detect_session(session, detector, overwrite=overwrite, out_dir=out)
-    return out
 
 
 def truth_in_camera(session: Session, camera: str, model: StickModel) -> FloatArray:

@@ -30,7 +30,7 @@ from mocapkit.io.markers import true_runs
 from mocapkit.io.motion import Motion
 from mocapkit.pipelines.camera_check import check_session_cameras
 from mocapkit.pipelines.fit_report import SHOWN_SPANS, span_when, worst_spans_lines
-from mocapkit.pipelines.harness import TUNING_CLIPS
+from mocapkit.pipelines.harness import HARNESS_DETECTORS, TUNING_CLIPS
 from mocapkit.pipelines.input_speeds import keypoint_input_speeds
 from mocapkit.pipelines.run import run_tracker
 from mocapkit.timing import CompileTime, StageTimer, numba_compiling
@@ -491,6 +491,9 @@ ACCURACY_MODES: dict[str, StereoConfig] = {
     "skin": StereoConfig(),
 }
 
+#: The modes that track from keypoints (the ones a detector can feed).
+_KEYPOINT_MODES = tuple(k for k, c in ACCURACY_MODES.items() if c.use_keypoints)
+
 
 def stereo_accuracy(
     mocap_dir: str | os.PathLike[str],
@@ -502,6 +505,7 @@ def stereo_accuracy(
     say: Any = None,
     seed: int = 0,
     n_particles: int | None = None,
+    detector: str | None = None,
 ) -> list[dict[str, Any]]:
     """Render each clip's excerpt (``--rig all``, long sleeves; `STEREO_CLIPS`) once,
     track it in each mode. ``clips``: default the project's tuning clips
@@ -511,12 +515,27 @@ def stereo_accuracy(
     (default 150) change every mode's settings, to measure the spread between seeds and
     the effect of the particle count.
 
-    Returns one row per clip and mode: ``clip``, ``mode``, ``cameras`` and the figures
-    of `evaluate_stereo` plus ``frames_per_s``.
+    The keypoint modes take the session's true 2-D keypoints; with ``detector`` (a
+    `mocapkit.detect` backend, e.g. ``"mediapipe"``) they take that detector's, run on
+    the tracked cameras' rendered video (kept in ``<session>/detect_<detector>`` and
+    reused; `mocapkit.pipelines.harness.detector_keypoints`).
+
+    Returns one row per clip and mode: ``clip``, ``mode``, ``keypoints`` (``"true"`` or
+    the detector), ``cameras`` and the figures of `evaluate_stereo` plus
+    ``frames_per_s``.
     """
     for m in modes:
         if m not in ACCURACY_MODES:
             raise unknown_name("accuracy mode", m, ACCURACY_MODES, "--modes")
+    if detector is not None:
+        if detector not in HARNESS_DETECTORS:
+            raise unknown_name("detector", detector, HARNESS_DETECTORS, "--detector")
+        blind = [m for m in modes if not ACCURACY_MODES[m].use_keypoints]
+        if blind:
+            raise ConfigError(
+                f"--detector: the modes {blind} track from the video, not from keypoints; "
+                f"expected keypoint modes ({', '.join(_KEYPOINT_MODES)})"
+            )
     rows = []
     work = Path(work_dir)
     for clip in clips or TUNING_CLIPS:
@@ -525,15 +544,45 @@ def stereo_accuracy(
         for m in modes:
             cfg = replace(ACCURACY_MODES[m], seed=int(seed))
             run = track_stereo_session(
-                session, None, cameras=cameras, config=cfg, n_particles=n_particles
+                _with_keypoints(session, cameras, detector),
+                None,
+                cameras=cameras,
+                config=cfg,
+                n_particles=n_particles,
             )
             ev = evaluate_stereo(run, session)
-            row = {"clip": clip, "start_s": start, "mode": m, "cameras": cameras or "all", **ev}
+            row = {
+                "clip": clip,
+                "start_s": start,
+                "mode": m,
+                "keypoints": detector or "true",
+                "cameras": cameras or "all",
+                **ev,
+            }
             row["frames_per_s"] = run.motion.n_frames / max(run.seconds, 1e-9)
             rows.append(row)
             if say is not None:
                 say(format_accuracy_row(row))
     return rows
+
+
+def _with_keypoints(session_dir: Path, cameras: str | None, detector: str | None) -> Session:
+    """The session, its tracked cameras' keypoints (``cameras``, `parse_cameras`)
+    replaced by ``detector``'s on their video (`mocapkit.pipelines.harness.
+    detector_keypoints`, cached in the session folder); as it is without a detector."""
+    from mocapkit.io.session import load_session
+    from mocapkit.io.session_csv import read_keypoints_csv
+    from mocapkit.pipelines.harness import detector_keypoints
+
+    session = load_session(session_dir)
+    if detector is None:
+        return session
+    names = parse_cameras(cameras, session.video_cameras)
+    found = detector_keypoints(session_dir, session_dir, detector, False, names)
+    for c in names:
+        kp = read_keypoints_csv(found / "keypoints" / f"{c}.csv")
+        session.keypoints[c] = replace(kp, source=f"{kp.source} (detected: {detector})")
+    return session
 
 
 #: Variants of the ablation study (the paper's Figs. 2, 3, 5 and 8 as numbers), each a
@@ -668,18 +717,19 @@ def stereo_ablations(
 
 
 def format_accuracy_row(row: dict[str, Any]) -> str:
-    """One line: clip, mode, per-joint errors, arm mean, yaw error."""
+    """One line: clip, mode, keypoints, per-joint errors, arm mean, yaw error."""
     per = row["per_joint_mm"]
     joints = " ".join(f"{per[j]:6.1f}" for j in ARM_JOINTS)
     return (
-        f"{row['clip']:<16}{row['mode']:<17}{joints}  {row['arm_mean_mm']:6.1f}"
+        f"{row['clip']:<16}{row['mode']:<17}{row.get('keypoints', 'true'):<10}{joints}  "
+        f"{row['arm_mean_mm']:6.1f}"
         f"  {row['torso_yaw_error_deg']:5.1f}"
     )
 
 
 def accuracy_means(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per mode (in the rows' order), the mean over its clips of each figure of
-    `format_accuracy_row`, as a row with ``clip`` ``"mean"``."""
+    `format_accuracy_row`, as a row with ``clip`` ``"mean"`` (and the rows' keypoints)."""
     out = []
     for mode in dict.fromkeys(r["mode"] for r in rows):
         mine = [r for r in rows if r["mode"] == mode]
@@ -687,6 +737,7 @@ def accuracy_means(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
             {
                 "clip": "mean",
                 "mode": mode,
+                "keypoints": "/".join(dict.fromkeys(r.get("keypoints", "true") for r in mine)),
                 "per_joint_mm": {
                     j: float(np.mean([r["per_joint_mm"][j] for r in mine])) for j in ARM_JOINTS
                 },
@@ -700,7 +751,7 @@ def accuracy_means(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
 def accuracy_header() -> str:
     """Column titles of `format_accuracy_row`."""
     short = " ".join(f"{j.replace('left_', 'L').replace('right_', 'R')[:6]:>6}" for j in ARM_JOINTS)
-    return f"{'clip':<16}{'mode':<17}{short}  {'mean':>6}  {'yaw':>5}"
+    return f"{'clip':<16}{'mode':<17}{'keypoints':<10}{short}  {'mean':>6}  {'yaw':>5}"
 
 
 __all__ = [
