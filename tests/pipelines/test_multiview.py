@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 import shutil
 from pathlib import Path
 
@@ -173,6 +174,24 @@ def test_auto_keeps_the_papers_tracker_on_a_narrow_pair(tmp_path) -> None:
     synthesize_session("builtin:wave", folder, options)
     assert resolve_stereo_method(folder) == "filter"
     assert resolve_stereo_method(folder, "fit") == "fit"
+
+
+def test_track_stereo_on_a_narrow_pair_says_what_a_detector_costs(tmp_path, capsys) -> None:
+    """`track stereo` on a narrow pair says it keeps the paper's tracker and what the
+    narrow baseline costs with a detector's keypoints (docs/stereo.md's figures)."""
+    from mocapkit.synth.session_writer import SynthOptions, synthesize_session
+
+    folder = tmp_path / "pair"
+    options = SynthOptions(rig="stereo", seconds=0.3, image_size=(160, 120), seed=1)
+    synthesize_session("builtin:wave", folder, options)
+    assert main(["track", "stereo", str(folder), "--out", str(tmp_path / "r")]) == 0
+    out = capsys.readouterr().out
+    assert re.search(
+        r"narrow pair \(optical axes less than 20 deg apart\): the paper's tracker.*"
+        r"expect arm errors near 200 mm.*three or more cameras or a wide pair",
+        out,
+        flags=re.DOTALL,
+    ), out
 
 
 def test_auto_detects_missing_keypoints_when_a_detector_is_installed(
