@@ -22,7 +22,7 @@ from numpy.typing import ArrayLike, NDArray
 from mocapkit.camera.pinhole import Camera
 from mocapkit.camera.triangulation import triangulate_views
 from mocapkit.errors import ConfigError, ShapeError
-from mocapkit.eval.continuity import roll_steps_deg
+from mocapkit.eval.continuity import roll_steps_deg, speeds_mm_s
 from mocapkit.skeleton.model import Skeleton
 
 FloatArray = NDArray[np.float64]
@@ -69,14 +69,15 @@ class SpeedBound:
 
 def frame_speeds_mm_s(time_s: ArrayLike, points_mm: ArrayLike) -> FloatArray:
     """Speed of each point from the frame before to this frame, shape (T, K), mm/s: row 0
-    and frames where either end lacks the point are NaN."""
+    and frames where either end lacks the point are NaN
+    (`mocapkit.eval.continuity.speeds_mm_s` aligned to the frames)."""
     t = np.asarray(time_s, dtype=float)
     p = np.asarray(points_mm, dtype=float)
     if p.ndim != 3 or p.shape[0] != t.shape[0] or p.shape[2] != 3:
         raise ShapeError(f"points_mm: expected shape ({t.shape[0]}, K, 3), found {p.shape}")
     out = np.full(p.shape[:2], np.nan)
     if t.shape[0] > 1:
-        out[1:] = np.linalg.norm(np.diff(p, axis=0), axis=2) / np.diff(t)[:, None]
+        out[1:] = speeds_mm_s(t, p)
     return out
 
 
@@ -131,7 +132,7 @@ def nearest_input_speeds(
                 f"candidates: expected shape ({j.shape[1]}, {m.shape[1]}), found {cand.shape}"
             )
         cand[~cand.any(axis=1)] = True
-    speed = frame_speeds_mm_s(t, m)[1:]  # (T - 1, M)
+    speed = speeds_mm_s(t, m)  # (T - 1, M)
     if groups is not None:
         g = np.asarray(groups)
         if g.shape != (m.shape[1],):
