@@ -59,15 +59,7 @@ def limb_candidates(
             effectors = default_marker_effectors(skeleton)
         except MocapError:
             effectors = {}
-    parents = np.asarray(skeleton.parents)
-
-    def chain(j: int) -> set[int]:  # j and its ancestors
-        out = set()
-        while j >= 0:
-            out.add(j)
-            j = int(parents[j])
-        return out
-
+    carries = skeleton.ancestors_mask()  # [a, j]: a is j or above it
     set_joint = {
         n: skeleton.joint_index(effectors[n].joint) for n in dict.fromkeys(sets) if n in effectors
     }
@@ -76,11 +68,10 @@ def limb_candidates(
         if name not in skeleton.canonical:
             continue
         j = skeleton.joint_index(skeleton.canonical[name][0])
-        above = chain(j)
         for i, s in enumerate(sets):
             if s in set_joint:
                 e = set_joint[s]
-                cand[k, i] = e in above or j in chain(e)
+                cand[k, i] = carries[e, j] or carries[j, e]
     return cand
 
 
